@@ -1,0 +1,37 @@
+"""d3stereo: decisive disparity diffusion (D3Stereo) stereo matching and a batch evaluator.
+
+Python entry points::
+
+    from d3cli import D3Stereo, load_config
+    result = D3Stereo(load_config()).compute(left, right, max_disparity=64)
+    result.disparity  # float32 (H, W), inf where invalid when filling is off
+"""
+
+__version__ = "0.1.0"
+
+from .config import Config, load_config  # noqa: E402
+from .errors import BackendUnavailable, ConfigError, D3Error, InputError, OutputError  # noqa: E402
+
+
+def __getattr__(name):
+    # The pipeline pulls in numba; import it lazily so `d3stereo info` and the config
+    # checks stay fast.
+    if name in ("D3Stereo", "DisparityResult"):
+        from . import pipeline
+
+        return getattr(pipeline, name)
+    raise AttributeError(name)
+
+
+__all__ = [
+    "Config",
+    "load_config",
+    "D3Stereo",
+    "DisparityResult",
+    "D3Error",
+    "ConfigError",
+    "InputError",
+    "BackendUnavailable",
+    "OutputError",
+    "__version__",
+]

@@ -1,0 +1,493 @@
+"""Batch runs and batch evaluation: many pairs in, one output folder out.
+
+Layout of an output folder ``OUT``::
+
+    OUT/run.json                 resolved config, versions, backend, per-pair status
+    OUT/<pair>/disp.pfm          float32 disparity, inf = invalid
+    OUT/<pair>/disp.png          KITTI uint16 (disparity * 256, 0 = invalid)
+    OUT/<pair>/disp_color.png    colour coded over [0, max disparity]
+    OUT/<pair>/valid.png         255 where the method decided the disparity itself
+    OUT/<pair>/error.png         error map (only with --eval and ground truth)
+    OUT/<pair>/result.json       timings, metrics, info; written LAST
+    OUT/metrics.csv, summary.json, summary.md   (only with --eval)
+
+Every file is written atomically, and ``result.json`` last: its presence means the
+pair is complete, so an interrupted batch resumes where it stopped.  A pair whose
+stored ``result.json`` was made by another method, configuration or disparity
+override is computed again.
+
+One failing pair never stops a batch: its error is recorded (``run.json``, the
+summary) and the next pair runs.  Only KeyboardInterrupt ends a batch early.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import platform
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Iterable, Sequence
+
+from . import __version__
+from .config import Config
+from .errors import D3Error, InputError, OutputError, where_what_fix
+
+log = logging.getLogger(__name__)
+
+#: The per-pair files of a complete result, besides result.json.
+OUTPUT_FILES = ("disp.pfm", "disp.png", "disp_color.png", "valid.png")
+RESULT_FILE = "result.json"
+RUN_FILE = "run.json"
+
+
+@dataclass
+class BatchResult:
+    """What a batch did.
+
+    Attributes
+    ----------
+    out_dir : Path
+        The output folder.
+    rows : list of dict
+        One row per pair for :mod:`d3cli.report` (``pair``, ``family``, ``status``,
+        metric keys, ``time_s``, ``error``).
+    n_failed : int
+        Number of pairs that failed.
+    run_json : Path
+        Path of ``run.json``.
+    summary : dict or None
+        :func:`d3cli.report.summarize` of the rows when evaluating, else None.
+    """
+
+    out_dir: Path
+    rows: list = field(default_factory=list)
+    n_failed: int = 0
+    run_json: Path | None = None
+    summary: dict | None = None
+
+    @property
+    def n_pairs(self) -> int:
+        return len(self.rows)
+
+    @property
+    def failures(self) -> list[tuple[str, str]]:
+        """(pair, error message) of each failed pair."""
+        return [(r["pair"], r.get("error", "")) for r in self.rows if r["status"] == "failed"]
+
+
+# ----------------------------------------------------------------------------- helpers
+def ensure_writable(out_dir: str | os.PathLike) -> Path:
+    """Create ``out_dir`` (with parents) and prove it is writable with a probe file.
+
+    Raises
+    ------
+    OutputError
+        Naming the folder, when it cannot be created or written.
+    """
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=out, prefix=".d3stereo-probe-")
+        os.close(fd)
+        os.remove(probe)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise OutputError(
+            where_what_fix(str(out), f"cannot write to the output folder ({reason})",
+                           "choose another folder with -o or fix its permissions")
+        ) from None
+    return out
+
+
+def write_json(path: Path, data: dict) -> None:
+    """Write ``data`` as indented JSON (NaN/inf as null), atomically."""
+    from .io import atomic_write
+    from .report import _jsonable  # the one JSON-cleaning rule shared by every report file
+
+    text = json.dumps(_jsonable(data), indent=2, allow_nan=False) + "\n"
+    atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+
+
+def settings_fingerprint(cfg: Config, method: str, max_disparity: int | None) -> str:
+    """Short hash of what determines a pair's result (method, config, --max-disparity)."""
+    blob = json.dumps([method, cfg.to_dict(), max_disparity], sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def read_result(pair_dir: Path) -> dict | None:
+    """The stored result of a complete pair folder, or None when incomplete."""
+    result_path = pair_dir / RESULT_FILE
+    if not result_path.is_file() or not all((pair_dir / f).is_file() for f in OUTPUT_FILES):
+        return None
+    try:
+        return json.loads(result_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        log.warning("%s: unreadable, computing the pair again", result_path)
+        return None
+
+
+def package_versions() -> dict:
+    """Versions of d3stereo and the libraries that shape its results."""
+    import cv2
+    import numba
+    import numpy
+    import skimage
+
+    return {
+        "d3stereo": __version__,
+        "numpy": numpy.__version__,
+        "numba": numba.__version__,
+        "cv2": cv2.__version__,
+        "skimage": skimage.__version__,
+    }
+
+
+def _row(pair, status: str, *, time_s: float | None = None, error: str = "", metrics=None) -> dict:
+    row = {"pair": pair.name, "family": pair.family, "status": status, "time_s": time_s, "error": error}
+    row.update(metrics or {})
+    return row
+
+
+def _progress(pairs: Sequence, enabled: bool, desc: str):
+    from tqdm import tqdm
+
+    return tqdm(pairs, desc=desc, unit="pair", disable=not (enabled and sys.stderr.isatty()))
+
+
+# ----------------------------------------------------------------------------- one pair
+def _evaluate(pair, left, right, disparity, pair_dir: Path) -> dict:
+    """Metrics of one estimate: against ground truth when there is one, photometric always.
+
+    Writes ``pair_dir/error.png`` when the pair has ground truth.
+    """
+    from . import datasets, io, metrics
+
+    shape = left.shape[:2]
+    scores = {}
+    gt, mask = datasets.load_ground_truth(pair, shape)
+    if gt is not None:
+        scores.update(metrics.disparity_errors(disparity, gt, mask=mask))
+        pair_dir.mkdir(parents=True, exist_ok=True)
+        io.write_image(pair_dir / "error.png", metrics.error_map(disparity, gt, mask=mask))
+    scores.update(metrics.photometric_scores(io.to_grey(left), io.to_grey(right), disparity))
+    return scores
+
+
+def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fingerprint) -> dict:
+    """Compute, write and (optionally) score one pair; returns the stored result dict."""
+    from . import baselines, datasets, io
+
+    t0 = time.perf_counter()
+    left, right = datasets.load_pair_images(pair)
+    height, width = left.shape[:2]
+    dmax = datasets.resolve_max_disparity(pair, width, override=max_disparity)
+    result = baselines.compute_pair(method, cfg, left, right, max_disparity=dmax)
+    for text in result.warnings:
+        log.warning("%s: %s", pair.name, text)
+    # An old result.json beside new, maybe half-written outputs would mark them complete.
+    (pair_dir / RESULT_FILE).unlink(missing_ok=True)
+    io.write_disparity_outputs(pair_dir, result.disparity, result.valid, vmax=dmax)
+    scores = _evaluate(pair, left, right, result.disparity, pair_dir) if evaluate else None
+    wall = time.perf_counter() - t0
+    stored = {
+        "pair": pair.name,
+        "family": pair.family,
+        "method": method,
+        "settings": fingerprint,
+        "inputs": {"left": pair.left, "right": pair.right, "gt": pair.gt},
+        "shape": [height, width],
+        "max_disparity": dmax,
+        "color_range": [0, dmax],
+        "valid_share": float(result.valid.mean()) if result.valid.size else 0.0,
+        "timings": {**result.timings, "wall": wall},
+        "metrics": scores,
+        "info": result.info,
+        "warnings": list(result.warnings),
+    }
+    write_json(pair_dir / RESULT_FILE, stored)  # last: marks the pair complete
+    return stored
+
+
+def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
+    """A complete earlier result; scored now from disp.pfm if it was stored unscored."""
+    if evaluate and not stored.get("metrics"):
+        from . import datasets, io
+
+        left, right = datasets.load_pair_images(pair)
+        disparity = io.read_pfm(pair_dir / "disp.pfm")
+        stored = {**stored, "metrics": _evaluate(pair, left, right, disparity, pair_dir)}
+        write_json(pair_dir / RESULT_FILE, stored)
+    return stored
+
+
+# ----------------------------------------------------------------------------- batches
+def run_batch(
+    pairs: Sequence,
+    out_dir: str | os.PathLike,
+    *,
+    cfg: Config,
+    method: str,
+    evaluate: bool = False,
+    overwrite: bool = False,
+    max_disparity: int | None = None,
+    progress: bool = True,
+    config_source: str | None = None,
+) -> BatchResult:
+    """Run ``method`` on every pair, writing ``out_dir/<pair>/...`` and ``out_dir/run.json``.
+
+    Parameters
+    ----------
+    pairs : sequence of d3cli.datasets.Pair
+        The pairs, e.g. from :func:`d3cli.datasets.discover`.
+    out_dir : path-like
+        Output folder; created when missing.
+    cfg : Config, keyword-only
+        Resolved configuration (stored in run.json).
+    method : {"d3stereo", "sgbm", "pt-sgm"}, keyword-only
+    evaluate : bool, keyword-only
+        Score each result: against ground truth where the pair has it (EPE, PEP,
+        density, ``error.png``), photometric scores always; writes the summary files.
+    overwrite : bool, keyword-only
+        Compute pairs again even when their outputs are complete.
+    max_disparity : int, optional, keyword-only
+        Override of every pair's disparity range, pixels.
+    progress : bool, keyword-only
+        Show a tqdm bar (only on a terminal).
+    config_source : str, optional, keyword-only
+        Where the configuration came from, recorded in run.json.
+
+    Returns
+    -------
+    BatchResult
+
+    Raises
+    ------
+    OutputError
+        When ``out_dir`` cannot be written (checked before any pair runs).
+    BackendUnavailable
+        When ``cfg.run.backend`` is ``cuda`` and CUDA cannot be used (checked up front).
+    """
+    out = ensure_writable(out_dir)
+    if method != "sgbm" and cfg.run.backend == "cuda":
+        from .kernels import get_backend
+
+        get_backend("cuda")  # BackendUnavailable now, not once per pair
+    fingerprint = settings_fingerprint(cfg, method, max_disparity)
+    batch = BatchResult(out_dir=out, run_json=out / RUN_FILE)
+    records = []
+    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    try:
+        for pair in _progress(pairs, progress, method):
+            row, record = _batch_pair(pair, out / pair.name, cfg=cfg, method=method, evaluate=evaluate,
+                                      overwrite=overwrite, max_disparity=max_disparity,
+                                      fingerprint=fingerprint)
+            batch.rows.append(row)
+            records.append(record)
+    except KeyboardInterrupt:
+        _write_run_json(batch, records, cfg=cfg, method=method, max_disparity=max_disparity,
+                        started=started, config_source=config_source, interrupted=True)
+        raise
+    batch.n_failed = sum(r["status"] == "failed" for r in batch.rows)
+    if evaluate:
+        from . import report
+
+        report.write_summary(out, batch.rows, method=method, extra={"settings": fingerprint})
+        batch.summary = report.summarize(batch.rows)
+    _write_run_json(batch, records, cfg=cfg, method=method, max_disparity=max_disparity,
+                    started=started, config_source=config_source, interrupted=False)
+    return batch
+
+
+def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, fingerprint):
+    """One pair of a batch -> (report row, run.json record); never raises but KeyboardInterrupt."""
+    t0 = time.perf_counter()
+    reused = False
+    try:
+        stored = None if overwrite else read_result(pair_dir)
+        if stored is not None and stored.get("settings") == fingerprint:
+            log.info("%s: complete, skipped (use --overwrite to compute it again)", pair.name)
+            stored = _reuse_pair(pair, pair_dir, stored, evaluate=evaluate)
+            reused = True
+        else:
+            stored = _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
+                               max_disparity=max_disparity, fingerprint=fingerprint)
+    except D3Error as exc:
+        return _failed(pair, str(exc), time.perf_counter() - t0)
+    except Exception as exc:  # noqa: BLE001 - one broken pair must not end the batch
+        log.debug("%s: unexpected error", pair.name, exc_info=True)
+        return _failed(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
+    wall = stored.get("timings", {}).get("wall")
+    row = _row(pair, "ok", time_s=wall, metrics=stored.get("metrics"))
+    record = {"pair": pair.name, "status": "skipped" if reused else "ok", "wall_s": wall,
+              "max_disparity": stored.get("max_disparity"), "backend": stored.get("info", {}).get("backend"),
+              "warnings": stored.get("warnings", [])}
+    return row, record
+
+
+def _failed(pair, message: str, wall: float):
+    log.debug("%s failed: %s", pair.name, message)
+    row = _row(pair, "failed", time_s=wall, error=message)
+    return row, {"pair": pair.name, "status": "failed", "wall_s": wall, "error": message}
+
+
+def _write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, started,
+                    config_source, interrupted) -> None:
+    failed = [{"pair": r["pair"], "error": r["error"]} for r in records if r["status"] == "failed"]
+    data = {
+        "d3stereo": __version__,
+        "started": started,
+        "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "interrupted": interrupted,
+        "method": method,
+        "backend": cfg.run.backend,
+        "backends_used": sorted({r["backend"] for r in records if r.get("backend")}),
+        "max_disparity_override": max_disparity,
+        "config_source": config_source,
+        "config": cfg.to_dict(),
+        "versions": package_versions(),
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        "n_pairs": len(records),
+        "n_failed": len(failed),
+        "pairs": records,
+        "failed": failed,
+    }
+    write_json(batch.run_json, data)
+
+
+# ----------------------------------------------------------------------------- evaluation
+def method_names(pred_dirs: Sequence[Path]) -> list[str]:
+    """Column names for prediction folders: run.json's method when unique, else the folder name."""
+    from_run = []
+    for folder in pred_dirs:
+        try:
+            from_run.append(json.loads((Path(folder) / RUN_FILE).read_text(encoding="utf-8")).get("method"))
+        except (OSError, ValueError, AttributeError):
+            from_run.append(None)
+    names = []
+    for folder, name in zip(pred_dirs, from_run):
+        unique = name and from_run.count(name) == 1
+        names.append(name if unique else Path(folder).resolve().name)
+    if len(set(names)) < len(names):  # same folder names: fall back to the full paths
+        names = [str(Path(f)) for f in pred_dirs]
+    return names
+
+
+def evaluate_predictions(
+    pred_dir: str | os.PathLike,
+    pairs: Iterable,
+    *,
+    report_dir: str | os.PathLike | None = None,
+    progress: bool = True,
+) -> list[dict]:
+    """Score ``pred_dir/<pair>/disp.pfm`` for each pair; rows for :mod:`d3cli.report`.
+
+    Error maps go to ``report_dir/<pair>/error.png`` (default: beside the prediction).
+    A pair without a prediction, or whose prediction cannot be scored, becomes a
+    ``failed`` row naming the problem.
+    """
+    from . import io
+
+    pred_dir = Path(pred_dir)
+    report_dir = Path(report_dir) if report_dir is not None else pred_dir
+    rows = []
+    for pair in _progress(list(pairs), progress, pred_dir.name):
+        t0 = time.perf_counter()
+        pred_path = pred_dir / pair.name / "disp.pfm"
+        try:
+            if not pred_path.is_file():
+                raise InputError(where_what_fix(str(pred_path), "no prediction for this pair",
+                                                "run `d3stereo run` on the pair or check --gt"))
+            left, right = _load_images(pair)
+            disparity = io.read_pfm(pred_path)
+            scores = _evaluate(pair, left, right, disparity, report_dir / pair.name)
+        except D3Error as exc:
+            rows.append(_failed(pair, str(exc), time.perf_counter() - t0)[0])
+            continue
+        except Exception as exc:  # noqa: BLE001 - one broken pair must not end the evaluation
+            log.debug("%s: unexpected error", pair.name, exc_info=True)
+            rows.append(_failed(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)[0])
+            continue
+        rows.append(_row(pair, "ok", time_s=_stored_time(pred_dir / pair.name), metrics=scores))
+    return rows
+
+
+def _load_images(pair):
+    from . import datasets
+
+    return datasets.load_pair_images(pair)
+
+
+def _stored_time(pair_dir: Path) -> float | None:
+    """The wall time recorded by the run that made a prediction, if any."""
+    try:
+        return json.loads((pair_dir / RESULT_FILE).read_text(encoding="utf-8"))["timings"]["wall"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def evaluate_folders(
+    pred_dirs: Sequence[str | os.PathLike],
+    pairs: Sequence,
+    *,
+    out_dir: str | os.PathLike | None = None,
+    progress: bool = True,
+) -> dict:
+    """Score one or more prediction folders against the same pairs and write the reports.
+
+    One folder: ``metrics.csv``, ``summary.json``, ``summary.md`` and the error maps
+    ``<pair>/error.png`` in ``out_dir`` (default: the prediction folder).  Several: each
+    folder's reports go to ``out_dir/<method>/`` (default: the prediction folder itself)
+    and the side-by-side table to ``out_dir/comparison.md`` (default: in the first
+    prediction folder).
+
+    Returns
+    -------
+    dict
+        ``results`` (method -> rows), ``summaries`` (method -> summary dict),
+        ``comparison`` (Markdown text or None), ``comparison_path``, ``n_failed``,
+        ``n_rows``, ``out_dir``.
+    """
+    from . import report
+
+    pred_dirs = [Path(p) for p in pred_dirs]
+    for folder in pred_dirs:
+        if not folder.is_dir():
+            raise InputError(where_what_fix(str(folder), "prediction folder not found",
+                                            "give the -o folder of a `d3stereo run`"))
+    names = method_names(pred_dirs)
+    out = Path(out_dir) if out_dir is not None else pred_dirs[0]
+    ensure_writable(out)
+    results, summaries = {}, {}
+    for folder, name in zip(pred_dirs, names):
+        if len(pred_dirs) == 1:
+            target = out
+        else:
+            target = ensure_writable(out / name) if out_dir is not None else folder
+        rows = evaluate_predictions(folder, pairs, report_dir=target, progress=progress)
+        report.write_summary(target, rows, method=name, extra={"predictions": str(folder)})
+        results[name] = rows
+        summaries[name] = report.summarize(rows)
+    comparison = comparison_path = None
+    if len(pred_dirs) > 1:
+        comparison = report.side_by_side(results)
+        comparison_path = out / "comparison.md"
+        from .io import atomic_write
+
+        atomic_write(comparison_path, lambda tmp: Path(tmp).write_text(comparison + "\n", encoding="utf-8"))
+    return {
+        "results": results,
+        "summaries": summaries,
+        "comparison": comparison,
+        "comparison_path": comparison_path,
+        "n_failed": sum(r["status"] == "failed" for rows in results.values() for r in rows),
+        "n_rows": sum(len(rows) for rows in results.values()),
+        "out_dir": out,
+    }

@@ -1,0 +1,237 @@
+"""The ``d3stereo`` command line: parse, call the library, turn the outcome into an exit code.
+
+Exit codes: 0 success; 1 a user error (any :class:`~d3cli.errors.D3Error`, printed as
+one line ``Error: <message>``) or a batch with failed pairs; 2 a usage error (click).
+Unexpected exceptions keep their traceback: they are bugs, not user mistakes.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import platform
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import click
+
+from . import __version__
+from .config import BACKENDS, METHODS, Config, load_config
+from .errors import D3Error
+
+log = logging.getLogger("d3cli")
+
+#: Environment variable naming a config file used when -c is not given.
+CONFIG_ENV = "D3STEREO_CONFIG"
+#: Config file picked up from the working folder when neither -c nor the variable is set.
+LOCAL_CONFIG = "d3stereo.yaml"
+
+
+class _Group(click.Group):
+    """A click group that turns every D3Error into ``Error: <message>`` and exit code 1."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except D3Error as exc:
+            raise click.ClickException(str(exc)) from None
+
+
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever sys.stderr is at the time of each record (click's test runner swaps it)."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, _value):
+        pass
+
+
+def _setup_logging(verbose: bool, quiet: bool) -> None:
+    level = logging.DEBUG if verbose else logging.ERROR if quiet else logging.WARNING
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", handlers=[_StderrHandler()], force=True)
+    # numba logs its compiler passes at DEBUG; they drown the useful lines.
+    logging.getLogger("numba").setLevel(max(level, logging.INFO))
+
+
+def _verbosity(fn):
+    fn = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress bar.")(fn)
+    fn = click.option("-v", "--verbose", is_flag=True, help="Debug logging.")(fn)
+    return fn
+
+
+def config_search(explicit: str | None) -> tuple[str | None, str]:
+    """Which config file to load and why: -c FILE, $D3STEREO_CONFIG, ./d3stereo.yaml, or none."""
+    if explicit:
+        return explicit, "-c option"
+    env = os.environ.get(CONFIG_ENV)
+    if env:
+        return env, f"${CONFIG_ENV}"
+    if Path(LOCAL_CONFIG).is_file():
+        return LOCAL_CONFIG, "working folder"
+    return None, "built-in defaults"
+
+
+def samples_dir() -> Path:
+    """Folder of the bundled sample pairs (pair-folder layout)."""
+    from . import samples
+
+    return Path(samples.__file__).resolve().parent
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="d3stereo")
+def main():
+    """D3Stereo: dense disparity from rectified stereo pairs, with batch evaluation."""
+
+
+# ----------------------------------------------------------------------------- run
+@main.command()
+@click.argument("inputs", nargs=-1, type=click.Path(path_type=Path))
+@click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), default=Path("d3stereo-out"),
+              show_default=True, help="Output folder.")
+@click.option("--method", type=click.Choice(METHODS), default=None,
+              help="Stereo method [default: run.method of the config, d3stereo].")
+@click.option("--backend", type=click.Choice(BACKENDS), default=None,
+              help="Compute backend [default: run.backend of the config, auto].")
+@click.option("-c", "--config", "config_path", type=click.Path(path_type=Path), default=None,
+              help=f"YAML config (see configs/default.yaml); else ${CONFIG_ENV} or ./{LOCAL_CONFIG}.")
+@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
+              help="Override one config value; repeatable.")
+@click.option("--max-disparity", type=int, default=None, metavar="N",
+              help="Largest disparity searched in every pair, pixels.")
+@click.option("--eval/--no-eval", "evaluate", default=False,
+              help="Score each pair (ground truth where present, photometric always).")
+@click.option("--overwrite", is_flag=True, help="Compute pairs again even when their outputs are complete.")
+@click.option("--no-fill", is_flag=True, help="Leave undecided pixels invalid (inf) instead of filling them.")
+@_verbosity
+def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
+        no_fill, verbose, quiet):
+    """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
+
+    INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
+    KITTI root, a manifest YAML, or two image files.
+    """
+    from . import batch, datasets, report
+
+    _setup_logging(verbose, quiet)
+    if max_disparity is not None and max_disparity <= 0:
+        raise click.BadParameter(f"must be a positive number of pixels, got {max_disparity}",
+                                 param_hint="--max-disparity")
+    cfg, source = _resolve_config(config_path, overrides, method=method, backend=backend, no_fill=no_fill)
+    method = cfg.run.method
+    if method == "sgbm" and cfg.run.backend == "cuda":
+        log.warning("--backend cuda: sgbm runs on OpenCV's CPU implementation")
+    pairs = datasets.discover(list(inputs) if inputs else [samples_dir()])
+    override = max_disparity if max_disparity is not None else cfg.run.max_disparity
+    result = batch.run_batch(pairs, out_dir, cfg=cfg, method=method, evaluate=evaluate,
+                             overwrite=overwrite, max_disparity=override, progress=not quiet,
+                             config_source=source)
+    if result.summary is not None and not quiet:
+        click.echo(report.format_table(result.summary))
+    _finish(result.failures, result.n_pairs, result.run_json)
+
+
+def _resolve_config(config_path, overrides, *, method, backend, no_fill) -> tuple[Config, str]:
+    path, why = config_search(str(config_path) if config_path else None)
+    cfg = load_config(path, overrides)
+    if path:
+        log.info("config: %s (%s)", path, why)
+    if method is not None:
+        cfg = replace(cfg, run=replace(cfg.run, method=method))
+    if backend is not None:
+        cfg = replace(cfg, run=replace(cfg.run, backend=backend))
+    if no_fill:
+        cfg = replace(cfg, refine=replace(cfg.refine, fill=False), sgbm=replace(cfg.sgbm, fill=False))
+    return cfg, f"{path} ({why})" if path else why
+
+
+def _finish(failures, n_total: int, where) -> None:
+    """Report failed pairs on stderr; exit 1 when there are any."""
+    for pair, message in failures:
+        prefix = "" if message.startswith(f"{pair}:") else f"{pair}: "
+        click.echo(f"failed: {prefix}{message}", err=True)
+    if failures:
+        raise click.ClickException(f"{len(failures)} of {n_total} pairs failed (see {where})")
+
+
+# ----------------------------------------------------------------------------- eval
+@main.command("eval")
+@click.argument("pred_dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--gt", "gt_input", required=True, multiple=True, type=click.Path(path_type=Path),
+              help="The pairs with ground truth (any layout `run` accepts); repeatable.")
+@click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), default=None,
+              help="Folder for the reports [default: the first PRED_DIR].")
+@_verbosity
+def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
+    """Score the disp.pfm files of PRED_DIR(s) against the pairs of --gt.
+
+    Several PRED_DIRs give one side-by-side table (comparison.md).
+    """
+    from . import batch, datasets, report
+
+    _setup_logging(verbose, quiet)
+    pairs = datasets.discover(list(gt_input))
+    outcome = batch.evaluate_folders(pred_dirs, pairs, out_dir=out_dir, progress=not quiet)
+    if outcome["comparison"] is not None:
+        click.echo(outcome["comparison"])
+    elif not quiet:
+        (summary,) = outcome["summaries"].values()
+        click.echo(report.format_table(summary))
+    failures = [(f"{name}/{pair}", msg) for name, rows in outcome["results"].items()
+                for pair, msg in ((r["pair"], r.get("error", "")) for r in rows if r["status"] == "failed")]
+    report_file = outcome["comparison_path"] or Path(outcome["out_dir"]) / "summary.json"
+    _finish(failures, outcome["n_rows"], report_file)
+
+
+# ----------------------------------------------------------------------------- synth
+@main.command()
+@click.argument("out_dir", type=click.Path(path_type=Path))
+@click.option("--n", "n", type=click.IntRange(min=1), default=12, show_default=True, help="Number of pairs.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same pairs).")
+@click.option("--width", type=click.IntRange(min=16), default=1280, show_default=True, help="Image width, pixels.")
+@click.option("--height", type=click.IntRange(min=16), default=720, show_default=True, help="Image height, pixels.")
+@_verbosity
+def synth(out_dir, n, seed, width, height, verbose, quiet):
+    """Write N synthetic road stereo pairs with exact ground truth into OUT_DIR."""
+    from . import synth as synth_mod
+
+    _setup_logging(verbose, quiet)
+    written = synth_mod.generate_dataset(out_dir, n=n, seed=seed, width=width, height=height)
+    if not quiet:
+        click.echo(f"wrote {len(written)} pairs to {out_dir}")
+
+
+# ----------------------------------------------------------------------------- info
+@main.command()
+def info():
+    """Versions, threads, CUDA availability and the config file in use."""
+    from .batch import package_versions
+    from .kernels import cuda_status
+
+    versions = package_versions()
+    lines = [f"d3stereo {__version__}", f"python {platform.python_version()} ({sys.executable})",
+             f"platform {platform.platform()}"]
+    lines += [f"{name} {version}" for name, version in versions.items() if name != "d3stereo"]
+    lines.append(f"cpu count {os.cpu_count()}")
+    lines.append(_numba_threads())
+    usable, reason = cuda_status()
+    lines.append(f"cuda usable: {reason}" if usable else f"cuda not usable: {reason}")
+    path, why = config_search(None)
+    lines.append(f"config {path} ({why})" if path else f"config none: {why} "
+                 f"(searched -c, ${CONFIG_ENV}, ./{LOCAL_CONFIG})")
+    lines.append(f"samples {samples_dir()}")
+    click.echo("\n".join(lines))
+
+
+def _numba_threads() -> str:
+    import numba
+
+    return f"numba threads {numba.get_num_threads()} (NUMBA_NUM_THREADS={numba.config.NUMBA_NUM_THREADS})"
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,411 @@
+"""Configuration: YAML -> frozen dataclasses, with every default and every check here.
+
+A configuration is built in three layers, later ones winning:
+
+1. the defaults written in the dataclasses below,
+2. a YAML file (``-c FILE``; ``configs/default.yaml`` documents every key),
+3. ``--set section.key=value`` overrides (values parsed as YAML scalars).
+
+Unknown sections or keys, wrong types and out-of-range values raise
+:class:`~d3cli.errors.ConfigError` naming the file, the dotted key, what was expected
+and the valid keys.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import types
+import typing
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Mapping
+
+import yaml
+
+from .errors import ConfigError
+
+METHODS = ("d3stereo", "sgbm", "pt-sgm")
+BACKENDS = ("auto", "cpu", "cuda")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """What to run: the method, the backend and the disparity range."""
+
+    method: str = "d3stereo"
+    backend: str = "auto"
+    max_disparity: int | None = None  # None: from the dataset layout, else width // 4
+
+
+@dataclass(frozen=True)
+class PyramidConfig:
+    """Image/cost pyramid and hierarchy (paper section III, Fig. 1)."""
+
+    levels: int = 4  # k: number of scales; level 1 is full resolution
+    ars: bool = True  # alternating inheritance/diffusion; False: linear hierarchy (DFM)
+
+
+@dataclass(frozen=True)
+class CostConfig:
+    """NCC matching cost (DESIGN step 2)."""
+
+    window: int = 5  # odd NCC window size at every level ...
+    level_windows: tuple[int, ...] = ()  # ... unless given per level, finest first
+    min_variance: float = 1e-2  # grey-level variance (0-255 scale) below which a window is flat
+
+
+@dataclass(frozen=True)
+class AggregationConfig:
+    """Cost aggregation: recursive bilateral filtering, paper eq. 2-3."""
+
+    rbf: bool = True  # False: one-pass plain bilateral filter of radius kappa_a (ablation)
+    t_max: int = 4  # RBF passes of the 3x3 kernel
+    sigma_space: float = 1.5  # sigma_1 in eq. 3, pixels
+    sigma_color: float = 12.0  # sigma_2 in eq. 3, grey levels (0-255)
+    kappa_a: int = 4  # radius of the plain bilateral filter used when rbf is False
+
+
+@dataclass(frozen=True)
+class SeedConfig:
+    """Decisive seeds at the coarsest level (DESIGN step 4)."""
+
+    pkrn_min: float = 1.2  # keep a WTA disparity when (c2 + eps) / (c1 + eps) >= this
+    epsilon: float = 1e-3  # eps in the PKRN ratio
+    lr_tolerance: int = 1  # max |d_left - d_right| for the left-right check
+    pkrn_exclusion: int = 0  # 0: naive PKRN; r > 0: c2 ignores disparities within r of d*
+    every_level: bool = False  # also add fresh seeds below the coarsest level where nothing was inherited
+
+
+@dataclass(frozen=True)
+class DiffusionConfig:
+    """Intra-scale decisive diffusion, paper eq. 5-6 and Algorithm 1."""
+
+    tau: int = 1  # disparity search tolerance r in [-tau, tau]
+    kappa_d: int = 1  # neighbourhood radius
+    adversarial: bool = True  # decided pixels may switch to a better candidate (eq. 6)
+    max_sweeps: int = 100000  # safeguard; diffusion normally stops when nothing changes
+    max_gap: float = 0.05  # accepted states cost <= the pixel's least cost + this; -1: off (paper)
+
+
+@dataclass(frozen=True)
+class InheritanceConfig:
+    """Inter-scale decisive inheritance, paper eq. 7-9 and Algorithm 2."""
+
+    prc: bool = True  # patch reliability constraint; False: DFM-style PKRN test in the patch
+    dfm_pkrn_min: float = 1.05  # PKRN threshold of the DFM-style test (prc False)
+
+
+@dataclass(frozen=True)
+class PTConfig:
+    """Perspective transformation for road scenes (DESIGN step 6)."""
+
+    enabled: bool = False
+    margin: int = 8  # delta: full-resolution disparity margin around the road model
+    slack: int = 2  # extra disparities added to the narrow range [0, 2 delta + slack]
+    min_inlier_share: float = 0.5  # below this the scene is not road-like: full range
+    inlier_threshold: float = 1.0  # |residual| in coarse-level pixels counted as inlier
+    iterations: int = 10  # iteratively re-weighted least-squares rounds
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Sub-pixel refinement and hole filling (DESIGN step 8)."""
+
+    subpixel: bool = True  # parabola through C(d-1), C(d), C(d+1), clamped to +-0.5
+    fill: bool = True  # False: undecided pixels stay inf in disp.pfm
+    smooth_filled: bool = True  # 5x5 median over the filled pixels only
+
+
+@dataclass(frozen=True)
+class SGBMConfig:
+    """OpenCV StereoSGBM baseline (``--method sgbm`` / ``pt-sgm``)."""
+
+    block_size: int = 5  # odd; P1 = 8 * block_size**2, P2 = 32 * block_size**2
+    mode: str = "3way"  # sgbm | hh | 3way | hh4
+    uniqueness_ratio: int = 10
+    speckle_window: int = 100
+    speckle_range: int = 2
+    disp12_max_diff: int = 1
+    fill: bool = True  # fill invalid pixels like d3stereo (row-wise, background side)
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole resolved configuration of one run."""
+
+    run: RunConfig = field(default_factory=RunConfig)
+    pyramid: PyramidConfig = field(default_factory=PyramidConfig)
+    cost: CostConfig = field(default_factory=CostConfig)
+    aggregation: AggregationConfig = field(default_factory=AggregationConfig)
+    seeds: SeedConfig = field(default_factory=SeedConfig)
+    diffusion: DiffusionConfig = field(default_factory=DiffusionConfig)
+    inheritance: InheritanceConfig = field(default_factory=InheritanceConfig)
+    pt: PTConfig = field(default_factory=PTConfig)
+    refine: RefineConfig = field(default_factory=RefineConfig)
+    sgbm: SGBMConfig = field(default_factory=SGBMConfig)
+
+    def to_dict(self) -> dict:
+        """Plain nested dict (tuples as lists), e.g. for run.json."""
+        out = {}
+        for f in fields(self):
+            sec = dataclasses.asdict(getattr(self, f.name))
+            out[f.name] = {k: list(v) if isinstance(v, tuple) else v for k, v in sec.items()}
+        return out
+
+    def level_window(self, level: int) -> int:
+        """NCC window size at ``level`` (0 = full resolution)."""
+        lw = self.cost.level_windows
+        if lw:
+            return lw[min(level, len(lw) - 1)]
+        return self.cost.window
+
+
+# ----------------------------------------------------------------------------- checks
+# Range checks: (predicate, text of what is expected).  Keys absent here take any
+# value of the right type.
+_RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
+    "run.method": (lambda v: v in METHODS, "one of " + ", ".join(METHODS)),
+    "run.backend": (lambda v: v in BACKENDS, "one of " + ", ".join(BACKENDS)),
+    "run.max_disparity": (lambda v: v is None or v > 0, "a positive integer or null"),
+    "pyramid.levels": (lambda v: 1 <= v <= 8, "an integer in [1, 8]"),
+    "cost.window": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
+    "cost.level_windows": (
+        lambda v: all(w >= 1 and w % 2 == 1 and w <= 31 for w in v),
+        "a list of odd integers in [1, 31]",
+    ),
+    "cost.min_variance": (lambda v: v >= 0, "a number >= 0"),
+    "aggregation.t_max": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
+    "aggregation.sigma_space": (lambda v: v > 0, "a number > 0"),
+    "aggregation.sigma_color": (lambda v: v > 0, "a number > 0"),
+    "aggregation.kappa_a": (lambda v: 0 <= v <= 32, "an integer in [0, 32]"),
+    "seeds.pkrn_min": (lambda v: v >= 1.0, "a number >= 1"),
+    "seeds.epsilon": (lambda v: v >= 0, "a number >= 0"),
+    "seeds.lr_tolerance": (lambda v: v >= 0, "an integer >= 0"),
+    "seeds.pkrn_exclusion": (lambda v: v >= 0, "an integer >= 0"),
+    "diffusion.tau": (lambda v: 0 <= v <= 16, "an integer in [0, 16]"),
+    "diffusion.kappa_d": (lambda v: 1 <= v <= 8, "an integer in [1, 8]"),
+    "diffusion.max_sweeps": (lambda v: v >= 1, "an integer >= 1"),
+    "diffusion.max_gap": (lambda v: v >= 0 or v == -1, "a number >= 0, or -1 for off"),
+    "inheritance.dfm_pkrn_min": (lambda v: v >= 1.0, "a number >= 1"),
+    "pt.margin": (lambda v: 1 <= v <= 256, "an integer in [1, 256]"),
+    "pt.slack": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
+    "pt.min_inlier_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
+    "pt.inlier_threshold": (lambda v: v > 0, "a number > 0"),
+    "pt.iterations": (lambda v: 1 <= v <= 100, "an integer in [1, 100]"),
+    "sgbm.block_size": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
+    "sgbm.mode": (lambda v: v in ("sgbm", "hh", "3way", "hh4"), "one of sgbm, hh, 3way, hh4"),
+    "sgbm.uniqueness_ratio": (lambda v: 0 <= v <= 100, "an integer in [0, 100]"),
+    "sgbm.speckle_window": (lambda v: v >= 0, "an integer >= 0"),
+    "sgbm.speckle_range": (lambda v: v >= 0, "an integer >= 0"),
+    "sgbm.disp12_max_diff": (lambda v: v >= -1, "an integer >= -1"),
+}
+
+
+def _type_name(tp) -> str:
+    names = {int: "an integer", float: "a number", bool: "true or false", str: "a string"}
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return _type_name(args[0]) + " or null"
+    if origin is tuple:
+        return "a list of " + _type_name(typing.get_args(tp)[0])[2:] + "s"
+    return names.get(tp, str(tp))
+
+
+def _coerce(value: Any, tp, where: str, key: str):
+    """Check ``value`` against the annotation ``tp``; return it in canonical form."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        inner = [a for a in args if a is not type(None)][0]
+        return _coerce(value, inner, where, key)
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            _bad_type(value, tp, where, key)
+        inner = typing.get_args(tp)[0]
+        return tuple(_coerce(v, inner, where, key) for v in value)
+    if tp is bool:
+        if not isinstance(value, bool):
+            _bad_type(value, tp, where, key)
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                return int(value)
+            _bad_type(value, tp, where, key)
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            _bad_type(value, tp, where, key)
+        if not math.isfinite(float(value)):
+            _bad_type(value, tp, where, key)
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            _bad_type(value, tp, where, key)
+        return value
+    raise TypeError(f"unsupported config annotation {tp!r}")  # programming error
+
+
+def _bad_type(value, tp, where, key):
+    raise ConfigError(
+        f"{where}: {key} must be {_type_name(tp)}, got {value!r}; "
+        f"fix the value of {key} (see configs/default.yaml)"
+    )
+
+
+_HINTS_CACHE: dict[type, dict] = {}
+
+
+def _hints(cls) -> dict:
+    if cls not in _HINTS_CACHE:
+        _HINTS_CACHE[cls] = typing.get_type_hints(cls)
+    return _HINTS_CACHE[cls]
+
+
+def _section_classes() -> dict[str, type]:
+    hints = _hints(Config)
+    return {f.name: hints[f.name] for f in fields(Config)}
+
+
+def _apply(cfg: Config, data: Mapping, where: str) -> Config:
+    """Return ``cfg`` updated with the nested mapping ``data`` (all checks applied)."""
+    if data is None:
+        return cfg
+    if not isinstance(data, Mapping):
+        raise ConfigError(
+            f"{where}: the top level must be a mapping of sections, got {type(data).__name__}; "
+            f"valid sections: {', '.join(_section_classes())}"
+        )
+    sections = _section_classes()
+    new_sections = {}
+    for sec_name, sec_data in data.items():
+        if sec_name not in sections:
+            raise ConfigError(
+                f"{where}: unknown section {sec_name!r}; valid sections: {', '.join(sections)}"
+            )
+        if sec_data is None:
+            continue
+        sec_cls = sections[sec_name]
+        if not isinstance(sec_data, Mapping):
+            raise ConfigError(
+                f"{where}: section {sec_name} must be a mapping of keys, got {sec_data!r}; "
+                f"valid keys: {', '.join(f.name for f in fields(sec_cls))}"
+            )
+        hints = _hints(sec_cls)
+        changes = {}
+        for key, value in sec_data.items():
+            dotted = f"{sec_name}.{key}"
+            if key not in hints:
+                raise ConfigError(
+                    f"{where}: unknown key {dotted!r}; valid keys of {sec_name}: "
+                    f"{', '.join(f.name for f in fields(sec_cls))}"
+                )
+            value = _coerce(value, hints[key], where, dotted)
+            check = _RANGES.get(dotted)
+            if check is not None and not check[0](value):
+                raise ConfigError(
+                    f"{where}: {dotted} must be {check[1]}, got {value!r}; "
+                    f"fix the value of {dotted}"
+                )
+            changes[key] = value
+        new_sections[sec_name] = replace(new_sections.get(sec_name, getattr(cfg, sec_name)), **changes)
+    return replace(cfg, **new_sections)
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader that rejects duplicate keys (a silent override is a user error)."""
+
+
+def _construct_mapping(loader, node, deep=False):
+    seen = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise ConfigError(
+                f"{loader.name}:{key_node.start_mark.line + 1}: duplicate key {key!r} "
+                f"(first at line {seen[key]}); keep only one"
+            )
+        seen[key] = key_node.start_mark.line + 1
+    return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
+
+
+_UniqueKeyLoader.add_constructor(
+    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping
+)
+
+
+def read_yaml(path: str | os.PathLike) -> Any:
+    """Parse a YAML file, raising ConfigError with file and line on any problem."""
+    path = os.fspath(path)
+    try:
+        with open(path, "r", encoding="utf-8") as fh:
+            text = fh.read()
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: config file not found; check the path given to -c") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read config file ({exc}); give a readable UTF-8 YAML file") from None
+    try:
+        loader = _UniqueKeyLoader(text)
+        loader.name = path
+        try:
+            return loader.get_single_data()
+        finally:
+            loader.dispose()
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f":{mark.line + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(f"{path}{line}: not valid YAML ({problem}); fix the syntax") from None
+
+
+def parse_override(text: str) -> tuple[str, str, Any]:
+    """Split ``section.key=value`` into (section, key, YAML-parsed value)."""
+    if "=" not in text or "." not in text.split("=", 1)[0]:
+        raise ConfigError(
+            f"--set {text}: expected section.key=value (e.g. diffusion.tau=2); fix the option"
+        )
+    dotted, raw = text.split("=", 1)
+    section, key = dotted.strip().split(".", 1)
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        value = raw
+    return section, key, value
+
+
+def load_config(path: str | os.PathLike | None = None, overrides: typing.Iterable[str] = ()) -> Config:
+    """Build a :class:`Config` from defaults, an optional YAML file and overrides.
+
+    Parameters
+    ----------
+    path : path-like or None
+        YAML file with sections as in ``configs/default.yaml``.
+    overrides : iterable of str
+        ``section.key=value`` strings applied after the file.
+
+    Returns
+    -------
+    Config
+        The frozen, validated configuration.
+
+    Raises
+    ------
+    ConfigError
+        Unknown sections/keys, wrong types, out-of-range values, bad YAML.
+    """
+    cfg = Config()
+    if path is not None:
+        cfg = _apply(cfg, read_yaml(path), os.fspath(path))
+    for text in overrides:
+        section, key, value = parse_override(text)
+        cfg = _apply(cfg, {section: {key: value}}, f"--set {text}")
+    return cfg
+
+
+def config_from_dict(data: Mapping | None, where: str = "<dict>") -> Config:
+    """Build a validated :class:`Config` from a nested mapping (e.g. run.json)."""
+    return _apply(Config(), data or {}, where)

@@ -1,0 +1,377 @@
+"""CPU backend: the per-pixel functions of ``pixel.py`` compiled with ``njit`` and
+driven by parallel (``prange``) loops over rows or over frontier pixels.
+
+Every driver is deterministic and independent of the thread count: parallel loops only
+write disjoint cells, reductions are done serially, and iterative steps are
+double-buffered (Jacobi).  Arrays are C-contiguous float32 volumes (H, W, D) with the
+disparity axis innermost, so inner loops run over contiguous memory.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+from numba import njit, prange
+
+
+def _drop_stale_cache() -> None:
+    """Delete this module's numba cache when pixel.py changed since it was written.
+
+    Numba keys a cached function on its own source file only, so the drivers below
+    would keep stale copies of the per-pixel functions they inline after an edit of
+    pixel.py.
+    """
+    here = Path(__file__).resolve().parent
+    cache = here / "__pycache__"
+    try:
+        digest = hashlib.sha256((here / "pixel.py").read_bytes()).hexdigest()
+        stamp = cache / "pixel.sha256"
+        if stamp.exists() and stamp.read_text() == digest:
+            return
+        for f in list(cache.glob("cpu.*.nbi")) + list(cache.glob("cpu.*.nbc")):
+            f.unlink()
+        cache.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:  # read-only install: numba then caches elsewhere or not at all
+        pass
+
+
+_drop_stale_cache()
+
+from .pixel import UNDECIDED, build_ops  # noqa: E402
+
+ops = build_ops(njit(cache=True))
+_ncc_cost = ops.ncc_cost
+_box_sum = ops.box_sum
+_rbf_weight = ops.rbf_weight
+_seed_at = ops.seed_at
+_diffuse_at = ops.diffuse_at
+_inherit_at = ops.inherit_at
+_subpixel_at = ops.subpixel_at
+
+
+@njit(cache=True)
+def integral_image(img, power):
+    """(H+1, W+1) float64 integral image of ``img ** power`` (power 1 or 2)."""
+    h, w = img.shape
+    ii = np.zeros((h + 1, w + 1), np.float64)
+    for y in range(h):
+        row = 0.0
+        for x in range(w):
+            val = np.float64(img[y, x])
+            row += val if power == 1 else val * val
+            ii[y + 1, x + 1] = ii[y, x + 1] + row
+    return ii
+
+
+@njit(parallel=True, cache=True)
+def ncc_cost_volume(left, right, max_disparity, window, min_variance):
+    """NCC cost volume ``(1 - NCC) / 2`` with box sums (DESIGN step 2).
+
+    The window is clipped to the part where both the left window around (u, v) and the
+    right window around (u - d, v) lie inside the image.  Cells with u - d < 0 or a flat
+    window cost 1.
+
+    Parameters
+    ----------
+    left, right : ndarray, float32, (H, W)
+        Grey images, 0-255 scale.
+    max_disparity : int
+        Largest disparity; the volume has ``max_disparity + 1`` slices.
+    window : int
+        Odd window size.
+    min_variance : float
+        Grey-level variance at or below which a window is flat.
+
+    Returns
+    -------
+    ndarray, float32, (H, W, max_disparity + 1)
+    """
+    h, w = left.shape
+    n_disp = max_disparity + 1
+    r = window // 2
+    ii_l = integral_image(left, 1)
+    ii_ll = integral_image(left, 2)
+    ii_r = integral_image(right, 1)
+    ii_rr = integral_image(right, 2)
+    cost = np.empty((h, w, n_disp), np.float32)
+    for v in prange(h):
+        v0 = max(0, v - r)
+        v1 = min(h - 1, v + r)
+        # prefix[u + 1, d]: sum over columns <= u of the column sums of L(y, u) R(y, u - d)
+        prefix = np.zeros((w + 1, n_disp), np.float64)
+        for u in range(w):
+            for d in range(n_disp):
+                s = 0.0
+                if u - d >= 0:
+                    for y in range(v0, v1 + 1):
+                        s += np.float64(left[y, u]) * np.float64(right[y, u - d])
+                prefix[u + 1, d] = prefix[u, d] + s
+        for u in range(w):
+            for d in range(n_disp):
+                if u - d < 0:
+                    cost[v, u, d] = 1.0
+                    continue
+                c0 = max(u - r, d)
+                c1 = min(u + r, w - 1)
+                n = (v1 - v0 + 1) * (c1 - c0 + 1)
+                sl = _box_sum(ii_l, v0, c0, v1, c1)
+                sll = _box_sum(ii_ll, v0, c0, v1, c1)
+                sr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d)
+                srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
+                slr = prefix[c1 + 1, d] - prefix[c0, d]
+                cost[v, u, d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+    return cost
+
+
+@njit(parallel=True, cache=True)
+def rbf_weights(img, sigma_space, sigma_color):
+    """Normalised 3x3 bilateral weights per pixel (paper eq. 3), computed once per level.
+
+    Returns float32 (H, W, 9); slot k is the neighbour (dy, dx) = (k // 3 - 1, k % 3 - 1);
+    neighbours outside the image get weight 0.
+    """
+    h, w = img.shape
+    inv_ss2 = 1.0 / (sigma_space * sigma_space)
+    inv_sc2 = 1.0 / (sigma_color * sigma_color)
+    weights = np.zeros((h, w, 9), np.float32)
+    for v in prange(h):
+        for u in range(w):
+            total = 0.0
+            for k in range(9):
+                dy = k // 3 - 1
+                dx = k % 3 - 1
+                y = v + dy
+                x = u + dx
+                if 0 <= y < h and 0 <= x < w:
+                    wk = _rbf_weight(dy, dx, np.float64(img[v, u]), np.float64(img[y, x]), inv_ss2, inv_sc2)
+                    weights[v, u, k] = wk
+                    total += wk
+            for k in range(9):
+                weights[v, u, k] = weights[v, u, k] / total
+    return weights
+
+
+@njit(parallel=True, cache=True)
+def _rbf_pass(src, dst, weights):
+    h, w, n_disp = src.shape
+    for v in prange(h):
+        for u in range(w):
+            for d in range(n_disp):
+                dst[v, u, d] = 0.0
+            for k in range(9):
+                wk = weights[v, u, k]
+                if wk == 0.0:
+                    continue
+                y = v + k // 3 - 1
+                x = u + k % 3 - 1
+                for d in range(n_disp):
+                    dst[v, u, d] += wk * src[y, x, d]
+
+
+def rbf_filter(cost, weights, t_max):
+    """Recursive bilateral filtering: ``t_max`` passes of the 3x3 kernel (paper eq. 2).
+
+    Parameters
+    ----------
+    cost : ndarray, float32, (H, W, D)
+    weights : ndarray, float32, (H, W, 9)
+        From :func:`rbf_weights`.
+    t_max : int
+
+    Returns
+    -------
+    ndarray, float32, (H, W, D)
+        A new array (``cost`` is left untouched).
+    """
+    src = cost.copy()
+    if t_max == 0:
+        return src
+    dst = np.empty_like(src)
+    for _ in range(t_max):
+        _rbf_pass(src, dst, weights)
+        src, dst = dst, src
+    return src
+
+
+@njit(parallel=True, cache=True)
+def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
+    """One pass of a plain (2 radius + 1)^2 bilateral filter over every disparity slice.
+
+    The ablation counterpart of RBF (paper Fig. 4): same kernel as eq. 3, larger support.
+    """
+    h, w, n_disp = cost.shape
+    inv_ss2 = 1.0 / (sigma_space * sigma_space)
+    inv_sc2 = 1.0 / (sigma_color * sigma_color)
+    out = np.empty_like(cost)
+    for v in prange(h):
+        acc = np.empty(n_disp, np.float64)
+        for u in range(w):
+            acc[:] = 0.0
+            total = 0.0
+            for dy in range(-radius, radius + 1):
+                y = v + dy
+                if y < 0 or y >= h:
+                    continue
+                for dx in range(-radius, radius + 1):
+                    x = u + dx
+                    if x < 0 or x >= w:
+                        continue
+                    wk = _rbf_weight(dy, dx, np.float64(img[v, u]), np.float64(img[y, x]), inv_ss2, inv_sc2)
+                    total += wk
+                    for d in range(n_disp):
+                        acc[d] += wk * cost[y, x, d]
+            for d in range(n_disp):
+                out[v, u, d] = acc[d] / total
+    return out
+
+
+@njit(parallel=True, cache=True)
+def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion):
+    """Sparse seed map at the coarsest level (DESIGN step 4); int32 (H, W), -1 undecided."""
+    h, w, _ = cost.shape
+    out = np.empty((h, w), np.int32)
+    for v in prange(h):
+        for u in range(w):
+            out[v, u] = _seed_at(cost, v, u, pkrn_min, epsilon, lr_tolerance, exclusion)
+    return out
+
+
+@njit(parallel=True, cache=True)
+def _evaluate_frontier(cost, disp, min_cost, max_gap, active, n_active, new_values, tau, kappa_d, adversarial):
+    w = disp.shape[1]
+    for i in prange(n_active):
+        p = active[i]
+        new_values[i] = _diffuse_at(cost, disp, min_cost, max_gap, p // w, p % w, tau, kappa_d, adversarial)
+
+
+@njit(cache=True)
+def _build_frontier(changed, n_changed, stamp, sweep, active, h, w, kappa_d):
+    """Pixels within ``kappa_d`` of a changed pixel (the pixel itself excluded), deduplicated."""
+    n_active = 0
+    for i in range(n_changed):
+        p = changed[i]
+        v = p // w
+        u = p % w
+        for dv in range(-kappa_d, kappa_d + 1):
+            y = v + dv
+            if y < 0 or y >= h:
+                continue
+            for du in range(-kappa_d, kappa_d + 1):
+                x = u + du
+                if x < 0 or x >= w or (dv == 0 and du == 0):
+                    continue
+                q = y * w + x
+                if stamp[q] != sweep:
+                    stamp[q] = sweep
+                    active[n_active] = q
+                    n_active += 1
+    return n_active
+
+
+@njit(cache=True)
+def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweeps):
+    """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 5-6).
+
+    Parameters
+    ----------
+    cost : ndarray, float32, (H, W, D)
+    disp0 : ndarray, int32, (H, W)
+        Sparse decisive map D_i^S (-1 undecided); not modified.
+    min_cost : ndarray, float32, (H, W)
+        Least cost of each pixel over all disparities (:func:`min_cost`).
+    max_gap : float
+        Accepted states cost at most min_cost + max_gap; < 0: off.
+    tau, kappa_d : int
+        Disparity tolerance and neighbourhood radius.
+    adversarial : bool
+        Allow decided pixels to switch to a strictly cheaper accepted candidate.
+    max_sweeps : int
+        Safeguard on the number of sweeps.
+
+    Returns
+    -------
+    disp : ndarray, int32, (H, W)
+    sweeps : int
+        Sweeps run (the last one changed nothing unless the safeguard stopped it).
+    """
+    h, w = disp0.shape
+    disp = disp0.copy()
+    flat = disp.reshape(h * w)  # a view: writes go to disp
+    changed = np.empty(h * w, np.int64)
+    n_changed = 0
+    for p in range(h * w):
+        if flat[p] != UNDECIDED:
+            changed[n_changed] = p
+            n_changed += 1
+    stamp = np.zeros(h * w, np.int64)
+    active = np.empty(h * w, np.int64)
+    new_values = np.empty(h * w, np.int32)
+    sweeps = 0
+    while n_changed > 0 and sweeps < max_sweeps:
+        sweeps += 1
+        n_active = _build_frontier(changed, n_changed, stamp, sweeps, active, h, w, kappa_d)
+        _evaluate_frontier(cost, disp, min_cost, max_gap, active, n_active, new_values, tau, kappa_d, adversarial)
+        # Jacobi: every frontier pixel read the previous map; apply all changes after.
+        n_changed = 0
+        for i in range(n_active):
+            p = active[i]
+            if new_values[i] != flat[p]:
+                changed[n_changed] = p
+                n_changed += 1
+                new_values[n_changed - 1] = new_values[i]
+        for i in range(n_changed):
+            flat[changed[i]] = new_values[i]
+    return disp, sweeps
+
+
+@njit(parallel=True, cache=True)
+def min_cost(cost):
+    """Least cost of every pixel over all disparities; float32 (H, W)."""
+    h, w, n_disp = cost.shape
+    out = np.empty((h, w), np.float32)
+    for v in prange(h):
+        for u in range(w):
+            best = cost[v, u, 0]
+            for d in range(1, n_disp):
+                if cost[v, u, d] < best:
+                    best = cost[v, u, d]
+            out[v, u] = best
+    return out
+
+
+@njit(parallel=True, cache=True)
+def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
+    """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
+
+    Parameters
+    ----------
+    cost : ndarray, float32, (H, W, D)
+        Cost volume of the finer level i.
+    coarse : ndarray, int32, (>= H // 2, >= W // 2)
+        Disparity map of level i + 1 (-1 undecided).
+
+    Returns
+    -------
+    ndarray, int32, (H, W)
+        Sparse map D_i^S.
+    """
+    h, w, _ = cost.shape
+    out = np.empty((h, w), np.int32)
+    for v in prange(h):
+        for u in range(w):
+            out[v, u] = _inherit_at(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon)
+    return out
+
+
+@njit(parallel=True, cache=True)
+def subpixel(cost, disp):
+    """Parabola sub-pixel refinement (DESIGN step 8); float32 (H, W), inf where undecided."""
+    h, w = disp.shape
+    out = np.empty((h, w), np.float32)
+    for v in prange(h):
+        for u in range(w):
+            out[v, u] = _subpixel_at(cost, disp, v, u)
+    return out

@@ -1,0 +1,376 @@
+"""Per-pixel math of D3Stereo, written once and compiled for every backend.
+
+``build_ops(jit)`` returns a namespace of functions compiled with ``jit``:
+``numba.njit`` for the CPU (``kernels/cpu.py``) and ``numba.cuda.jit(device=True)``
+for CUDA (``kernels/cuda.py``).  The same Python source is compiled twice, so the two
+backends cannot drift apart.  (Calling an ``@njit`` function from a CUDA kernel fails
+in the CUDA simulator, hence the factory rather than shared dispatchers.)
+
+Rules for everything in here: arguments are arrays, indices and scalars; results are
+scalars; no allocation, no exceptions, no Python objects.  Scratch memory and loops over
+the image belong to the drivers.
+
+Conventions (DESIGN.md section 1)
+---------------------------------
+* ``cost`` is a float32 volume of shape (H, W, D), disparity innermost; cost is
+  ``(1 - NCC) / 2`` in [0, 1], lower is better.  Cells whose right pixel ``u - d`` is
+  outside the image, or whose window is flat, hold 1.0 and never win.
+* Disparity maps are int32 with ``-1`` for undecided pixels (never 0, a legal disparity).
+* :func:`cost_or_inf` returns ``inf`` for a cell that does not exist (pixel outside the
+  image or disparity outside [0, D-1]).  A comparison ``c < cost_or_inf(...)`` against a
+  missing cell is therefore always true: missing neighbours never veto a decision.
+* The right-view cost is the left volume re-indexed (never a second volume):
+  ``C_R(x, v, d) = C_L(x + d, v, d)`` (:func:`right_cost_or_inf`).
+* Ties in an arg-min go to the smaller disparity, so every backend agrees exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+UNDECIDED = -1
+INF = math.inf
+
+
+def build_ops(jit):
+    """Compile the per-pixel functions with ``jit`` and return them in a namespace.
+
+    Parameters
+    ----------
+    jit : callable
+        A decorator such as ``numba.njit(cache=True)`` or ``numba.cuda.jit(device=True)``.
+
+    Returns
+    -------
+    types.SimpleNamespace
+        ``ncc_cost, box_sum, cost_or_inf, right_cost_or_inf, rbf_weight, seed_at,
+        diffuse_at, inherit_at, subpixel_at``.
+    """
+
+    @jit
+    def ncc_cost(n, sl, sll, sr, srr, slr, min_variance):
+        """Matching cost ``(1 - NCC) / 2`` from window sums (DESIGN step 2).
+
+        ``n`` pixels; ``sl, sll`` sums of L and L^2; ``sr, srr`` of R and R^2; ``slr`` of
+        L*R (float64).  A window whose grey-level variance is <= ``min_variance`` is flat:
+        NCC is undefined there, cost 1.
+        """
+        if n <= 0:
+            return 1.0
+        inv = 1.0 / n
+        ml = sl * inv
+        mr = sr * inv
+        vl = sll * inv - ml * ml
+        vr = srr * inv - mr * mr
+        if vl <= min_variance or vr <= min_variance:
+            return 1.0
+        ncc = (slr * inv - ml * mr) / math.sqrt(vl * vr)
+        if ncc > 1.0:
+            ncc = 1.0
+        elif ncc < -1.0:
+            ncc = -1.0
+        return 0.5 * (1.0 - ncc)
+
+    @jit
+    def box_sum(ii, r0, c0, r1, c1):
+        """Sum of rows r0..r1, columns c0..c1 (inclusive) from an (H+1, W+1) integral image."""
+        return ii[r1 + 1, c1 + 1] - ii[r0, c1 + 1] - ii[r1 + 1, c0] + ii[r0, c0]
+
+    @jit
+    def cost_or_inf(cost, v, u, d):
+        """``cost[v, u, d]``, or inf where that cell does not exist."""
+        if d < 0 or d >= cost.shape[2] or u < 0 or u >= cost.shape[1]:
+            return INF
+        return cost[v, u, d]
+
+    @jit
+    def right_cost_or_inf(cost, v, x, d):
+        """Right-view cost ``C_R(x, v, d) = C_L(x + d, v, d)``, inf where it does not exist."""
+        return cost_or_inf(cost, v, x + d, d)
+
+    @jit
+    def rbf_weight(dy, dx, i_p, i_q, inv_sigma_space2, inv_sigma_color2):
+        """Bilateral kernel K(p, q) of paper eq. 3 (unnormalised)."""
+        di = i_p - i_q
+        return math.exp(-(dy * dy + dx * dx) * inv_sigma_space2 - di * di * inv_sigma_color2)
+
+    @jit
+    def seed_at(cost, v, u, pkrn_min, epsilon, lr_tolerance, exclusion):
+        """Decisive seed at (u, v) of the coarsest level, or UNDECIDED (DESIGN step 4).
+
+        Winner-take-all ``d1`` (smallest disparity on ties) is kept when
+        (a) PKRN = (c2 + eps) / (c1 + eps) >= pkrn_min, where c2 is the least cost at any
+        disparity farther than ``exclusion`` from d1 (``exclusion = 0``: the naive peak
+        ratio), and (b) the right view's WTA at (u - d1, v) is within ``lr_tolerance``.
+        A cost of 1 (invalid or flat) never yields a seed.
+        """
+        n_disp = cost.shape[2]
+        d1 = 0
+        c1 = cost[v, u, 0]
+        for d in range(1, n_disp):
+            c = cost[v, u, d]
+            if c < c1:
+                c1 = c
+                d1 = d
+        if c1 >= 1.0:
+            return UNDECIDED
+        c2 = INF
+        for d in range(n_disp):
+            if abs(d - d1) > exclusion:
+                c = cost[v, u, d]
+                if c < c2:
+                    c2 = c
+        if c2 == INF:
+            return UNDECIDED
+        if c2 + epsilon < pkrn_min * (c1 + epsilon):
+            return UNDECIDED
+        x = u - d1
+        width = cost.shape[1]
+        dr = 0
+        cr = INF
+        for d in range(n_disp):
+            if x + d >= width:
+                break
+            c = cost[v, x + d, d]
+            if c < cr:
+                cr = c
+                dr = d
+        if abs(dr - d1) > lr_tolerance:
+            return UNDECIDED
+        return d1
+
+    @jit
+    def accept_state(cost, v, u, s, c):
+        """Hypotheses (2) and (3) of the diffusion for candidate ``s`` of cost ``c``.
+
+        (2) local minimum of the cost curve: C(p, s) < C(p, s - 1), C(p, s + 1);
+        (3) right-view consistency: the matched right pixel (u - s, v) is not matched
+        better by its neighbours along its own disparity line,
+        C(p, s) < C((u - 1, v), s - 1) and C(p, s) < C((u + 1, v), s + 1).
+        """
+        if c >= 1.0:
+            return False
+        if not (c < cost_or_inf(cost, v, u, s - 1) and c < cost_or_inf(cost, v, u, s + 1)):
+            return False
+        if not (c < cost_or_inf(cost, v, u - 1, s - 1) and c < cost_or_inf(cost, v, u + 1, s + 1)):
+            return False
+        return True
+
+    @jit
+    def diffuse_at(cost, disp, min_cost, max_gap, v, u, tau, kappa_d, adversarial):
+        """New state of pixel (u, v) in one Jacobi diffusion sweep (paper eq. 5-6).
+
+        The candidates are ``D(q) + r`` for every decided neighbour q within radius
+        ``kappa_d`` (p itself excluded) and r in [-tau, tau]; the state ``s`` is the
+        candidate of least cost (smaller disparity on ties).  An undecided pixel takes
+        ``s`` when it passes hypotheses (2)-(3); a decided pixel switches to ``s`` only in
+        the adversarial mode and only when s also costs strictly less than its current
+        disparity (eq. 6).  Reads ``disp`` (the previous sweep) only.
+
+        Near-optimality (``max_gap >= 0``; an addition to the paper, see
+        ``DiffusionConfig.max_gap``): the accepted state must also cost at most
+        ``min_cost[v, u] + max_gap``, ``min_cost`` being the pixel's least cost over all
+        disparities.  On noisy NCC cost curves almost every disparity is some local
+        minimum, and without this test diffusion walks from a foreground edge deep into
+        the background one +-1 step at a time.
+        """
+        height = disp.shape[0]
+        width = disp.shape[1]
+        n_disp = cost.shape[2]
+        cur = disp[v, u]
+        best_s = UNDECIDED
+        best_c = INF
+        for dv in range(-kappa_d, kappa_d + 1):
+            y = v + dv
+            if y < 0 or y >= height:
+                continue
+            for du in range(-kappa_d, kappa_d + 1):
+                x = u + du
+                if x < 0 or x >= width or (dv == 0 and du == 0):
+                    continue
+                q = disp[y, x]
+                if q < 0:
+                    continue
+                for r in range(-tau, tau + 1):
+                    s = q + r
+                    if s < 0 or s >= n_disp:
+                        continue
+                    c = cost[v, u, s]
+                    if c < best_c or (c == best_c and s < best_s):
+                        best_c = c
+                        best_s = s
+        if best_s == UNDECIDED or best_s == cur:
+            return cur
+        if not accept_state(cost, v, u, best_s, best_c):
+            return cur
+        if max_gap >= 0.0 and best_c > min_cost[v, u] + max_gap:
+            return cur
+        if cur < 0:
+            return best_s
+        if adversarial and best_c < cost[v, u, cur]:
+            return best_s
+        return cur
+
+    @jit
+    def best_of_three(cost, v, x, d, right_view):
+        """Least cost among disparities d-1, d, d+1 at (x, v) (smaller disparity on ties).
+
+        ``right_view`` selects the right-view cost C_R(x, v, .) instead of C_L.
+        Returns (disparity, cost); (-1, inf) when none of the three cells exists.
+        """
+        best_d = UNDECIDED
+        best_c = INF
+        for s in range(d - 1, d + 2):
+            if right_view:
+                c = right_cost_or_inf(cost, v, x, s)
+            else:
+                c = cost_or_inf(cost, v, x, s)
+            if c < best_c:
+                best_c = c
+                best_d = s
+        return best_d, best_c
+
+    @jit
+    def outside_cost(cost, v, x, d, right_view):
+        """Least cost at the 'outside' disparities d - 2 and d + 2 (the G sets of eq. 8)."""
+        if right_view:
+            return min(right_cost_or_inf(cost, v, x, d - 2), right_cost_or_inf(cost, v, x, d + 2))
+        return min(cost_or_inf(cost, v, x, d - 2), cost_or_inf(cost, v, x, d + 2))
+
+    @jit
+    def patch_reliable(cost, y0, u0, x0, d, right_view):
+        """Patch reliability constraint (PRC, paper eq. 7-8) in one view.
+
+        The 2x2 patch at rows y0, y0+1 and columns x0, x0+1 of the chosen view, with the
+        in-patch disparities {d-1, d, d+1} (d = 2 dc, the coarse disparity doubled) and the
+        outside disparities {d-2, d+2} of the pixels just beside the partner patch.  The
+        patch is reliable when the mean of the four best in-patch costs is below the least
+        outside cost.  Returns that least outside cost, or -1 when the patch is unreliable.
+        """
+        sum_in = 0.0
+        least_out = INF
+        for b in range(2):
+            for a in range(2):
+                c_in = best_of_three(cost, y0 + b, x0 + a, d, right_view)[1]
+                sum_in += c_in
+                least_out = min(least_out, outside_cost(cost, y0 + b, x0 + a, d, right_view))
+        if sum_in * 0.25 < least_out:
+            return least_out
+        return -1.0
+
+    @jit
+    def pixel_decisive(cost, v, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon):
+        """Best in-patch disparity of one pixel if it passes the pixel test, else -1.
+
+        With ``prc``: local minimum C(d*) < C(d* +- 1) and below the patch's least outside
+        cost (eq. 9).  Without (DFM-style ablation): PKRN of the best against the second
+        best in-patch cost >= dfm_pkrn_min.
+        """
+        best_d, best_c = best_of_three(cost, v, x, d, right_view)
+        if best_d < 0 or best_c >= 1.0:
+            return UNDECIDED
+        if prc:
+            if right_view:
+                lo = right_cost_or_inf(cost, v, x, best_d - 1)
+                hi = right_cost_or_inf(cost, v, x, best_d + 1)
+            else:
+                lo = cost_or_inf(cost, v, x, best_d - 1)
+                hi = cost_or_inf(cost, v, x, best_d + 1)
+            if best_c < lo and best_c < hi and best_c < least_out:
+                return best_d
+            return UNDECIDED
+        second = INF
+        for s in range(d - 1, d + 2):
+            if s != best_d:
+                if right_view:
+                    c = right_cost_or_inf(cost, v, x, s)
+                else:
+                    c = cost_or_inf(cost, v, x, s)
+                second = min(second, c)
+        if second + epsilon >= dfm_pkrn_min * (best_c + epsilon):
+            return best_d
+        return UNDECIDED
+
+    @jit
+    def inherit_at(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon):
+        """Inherited disparity of fine pixel (u, v) from the coarser map, or UNDECIDED.
+
+        Paper Algorithm 2, eq. 7-9.  The coarse pixel (u//2, v//2) with disparity dc maps
+        to the 2x2 left patch at columns u0 = 2(u//2) + {0, 1} and the right patch at
+        x0 = u0 - 2 dc + {0, 1}; co-row partners give the in-patch disparities
+        {2dc - 1, 2dc, 2dc + 1} and the pixels just beside the partner patch the outside
+        disparities {2dc - 2, 2dc + 2}.  With ``prc`` the patch must pass the patch
+        reliability constraint in both views and the pixel the local-minimum constraint
+        (:func:`pixel_decisive`); without, the DFM-style PKRN test.  Bidirectional as in
+        LRDC: the matched right pixel must pass its own test with the same disparity.
+        """
+        pv = v // 2
+        pu = u // 2
+        if pv >= coarse.shape[0] or pu >= coarse.shape[1]:
+            return UNDECIDED
+        dc = coarse[pv, pu]
+        if dc < 0:
+            return UNDECIDED
+        d = 2 * dc
+        y0 = 2 * pv
+        u0 = 2 * pu
+        x0 = u0 - d
+        least_out_l = INF
+        least_out_r = INF
+        if prc:
+            least_out_l = patch_reliable(cost, y0, u0, x0, d, False)
+            if least_out_l < 0.0:
+                return UNDECIDED
+            least_out_r = patch_reliable(cost, y0, x0, u0, d, True)
+            if least_out_r < 0.0:
+                return UNDECIDED
+        dl = pixel_decisive(cost, v, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon)
+        if dl < 0:
+            return UNDECIDED
+        dr = pixel_decisive(cost, v, u - dl, d, True, prc, least_out_r, dfm_pkrn_min, epsilon)
+        if dr != dl:
+            return UNDECIDED
+        return dl
+
+    @jit
+    def subpixel_at(cost, disp, v, u):
+        """Sub-pixel disparity by a parabola through C(d-1), C(d), C(d+1) (DESIGN step 8).
+
+        The offset is clamped to [-0.5, 0.5]; at the ends of the range or on a flat or
+        concave curve the integer disparity is returned; inf where undecided.
+        """
+        d = disp[v, u]
+        if d < 0:
+            return INF
+        if d - 1 < 0 or d + 1 >= cost.shape[2]:
+            return float(d)
+        c0 = cost[v, u, d - 1]
+        c1 = cost[v, u, d]
+        c2 = cost[v, u, d + 1]
+        denom = c0 + c2 - 2.0 * c1
+        if denom <= 0.0:
+            return float(d)
+        offset = 0.5 * (c0 - c2) / denom
+        if offset > 0.5:
+            offset = 0.5
+        elif offset < -0.5:
+            offset = -0.5
+        return d + offset
+
+    return SimpleNamespace(
+        ncc_cost=ncc_cost,
+        box_sum=box_sum,
+        cost_or_inf=cost_or_inf,
+        right_cost_or_inf=right_cost_or_inf,
+        rbf_weight=rbf_weight,
+        seed_at=seed_at,
+        accept_state=accept_state,
+        diffuse_at=diffuse_at,
+        best_of_three=best_of_three,
+        outside_cost=outside_cost,
+        patch_reliable=patch_reliable,
+        pixel_decisive=pixel_decisive,
+        inherit_at=inherit_at,
+        subpixel_at=subpixel_at,
+    )

@@ -1,0 +1,257 @@
+"""D3Stereo pipeline: ``D3Stereo(cfg).compute(left, right) -> DisparityResult``."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import Config
+from .cost import cost_volume
+from .diffusion import diffuse
+from .errors import InputError
+from .inheritance import inherit
+from .kernels import get_backend
+from .pyramid import build_pyramid, level_max_disparity, usable_levels
+from .rbf import aggregate
+from .seeds import decisive_seeds
+from .subpixel import fill_holes, refine_subpixel
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class DisparityResult:
+    """Output of a stereo method on one pair.
+
+    Attributes
+    ----------
+    disparity : ndarray, float32, (H, W)
+        Left-view disparity in pixels (left (u, v) matches right (u - d, v)).
+        ``inf`` where invalid (only when hole filling is off).
+    valid : ndarray, bool, (H, W)
+        True where the method decided the disparity itself (before any filling).
+    levels : list of ndarray
+        Per-level integer disparity maps (int32, -1 = undecided), finest first; empty for
+        baselines.
+    timings : dict of str to float
+        Seconds per step.
+    info : dict
+        JSON-serialisable facts about the run (backend, seeds, fitted PT model, ...).
+    warnings : list of str
+        Human-readable warnings (e.g. "no decisive seeds").
+    """
+
+    disparity: np.ndarray
+    valid: np.ndarray
+    levels: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+
+def _grey(img: np.ndarray, name: str) -> np.ndarray:
+    """Grey float32 image on the 0-255 scale from a raw image array."""
+    from .io import to_grey
+
+    arr = np.asarray(img)
+    if arr.ndim not in (2, 3) or arr.size == 0:
+        raise InputError(f"{name} image: expected a non-empty (H, W) or (H, W, C) array, got shape {arr.shape}; pass an image")
+    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+        raise InputError(f"{name} image: contains NaN or inf values; pass finite intensities")
+    return to_grey(arr)
+
+
+class D3Stereo:
+    """The D3Stereo stereo matcher (NCC + RBF + decisive diffusion/inheritance).
+
+    Parameters
+    ----------
+    cfg : Config, optional
+        Resolved configuration (:func:`d3cli.load_config`); defaults when omitted.
+
+    Examples
+    --------
+    >>> from d3cli import D3Stereo, load_config
+    >>> result = D3Stereo(load_config()).compute(left, right, max_disparity=64)  # doctest: +SKIP
+    """
+
+    def __init__(self, cfg: Config | None = None):
+        self.cfg = cfg if cfg is not None else Config()
+        self.backend, self.backend_name = get_backend(self.cfg.run.backend)
+
+    def compute(self, left, right, *, max_disparity: int | None = None) -> DisparityResult:
+        """Estimate the left-view disparity map of a rectified pair.
+
+        Parameters
+        ----------
+        left, right : ndarray, (H, W) or (H, W, C), any integer or float dtype
+            Rectified images; left (u, v) matches right (u - d, v) with d >= 0.
+        max_disparity : int, optional, keyword-only
+            Largest disparity searched at full resolution; default ``cfg.run.max_disparity``
+            or, if that is unset, ``W // 4``.
+
+        Returns
+        -------
+        DisparityResult
+            float32 disparity (sub-pixel; filled unless ``refine.fill`` is false, in which
+            case undecided pixels are inf), validity mask, per-level maps, timings, info.
+
+        Raises
+        ------
+        InputError
+            Shapes differ, an image is empty or not finite, or max_disparity is not in
+            [1, W - 1].
+        """
+        cfg = self.cfg
+        timings: dict[str, float] = {}
+        t_start = time.perf_counter()
+        grey_l = _grey(left, "left")
+        grey_r = _grey(right, "right")
+        if grey_l.shape != grey_r.shape:
+            raise InputError(
+                f"pair: left is {grey_l.shape[0]}x{grey_l.shape[1]} but right is "
+                f"{grey_r.shape[0]}x{grey_r.shape[1]}; a stereo pair needs equal sizes"
+            )
+        h, w = grey_l.shape
+        dmax = max_disparity if max_disparity is not None else cfg.run.max_disparity
+        if dmax is None:
+            dmax = max(1, w // 4)
+        if not 1 <= int(dmax) <= w - 1:
+            raise InputError(
+                f"pair: max disparity {dmax} is outside [1, {w - 1}] for an image {w} px wide; "
+                f"pass --max-disparity in that range"
+            )
+        dmax = int(dmax)
+        levels = usable_levels((h, w), cfg.pyramid.levels)
+        pyr_l = build_pyramid(grey_l, levels)
+        pyr_r = build_pyramid(grey_r, levels)
+        timings["pyramid"] = time.perf_counter() - t_start
+
+        info: dict = {"backend": self.backend_name, "levels": levels, "max_disparity": dmax, "per_level": []}
+        warnings: list[str] = []
+        level_maps: list[np.ndarray] = []
+        disp = None
+        cost = None
+        for level in range(levels - 1, -1, -1):
+            stats: dict = {"level": level + 1, "shape": list(pyr_l[level].shape)}
+            t0 = time.perf_counter()
+            cost = self._level_cost(pyr_l[level], pyr_r[level], level, dmax)
+            t1 = time.perf_counter()
+            seeds = None
+            if level == levels - 1 or cfg.seeds.every_level:
+                seeds = decisive_seeds(
+                    cost,
+                    pkrn_min=cfg.seeds.pkrn_min,
+                    epsilon=cfg.seeds.epsilon,
+                    lr_tolerance=cfg.seeds.lr_tolerance,
+                    exclusion=cfg.seeds.pkrn_exclusion,
+                    backend=self.backend,
+                )
+            if level == levels - 1:
+                disp = seeds
+                stats["seeds"] = int((disp >= 0).sum())
+                if stats["seeds"] == 0:
+                    warnings.append(
+                        "no decisive seeds at the coarsest level (textureless or unrectified pair?); "
+                        "the disparity map is all invalid"
+                    )
+            else:
+                disp = inherit(
+                    cost,
+                    disp,
+                    prc=cfg.inheritance.prc,
+                    dfm_pkrn_min=cfg.inheritance.dfm_pkrn_min,
+                    epsilon=cfg.seeds.epsilon,
+                    backend=self.backend,
+                )
+                stats["inherited"] = int((disp >= 0).sum())
+                if seeds is not None:
+                    # inherited disparities win; fresh seeds cover what inheritance left
+                    disp = np.where(disp >= 0, disp, seeds).astype(np.int32)
+                    stats["seeds"] = int((seeds >= 0).sum())
+            t2 = time.perf_counter()
+            sweeps = 0
+            if cfg.pyramid.ars or level == 0:
+                disp, sweeps = diffuse(
+                    cost,
+                    disp,
+                    max_gap=cfg.diffusion.max_gap,
+                    tau=cfg.diffusion.tau,
+                    kappa_d=cfg.diffusion.kappa_d,
+                    adversarial=cfg.diffusion.adversarial,
+                    max_sweeps=cfg.diffusion.max_sweeps,
+                    backend=self.backend,
+                )
+            t3 = time.perf_counter()
+            stats.update(
+                sweeps=int(sweeps),
+                decided_share=float((disp >= 0).mean()),
+                time_cost=t1 - t0,
+                time_decide=t2 - t1,
+                time_diffusion=t3 - t2,
+            )
+            log.debug(
+                "level %d %s: %s %d, %d sweeps, %.1f%% decided; cost %.3fs, %s %.3fs, diffusion %.3fs",
+                level + 1,
+                "x".join(map(str, pyr_l[level].shape)),
+                "seeds" if level == levels - 1 else "inherited",
+                stats.get("seeds", stats.get("inherited", 0)),
+                sweeps,
+                100 * stats["decided_share"],
+                t1 - t0,
+                "seeds" if level == levels - 1 else "inheritance",
+                t2 - t1,
+                t3 - t2,
+            )
+            for key in ("cost", "decide", "diffusion"):
+                timings[key] = timings.get(key, 0.0) + stats["time_" + key]
+            info["per_level"].append(stats)
+            level_maps.insert(0, disp)
+            if level > 0:
+                cost = None  # free the coarse volume before the next, larger one
+
+        t0 = time.perf_counter()
+        valid = disp >= 0
+        if cfg.refine.subpixel:
+            out = refine_subpixel(cost, disp, backend=self.backend)
+        else:
+            out = np.where(valid, disp, np.inf).astype(np.float32)
+        if cfg.refine.fill:
+            out = fill_holes(out, valid, smooth=cfg.refine.smooth_filled)
+        timings["finish"] = time.perf_counter() - t0
+        timings["total"] = time.perf_counter() - t_start
+        info["decided_share"] = float(valid.mean())
+        return DisparityResult(
+            disparity=np.ascontiguousarray(out, dtype=np.float32),
+            valid=valid,
+            levels=level_maps,
+            timings=timings,
+            info=info,
+            warnings=warnings,
+        )
+
+    def _level_cost(self, left, right, level: int, max_disparity: int):
+        """Aggregated cost volume of one level (steps 2-3)."""
+        cfg = self.cfg
+        cost = cost_volume(
+            left,
+            right,
+            max_disparity=level_max_disparity(max_disparity, level),
+            window=cfg.level_window(level),
+            min_variance=cfg.cost.min_variance,
+            backend=self.backend,
+        )
+        agg = cfg.aggregation
+        return aggregate(
+            cost,
+            left,
+            rbf=agg.rbf,
+            t_max=agg.t_max,
+            sigma_space=agg.sigma_space,
+            sigma_color=agg.sigma_color,
+            kappa_a=agg.kappa_a,
+            backend=self.backend,
+        )

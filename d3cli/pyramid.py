@@ -1,0 +1,48 @@
+"""Image pyramids and disparity ranges per level (DESIGN step 1)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def downsample(img: np.ndarray) -> np.ndarray:
+    """Halve a grey image by 2x2 area averaging.
+
+    An odd last row/column is dropped, so that pixel (u, v) of the result covers exactly
+    pixels 2u..2u+1, 2v..2v+1 of the input (the 2x2 patches of inheritance, paper Fig. 3).
+
+    Parameters
+    ----------
+    img : ndarray, float32, (H, W)
+
+    Returns
+    -------
+    ndarray, float32, (H // 2, W // 2)
+    """
+    h, w = img.shape[0] // 2 * 2, img.shape[1] // 2 * 2
+    a = img[:h, :w].astype(np.float32, copy=False)
+    return (0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])).astype(np.float32)
+
+
+def build_pyramid(img: np.ndarray, levels: int) -> list[np.ndarray]:
+    """List of ``levels`` images, full resolution first, each half the previous."""
+    pyramid = [np.ascontiguousarray(img, dtype=np.float32)]
+    for _ in range(levels - 1):
+        pyramid.append(downsample(pyramid[-1]))
+    return pyramid
+
+
+def level_max_disparity(max_disparity: int, level: int) -> int:
+    """ceil(dmax / 2^level): the disparity bound of ``level`` (0 = full resolution)."""
+    return max(1, math.ceil(max_disparity / (2 ** level)))
+
+
+def usable_levels(shape: tuple[int, int], levels: int, *, min_size: int = 8) -> int:
+    """The number of levels (<= ``levels``) whose coarsest image is at least ``min_size``."""
+    h, w = shape
+    k = 1
+    while k < levels and min(h >> k, w >> k) >= min_size:
+        k += 1
+    return k

@@ -1,0 +1,35 @@
+"""Step 3: cost aggregation by recursive bilateral filtering (paper eq. 2-3)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def aggregate(cost, image, *, rbf: bool, t_max: int, sigma_space: float, sigma_color: float, kappa_a: int, backend):
+    """Aggregate a cost volume with RBF, or with one plain bilateral pass (ablation).
+
+    Parameters
+    ----------
+    cost : ndarray, float32, (H, W, D)
+    image : ndarray, float32, (H, W)
+        Left grey image of the level; guides the bilateral weights.
+    rbf : bool
+        True: ``t_max`` passes of the 3x3 kernel of eq. 3 with weights computed once
+        (paper eq. 2).  False: one pass of a (2 kappa_a + 1)^2 bilateral filter.
+    t_max, sigma_space, sigma_color, kappa_a
+        Filter parameters (sigma_1, sigma_2 of eq. 3 in pixels and grey levels).
+    backend : module
+
+    Returns
+    -------
+    ndarray, float32, (H, W, D)
+    """
+    image = np.ascontiguousarray(image, dtype=np.float32)
+    if rbf:
+        if t_max == 0:
+            return cost
+        weights = backend.rbf_weights(image, float(sigma_space), float(sigma_color))
+        return backend.rbf_filter(cost, weights, int(t_max))
+    if kappa_a == 0:
+        return cost
+    return backend.bilateral_filter(cost, image, int(kappa_a), float(sigma_space), float(sigma_color))

@@ -1,0 +1,1 @@
+"""Bundled sample stereo pairs (pair-folder layout)."""

@@ -1,0 +1,485 @@
+"""The d3stereo command line and the batch runner: outputs, resume, errors, atomicity.
+
+CLI runs use ``--method sgbm`` so that they test the command line, not the pipeline.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import tempfile
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import write_png
+
+import d3cli.baselines
+import d3cli.io
+import d3cli.pipeline
+from d3cli.batch import OUTPUT_FILES, run_batch
+from d3cli.cli import main
+from d3cli.config import Config
+
+PER_PAIR = (*OUTPUT_FILES, "result.json")
+
+
+def invoke(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def assert_user_error(result, code=1, contains=""):
+    """One ``Error:`` line, the exit code, and no traceback anywhere."""
+    assert result.exit_code == code, result.output
+    assert "Traceback" not in result.output
+    error_lines = [line for line in result.output.splitlines() if line.startswith("Error:")]
+    assert len(error_lines) == 1, result.output
+    assert contains in error_lines[0] or contains in result.output, result.output
+    return error_lines[0]
+
+
+def run_json(out):
+    return json.loads((out / "run.json").read_text())
+
+
+def leftover_temp_files(folder):
+    return [p.name for p in folder.rglob("*") if ".tmp-" in p.name or p.name.startswith(".d3stereo-probe")]
+
+
+# ----------------------------------------------------------------------------- happy path
+def test_run_eval_writes_everything(tmp_path, pairs_root):
+    out = tmp_path / "out"
+    result = invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--eval")
+    assert result.exit_code == 0, result.output
+    for name in "abc":
+        for f in (*PER_PAIR, "error.png"):
+            assert (out / name / f).is_file(), (name, f)
+        stored = json.loads((out / name / "result.json").read_text())
+        assert stored["method"] == "sgbm"
+        assert stored["color_range"] == [0, stored["max_disparity"]]
+        assert stored["metrics"]["epe"] < 1.0
+        assert {"mse", "psnr", "ssim", "coverage"} <= set(stored["metrics"])
+        assert stored["timings"]["wall"] > 0
+    info = run_json(out)
+    assert info["method"] == "sgbm"
+    assert info["config"] == Config().to_dict() | {"run": {**Config().to_dict()["run"], "method": "sgbm"}}
+    assert set(info["versions"]) == {"d3stereo", "numpy", "numba", "cv2", "skimage"}
+    assert info["python"] and info["platform"] and info["backend"] == "auto"
+    assert [p["status"] for p in info["pairs"]] == ["ok", "ok", "ok"]
+    assert all(p["wall_s"] > 0 for p in info["pairs"])
+    assert info["n_failed"] == 0 and info["failed"] == []
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["method"] == "sgbm"
+    assert summary["counts"]["ok"] == 3
+    assert summary["overall"]["means"]["epe"] < 1.0
+    assert (out / "summary.md").is_file() and (out / "metrics.csv").is_file()
+    assert "EPE" in result.output
+    assert leftover_temp_files(out) == []
+
+
+def test_disparity_is_read_back_in_pixels(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    make_pair_folder(root, "p", shift=6, size=(48, 96))
+    out = tmp_path / "out"
+    assert invoke("run", root, "-o", out, "--method", "sgbm", "--no-fill").exit_code == 0
+    disp = d3cli.io.read_pfm(out / "p" / "disp.pfm")
+    inner = disp[8:-8, 40:-8]
+    assert np.nanmedian(np.where(np.isfinite(inner), inner, np.nan)) == pytest.approx(6, abs=0.25)
+    assert np.isinf(disp[:, :8]).all()  # --no-fill leaves SGBM's border invalid
+    valid = d3cli.io.read_image(out / "p" / "valid.png")
+    assert set(np.unique(valid)) <= {0, 255}
+
+
+def test_rerun_skips_complete_pairs_and_overwrite_redoes(tmp_path, pairs_root):
+    out = tmp_path / "out"
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--eval").exit_code == 0
+    stamp = {n: (out / n / "result.json").stat().st_mtime_ns for n in "abc"}
+
+    again = invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--eval")
+    assert again.exit_code == 0, again.output
+    assert {n: (out / n / "result.json").stat().st_mtime_ns for n in "abc"} == stamp
+    assert [p["status"] for p in run_json(out)["pairs"]] == ["skipped"] * 3
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["counts"]["ok"] == 3 and summary["overall"]["means"]["epe"] is not None
+
+    redo = invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--eval", "--overwrite")
+    assert redo.exit_code == 0, redo.output
+    assert all((out / n / "result.json").stat().st_mtime_ns != stamp[n] for n in "abc")
+    assert [p["status"] for p in run_json(out)["pairs"]] == ["ok"] * 3
+
+
+def test_changed_settings_recompute(tmp_path, pairs_root):
+    out = tmp_path / "out"
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
+    stamp = (out / "a" / "result.json").stat().st_mtime_ns
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--set", "sgbm.block_size=7").exit_code == 0
+    assert (out / "a" / "result.json").stat().st_mtime_ns != stamp
+
+
+def test_incomplete_pair_is_recomputed(tmp_path, pairs_root):
+    out = tmp_path / "out"
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
+    (out / "b" / "disp.png").unlink()
+    stamp_a = (out / "a" / "result.json").stat().st_mtime_ns
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
+    assert (out / "b" / "disp.png").is_file()
+    assert (out / "a" / "result.json").stat().st_mtime_ns == stamp_a
+    assert [p["status"] for p in run_json(out)["pairs"]] == ["skipped", "ok", "skipped"]
+
+
+def test_failed_rerun_keeps_the_earlier_complete_result(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    make_pair_folder(root, "p", size=(48, 96))
+    out = tmp_path / "out"
+    assert invoke("run", root, "-o", out, "--method", "sgbm").exit_code == 0
+    stamp = (out / "p" / "result.json").stat().st_mtime_ns
+    result = invoke("run", root, "-o", out, "--method", "sgbm", "--max-disparity", "200")
+    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert result.output.count("failed: p: ") == 1 and "p: p:" not in result.output
+    assert (out / "p" / "result.json").stat().st_mtime_ns == stamp
+    assert invoke("run", root, "-o", out, "--method", "sgbm").exit_code == 0
+    assert run_json(out)["pairs"][0]["status"] == "skipped"
+
+
+def test_eval_added_on_rerun_scores_stored_predictions(tmp_path, pairs_root):
+    out = tmp_path / "out"
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
+    result = invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--eval")
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "a" / "result.json").read_text())["metrics"]["epe"] < 1.0
+
+
+def test_bundled_samples_run_by_default(tmp_path):
+    out = tmp_path / "out"
+    result = invoke("run", "-o", out, "--method", "sgbm", "--eval", "-q")
+    assert result.exit_code == 0, result.output
+    names = sorted(p["pair"] for p in run_json(out)["pairs"])
+    assert names == ["motorcycle", "road"]
+    for name, bound in (("motorcycle", 2.0), ("road", 0.5)):
+        assert json.loads((out / name / "result.json").read_text())["metrics"]["epe"] < bound
+
+
+@pytest.mark.skipif(not hasattr(d3cli.pipeline, "D3Stereo"), reason="d3cli.pipeline.D3Stereo is not implemented yet")
+def test_run_d3stereo_method(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    make_pair_folder(root, "p", shift=6, size=(128, 256))
+    out = tmp_path / "out"
+    result = invoke("run", root, "-o", out, "--method", "d3stereo", "--eval", "--backend", "cpu")
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "p" / "result.json").read_text())["metrics"]["epe"] < 1.0
+
+
+def test_warnings_are_logged_and_stored(tmp_path, make_pair_folder, monkeypatch):
+    root = tmp_path / "pairs"
+    make_pair_folder(root, "p")
+    real = d3cli.baselines.sgbm_disparity
+
+    def with_warning(*args, **kwargs):
+        res = real(*args, **kwargs)
+        res.warnings.append("few seeds")
+        return res
+
+    monkeypatch.setattr(d3cli.baselines, "sgbm_disparity", with_warning)
+    out = tmp_path / "out"
+    result = invoke("run", root, "-o", out, "--method", "sgbm")
+    assert result.exit_code == 0
+    assert "WARNING: p: few seeds" in result.output
+    assert json.loads((out / "p" / "result.json").read_text())["warnings"] == ["few seeds"]
+
+
+# ----------------------------------------------------------------------------- bad inputs
+def test_missing_right_image(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    (make_pair_folder(root, "p") / "right.png").unlink()
+    line = assert_user_error(invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm"))
+    assert "right" in line or "right" in line.lower()
+
+
+def test_size_mismatch(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    folder = make_pair_folder(root, "p", size=(48, 96))
+    write_png(folder / "right.png", np.zeros((48, 90), np.uint8))
+    result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm")
+    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert "48x96" in result.output and "48x90" in result.output
+
+
+def test_corrupt_image(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    folder = make_pair_folder(root, "p")
+    (folder / "left.png").write_bytes(b"\x89PNG\r\n\x1a\n this is not an image")
+    result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm")
+    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert "left.png" in result.output
+
+
+def test_empty_folder(tmp_path):
+    (tmp_path / "empty").mkdir()
+    assert_user_error(invoke("run", tmp_path / "empty", "-o", tmp_path / "out", "--method", "sgbm"),
+                      contains=str(tmp_path / "empty"))
+
+
+def test_missing_input(tmp_path):
+    assert_user_error(invoke("run", tmp_path / "nope", "-o", tmp_path / "out", "--method", "sgbm"))
+
+
+def test_gt_of_another_size(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    folder = make_pair_folder(root, "p", size=(48, 96))
+    d3cli.io.write_pfm(folder / "disp_gt.pfm", np.full((40, 96), 5, np.float32))
+    result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm", "--eval")
+    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert "disp_gt.pfm" in result.output or "ground truth" in result.output
+
+
+@pytest.mark.parametrize("value", ["0", "-3"])
+def test_max_disparity_not_positive_is_usage_error(tmp_path, pairs_root, value):
+    result = invoke("run", pairs_root, "-o", tmp_path / "out", "--method", "sgbm", "--max-disparity", value)
+    assert_user_error(result, code=2, contains="--max-disparity")
+
+
+def test_max_disparity_not_below_width(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    make_pair_folder(root, "p", size=(48, 96))
+    result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm", "--max-disparity", "96")
+    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert "max" in result.output.lower() and "96" in result.output
+
+
+def test_bad_method_is_usage_error(tmp_path, pairs_root):
+    assert_user_error(invoke("run", pairs_root, "-o", tmp_path / "out", "--method", "magic"), code=2)
+
+
+def test_unknown_config_key(tmp_path, pairs_root):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("diffusion:\n  tua: 2\n")
+    line = assert_user_error(invoke("run", pairs_root, "-o", tmp_path / "out", "-c", cfg))
+    assert line.startswith(f"Error: {cfg}: unknown key 'diffusion.tua'; valid keys of diffusion: tau, kappa_d, ")
+
+
+def test_output_folder_not_writable_chmod(tmp_path, pairs_root):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        if os.access(locked, os.W_OK):
+            pytest.skip("running as root: chmod does not stop writes (see the monkeypatch test)")
+        line = assert_user_error(invoke("run", pairs_root, "-o", locked / "out", "--method", "sgbm"))
+        assert str(locked / "out") in line
+    finally:
+        locked.chmod(0o755)
+
+
+def test_output_folder_not_writable_simulated(tmp_path, pairs_root, monkeypatch):
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    out = tmp_path / "out"
+    line = assert_user_error(invoke("run", pairs_root, "-o", out, "--method", "sgbm"))
+    assert line == (f"Error: {out}: cannot write to the output folder (Permission denied); "
+                    "choose another folder with -o or fix its permissions")
+    assert not any(p.is_dir() and p.name in "abc" for p in out.iterdir())
+
+
+def test_output_path_is_a_file(tmp_path, pairs_root):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    line = assert_user_error(invoke("run", pairs_root, "-o", blocker, "--method", "sgbm"))
+    assert str(blocker) in line
+
+
+def test_failing_pair_in_the_middle(tmp_path, pairs_root):
+    (pairs_root / "b" / "left.png").write_bytes(b"garbage")
+    out = tmp_path / "out"
+    result = invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--eval")
+    line = assert_user_error(result)
+    assert line == f"Error: 1 of 3 pairs failed (see {out / 'run.json'})"
+    assert "failed: b:" in result.output
+    for name in "ac":
+        assert (out / name / "result.json").is_file()
+    assert not (out / "b" / "result.json").exists()
+    info = run_json(out)
+    assert [p["status"] for p in info["pairs"]] == ["ok", "failed", "ok"]
+    assert info["n_failed"] == 1 and info["failed"][0]["pair"] == "b"
+    assert "left.png" in info["failed"][0]["error"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["counts"] == {"ok": 2, "failed": 1, "skipped": 0, "total": 3}
+    assert summary["failures"][0]["pair"] == "b"
+
+
+def test_unexpected_exception_in_a_pair_is_recorded(tmp_path, pairs_root, monkeypatch):
+    real = d3cli.baselines.compute_pair
+
+    def flaky(method, cfg, left, right, *, max_disparity):
+        flaky.calls += 1
+        if flaky.calls == 2:  # the second pair, b
+            raise ValueError("kernel exploded")
+        return real(method, cfg, left, right, max_disparity=max_disparity)
+
+    flaky.calls = 0
+    monkeypatch.setattr(d3cli.baselines, "compute_pair", flaky)
+    out = tmp_path / "out"
+    result = invoke("run", pairs_root, "-o", out, "--method", "sgbm")
+    assert_user_error(result, contains="1 of 3 pairs failed")
+    failed = run_json(out)["failed"]
+    assert failed == [{"pair": "b", "error": "b: ValueError: kernel exploded"}]
+
+
+# ----------------------------------------------------------------------------- atomicity
+def test_writer_failure_leaves_no_half_written_files(tmp_path, pairs_root, monkeypatch):
+    out = tmp_path / "out"
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
+    real = d3cli.io.write_kitti_png
+
+    def half_then_crash(path, disp):
+        if "b" == os.path.basename(os.path.dirname(path)):
+            def partial(tmp):
+                with open(tmp, "wb") as fh:
+                    fh.write(b"\x89PNG\r\n\x1a\n-half")
+                raise RuntimeError("disk on fire")
+
+            return d3cli.io.atomic_write(path, partial)
+        return real(path, disp)
+
+    monkeypatch.setattr(d3cli.io, "write_kitti_png", half_then_crash)
+    result = invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--overwrite")
+    assert_user_error(result, contains="1 of 3 pairs failed")
+    assert leftover_temp_files(out) == []
+    # b's old result.json is gone (it no longer describes b's files): b is incomplete.
+    assert not (out / "b" / "result.json").exists()
+    # Whatever final files exist are complete and readable.
+    for f in OUTPUT_FILES:
+        path = out / "b" / f
+        if path.exists():
+            if f.endswith(".pfm"):
+                d3cli.io.read_pfm(path)
+            else:
+                d3cli.io.read_image(path)
+    monkeypatch.setattr(d3cli.io, "write_kitti_png", real)
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
+    assert [p["status"] for p in run_json(out)["pairs"]] == ["skipped", "ok", "skipped"]
+
+
+def test_keyboard_interrupt_propagates_and_is_recorded(tmp_path, pairs_root, monkeypatch):
+    from d3cli.datasets import discover
+
+    calls = []
+
+    def interrupt(method, cfg, left, right, *, max_disparity):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return d3cli.baselines.sgbm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.sgbm)
+
+    monkeypatch.setattr(d3cli.baselines, "compute_pair", interrupt)
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        run_batch(discover([pairs_root]), out, cfg=Config(), method="sgbm", progress=False)
+    info = run_json(out)
+    assert info["interrupted"] is True
+    assert [p["pair"] for p in info["pairs"]] == ["a"]
+
+
+# ----------------------------------------------------------------------------- eval
+def test_eval_one_folder(tmp_path, pairs_root):
+    out = tmp_path / "sgbm"
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
+    result = invoke("eval", out, "--gt", pairs_root)
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["method"] == "sgbm"  # from run.json
+    assert summary["counts"]["ok"] == 3 and summary["overall"]["means"]["epe"] < 1.0
+    assert (out / "metrics.csv").is_file() and (out / "summary.md").is_file()
+
+
+def test_eval_side_by_side(tmp_path, pairs_root):
+    filled, holes = tmp_path / "filled", tmp_path / "holes"
+    assert invoke("run", pairs_root, "-o", filled, "--method", "sgbm").exit_code == 0
+    assert invoke("run", pairs_root, "-o", holes, "--method", "sgbm", "--no-fill").exit_code == 0
+    report_dir = tmp_path / "report"
+    result = invoke("eval", filled, holes, "--gt", pairs_root, "-o", report_dir)
+    assert result.exit_code == 0, result.output
+    table = (report_dir / "comparison.md").read_text()
+    assert "filled" in table and "holes" in table  # same method: named by folder
+    assert "filled" in result.output
+    for name in ("filled", "holes"):
+        assert json.loads((report_dir / name / "summary.json").read_text())["counts"]["ok"] == 3
+        assert (report_dir / name / "a" / "error.png").is_file()
+    assert not (filled / "a" / "error.png").exists()  # the prediction folders are only read
+
+
+def test_eval_missing_prediction_is_a_failed_pair(tmp_path, pairs_root):
+    out = tmp_path / "sgbm"
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
+    (out / "c" / "disp.pfm").unlink()
+    result = invoke("eval", out, "--gt", pairs_root)
+    assert_user_error(result, contains="1 of 3 pairs failed")
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["failures"][0]["pair"] == "c"
+    assert "no prediction" in summary["failures"][0]["error"]
+
+
+def test_eval_needs_gt(tmp_path):
+    assert invoke("eval", tmp_path).exit_code == 2
+
+
+def test_eval_missing_prediction_folder(tmp_path, pairs_root):
+    assert_user_error(invoke("eval", tmp_path / "nope", "--gt", pairs_root), contains="prediction folder not found")
+
+
+# ----------------------------------------------------------------------------- info, synth
+def test_info():
+    result = invoke("info")
+    assert result.exit_code == 0, result.output
+    assert "d3stereo 0.1.0" in result.output
+    for word in ("numpy", "numba threads", "cv2", "skimage", "cpu count", "cuda", "config"):
+        assert word in result.output
+    assert "Traceback" not in result.output
+
+
+def test_version():
+    result = invoke("--version")
+    assert result.exit_code == 0 and "0.1.0" in result.output
+
+
+@pytest.mark.skipif(importlib.util.find_spec("d3cli.synth") is None, reason="d3cli.synth is not written yet")
+def test_synth_then_run(tmp_path):
+    data = tmp_path / "synth"
+    result = invoke("synth", data, "--n", "2", "--seed", "1", "--width", "160", "--height", "96")
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "out"
+    result = invoke("run", data, "-o", out, "--method", "sgbm", "--eval")
+    assert result.exit_code == 0, result.output
+    assert run_json(out)["n_pairs"] == 2
+
+
+def test_cuda_backend_unavailable_fails_up_front(tmp_path, pairs_root):
+    from d3cli.kernels import cuda_status
+
+    if cuda_status()[0]:
+        pytest.skip("CUDA is usable here")
+    out = tmp_path / "out"
+    line = assert_user_error(invoke("run", pairs_root, "-o", out, "--method", "d3stereo", "--backend", "cuda"))
+    assert line.startswith("Error: --backend cuda: ")
+    assert not (out / "a").exists()
+
+
+def test_bundled_samples_are_reproducible(tmp_path):
+    """scripts/make_samples.py regenerates the bundled pairs (same pixels, same ground truth)."""
+    import runpy
+    from pathlib import Path
+
+    from d3cli.cli import samples_dir
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "make_samples.py"
+    runpy.run_path(str(script), run_name="make_samples")["main"](["--out", str(tmp_path)])
+    for name in ("motorcycle", "road"):
+        for f in ("left.png", "right.png"):
+            np.testing.assert_array_equal(d3cli.io.read_image(tmp_path / name / f),
+                                          d3cli.io.read_image(samples_dir() / name / f))
+        np.testing.assert_array_equal(d3cli.io.read_pfm(tmp_path / name / "disp_gt.pfm"),
+                                      d3cli.io.read_pfm(samples_dir() / name / "disp_gt.pfm"))
+    total = sum(p.stat().st_size for p in samples_dir().glob("*/*") if p.parent.name != "__pycache__")
+    assert total < 1.5e6

@@ -1,0 +1,178 @@
+"""load_config: defaults, files, overrides and every kind of mistake, with exact messages."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from d3cli.cli import main
+from d3cli.config import Config, load_config, read_yaml
+from d3cli.errors import ConfigError
+
+DEFAULT_YAML = Path(__file__).resolve().parents[1] / "configs" / "default.yaml"
+
+
+def write(tmp_path, text, name="cfg.yaml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_defaults():
+    cfg = load_config()
+    assert cfg == Config()
+    assert cfg.run.method == "d3stereo" and cfg.cost.window == 5
+
+
+def test_default_yaml_equals_builtin_defaults():
+    assert load_config(DEFAULT_YAML) == Config()
+
+
+def test_default_yaml_lists_every_key():
+    data = read_yaml(DEFAULT_YAML)
+    expected = Config().to_dict()
+    assert list(data) == list(expected)
+    for section, keys in expected.items():
+        assert list(data[section]) == list(keys), section
+
+
+def test_file_values(tmp_path):
+    path = write(tmp_path, "run:\n  method: sgbm\ncost:\n  window: 7\n  level_windows: [5, 7]\n")
+    cfg = load_config(path)
+    assert cfg.run.method == "sgbm"
+    assert cfg.cost.window == 7 and cfg.cost.level_windows == (5, 7)
+    assert cfg.pyramid == Config().pyramid
+
+
+def test_empty_file_gives_defaults(tmp_path):
+    assert load_config(write(tmp_path, "# nothing\n")) == Config()
+
+
+def test_overrides_win_over_file(tmp_path):
+    path = write(tmp_path, "diffusion:\n  tau: 2\n")
+    cfg = load_config(path, ["diffusion.tau=3", "refine.fill=false", "aggregation.sigma_color=8"])
+    assert cfg.diffusion.tau == 3
+    assert cfg.refine.fill is False
+    assert cfg.aggregation.sigma_color == 8.0 and isinstance(cfg.aggregation.sigma_color, float)
+
+
+def test_unknown_section(tmp_path):
+    path = write(tmp_path, "foo:\n  a: 1\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config(path)
+    assert str(exc.value) == (
+        f"{path}: unknown section 'foo'; valid sections: run, pyramid, cost, aggregation, seeds, "
+        "diffusion, inheritance, pt, refine, sgbm"
+    )
+
+
+def test_unknown_key(tmp_path):
+    path = write(tmp_path, "run:\n  metod: sgbm\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config(path)
+    assert str(exc.value) == f"{path}: unknown key 'run.metod'; valid keys of run: method, backend, max_disparity"
+
+
+def test_wrong_type(tmp_path):
+    path = write(tmp_path, "cost:\n  window: five\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config(path)
+    assert str(exc.value) == (
+        f"{path}: cost.window must be an integer, got 'five'; fix the value of cost.window "
+        "(see configs/default.yaml)"
+    )
+
+
+def test_bool_is_not_an_integer(tmp_path):
+    with pytest.raises(ConfigError, match="pyramid.levels must be an integer, got True"):
+        load_config(write(tmp_path, "pyramid:\n  levels: yes\n"))
+
+
+def test_out_of_range(tmp_path):
+    path = write(tmp_path, "cost:\n  window: 4\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config(path)
+    assert str(exc.value) == f"{path}: cost.window must be an odd integer in [1, 31], got 4; fix the value of cost.window"
+
+
+def test_duplicate_key_names_line(tmp_path):
+    path = write(tmp_path, "run:\n  method: sgbm\n  method: d3stereo\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config(path)
+    assert str(exc.value) == f"{path}:3: duplicate key 'method' (first at line 2); keep only one"
+
+
+def test_invalid_yaml_names_line(tmp_path):
+    path = write(tmp_path, "run:\n  method: [sgbm\n")
+    with pytest.raises(ConfigError, match=rf"^{path}:\d+: not valid YAML \(.*\); fix the syntax$"):
+        load_config(path)
+
+
+def test_non_yaml_binary_file(tmp_path):
+    path = tmp_path / "image.png"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00\x00")
+    with pytest.raises(ConfigError, match=rf"^{path}: cannot read config file .*; give a readable UTF-8 YAML file$"):
+        load_config(path)
+
+
+def test_top_level_list(tmp_path):
+    with pytest.raises(ConfigError, match="the top level must be a mapping of sections, got list"):
+        load_config(write(tmp_path, "- a\n- b\n"))
+
+
+def test_missing_file(tmp_path):
+    path = tmp_path / "nope.yaml"
+    with pytest.raises(ConfigError) as exc:
+        load_config(path)
+    assert str(exc.value) == f"{path}: config file not found; check the path given to -c"
+
+
+def test_bad_override_forms():
+    with pytest.raises(ConfigError) as exc:
+        load_config(None, ["nokey"])
+    assert str(exc.value) == "--set nokey: expected section.key=value (e.g. diffusion.tau=2); fix the option"
+    with pytest.raises(ConfigError) as exc:
+        load_config(None, ["pyramid.levels=9"])
+    assert str(exc.value) == (
+        "--set pyramid.levels=9: pyramid.levels must be an integer in [1, 8], got 9; "
+        "fix the value of pyramid.levels"
+    )
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--set", "run.foo=1"], "Error: --set run.foo=1: unknown key 'run.foo'; valid keys of run: "
+                                 "method, backend, max_disparity"),
+        (["--set", "diffusion.tau=abc"], "Error: --set diffusion.tau=abc: diffusion.tau must be an integer, "
+                                         "got 'abc'; fix the value of diffusion.tau (see configs/default.yaml)"),
+    ],
+)
+def test_cli_config_errors_are_one_line(tmp_path, args, message):
+    result = CliRunner().invoke(main, ["run", "-o", str(tmp_path / "out"), *args])
+    assert result.exit_code == 1
+    assert result.output.strip() == message
+    assert "Traceback" not in result.output
+
+
+def test_cli_config_file_error(tmp_path):
+    path = write(tmp_path, "sgbm:\n  mode: fast\n")
+    result = CliRunner().invoke(main, ["run", "-c", str(path), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    assert result.output.strip() == (
+        f"Error: {path}: sgbm.mode must be one of sgbm, hh, 3way, hh4, got 'fast'; fix the value of sgbm.mode"
+    )
+
+
+def test_config_from_environment(tmp_path, monkeypatch):
+    from d3cli.cli import config_search
+
+    path = write(tmp_path, "run:\n  method: sgbm\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("D3STEREO_CONFIG", raising=False)
+    assert config_search(None) == (None, "built-in defaults")
+    monkeypatch.setenv("D3STEREO_CONFIG", str(path))
+    assert config_search(None) == (str(path), "$D3STEREO_CONFIG")
+    assert config_search("x.yaml") == ("x.yaml", "-c option")
