@@ -44,6 +44,7 @@ log = logging.getLogger(__name__)
 #: The per-pair files of a complete result, besides result.json.
 OUTPUT_FILES = ("disp.pfm", "disp.png", "disp_color.png", "valid.png")
 RESULT_FILE = "result.json"
+ERROR_MAP = "error.png"
 RUN_FILE = "run.json"
 
 
@@ -115,9 +116,22 @@ def write_json(path: Path, data: dict) -> None:
     atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
 
 
+#: Config sections that shape each baseline's result; d3stereo uses all but run and sgbm.
+_BASELINE_SECTIONS = {"sgbm": ("sgbm",), "pt-sgm": ("sgbm", "pt")}
+
+
 def settings_fingerprint(cfg: Config, method: str, max_disparity: int | None) -> str:
-    """Short hash of what determines a pair's result (method, config, --max-disparity)."""
-    blob = json.dumps([method, cfg.to_dict(), max_disparity], sort_keys=True)
+    """Short hash of what determines a pair's result: method, its config sections, range.
+
+    The backend is left out on purpose: CPU and CUDA give the same result.
+    """
+    sections = cfg.to_dict()
+    del sections["run"]  # method and max_disparity are hashed as resolved; backend does not matter
+    if method in _BASELINE_SECTIONS:
+        sections = {name: sections[name] for name in _BASELINE_SECTIONS[method]}
+    else:
+        del sections["sgbm"]
+    blob = json.dumps([method, sections, max_disparity], sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -165,7 +179,7 @@ def _progress(pairs: Sequence, enabled: bool, desc: str):
 def _evaluate(pair, left, right, disparity, pair_dir: Path) -> dict:
     """Metrics of one estimate: against ground truth when there is one, photometric always.
 
-    Writes ``pair_dir/error.png`` when the pair has ground truth.
+    Writes the error map ``pair_dir/error.png`` when the pair has ground truth.
     """
     from . import datasets, io, metrics
 
@@ -175,7 +189,7 @@ def _evaluate(pair, left, right, disparity, pair_dir: Path) -> dict:
     if gt is not None:
         scores.update(metrics.disparity_errors(disparity, gt, mask=mask))
         pair_dir.mkdir(parents=True, exist_ok=True)
-        io.write_image(pair_dir / "error.png", metrics.error_map(disparity, gt, mask=mask))
+        io.write_image(pair_dir / ERROR_MAP, metrics.error_map(disparity, gt, mask=mask))
     scores.update(metrics.photometric_scores(io.to_grey(left), io.to_grey(right), disparity))
     return scores
 
@@ -191,8 +205,10 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
     result = baselines.compute_pair(method, cfg, left, right, max_disparity=dmax)
     for text in result.warnings:
         log.warning("%s: %s", pair.name, text)
-    # An old result.json beside new, maybe half-written outputs would mark them complete.
-    (pair_dir / RESULT_FILE).unlink(missing_ok=True)
+    # An old result.json beside new, maybe half-written outputs would mark them complete;
+    # an old error map would describe another estimate.
+    for stale in (RESULT_FILE, ERROR_MAP):
+        (pair_dir / stale).unlink(missing_ok=True)
     io.write_disparity_outputs(pair_dir, result.disparity, result.valid, vmax=dmax)
     scores = _evaluate(pair, left, right, result.disparity, pair_dir) if evaluate else None
     wall = time.perf_counter() - t0

@@ -160,7 +160,7 @@ def _finish(failures, n_total: int, where) -> None:
 
 # ----------------------------------------------------------------------------- eval
 @main.command("eval")
-@click.argument("pred_dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.argument("pred_dirs", nargs=-1, required=True, metavar="PRED_DIR...", type=click.Path(path_type=Path))
 @click.option("--gt", "gt_input", required=True, multiple=True, type=click.Path(path_type=Path),
               help="The pairs with ground truth (any layout `run` accepts); repeatable.")
 @click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), default=None,

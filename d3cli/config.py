@@ -70,11 +70,11 @@ class AggregationConfig:
 class SeedConfig:
     """Decisive seeds at the coarsest level (DESIGN step 4)."""
 
-    pkrn_min: float = 1.2  # keep a WTA disparity when (c2 + eps) / (c1 + eps) >= this
+    pkrn_min: float = 2.0  # keep a WTA disparity when (c2 + eps) / (c1 + eps) >= this
     epsilon: float = 1e-3  # eps in the PKRN ratio
     lr_tolerance: int = 1  # max |d_left - d_right| for the left-right check
     pkrn_exclusion: int = 0  # 0: naive PKRN; r > 0: c2 ignores disparities within r of d*
-    every_level: bool = False  # also add fresh seeds below the coarsest level where nothing was inherited
+    every_level: bool = True  # also add fresh seeds below the coarsest level where nothing was inherited
 
 
 @dataclass(frozen=True)
@@ -113,7 +113,9 @@ class RefineConfig:
     """Sub-pixel refinement and hole filling (DESIGN step 8)."""
 
     subpixel: bool = True  # parabola through C(d-1), C(d), C(d+1), clamped to +-0.5
+    occlusion_check: bool = True  # uniqueness + left-border tests: estimates with no possible true match become holes
     fill: bool = True  # False: undecided pixels stay inf in disp.pfm
+    fill_inside: bool = False  # non-occluded holes take the median of 4 directions, not the background side
     smooth_filled: bool = True  # 5x5 median over the filled pixels only
 
 

@@ -11,13 +11,13 @@ import numpy as np
 from .config import Config
 from .cost import cost_volume
 from .diffusion import diffuse
-from .errors import InputError
+from .errors import ConfigError, InputError
 from .inheritance import inherit
 from .kernels import get_backend
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
 from .rbf import aggregate
 from .seeds import decisive_seeds
-from .subpixel import fill_holes, refine_subpixel
+from .subpixel import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel
 
 log = logging.getLogger(__name__)
 
@@ -106,6 +106,11 @@ class D3Stereo:
             [1, W - 1].
         """
         cfg = self.cfg
+        if cfg.pt.enabled:
+            raise ConfigError(
+                "pt.enabled: the perspective transformation is not implemented yet (road-scene issue); "
+                "set pt.enabled=false"
+            )
         timings: dict[str, float] = {}
         t_start = time.perf_counter()
         grey_l = _grey(left, "left")
@@ -219,8 +224,16 @@ class D3Stereo:
             out = refine_subpixel(cost, disp, backend=self.backend)
         else:
             out = np.where(valid, disp, np.inf).astype(np.float32)
+        occluded = None
+        if cfg.refine.occlusion_check:
+            occluded = occluded_by_uniqueness(out, valid) | out_of_view(out, valid, max_disparity=dmax)
+            valid = valid & ~occluded
+            out = np.where(valid, out, np.inf).astype(np.float32)
+            info["occluded_share"] = float(occluded.mean())
         if cfg.refine.fill:
-            out = fill_holes(out, valid, smooth=cfg.refine.smooth_filled)
+            out = fill_holes(
+                out, valid, smooth=cfg.refine.smooth_filled, occluded=occluded if cfg.refine.fill_inside else None
+            )
         timings["finish"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
         info["decided_share"] = float(valid.mean())

@@ -25,6 +25,64 @@ def refine_subpixel(cost, disparity, *, backend):
     return backend.subpixel(cost, disparity)
 
 
+def occluded_by_uniqueness(disparity: np.ndarray, valid: np.ndarray, *, tolerance: float = 1.0) -> np.ndarray:
+    """Pixels whose match in the right image is claimed by a nearer (larger-d) pixel.
+
+    Each valid left pixel (u, v) maps to the right pixel round(u - d); when several map
+    to the same right pixel, only the largest disparity can be visible there, and the
+    others (smaller by more than ``tolerance``) are occluded in the right view: their
+    estimate has no true match.  This is the classic uniqueness/occlusion test; in
+    D3Stereo it catches diffusion that leaked foreground or random disparities into
+    half-occluded regions and into the left border strip, which filling then gives the
+    background disparity.
+
+    Parameters
+    ----------
+    disparity : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
+    tolerance : float, keyword-only
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+        True where the pixel is judged occluded.
+    """
+    h, w = disparity.shape
+    v, u = np.nonzero(valid)
+    d = disparity[v, u]
+    xr = np.clip(np.rint(u - d).astype(np.int64), 0, w - 1)
+    flat = v.astype(np.int64) * w + xr
+    best = np.full(h * w, -np.inf)
+    np.maximum.at(best, flat, d)
+    occluded = np.zeros((h, w), bool)
+    occluded[v, u] = d < best[flat] - tolerance
+    return occluded
+
+
+def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int) -> np.ndarray:
+    """Pixels of the left border strip whose estimate is suspect: their true match may
+    lie left of the right image.
+
+    In each row, ``b`` is the first valid disparity at or right of column
+    ``min(max_disparity, W - 1)`` (the nearest surface that is surely inside the view).  A
+    strip pixel u < b with a decided disparity below b - 1 most likely sees that same
+    surface, whose match is outside the right image, so its own estimate cannot be
+    right; it becomes a hole and filling gives it b.
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+    """
+    h, w = disparity.shape
+    start = min(int(max_disparity), w - 1)
+    sub_valid = valid[:, start:]
+    has = sub_valid.any(axis=1)
+    first = np.argmax(sub_valid, axis=1) + start
+    b = np.where(has, disparity[np.arange(h), first], -np.inf)[:, None]
+    cols = np.arange(w)[None, :]
+    return valid & (cols < b) & (disparity < b - 1)
+
+
 def _nearest_along_rows(disp: np.ndarray, valid: np.ndarray):
     """Values of the nearest valid pixel to the left and to the right in each row (inf if none)."""
     h, w = disp.shape
@@ -37,7 +95,9 @@ def _nearest_along_rows(disp: np.ndarray, valid: np.ndarray):
     return left_val, right_val
 
 
-def fill_holes(disparity: np.ndarray, valid: np.ndarray, *, smooth: bool = True) -> np.ndarray:
+def fill_holes(
+    disparity: np.ndarray, valid: np.ndarray, *, smooth: bool = True, occluded: np.ndarray | None = None
+) -> np.ndarray:
     """Fill undecided pixels: row-wise nearest valid neighbours, the smaller of the two.
 
     Holes are mostly occlusions, whose true disparity is the background's (the smaller
@@ -61,7 +121,23 @@ def fill_holes(disparity: np.ndarray, valid: np.ndarray, *, smooth: bool = True)
     if valid.all() or not valid.any():
         return disp.copy()
     left_val, right_val = _nearest_along_rows(disp, valid)
-    filled = np.where(valid, disp, np.minimum(left_val, right_val)).astype(np.float32)
+    fill_value = np.minimum(left_val, right_val)
+    if occluded is not None:
+        # Holes that are not occlusions (undecided: weak texture, rejected matches) lie
+        # inside a surface: the median of the nearest valid values in the four directions
+        # estimates it better than the background side.
+        up_val, down_val = (x.T for x in _nearest_along_rows(disp.T, valid.T))
+        four = np.stack([left_val, right_val, up_val, down_val])
+        four = np.where(np.isfinite(four), four, np.nan)
+        with np.errstate(all="ignore"):
+            import warnings
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                inside = np.nanmedian(four, axis=0)
+        use_inside = ~occluded & np.isfinite(inside)
+        fill_value = np.where(use_inside, inside, fill_value)
+    filled = np.where(valid, disp, fill_value).astype(np.float32)
     empty_rows = ~valid.any(axis=1)
     if empty_rows.any():
         good = np.flatnonzero(~empty_rows)

@@ -5,7 +5,8 @@ built from smooth multi-octave value noise (millimetre undulations, a small cros
 slope and grade), 0-3 smooth-walled elliptical potholes and an optional bump.  Its
 albedo is a procedural texture map over the road plane (asphalt: stones of several
 sizes in a dark binder; cement: fine noise, sand, pores and cracks) at about one texel
-per millimetre, so both views sample the very same surface.
+per pixel of the nearest image row (1-1.5 mm at 1280x720), so both views sample the
+very same surface.
 
 Each view of a rectified stereo rig is rendered by ray casting the height field
 (sphere tracing with per-tile Lipschitz bounds, converged to 1 micrometre), with 2x2
@@ -479,6 +480,14 @@ def _sample_rig(rng: np.random.Generator, width: int, height: int) -> StereoRig:
     return rig
 
 
+def _texel_size(rig: StereoRig) -> float:
+    """Texture resolution, metres: about one texel per pixel at the nearest (bottom)
+    image row, where the pixel footprint is smallest; never below 0.7 mm."""
+    steepest = min(89.0, rig.pitch_deg + math.degrees(math.atan(rig.cy / rig.f)))
+    near_depth = rig.height_m / math.sin(math.radians(steepest))
+    return float(np.clip(near_depth / rig.f, 7e-4, 2e-2))
+
+
 def _border_pixels(rig: StereoRig, per_edge: int = 33) -> tuple[np.ndarray, np.ndarray]:
     us = np.linspace(-0.5, rig.width - 0.5, per_edge)
     vs = np.linspace(-0.5, rig.height - 0.5, per_edge)
@@ -557,7 +566,8 @@ def _sample_potholes(rng, rig: StereoRig, count: int) -> list[Pothole]:
         # Walls at least 1.2x as wide as the pothole is deep keep slopes below ~1.3.
         wall = max(1.2 * depth, rng.uniform(0.25, 0.5) * semi_b)
         flat_fraction = max(0.0, 1.0 - wall / semi_b)
-        wobble = (rng.uniform(0.0, 0.12), rng.uniform(0, 2 * math.pi), rng.uniform(0.0, 0.08), rng.uniform(0, 2 * math.pi))
+        wobble = (rng.uniform(0.0, 0.12), rng.uniform(0, 2 * math.pi),
+                  rng.uniform(0.0, 0.08), rng.uniform(0, 2 * math.pi))
         holes.append(Pothole(x, y, semi_a, semi_b, rng.uniform(0, math.pi), depth, flat_fraction, wobble))
     return holes
 
@@ -643,6 +653,7 @@ class _RoadShape:
         if self.flat:
             return -1e-3, 1e-3
         x_min, x_max, y_min, y_max = bounds
+        x_min, y_min, x_max, y_max = x_min - 0.1, y_min - 0.1, x_max + 0.1, y_max + 0.1  # grid overhang
         tilt = abs(self.cross_slope) * max(abs(x_min), abs(x_max)) + abs(self.grade) * max(abs(y_min), abs(y_max))
         wave = 5.0 * self.undulation_m
         hole = max((h.depth for h in self.holes), default=0.0) + (_ROUGH_FLOOR_M * 5.0 if self.holes else 0.0)
@@ -679,10 +690,13 @@ def _build_height_field(rng, road: _RoadShape, bounds, spacing: float) -> _Heigh
         xs = x_min + spacing * np.arange(nx)
         ys = y_min + spacing * np.arange(ny)
         h = road.undulation_m * np.clip(octaves, -5.0, 5.0) + road.cross_slope * xs[None, :] + road.grade * ys[:, None]
+        # Overlapping potholes merge into one (the deepest wins), they do not add up.
+        sink = np.zeros(shape)
         for hole in road.holes:
             rows, cols = _grid_window(hole, x_min, y_min, spacing, shape)
             xx, yy = _grid_coords(x_min, y_min, spacing, rows, cols)
-            h[rows, cols] -= hole.depth * _pothole_weight(hole, xx, yy)
+            np.maximum(sink[rows, cols], hole.depth * _pothole_weight(hole, xx, yy), out=sink[rows, cols])
+        h -= sink
         if road.holes:
             # Broken, rough floors: a few millimetres of relief where the road is gone.
             relief = np.clip(np.abs(_fractal_noise(rng, shape, spacing, (0.06, 0.03, 0.015))), 0.0, 5.0)
@@ -778,8 +792,8 @@ def _build_albedo(rng, material: str, bounds, texel: float, holes, light_pool) -
         base = rng.uniform(0.42, 0.58)
         fine = _fractal_noise(rng, shape, texel, (0.008, 0.003, 0.0015), exponent=0.3)
         # Broom finish: striations across the road, long in x and short in y.
-        broom = cv2.resize(rng.standard_normal((max(2, int(shape[0] * texel / 0.003)), max(2, int(shape[1] * texel / 0.06)))),
-                           (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC)
+        lattice = (max(2, int(shape[0] * texel / 0.003)), max(2, int(shape[1] * texel / 0.06)))
+        broom = cv2.resize(rng.standard_normal(lattice), (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC)
         tex = (base * (1.0 + 0.07 * fine + 0.04 * broom)).astype(np.float32)
         _stones(rng, tex, texel, coverage=0.15, r_min_m=3e-4, r_max_m=1.5e-3, grey_mean=base * 1.1, grey_spread=0.08)
         _stones(rng, tex, texel, coverage=0.03, r_min_m=3e-4, r_max_m=1.2e-3, grey_mean=0.15, grey_spread=0.03)
@@ -857,7 +871,8 @@ def _sample_lighting(rng, variant: str, rig: StereoRig) -> _Lighting:
     # highlights land in the image.
     elevation = float(np.clip(rig.pitch_deg + rng.uniform(-12, 8), 20, 75))
     return _Lighting(_direction(elevation, rng.uniform(-15, 15)),
-                     np.array([0.3, 0.8, 0.01, rng.uniform(0.3, 0.7), 8.0, rng.uniform(100, 400), rng.uniform(0.3, 0.5)]),
+                     np.array([0.3, 0.8, 0.01, rng.uniform(0.3, 0.7), 8.0, rng.uniform(100, 400),
+                               rng.uniform(0.3, 0.5)]),
                      True, mean_electrons=8000.0, read_noise_e=6.0, mean_dn=rng.uniform(80, 100), vignetting=0.05)
 
 
@@ -934,14 +949,14 @@ def render_pair(
     _check_choice("variant", variant, VARIANTS)
     _check_choice("material", material, MATERIALS)
     _check_size(width, height)
+    if int(supersample) < 1:
+        raise InputError(where_what_fix("synth", f"supersample is {supersample}", "use 1 or more rays per axis"))
     rng = np.random.default_rng(seed)
     rig = _sample_rig(rng, width, height)
     road = _sample_road(rng, rig, potholes, flat)
     holes = road.holes
 
-    # The nearest pixel's footprint sets the texel: about one texel per pixel there.
-    near_depth = rig.height_m / math.sin(math.radians(min(89.0, rig.pitch_deg + math.degrees(math.atan(rig.cy / rig.f)))))
-    texel = float(np.clip(near_depth / rig.f, 7e-4, 2e-2))
+    texel = _texel_size(rig)
     spacing = float(np.clip(1.5 * texel, 2e-3, 2e-2))
     # The visible patch depends on the height range and the tilt part of the height
     # range on the patch: two rounds from a generous start settle it.

@@ -113,8 +113,17 @@ def test_changed_settings_recompute(tmp_path, pairs_root):
     out = tmp_path / "out"
     assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
     stamp = (out / "a" / "result.json").stat().st_mtime_ns
+    # Settings that cannot change an SGBM result keep the pair complete ...
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--backend", "cpu",
+                  "--set", "diffusion.tau=2").exit_code == 0
+    assert (out / "a" / "result.json").stat().st_mtime_ns == stamp
+    # ... its own settings and the disparity range do not.
     assert invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--set", "sgbm.block_size=7").exit_code == 0
-    assert (out / "a" / "result.json").stat().st_mtime_ns != stamp
+    stamp2 = (out / "a" / "result.json").stat().st_mtime_ns
+    assert stamp2 != stamp
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--set", "sgbm.block_size=7",
+                  "--max-disparity", "20").exit_code == 0
+    assert (out / "a" / "result.json").stat().st_mtime_ns != stamp2
 
 
 def test_incomplete_pair_is_recomputed(tmp_path, pairs_root):

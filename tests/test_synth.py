@@ -100,10 +100,14 @@ def test_flat_road_follows_the_pt_plane_model_with_the_calib_roll():
     assert coef[2] > 0
     assert math.degrees(math.atan2(-coef[1], coef[2])) == pytest.approx(pair.calib["roll_deg"], abs=1e-3)
     assert coef[1] == pytest.approx(-coef[2] * math.tan(theta), abs=1e-6)
-    # The rig's own numbers: d = f b / Z at the image centre.
-    f, b, h = pair.calib["f"], pair.calib["baseline"], pair.calib["height_m"]
-    centre_depth = h / math.sin(math.radians(pair.calib["pitch_deg"]))
-    expected = f * b / centre_depth
+    # The rig's own numbers: d = f b / Z at the image centre, Z from the left camera's
+    # height (the rig's mid-point is at height_m; roll lifts one camera a little).
+    keys = ("f", "baseline", "cx", "cy", "width", "height", "height_m", "pitch_deg", "roll_deg")
+    rig = synth.StereoRig(**{key: pair.calib[key] for key in keys})
+    left_height = rig.centres()[0][2]
+    assert left_height == pytest.approx(pair.calib["height_m"], abs=0.01)
+    centre_depth = left_height / math.sin(math.radians(pair.calib["pitch_deg"]))
+    expected = rig.f * rig.baseline / centre_depth
     assert coef[0] + coef[1] * (W - 1) / 2 + coef[2] * (H - 1) / 2 == pytest.approx(expected, rel=1e-4)
 
 
@@ -168,7 +172,8 @@ def test_generate_dataset_writes_consistent_pair_folders(tmp_path):
         source = dict(line.split(": ", 1) for line in (folder / "SOURCE.txt").read_text().splitlines())
         calib = dict(line.split(": ", 1) for line in (folder / "calib.txt").read_text().splitlines())
         assert source["gt_scale"] == "1" and source["gt_invalid"] == "inf" and source["family"] == "synth"
-        assert int(calib["ndisp"]) == int(source["max_disparity"]) == math.ceil(float(disp[np.isfinite(disp)].max())) + 8
+        ndisp = math.ceil(float(disp[np.isfinite(disp)].max())) + 8
+        assert int(calib["ndisp"]) == int(source["max_disparity"]) == ndisp
         assert int(calib["width"]) == W and int(calib["height"]) == H
         # The recorded pair seed reproduces the pair bit for bit.
         again = synth.render_pair(seed=int(source["pair_seed"]), width=W, height=H,
