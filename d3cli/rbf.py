@@ -23,13 +23,18 @@ def aggregate(cost, image, *, rbf: bool, t_max: int, sigma_space: float, sigma_c
     Returns
     -------
     ndarray, float32, (H, W, D)
+        Cells with u - d < 0 stay exactly 1.
     """
     image = np.ascontiguousarray(image, dtype=np.float32)
     if rbf:
         if t_max == 0:
             return cost
         weights = backend.rbf_weights(image, float(sigma_space), float(sigma_color))
-        return backend.rbf_filter(cost, weights, int(t_max))
-    if kappa_a == 0:
-        return cost
-    return backend.bilateral_filter(cost, image, int(kappa_a), float(sigma_space), float(sigma_color))
+        out = backend.rbf_filter(cost, weights, int(t_max))
+    else:
+        if kappa_a == 0:
+            return cost
+        out = backend.bilateral_filter(cost, image, int(kappa_a), float(sigma_space), float(sigma_color))
+    # Filtering mixes the out-of-view cells (u - d < 0, cost 1) with valid neighbours;
+    # put them back to 1 so that they never win.
+    return backend.invalidate_out_of_view(out)

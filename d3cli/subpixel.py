@@ -118,7 +118,9 @@ def fill_holes(
     """
     disp = np.asarray(disparity, dtype=np.float32)
     valid = np.asarray(valid, dtype=bool) & np.isfinite(disp)
-    if valid.all() or not valid.any():
+    if not valid.any():
+        return np.full(disp.shape, np.inf, np.float32)
+    if valid.all():
         return disp.copy()
     left_val, right_val = _nearest_along_rows(disp, valid)
     fill_value = np.minimum(left_val, right_val)

@@ -134,9 +134,9 @@ def test_constant_shift(matcher):
     left, right, gt = constant_scene()
     result = matcher.compute(left, right, max_disparity=16)
     inner = interior(16)
-    # measured: EPE 0.034 px, 100 % of the interior and 96 % of the image decided
-    assert end_point_error(result, gt, inner) < 0.07
-    assert np.abs(result.disparity[inner] - gt[inner]).max() < 0.5
+    # measured: EPE 0.031 px (max 0.15 px), 100 % of the interior and 96 % of the image decided
+    assert end_point_error(result, gt, inner) < 0.06
+    assert np.abs(result.disparity[inner] - gt[inner]).max() < 0.4
     assert result.valid[inner].mean() > 0.97
     assert result.valid.mean() > 0.85
     assert result.disparity.dtype == np.float32 and result.disparity.shape == (H, W)
@@ -148,8 +148,8 @@ def test_slanted_plane(matcher):
     left, right, gt = slanted_scene()
     result = matcher.compute(left, right, max_disparity=24)
     inner = interior(24)
-    # measured: EPE 0.057 px, 0 % above 1 px, 94.5 % of the interior decided
-    assert end_point_error(result, gt, inner) < 0.12
+    # measured: EPE 0.057 px, 0 % above 1 px, 94 % of the interior and 90 % of the image decided
+    assert end_point_error(result, gt, inner) < 0.11
     assert np.mean(np.abs(result.disparity[inner] - gt[inner]) > 1) < 0.005
     assert result.valid[inner].mean() > 0.88
     assert result.valid.mean() > 0.8
@@ -164,12 +164,13 @@ def test_road_plane_with_pothole(matcher):
     road = inner & ~depression
     pothole = inner & depression
     error = np.abs(result.disparity - gt)
-    # measured: road EPE 0.07 px; the pothole is found to a fraction of its 2 px depth
-    assert end_point_error(result, gt, road) < 0.15
-    assert pothole.sum() > 200
-    assert error[pothole].mean() < 0.4
+    # measured: road EPE 0.069 px, pothole EPE 0.093 px, 1.77 of its 2 px depth seen at
+    # the centre, 97 % of the interior decided
+    assert end_point_error(result, gt, road) < 0.14
+    assert pothole.sum() > 500
+    assert error[pothole].mean() < 0.2
     deepest = (np.abs(u - POTHOLE["u"]) <= 3) & (np.abs(v - POTHOLE["v"]) <= 2)
-    assert np.median(result.disparity[deepest] - (2.0 + 0.12 * v[deepest])) < -1.5  # depth seen
+    assert np.median(result.disparity[deepest] - (2.0 + 0.12 * v[deepest])) < -1.3
     assert result.valid[inner].mean() > 0.9
 
 
@@ -178,14 +179,15 @@ def test_two_planes_with_a_step(matcher):
     result = matcher.compute(left, right, max_disparity=24)
     inner = interior(24) & ~occluded
     foreground = in_foreground(*pixel_grid()).astype(np.uint8)
-    edge_band = cv2.dilate(foreground, np.ones((13, 13), np.uint8)) != cv2.erode(foreground, np.ones((13, 13), np.uint8))
+    square = np.ones((13, 13), np.uint8)
+    edge_band = cv2.dilate(foreground, square) != cv2.erode(foreground, square)  # within 6 px of the step
     error = np.abs(result.disparity - gt)
-    # measured: EPE 0.04 px away from the step, 0.83 px within 6 px of it, 0.2 px overall,
-    # 1.6 % of the pixels wrong by more than 1 px
-    assert error[inner & ~edge_band].mean() < 0.1
-    assert error[inner & edge_band].mean() < 1.6
-    assert error[inner].mean() < 0.4
-    assert np.mean(error[inner] > 1) < 0.035
+    # measured: EPE 0.037 px away from the step, 0.49 px within 6 px of it, 0.13 px
+    # overall, 1.1 % of the pixels wrong by more than 1 px, 97 % decided
+    assert error[inner & ~edge_band].mean() < 0.08
+    assert error[inner & edge_band].mean() < 1.0
+    assert error[inner].mean() < 0.27
+    assert np.mean(error[inner] > 1) < 0.025
     assert np.median(result.disparity[in_foreground(*pixel_grid()) & ~edge_band]) == pytest.approx(14, abs=0.1)
     assert result.valid[inner].mean() > 0.9
 
@@ -196,19 +198,14 @@ def test_no_fill_leaves_inf_exactly_where_undecided():
     np.testing.assert_array_equal(np.isfinite(result.disparity), result.valid)
     assert 0.8 < result.valid.mean() < 1.0
     assert len(result.levels) == 4 and result.levels[0].shape == (H, W)
-    np.testing.assert_array_equal(result.valid, result.levels[0] >= 0)
+    # valid = decided at level 1, less what the occlusion check rejected
+    assert not (result.valid & (result.levels[0] < 0)).any()
+    assert (result.levels[0] >= 0).mean() - result.valid.mean() < 0.05
     # sub-pixel values stay within half a pixel of the integer map
     decided = result.valid
     assert np.abs(result.disparity[decided] - result.levels[0][decided]).max() <= 0.5
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="cells whose right pixel u - d is outside the image hold cost 1 only before "
-    "aggregation: RBF averages them with valid neighbours, and seeds/diffusion then decide "
-    "disparities d > u at the left border (DESIGN step 2 says such cells never win). "
-    "Measured on this scene: 4 pixels at level 1, 1 at level 2 and 1 at level 4.",
-)
 def test_no_decided_match_falls_outside_the_right_image(matcher):
     left, right, _ = slanted_scene()
     result = matcher.compute(left, right, max_disparity=24)

@@ -127,6 +127,21 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance):
 
 
 @njit(parallel=True, cache=True)
+def invalidate_out_of_view(cost):
+    """Set every cell whose right pixel u - d is outside the image back to 1, in place.
+
+    Aggregation averages such cells with valid neighbours and pulls them below 1; reset
+    after it, they keep their meaning: no match, never a winner (DESIGN step 2).
+    """
+    h, w, n_disp = cost.shape
+    for v in prange(h):
+        for u in range(min(w, n_disp - 1)):
+            for d in range(u + 1, n_disp):
+                cost[v, u, d] = 1.0
+    return cost
+
+
+@njit(parallel=True, cache=True)
 def rbf_weights(img, sigma_space, sigma_color):
     """Normalised 3x3 bilateral weights per pixel (paper eq. 3), computed once per level.
 

@@ -80,7 +80,7 @@ def build_ops(jit):
     @jit
     def cost_or_inf(cost, v, u, d):
         """``cost[v, u, d]``, or inf where that cell does not exist."""
-        if d < 0 or d >= cost.shape[2] or u < 0 or u >= cost.shape[1]:
+        if d < 0 or d >= cost.shape[2] or u < 0 or u >= cost.shape[1] or v < 0 or v >= cost.shape[0]:
             return INF
         return cost[v, u, d]
 
@@ -126,6 +126,8 @@ def build_ops(jit):
         if c2 + epsilon < pkrn_min * (c1 + epsilon):
             return UNDECIDED
         x = u - d1
+        if x < 0:
+            return UNDECIDED  # the match lies outside the right image
         width = cost.shape[1]
         dr = 0
         cr = INF
@@ -239,10 +241,11 @@ def build_ops(jit):
         return min(cost_or_inf(cost, v, x, d - 2), cost_or_inf(cost, v, x, d + 2))
 
     @jit
-    def patch_reliable(cost, y0, u0, x0, d, right_view):
+    def patch_reliable(cost, y0, x0, d, right_view):
         """Patch reliability constraint (PRC, paper eq. 7-8) in one view.
 
-        The 2x2 patch at rows y0, y0+1 and columns x0, x0+1 of the chosen view, with the
+        The 2x2 patch at rows y0, y0+1 and columns x0, x0+1 of the chosen view (the left
+        patch for the left view, the right patch for the right view), with the
         in-patch disparities {d-1, d, d+1} (d = 2 dc, the coarse disparity doubled) and the
         outside disparities {d-2, d+2} of the pixels just beside the partner patch.  The
         patch is reliable when the mean of the four best in-patch costs is below the least
@@ -319,10 +322,10 @@ def build_ops(jit):
         least_out_l = INF
         least_out_r = INF
         if prc:
-            least_out_l = patch_reliable(cost, y0, u0, x0, d, False)
+            least_out_l = patch_reliable(cost, y0, u0, d, False)
             if least_out_l < 0.0:
                 return UNDECIDED
-            least_out_r = patch_reliable(cost, y0, x0, u0, d, True)
+            least_out_r = patch_reliable(cost, y0, x0, d, True)
             if least_out_r < 0.0:
                 return UNDECIDED
         dl = pixel_decisive(cost, v, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon)
