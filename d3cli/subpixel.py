@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import cv2
 import numpy as np
 
@@ -131,12 +133,9 @@ def fill_holes(
         up_val, down_val = (x.T for x in _nearest_along_rows(disp.T, valid.T))
         four = np.stack([left_val, right_val, up_val, down_val])
         four = np.where(np.isfinite(four), four, np.nan)
-        with np.errstate(all="ignore"):
-            import warnings
-
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                inside = np.nanmedian(four, axis=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: no neighbour
+            inside = np.nanmedian(four, axis=0)
         use_inside = ~occluded & np.isfinite(inside)
         fill_value = np.where(use_inside, inside, fill_value)
     filled = np.where(valid, disp, fill_value).astype(np.float32)

@@ -201,11 +201,15 @@ def rbf_filter(cost, weights, t_max):
     ndarray, float32, (H, W, D)
         A new array (``cost`` is left untouched).
     """
-    src = cost.copy()
     if t_max == 0:
+        return cost.copy()
+    # The first pass reads ``cost`` directly, so no copy of the input volume is made.
+    src = np.empty_like(cost)
+    _rbf_pass(cost, src, weights)
+    if t_max == 1:
         return src
-    dst = np.empty_like(src)
-    for _ in range(t_max):
+    dst = np.empty_like(cost)
+    for _ in range(t_max - 1):
         _rbf_pass(src, dst, weights)
         src, dst = dst, src
     return src
