@@ -36,6 +36,7 @@ class RunConfig:
     method: str = "d3stereo"
     backend: str = "auto"
     max_disparity: int | None = None  # None: from the dataset layout, else width // 4
+    max_memory_gb: float | None = None  # refuse pairs whose estimated peak exceeds this; None: 75 % of RAM
 
 
 @dataclass(frozen=True)
@@ -133,6 +134,16 @@ class SGBMConfig:
 
 
 @dataclass(frozen=True)
+class CameraConfig:
+    """Camera for point clouds when the pair has no calib.txt (``--pointcloud``)."""
+
+    f: float | None = None  # focal length, pixels
+    baseline: float | None = None  # metres
+    cx: float | None = None  # principal point, pixels; None: image centre
+    cy: float | None = None
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole resolved configuration of one run."""
 
@@ -146,6 +157,7 @@ class Config:
     pt: PTConfig = field(default_factory=PTConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)
     sgbm: SGBMConfig = field(default_factory=SGBMConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
 
     def to_dict(self) -> dict:
         """Plain nested dict (tuples as lists), e.g. for run.json."""
@@ -170,6 +182,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "run.method": (lambda v: v in METHODS, "one of " + ", ".join(METHODS)),
     "run.backend": (lambda v: v in BACKENDS, "one of " + ", ".join(BACKENDS)),
     "run.max_disparity": (lambda v: v is None or v > 0, "a positive integer or null"),
+    "run.max_memory_gb": (lambda v: v is None or v > 0, "a positive number (GB) or null"),
     "pyramid.levels": (lambda v: 1 <= v <= 8, "an integer in [1, 8]"),
     "cost.window": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "cost.level_windows": (
@@ -195,6 +208,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "pt.min_inlier_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
     "pt.inlier_threshold": (lambda v: v > 0, "a number > 0"),
     "pt.iterations": (lambda v: 1 <= v <= 100, "an integer in [1, 100]"),
+    "camera.f": (lambda v: v is None or v > 0, "a positive number (pixels) or null"),
+    "camera.baseline": (lambda v: v is None or v > 0, "a positive number (metres) or null"),
     "sgbm.block_size": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "sgbm.mode": (lambda v: v in ("sgbm", "hh", "3way", "hh4"), "one of sgbm, hh, 3way, hh4"),
     "sgbm.uniqueness_ratio": (lambda v: 0 <= v <= 100, "an integer in [0, 100]"),
