@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 
 def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: float, backend):
     """NCC cost volume ``C(p, d) = (1 - NCC) / 2`` of one level (DESIGN step 2).
 
     Parameters
     ----------
-    left, right : ndarray, float32, (H, W)
-        Grey images of the level, 0-255 scale.
+    left, right : float32 (H, W) arrays of the backend (``backend.to_device``)
+        Grey images of the level, 0-255 scale, C-contiguous.
     max_disparity : int
         Largest disparity of the level (the volume has max_disparity + 1 slices).
     window : int
@@ -26,6 +24,4 @@ def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: f
     ndarray, float32, (H, W, max_disparity + 1)
         Lower is better; 1 where u - d < 0 or a window is flat.
     """
-    left = np.ascontiguousarray(left, dtype=np.float32)
-    right = np.ascontiguousarray(right, dtype=np.float32)
     return backend.ncc_cost_volume(left, right, int(max_disparity), int(window), float(min_variance))

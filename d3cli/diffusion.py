@@ -34,5 +34,5 @@ def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, a
     if max_gap >= 0:
         least = backend.min_cost(cost)
     else:
-        least = np.zeros((1, 1), np.float32)  # never read
+        least = backend.to_device(np.zeros((1, 1), np.float32))  # never read
     return backend.diffuse(cost, disparity, least, float(max_gap), int(tau), int(kappa_d), bool(adversarial), int(max_sweeps))

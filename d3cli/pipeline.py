@@ -64,6 +64,16 @@ def _grey(img: np.ndarray, name: str) -> np.ndarray:
     return to_grey(arr)
 
 
+@dataclass
+class _Match:
+    """What :meth:`D3Stereo._match` leaves for the next step (backend arrays)."""
+
+    disparity: object  # int32 (H, W), -1 undecided
+    cost: object  # float32 (H, W, D), aggregated
+    level_maps: list
+    per_level: list
+
+
 class D3Stereo:
     """The D3Stereo stereo matcher (NCC + RBF + decisive diffusion/inheritance).
 
@@ -113,6 +123,38 @@ class D3Stereo:
             )
         timings: dict[str, float] = {}
         t_start = time.perf_counter()
+        grey_l, grey_r, dmax = self._prepare(left, right, max_disparity)
+        levels = usable_levels(grey_l.shape, cfg.pyramid.levels)
+        backend = self.backend
+        # One upload of the pair (its pyramid); everything below stays on the backend.
+        pyr_l = [backend.to_device(img) for img in build_pyramid(grey_l, levels)]
+        pyr_r = [backend.to_device(img) for img in build_pyramid(grey_r, levels)]
+        timings["pyramid"] = time.perf_counter() - t_start
+
+        info: dict = {"backend": self.backend_name, "levels": levels, "max_disparity": dmax}
+        warnings: list[str] = []
+        match = self._match(pyr_l, pyr_r, dmax, timings)
+        info["per_level"] = match.per_level
+        if match.per_level[0].get("seeds", 0) == 0:
+            warnings.append(
+                "no decisive seeds at the coarsest level (textureless or unrectified pair?); "
+                "the disparity map is all invalid"
+            )
+        t0 = time.perf_counter()
+        out, valid = self._finish(match, dmax, info)
+        timings["finish"] = time.perf_counter() - t0
+        timings["total"] = time.perf_counter() - t_start
+        return DisparityResult(
+            disparity=out,
+            valid=valid,
+            levels=[backend.to_host(m) for m in match.level_maps],
+            timings=timings,
+            info=info,
+            warnings=warnings,
+        )
+
+    def _prepare(self, left, right, max_disparity):
+        """Grey float32 images of equal shape and the checked full-resolution range."""
         grey_l = _grey(left, "left")
         grey_r = _grey(right, "right")
         if grey_l.shape != grey_r.shape:
@@ -120,8 +162,8 @@ class D3Stereo:
                 f"pair: left is {grey_l.shape[0]}x{grey_l.shape[1]} but right is "
                 f"{grey_r.shape[0]}x{grey_r.shape[1]}; a stereo pair needs equal sizes"
             )
-        h, w = grey_l.shape
-        dmax = max_disparity if max_disparity is not None else cfg.run.max_disparity
+        w = grey_l.shape[1]
+        dmax = max_disparity if max_disparity is not None else self.cfg.run.max_disparity
         if dmax is None:
             dmax = max(1, w // 4)
         if not 1 <= int(dmax) <= w - 1:
@@ -129,19 +171,38 @@ class D3Stereo:
                 f"pair: max disparity {dmax} is outside [1, {w - 1}] for an image {w} px wide; "
                 f"pass --max-disparity in that range"
             )
-        dmax = int(dmax)
-        levels = usable_levels((h, w), cfg.pyramid.levels)
-        pyr_l = build_pyramid(grey_l, levels)
-        pyr_r = build_pyramid(grey_r, levels)
-        timings["pyramid"] = time.perf_counter() - t_start
+        return grey_l, grey_r, int(dmax)
 
-        info: dict = {"backend": self.backend_name, "levels": levels, "max_disparity": dmax, "per_level": []}
-        warnings: list[str] = []
-        level_maps: list[np.ndarray] = []
+    def _match(self, pyr_l, pyr_r, dmax: int, timings: dict, *, stop_level: int = 0) -> "_Match":
+        """Steps 2-5 and 7 over the pyramid, coarsest level first (paper Fig. 1).
+
+        Parameters
+        ----------
+        pyr_l, pyr_r : list of backend float32 (H_i, W_i) arrays, finest first
+        dmax : int
+            Largest disparity at full resolution; level i searches ceil(dmax / 2^i).
+        timings : dict
+            Seconds per step are added to it.
+        stop_level : int
+            Finest level to compute (0 = full resolution); the perspective transformation
+            stops at the coarsest level.
+
+        Returns
+        -------
+        _Match
+            Integer map and aggregated cost volume of ``stop_level`` (backend arrays), the
+            per-level maps (finest first) and per-level statistics (coarsest first).
+        """
+        cfg = self.cfg
+        backend = self.backend
+        levels = len(pyr_l)
+        per_level: list[dict] = []
+        level_maps: list = []
         disp = None
         cost = None
-        for level in range(levels - 1, -1, -1):
-            stats: dict = {"level": level + 1, "shape": list(pyr_l[level].shape)}
+        for level in range(levels - 1, stop_level - 1, -1):
+            shape = tuple(pyr_l[level].shape)
+            stats: dict = {"level": level + 1, "shape": list(shape)}
             t0 = time.perf_counter()
             cost = self._level_cost(pyr_l[level], pyr_r[level], level, dmax)
             t1 = time.perf_counter()
@@ -153,16 +214,11 @@ class D3Stereo:
                     epsilon=cfg.seeds.epsilon,
                     lr_tolerance=cfg.seeds.lr_tolerance,
                     exclusion=cfg.seeds.pkrn_exclusion,
-                    backend=self.backend,
+                    backend=backend,
                 )
             if level == levels - 1:
                 disp = seeds
-                stats["seeds"] = int((disp >= 0).sum())
-                if stats["seeds"] == 0:
-                    warnings.append(
-                        "no decisive seeds at the coarsest level (textureless or unrectified pair?); "
-                        "the disparity map is all invalid"
-                    )
+                stats["seeds"] = backend.count_decided(disp)
             else:
                 disp = inherit(
                     cost,
@@ -170,16 +226,16 @@ class D3Stereo:
                     prc=cfg.inheritance.prc,
                     dfm_pkrn_min=cfg.inheritance.dfm_pkrn_min,
                     epsilon=cfg.seeds.epsilon,
-                    backend=self.backend,
+                    backend=backend,
                 )
-                stats["inherited"] = int((disp >= 0).sum())
+                stats["inherited"] = backend.count_decided(disp)
                 if seeds is not None:
                     # inherited disparities win; fresh seeds cover what inheritance left
-                    disp = np.where(disp >= 0, disp, seeds).astype(np.int32)
-                    stats["seeds"] = int((seeds >= 0).sum())
+                    disp = backend.merge_sparse(disp, seeds)
+                    stats["seeds"] = backend.count_decided(seeds)
             t2 = time.perf_counter()
             sweeps = 0
-            if cfg.pyramid.ars or level == 0:
+            if cfg.pyramid.ars or level == stop_level:
                 disp, sweeps = diffuse(
                     cost,
                     disp,
@@ -188,12 +244,12 @@ class D3Stereo:
                     kappa_d=cfg.diffusion.kappa_d,
                     adversarial=cfg.diffusion.adversarial,
                     max_sweeps=cfg.diffusion.max_sweeps,
-                    backend=self.backend,
+                    backend=backend,
                 )
             t3 = time.perf_counter()
             stats.update(
                 sweeps=int(sweeps),
-                decided_share=float((disp >= 0).mean()),
+                decided_share=backend.count_decided(disp) / float(shape[0] * shape[1]),
                 time_cost=t1 - t0,
                 time_decide=t2 - t1,
                 time_diffusion=t3 - t2,
@@ -201,7 +257,7 @@ class D3Stereo:
             log.debug(
                 "level %d %s: %s %d, %d sweeps, %.1f%% decided; cost %.3fs, %s %.3fs, diffusion %.3fs",
                 level + 1,
-                "x".join(map(str, pyr_l[level].shape)),
+                "x".join(map(str, shape)),
                 "seeds" if level == levels - 1 else "inherited",
                 stats.get("seeds", stats.get("inherited", 0)),
                 sweeps,
@@ -213,17 +269,27 @@ class D3Stereo:
             )
             for key in ("cost", "decide", "diffusion"):
                 timings[key] = timings.get(key, 0.0) + stats["time_" + key]
-            info["per_level"].append(stats)
+            per_level.append(stats)
             level_maps.insert(0, disp)
-            if level > 0:
+            if level > stop_level:
                 cost = None  # free the coarse volume before the next, larger one
+        return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level)
 
-        t0 = time.perf_counter()
-        valid = disp >= 0
+    def _finish(self, match: "_Match", dmax: int, info: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Step 8: sub-pixel refinement, occlusion check, hole filling; host arrays.
+
+        The one download of the result happens here: the integer map and the sub-pixel
+        map; the occlusion tests and the filling are row-wise NumPy on the host.
+        """
+        cfg = self.cfg
+        backend = self.backend
         if cfg.refine.subpixel:
-            out = refine_subpixel(cost, disp, backend=self.backend)
+            out = backend.to_host(refine_subpixel(match.cost, match.disparity, backend=backend))
+            disp = backend.to_host(match.disparity)
         else:
-            out = np.where(valid, disp, np.inf).astype(np.float32)
+            disp = backend.to_host(match.disparity)
+            out = np.where(disp >= 0, disp, np.inf).astype(np.float32)
+        valid = disp >= 0
         occluded = None
         if cfg.refine.occlusion_check:
             occluded = occluded_by_uniqueness(out, valid) | out_of_view(out, valid, max_disparity=dmax)
@@ -234,17 +300,8 @@ class D3Stereo:
             out = fill_holes(
                 out, valid, smooth=cfg.refine.smooth_filled, occluded=occluded if cfg.refine.fill_inside else None
             )
-        timings["finish"] = time.perf_counter() - t0
-        timings["total"] = time.perf_counter() - t_start
         info["decided_share"] = float(valid.mean())
-        return DisparityResult(
-            disparity=np.ascontiguousarray(out, dtype=np.float32),
-            valid=valid,
-            levels=level_maps,
-            timings=timings,
-            info=info,
-            warnings=warnings,
-        )
+        return np.ascontiguousarray(out, dtype=np.float32), valid
 
     def _level_cost(self, left, right, level: int, max_disparity: int):
         """Aggregated cost volume of one level (steps 2-3)."""

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 
 def aggregate(cost, image, *, rbf: bool, t_max: int, sigma_space: float, sigma_color: float, kappa_a: int, backend):
     """Aggregate a cost volume with RBF, or with one plain bilateral pass (ablation).
@@ -11,7 +9,7 @@ def aggregate(cost, image, *, rbf: bool, t_max: int, sigma_space: float, sigma_c
     Parameters
     ----------
     cost : ndarray, float32, (H, W, D)
-    image : ndarray, float32, (H, W)
+    image : float32 (H, W) array of the backend (``backend.to_device``)
         Left grey image of the level; guides the bilateral weights.
     rbf : bool
         True: ``t_max`` passes of the 3x3 kernel of eq. 3 with weights computed once
@@ -25,7 +23,6 @@ def aggregate(cost, image, *, rbf: bool, t_max: int, sigma_space: float, sigma_c
     ndarray, float32, (H, W, D)
         Cells with u - d < 0 stay exactly 1.
     """
-    image = np.ascontiguousarray(image, dtype=np.float32)
     if rbf:
         if t_max == 0:
             return cost

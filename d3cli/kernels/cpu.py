@@ -394,3 +394,34 @@ def subpixel(cost, disp):
         for u in range(w):
             out[v, u] = _subpixel_at(cost, disp, v, u)
     return out
+
+
+# ----------------------------------------------------------------------------- array handling
+# The pipeline moves data through these so that it never needs to know where arrays
+# live; on the CPU they are (nearly) free.
+
+
+def to_device(array):
+    """C-contiguous array for the kernels (the CPU's memory is the device's)."""
+    return np.ascontiguousarray(array)
+
+
+def to_host(array):
+    """NumPy array of a backend array (identity on the CPU)."""
+    return np.asarray(array)
+
+
+@njit(parallel=True, cache=True)
+def merge_sparse(primary, fallback):
+    """``primary`` where decided (>= 0), else ``fallback``; int32 (H, W), a new map."""
+    h, w = primary.shape
+    out = np.empty((h, w), np.int32)
+    for v in prange(h):
+        for u in range(w):
+            out[v, u] = primary[v, u] if primary[v, u] >= 0 else fallback[v, u]
+    return out
+
+
+def count_decided(disparity) -> int:
+    """Number of decided pixels (>= 0) of an integer disparity map."""
+    return int(np.count_nonzero(np.asarray(disparity) >= 0))
