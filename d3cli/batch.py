@@ -17,7 +17,25 @@ stored ``result.json`` was made by another method, configuration or disparity
 override is computed again.
 
 One failing pair never stops a batch: its error is recorded (``run.json``, the
-summary) and the next pair runs.  Only KeyboardInterrupt ends a batch early.
+summary) and the next pair runs.  Two things end a batch early:
+
+* Ctrl-C (KeyboardInterrupt): the pair in progress leaves no file behind (its temporary
+  files and any of its outputs already renamed are removed; ``result.json`` is written
+  last, so it never marks a half pair complete), ``run.json`` records the interruption,
+  and :class:`BatchInterrupted` says how many pairs are done.  Rerunning the same command
+  resumes and gives byte-identical per-pair files.
+* A full disk (ENOSPC/EDQUOT on a write): every later pair would fail the same way, so
+  the OutputError ends the batch; finished pairs stay complete.
+
+Only one run writes into a folder at a time: ``OUT/.d3stereo.lock`` (created with
+O_EXCL, holding pid and host) makes a second run fail with a clear error; a lock left by
+a run that no longer exists on this host is taken over with a warning.
+
+Before a pair is computed its estimated peak memory is checked
+(:func:`d3cli.resources.check_memory`; a per-pair failure), and after it the map is
+checked for the symptoms of an unrectified or swapped pair
+(:func:`d3cli.diagnostics.suspicious_result`; warnings in ``result.json``, ``run.json``
+and the summary).
 """
 
 from __future__ import annotations
@@ -27,6 +45,7 @@ import json
 import logging
 import os
 import platform
+import socket
 import sys
 import tempfile
 import time
@@ -46,6 +65,33 @@ OUTPUT_FILES = ("disp.pfm", "disp.png", "disp_color.png", "valid.png")
 RESULT_FILE = "result.json"
 ERROR_MAP = "error.png"
 RUN_FILE = "run.json"
+LOCK_FILE = ".d3stereo.lock"
+#: A lock file that cannot be read is taken as stale only when older than this (seconds):
+#: a run that has just created it may not have written its pid yet.
+LOCK_GRACE_S = 5.0
+
+
+class BatchInterrupted(KeyboardInterrupt):
+    """Ctrl-C ended a batch; finished pairs are complete, the pair in progress left nothing.
+
+    A KeyboardInterrupt, so code that does not know it still stops.
+
+    Attributes
+    ----------
+    n_done : int
+        Pairs complete in the output folder (computed now or skipped as complete).
+    n_total : int
+        Pairs of the batch.
+    run_json : Path
+        ``run.json`` recording the interruption.
+    """
+
+    def __init__(self, n_done: int, n_total: int, run_json: Path):
+        super().__init__(f"Interrupted: {n_done} of {n_total} pairs done; rerun the same command to resume")
+        self.n_done, self.n_total, self.run_json = n_done, n_total, run_json
+
+    def __str__(self) -> str:
+        return self.args[0]
 
 
 @dataclass
@@ -105,6 +151,97 @@ def ensure_writable(out_dir: str | os.PathLike) -> Path:
                            "choose another folder with -o or fix its permissions")
         ) from None
     return out
+
+
+def _pid_alive(pid: int) -> bool:
+    """True when process ``pid`` exists on this host (or when that cannot be told)."""
+    if pid <= 0:
+        return False
+    if os.name == "nt":  # os.kill(pid, 0) would terminate the process there
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: it exists, owned by someone else
+        return True
+    return True
+
+
+def _read_lock(path: Path) -> dict | None:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data, dict) or not isinstance(data.get("pid"), int):
+        return None
+    return data
+
+
+def _lock_is_stale(path: Path, holder: dict | None) -> bool:
+    if holder is None:
+        try:
+            age = time.time() - path.stat().st_mtime
+        except OSError:
+            return True  # gone already
+        return age > LOCK_GRACE_S
+    if holder.get("host") != socket.gethostname():
+        return False  # another machine's process cannot be checked from here
+    return not _pid_alive(holder["pid"])
+
+
+def acquire_lock(out: Path) -> Path:
+    """Create ``out/.d3stereo.lock`` (O_EXCL) holding this process's pid and host.
+
+    A lock whose process is gone (same host) or that is unreadable and older than
+    :data:`LOCK_GRACE_S` is taken over with a warning.
+
+    Returns
+    -------
+    Path
+        The lock file, for :func:`release_lock`.
+
+    Raises
+    ------
+    OutputError
+        ``OUT: another d3stereo run (pid N) is writing here; wait for it or use another
+        -o folder``, or when the lock cannot be created.
+    """
+    path = out / LOCK_FILE
+    for attempt in range(2):
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            holder = _read_lock(path)
+            if attempt == 0 and _lock_is_stale(path, holder):
+                who = f"pid {holder['pid']} on {holder.get('host')}" if holder else "an unreadable lock"
+                log.warning("%s: taking over the stale lock of a run that is gone (%s)", path, who)
+                path.unlink(missing_ok=True)
+                continue
+            pid = holder["pid"] if holder else "unknown"
+            host = "" if holder is None or holder.get("host") == socket.gethostname() else f" on {holder.get('host')}"
+            raise OutputError(where_what_fix(str(out), f"another d3stereo run (pid {pid}{host}) is writing here",
+                                             "wait for it or use another -o folder")) from None
+        except OSError as exc:
+            raise OutputError(where_what_fix(str(path), f"cannot create the lock file ({exc.strerror or exc})",
+                                             "choose another folder with -o or fix its permissions")) from None
+        holder = {"pid": os.getpid(), "host": socket.gethostname(),
+                  "started": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(holder, fh)
+        return path
+    raise OutputError(where_what_fix(str(out), "another d3stereo run took the lock over at the same moment",
+                                     "wait for it or use another -o folder"))
+
+
+def release_lock(path: Path) -> None:
+    """Remove the lock file when it is still this process's (not one taken over since)."""
+    holder = _read_lock(path)
+    if holder is not None and holder.get("pid") == os.getpid() and holder.get("host") == socket.gethostname():
+        try:
+            path.unlink()
+        except OSError as exc:
+            log.warning("%s: could not remove the lock file (%s); delete it by hand", path, exc)
 
 
 def write_json(path: Path, data: dict) -> None:
@@ -198,19 +335,26 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
     """Compute, write and (optionally) score one pair; returns the stored result dict."""
     from . import baselines, datasets, io
 
+    from . import diagnostics, resources
+
     t0 = time.perf_counter()
     left, right = datasets.load_pair_images(pair)
     height, width = left.shape[:2]
     dmax = datasets.resolve_max_disparity(pair, width, override=max_disparity)
+    resources.check_memory((height, width), dmax, cfg, method=method, where=pair.name)
     result = baselines.compute_pair(method, cfg, left, right, max_disparity=dmax)
+    result.warnings.extend(diagnostics.suspicious_result(result, dmax))
     for text in result.warnings:
         log.warning("%s: %s", pair.name, text)
-    # An old result.json beside new, maybe half-written outputs would mark them complete;
-    # an old error map would describe another estimate.
-    for stale in (RESULT_FILE, ERROR_MAP):
-        (pair_dir / stale).unlink(missing_ok=True)
-    io.write_disparity_outputs(pair_dir, result.disparity, result.valid, vmax=dmax)
-    scores = _evaluate(pair, left, right, result.disparity, pair_dir) if evaluate else None
+    try:
+        # An old result.json beside new, maybe half-written outputs would mark them complete;
+        # an old error map would describe another estimate.
+        _remove_pair_files(pair_dir)
+        io.write_disparity_outputs(pair_dir, result.disparity, result.valid, vmax=dmax)
+        scores = _evaluate(pair, left, right, result.disparity, pair_dir) if evaluate else None
+    except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
+        _remove_pair_files(pair_dir, remove_folder=True)
+        raise
     wall = time.perf_counter() - t0
     stored = {
         "pair": pair.name,
@@ -227,8 +371,34 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
         "info": result.info,
         "warnings": list(result.warnings),
     }
-    write_json(pair_dir / RESULT_FILE, stored)  # last: marks the pair complete
+    try:
+        write_json(pair_dir / RESULT_FILE, stored)  # last: marks the pair complete
+    except BaseException:
+        _remove_pair_files(pair_dir, remove_folder=True)
+        raise
     return stored
+
+
+def _remove_pair_files(pair_dir: Path, *, remove_folder: bool = False) -> None:
+    """Delete a pair's outputs, result.json, error map and leftover temporary files.
+
+    Used before a pair is written (stale files of an earlier run, temporary files of a
+    killed one) and when writing it failed or was interrupted.  Other files stay.
+    """
+    if not pair_dir.is_dir():
+        return
+    names = (*OUTPUT_FILES, RESULT_FILE, ERROR_MAP)
+    leftovers = [p for p in pair_dir.iterdir() if p.name.startswith(".") and ".tmp-" in p.name]
+    for path in [pair_dir / name for name in names] + leftovers:
+        try:
+            path.unlink(missing_ok=True)
+        except OSError as exc:
+            log.warning("%s: could not remove (%s)", path, exc)
+    if remove_folder:
+        try:
+            pair_dir.rmdir()  # only when empty: the user's own files stay
+        except OSError:
+            pass
 
 
 def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
@@ -295,20 +465,50 @@ def run_batch(
         from .kernels import get_backend
 
         get_backend("cuda")  # BackendUnavailable now, not once per pair
+    lock = acquire_lock(out)
+    try:
+        return _locked_batch(list(pairs), out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
+                             max_disparity=max_disparity, progress=progress, config_source=config_source)
+    finally:
+        release_lock(lock)
+
+
+def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, max_disparity, progress,
+                  config_source) -> BatchResult:
+    """The body of :func:`run_batch`, run while holding the output folder's lock."""
+    from .io import is_disk_full
+
     fingerprint = settings_fingerprint(cfg, method, max_disparity)
     batch = BatchResult(out_dir=out, run_json=out / RUN_FILE)
     records = []
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    meta = dict(cfg=cfg, method=method, max_disparity=max_disparity, started=started,
+                config_source=config_source, n_total=len(pairs))
+    current = None
     try:
-        for pair in _progress(pairs, progress, method):
-            row, record = _batch_pair(pair, out / pair.name, cfg=cfg, method=method, evaluate=evaluate,
+        for current in _progress(pairs, progress, method):
+            row, record = _batch_pair(current, out / current.name, cfg=cfg, method=method, evaluate=evaluate,
                                       overwrite=overwrite, max_disparity=max_disparity,
                                       fingerprint=fingerprint)
             batch.rows.append(row)
             records.append(record)
+        current = None
     except KeyboardInterrupt:
-        _write_run_json(batch, records, cfg=cfg, method=method, max_disparity=max_disparity,
-                        started=started, config_source=config_source, interrupted=True)
+        _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
+                        stop_reason="interrupted (Ctrl-C / SIGINT)")
+        n_done = sum(r["status"] in ("ok", "skipped") for r in records)
+        raise BatchInterrupted(n_done, len(pairs), batch.run_json) from None
+    except OutputError as exc:
+        if not is_disk_full(exc):
+            raise
+        row, record = _failed(current, str(exc), 0.0)
+        batch.rows.append(row)
+        records.append(record)
+        try:  # the disk is full: this may well fail too
+            _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current.name,
+                            stop_reason=str(exc))
+        except OutputError as again:
+            log.warning("run.json not written: %s", again)
         raise
     batch.n_failed = sum(r["status"] == "failed" for r in batch.rows)
     if evaluate:
@@ -316,13 +516,16 @@ def run_batch(
 
         report.write_summary(out, batch.rows, method=method, extra={"settings": fingerprint})
         batch.summary = report.summarize(batch.rows)
-    _write_run_json(batch, records, cfg=cfg, method=method, max_disparity=max_disparity,
-                    started=started, config_source=config_source, interrupted=False)
+    _write_run_json(batch, records, **meta, interrupted=False)
     return batch
 
 
 def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, fingerprint):
-    """One pair of a batch -> (report row, run.json record); never raises but KeyboardInterrupt."""
+    """One pair of a batch -> (report row, run.json record).
+
+    Raises only KeyboardInterrupt and the OutputError of a full disk; any other failure
+    becomes a ``failed`` row.
+    """
     t0 = time.perf_counter()
     reused = False
     try:
@@ -335,12 +538,18 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
             stored = _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
                                max_disparity=max_disparity, fingerprint=fingerprint)
     except D3Error as exc:
+        from .io import is_disk_full
+
+        if is_disk_full(exc):
+            raise  # every later pair would fail the same way: the batch stops
         return _failed(pair, str(exc), time.perf_counter() - t0)
     except Exception as exc:  # noqa: BLE001 - one broken pair must not end the batch
         log.debug("%s: unexpected error", pair.name, exc_info=True)
         return _failed(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
     wall = stored.get("timings", {}).get("wall")
     row = _row(pair, "ok", time_s=wall, metrics=stored.get("metrics"))
+    if stored.get("warnings"):
+        row["warnings"] = list(stored["warnings"])
     record = {"pair": pair.name, "status": "skipped" if reused else "ok", "wall_s": wall,
               "max_disparity": stored.get("max_disparity"), "backend": stored.get("info", {}).get("backend"),
               "warnings": stored.get("warnings", [])}
@@ -354,7 +563,7 @@ def _failed(pair, message: str, wall: float):
 
 
 def _write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, started,
-                    config_source, interrupted) -> None:
+                    config_source, interrupted, n_total=None, stopped_at=None, stop_reason=None) -> None:
     failed = [{"pair": r["pair"], "error": r["error"]} for r in records if r["status"] == "failed"]
     data = {
         "d3stereo": __version__,
@@ -371,6 +580,9 @@ def _write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, 
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "n_pairs": len(records),
+        "n_total": len(records) if n_total is None else n_total,
+        "stopped_at": stopped_at,
+        "stop_reason": stop_reason,
         "n_failed": len(failed),
         "pairs": records,
         "failed": failed,

@@ -1,7 +1,8 @@
 """The ``d3stereo`` command line: parse, call the library, turn the outcome into an exit code.
 
 Exit codes: 0 success; 1 a user error (any :class:`~d3cli.errors.D3Error`, printed as
-one line ``Error: <message>``) or a batch with failed pairs; 2 a usage error (click).
+one line ``Error: <message>``) or a batch with failed pairs; 2 a usage error (click);
+130 Ctrl-C (``Interrupted: N of M pairs done; rerun the same command to resume``).
 Unexpected exceptions keep their traceback: they are bugs, not user mistakes.
 """
 
@@ -22,6 +23,8 @@ from .errors import D3Error
 
 log = logging.getLogger("d3cli")
 
+#: Exit code after Ctrl-C (128 + SIGINT, as a shell reports it).
+INTERRUPTED_EXIT = 130
 #: Environment variable naming a config file used when -c is not given.
 CONFIG_ENV = "D3STEREO_CONFIG"
 #: Config file picked up from the working folder when neither -c nor the variable is set.
@@ -36,6 +39,13 @@ class _Group(click.Group):
             return super().invoke(ctx)
         except D3Error as exc:
             raise click.ClickException(str(exc)) from None
+        except KeyboardInterrupt as exc:
+            # click would print "Aborted!" and exit 1; say what was kept and exit like a shell.
+            from .batch import BatchInterrupted
+
+            message = str(exc) if isinstance(exc, BatchInterrupted) else "Interrupted"
+            click.echo(message, err=True)
+            ctx.exit(INTERRUPTED_EXIT)
 
 
 class _StderrHandler(logging.StreamHandler):

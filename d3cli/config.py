@@ -212,7 +212,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "camera.baseline": (lambda v: v is None or v > 0, "a positive number (metres) or null"),
     "sgbm.block_size": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "sgbm.mode": (lambda v: v in ("sgbm", "hh", "3way", "hh4"), "one of sgbm, hh, 3way, hh4"),
-    "sgbm.uniqueness_ratio": (lambda v: 0 <= v <= 100, "an integer in [0, 100]"),
+    # 100 kills the process: OpenCV's 3-way SGBM divides by (100 - uniquenessRatio) (SIGFPE).
+    "sgbm.uniqueness_ratio": (lambda v: 0 <= v <= 99, "an integer in [0, 99]"),
     "sgbm.speckle_window": (lambda v: v >= 0, "an integer >= 0"),
     "sgbm.speckle_range": (lambda v: v >= 0, "an integer >= 0"),
     "sgbm.disp12_max_diff": (lambda v: v >= -1, "an integer >= -1"),
@@ -288,13 +289,23 @@ def _section_classes() -> dict[str, type]:
     return {f.name: hints[f.name] for f in fields(Config)}
 
 
-def _apply(cfg: Config, data: Mapping, where: str) -> Config:
-    """Return ``cfg`` updated with the nested mapping ``data`` (all checks applied)."""
+def _at(where: str, lines: Mapping | None, *keys) -> str:
+    """``where:line`` when the line of the (section, key) path is known, else ``where``."""
+    line = (lines or {}).get(tuple(keys))
+    return f"{where}:{line}" if line is not None else where
+
+
+def _apply(cfg: Config, data: Mapping, where: str, lines: Mapping | None = None) -> Config:
+    """Return ``cfg`` updated with the nested mapping ``data`` (all checks applied).
+
+    ``lines`` maps ``()``, ``(section,)`` and ``(section, key)`` to 1-based line numbers
+    of the YAML file (see :func:`read_yaml_lines`), so messages can name the line.
+    """
     if data is None:
         return cfg
     if not isinstance(data, Mapping):
         raise ConfigError(
-            f"{where}: the top level must be a mapping of sections, got {type(data).__name__}; "
+            f"{_at(where, lines)}: the top level must be a mapping of sections, got {type(data).__name__}; "
             f"valid sections: {', '.join(_section_classes())}"
         )
     sections = _section_classes()
@@ -302,30 +313,31 @@ def _apply(cfg: Config, data: Mapping, where: str) -> Config:
     for sec_name, sec_data in data.items():
         if sec_name not in sections:
             raise ConfigError(
-                f"{where}: unknown section {sec_name!r}; valid sections: {', '.join(sections)}"
+                f"{_at(where, lines, sec_name)}: unknown section {sec_name!r}; valid sections: {', '.join(sections)}"
             )
         if sec_data is None:
             continue
         sec_cls = sections[sec_name]
         if not isinstance(sec_data, Mapping):
             raise ConfigError(
-                f"{where}: section {sec_name} must be a mapping of keys, got {sec_data!r}; "
+                f"{_at(where, lines, sec_name)}: section {sec_name} must be a mapping of keys, got {sec_data!r}; "
                 f"valid keys: {', '.join(f.name for f in fields(sec_cls))}"
             )
         hints = _hints(sec_cls)
         changes = {}
         for key, value in sec_data.items():
             dotted = f"{sec_name}.{key}"
+            at = _at(where, lines, sec_name, key)
             if key not in hints:
                 raise ConfigError(
-                    f"{where}: unknown key {dotted!r}; valid keys of {sec_name}: "
+                    f"{at}: unknown key {dotted!r}; valid keys of {sec_name}: "
                     f"{', '.join(f.name for f in fields(sec_cls))}"
                 )
-            value = _coerce(value, hints[key], where, dotted)
+            value = _coerce(value, hints[key], at, dotted)
             check = _RANGES.get(dotted)
             if check is not None and not check[0](value):
                 raise ConfigError(
-                    f"{where}: {dotted} must be {check[1]}, got {value!r}; "
+                    f"{at}: {dotted} must be {check[1]}, got {value!r}; "
                     f"fix the value of {dotted}"
                 )
             changes[key] = value
@@ -357,19 +369,74 @@ _UniqueKeyLoader.add_constructor(
 
 def read_yaml(path: str | os.PathLike) -> Any:
     """Parse a YAML file, raising ConfigError with file and line on any problem."""
+    return read_yaml_lines(path)[0]
+
+
+def _key_lines(node, loader) -> dict[tuple, int]:
+    """1-based lines of the top two levels of mapping keys of a composed YAML node."""
+    lines: dict[tuple, int] = {(): node.start_mark.line + 1}
+    if not isinstance(node, yaml.MappingNode):
+        return lines
+    for key_node, value_node in node.value:
+        if not isinstance(key_node, yaml.ScalarNode):
+            continue
+        section = loader.construct_object(key_node)
+        lines[(section,)] = key_node.start_mark.line + 1
+        if isinstance(value_node, yaml.MappingNode):
+            for sub_key, _ in value_node.value:
+                if isinstance(sub_key, yaml.ScalarNode):
+                    lines[(section, loader.construct_object(sub_key))] = sub_key.start_mark.line + 1
+    return lines
+
+
+def read_yaml_lines(path: str | os.PathLike) -> tuple[Any, dict[tuple, int]]:
+    """Parse a YAML file; return the data and the line of every section and key.
+
+    Returns
+    -------
+    data : Any
+        The parsed document (None for an empty file).
+    lines : dict
+        ``()`` -> line of the document, ``(section,)`` and ``(section, key)`` -> the
+        1-based line where that key is written.
+
+    Raises
+    ------
+    ConfigError
+        Missing or unreadable file, not UTF-8, invalid YAML or duplicate keys, naming the
+        file and the line.
+    """
     path = os.fspath(path)
     try:
-        with open(path, "r", encoding="utf-8") as fh:
-            text = fh.read()
+        with open(path, "rb") as fh:
+            raw = fh.read()
     except FileNotFoundError:
         raise ConfigError(f"{path}: config file not found; check the path given to -c") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except OSError as exc:
         raise ConfigError(f"{path}: cannot read config file ({exc}); give a readable UTF-8 YAML file") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise ConfigError(
+            f"{path}:{line}: cannot read config file (not UTF-8 text: byte 0x{raw[exc.start]:02x} at offset "
+            f"{exc.start}; is it a YAML file?); give a readable UTF-8 YAML file"
+        ) from None
+    if "\x00" in text:
+        line = text.count("\n", 0, text.index("\x00")) + 1
+        raise ConfigError(
+            f"{path}:{line}: cannot read config file (a NUL byte: binary data, not YAML); "
+            "give a readable UTF-8 YAML file"
+        )
     try:
         loader = _UniqueKeyLoader(text)
         loader.name = path
         try:
-            return loader.get_single_data()
+            node = loader.get_single_node()
+            if node is None:
+                return None, {}
+            data = loader.construct_document(node)
+            lines = _key_lines(node, loader)
         finally:
             loader.dispose()
     except yaml.YAMLError as exc:
@@ -377,6 +444,7 @@ def read_yaml(path: str | os.PathLike) -> Any:
         line = f":{mark.line + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise ConfigError(f"{path}{line}: not valid YAML ({problem}); fix the syntax") from None
+    return data, lines
 
 
 def parse_override(text: str) -> tuple[str, str, Any]:
@@ -416,7 +484,8 @@ def load_config(path: str | os.PathLike | None = None, overrides: typing.Iterabl
     """
     cfg = Config()
     if path is not None:
-        cfg = _apply(cfg, read_yaml(path), os.fspath(path))
+        data, lines = read_yaml_lines(path)
+        cfg = _apply(cfg, data, os.fspath(path), lines)
     for text in overrides:
         section, key, value = parse_override(text)
         cfg = _apply(cfg, {section: {key: value}}, f"--set {text}")

@@ -27,6 +27,7 @@ form ``<where>: <what>; <fix>``.
 
 from __future__ import annotations
 
+import errno
 import logging
 import math
 import os
@@ -435,7 +436,7 @@ def _normalise_invalid(path: Path, invalid: str) -> str:
 def _load_npy(path: Path) -> np.ndarray:
     try:
         array = np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, EOFError) as exc:  # EOFError: an empty or truncated file
         raise InputError(
             where_what_fix(str(path), f"cannot read .npy file ({exc})", "give a NumPy array saved with np.save")
         ) from None
@@ -679,13 +680,31 @@ def atomic_write(path: str | os.PathLike, write_fn: Callable[[Path], object]) ->
         os.replace(tmp, path)
     except OSError as exc:
         _remove_quietly(tmp)
-        raise OutputError(
-            where_what_fix(str(path), f"cannot write ({exc.strerror or exc})", "check free space and permissions")
-        ) from None
-    except BaseException:
+        raise _write_error(path, exc) from None
+    except BaseException:  # KeyboardInterrupt included: no temporary file stays behind
         _remove_quietly(tmp)
         raise
     return path
+
+
+#: errno values that mean "the disk (or the quota) is full".
+DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)})
+
+
+def _write_error(path: Path, exc: OSError) -> OutputError:
+    """OutputError for a failed write; carries ``errno`` so a batch can stop on a full disk."""
+    if exc.errno in DISK_FULL_ERRNOS:
+        fix = "free disk space, then rerun the same command (finished pairs are kept and skipped)"
+    else:
+        fix = "check free space and permissions"
+    error = OutputError(where_what_fix(str(path), f"cannot write ({exc.strerror or exc})", fix))
+    error.errno = exc.errno
+    return error
+
+
+def is_disk_full(exc: BaseException) -> bool:
+    """True when ``exc`` (an OSError or an OutputError from a write) means the disk is full."""
+    return getattr(exc, "errno", None) in DISK_FULL_ERRNOS
 
 
 def _remove_quietly(path: Path) -> None:
@@ -720,9 +739,11 @@ def write_disparity_outputs(folder: str | os.PathLike, disp: np.ndarray, valid: 
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise OutputError(
+        error = OutputError(
             where_what_fix(str(folder), f"cannot create output folder ({exc.strerror or exc})", "choose another -o folder")
-        ) from None
+        )
+        error.errno = exc.errno
+        raise error from None
     disp = np.asarray(disp, dtype=np.float32)
     valid = np.asarray(valid, dtype=bool)
     if valid.shape != disp.shape:

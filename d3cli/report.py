@@ -159,6 +159,8 @@ def _csv_cell(value) -> str:
     if isinstance(value, (float, np.floating)):
         value = float(value)
         return "" if math.isnan(value) else repr(value)
+    if isinstance(value, (list, tuple)):  # e.g. a pair's warnings: one cell
+        return " | ".join(_one_line(str(item)) for item in value)
     return str(value)
 
 
@@ -195,7 +197,9 @@ def summarize(rows: Iterable[Mapping]) -> dict:
         ``means`` maps every key of :data:`MEAN_KEYS` to the mean over the ok pairs
         that have a numeric value (``None`` when none has);
         ``failures``: ``[{"pair", "family", "error"}]``;
-        ``skipped``: ``[{"pair", "family", "reason"}]``.
+        ``skipped``: ``[{"pair", "family", "reason"}]``;
+        ``warnings``: ``[{"pair", "family", "warning"}]``, one per entry of a row's
+        ``warnings`` list (e.g. "the pair may be unrectified or swapped").
 
     Raises
     ------
@@ -223,6 +227,11 @@ def summarize(rows: Iterable[Mapping]) -> dict:
             {"pair": row["pair"], "family": _family(row), "reason": row.get("error") or ""}
             for row in rows
             if row["status"] == "skipped"
+        ],
+        "warnings": [
+            {"pair": row["pair"], "family": _family(row), "warning": str(text)}
+            for row in rows
+            for text in (row.get("warnings") or [])
         ],
     }
 
@@ -386,6 +395,9 @@ def summary_markdown(summary: Mapping, rows: Iterable[Mapping]) -> str:
     if summary.get("skipped"):
         lines += ["", "## Skipped pairs", ""]
         lines += [f"- {item['pair']}: {_one_line(item['reason'])}" for item in summary["skipped"]]
+    if summary.get("warnings"):
+        lines += ["", "## Warnings", "", "Maps of these pairs may be wrong; see each pair's result.json.", ""]
+        lines += [f"- {item['pair']}: {_one_line(item['warning'])}" for item in summary["warnings"]]
     return "\n".join(lines) + "\n"
 
 

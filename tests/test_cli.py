@@ -264,7 +264,7 @@ def test_unknown_config_key(tmp_path, pairs_root):
     cfg = tmp_path / "c.yaml"
     cfg.write_text("diffusion:\n  tua: 2\n")
     line = assert_user_error(invoke("run", pairs_root, "-o", tmp_path / "out", "-c", cfg))
-    assert line.startswith(f"Error: {cfg}: unknown key 'diffusion.tua'; valid keys of diffusion: tau, kappa_d, ")
+    assert line.startswith(f"Error: {cfg}:2: unknown key 'diffusion.tua'; valid keys of diffusion: tau, kappa_d, ")
 
 
 def test_output_folder_not_writable_chmod(tmp_path, pairs_root):

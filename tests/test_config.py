@@ -63,7 +63,7 @@ def test_unknown_section(tmp_path):
     with pytest.raises(ConfigError) as exc:
         load_config(path)
     assert str(exc.value) == (
-        f"{path}: unknown section 'foo'; valid sections: run, pyramid, cost, aggregation, seeds, "
+        f"{path}:1: unknown section 'foo'; valid sections: run, pyramid, cost, aggregation, seeds, "
         "diffusion, inheritance, pt, refine, sgbm, camera"
     )
 
@@ -72,7 +72,7 @@ def test_unknown_key(tmp_path):
     path = write(tmp_path, "run:\n  metod: sgbm\n")
     with pytest.raises(ConfigError) as exc:
         load_config(path)
-    assert str(exc.value) == f"{path}: unknown key 'run.metod'; valid keys of run: method, backend, max_disparity, max_memory_gb"
+    assert str(exc.value) == f"{path}:2: unknown key 'run.metod'; valid keys of run: method, backend, max_disparity, max_memory_gb"
 
 
 def test_wrong_type(tmp_path):
@@ -80,7 +80,7 @@ def test_wrong_type(tmp_path):
     with pytest.raises(ConfigError) as exc:
         load_config(path)
     assert str(exc.value) == (
-        f"{path}: cost.window must be an integer, got 'five'; fix the value of cost.window "
+        f"{path}:2: cost.window must be an integer, got 'five'; fix the value of cost.window "
         "(see configs/default.yaml)"
     )
 
@@ -94,7 +94,7 @@ def test_out_of_range(tmp_path):
     path = write(tmp_path, "cost:\n  window: 4\n")
     with pytest.raises(ConfigError) as exc:
         load_config(path)
-    assert str(exc.value) == f"{path}: cost.window must be an odd integer in [1, 31], got 4; fix the value of cost.window"
+    assert str(exc.value) == f"{path}:2: cost.window must be an odd integer in [1, 31], got 4; fix the value of cost.window"
 
 
 def test_duplicate_key_names_line(tmp_path):
@@ -113,7 +113,7 @@ def test_invalid_yaml_names_line(tmp_path):
 def test_non_yaml_binary_file(tmp_path):
     path = tmp_path / "image.png"
     path.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00\x00")
-    with pytest.raises(ConfigError, match=rf"^{path}: cannot read config file .*; give a readable UTF-8 YAML file$"):
+    with pytest.raises(ConfigError, match=rf"^{path}:1: cannot read config file .*; give a readable UTF-8 YAML file$"):
         load_config(path)
 
 
@@ -162,7 +162,7 @@ def test_cli_config_file_error(tmp_path):
     result = CliRunner().invoke(main, ["run", "-c", str(path), "-o", str(tmp_path / "out")])
     assert result.exit_code == 1
     assert result.output.strip() == (
-        f"Error: {path}: sgbm.mode must be one of sgbm, hh, 3way, hh4, got 'fast'; fix the value of sgbm.mode"
+        f"Error: {path}:2: sgbm.mode must be one of sgbm, hh, 3way, hh4, got 'fast'; fix the value of sgbm.mode"
     )
 
 
@@ -176,3 +176,47 @@ def test_config_from_environment(tmp_path, monkeypatch):
     monkeypatch.setenv("D3STEREO_CONFIG", str(path))
     assert config_search(None) == (str(path), "$D3STEREO_CONFIG")
     assert config_search("x.yaml") == ("x.yaml", "-c option")
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("run:\n  method: sgbm\ncost:\n  window: 5\n  window: 7\n",
+         "{path}:5: duplicate key 'window' (first at line 4); keep only one"),
+        ("run:\n  method: sgbm\ncost:\n  window: [5]\n",
+         "{path}:4: cost.window must be an integer, got [5]; fix the value of cost.window (see configs/default.yaml)"),
+        ("run:\n  method: sgbm\n\ncolour:\n  on: true\n",
+         "{path}:4: unknown section 'colour'; valid sections: run, pyramid, cost, aggregation, seeds, diffusion, "
+         "inheritance, pt, refine, sgbm, camera"),
+        ("seeds:\n  pkrn_min: 2.0\n  pkrn: 3\n",
+         "{path}:3: unknown key 'seeds.pkrn'; valid keys of seeds: pkrn_min, epsilon, lr_tolerance, "
+         "pkrn_exclusion, every_level"),
+        ("sgbm:\n  uniqueness_ratio: 100\n",
+         "{path}:2: sgbm.uniqueness_ratio must be an integer in [0, 99], got 100; "
+         "fix the value of sgbm.uniqueness_ratio"),
+        ("pyramid: 4\n",
+         "{path}:1: section pyramid must be a mapping of keys, got 4; valid keys: levels, ars"),
+        ("This is a README, not a config file.\n",
+         "{path}:1: the top level must be a mapping of sections, got str; valid sections: run, pyramid, cost, "
+         "aggregation, seeds, diffusion, inheritance, pt, refine, sgbm, camera"),
+        ("run:\n\tmethod: sgbm\n",
+         "{path}:2: not valid YAML (found character '\\t' that cannot start any token); fix the syntax"),
+        ("run:\n  method: sgbm\n\x00\x01binary\n",
+         "{path}:3: cannot read config file (a NUL byte: binary data, not YAML); give a readable UTF-8 YAML file"),
+    ],
+    ids=["duplicate", "wrong-type", "unknown-section", "unknown-key", "out-of-range", "section-not-mapping",
+         "not-yaml-prose", "yaml-syntax", "binary"],
+)
+def test_cli_config_errors_name_file_line_and_key(tmp_path, text, message):
+    path = write(tmp_path, text)
+    result = CliRunner().invoke(main, ["run", "-c", str(path), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    assert "Traceback" not in result.output
+    assert result.output.strip() == "Error: " + message.format(path=path)
+    assert not (tmp_path / "out").exists()  # nothing is written before the config is valid
+
+
+def test_line_numbers_of_flow_style_and_nested_keys(tmp_path):
+    path = write(tmp_path, "# comment\n\nrun: {method: sgbm, backend: gpu}\n")
+    with pytest.raises(ConfigError, match=rf"^{path}:3: run.backend must be one of auto, cpu, cuda, got 'gpu'"):
+        load_config(path)
