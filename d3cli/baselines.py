@@ -4,7 +4,8 @@
 
 - ``d3stereo``: :class:`d3cli.pipeline.D3Stereo` (the paper's method),
 - ``sgbm``: OpenCV's semi-global block matching (:func:`sgbm_disparity`),
-- ``pt-sgm``: SGBM after the same perspective transformation as PT-D3Stereo (not yet).
+- ``pt-sgm``: SGBM after the same perspective transformation as PT-D3Stereo
+  (:func:`pt_sgm_disparity`).
 
 :func:`fill_holes_rowwise` is the hole filling shared by SGBM and D3Stereo
 (DESIGN.md step 8): an invalid pixel takes the smaller of its nearest valid left and
@@ -117,22 +118,7 @@ def sgbm_disparity(
     grey_r = _to_uint8(to_grey(right))
     bs = cfg.block_size
     num_disp = _num_disparities(max_disparity)
-    matcher = cv2.StereoSGBM_create(
-        minDisparity=0,
-        numDisparities=num_disp,
-        blockSize=bs,
-        P1=8 * bs * bs,
-        P2=32 * bs * bs,
-        disp12MaxDiff=cfg.disp12_max_diff,
-        uniquenessRatio=cfg.uniqueness_ratio,
-        speckleWindowSize=cfg.speckle_window,
-        speckleRange=cfg.speckle_range,
-        mode=_SGBM_MODES[cfg.mode],
-    )
-    raw = matcher.compute(grey_l, grey_r)  # int16, 4 fractional bits
-    disp = raw.astype(np.float32) / 16.0
-    valid = (disp >= 0) & (disp <= max_disparity)
-    disp[~valid] = np.inf
+    disp, valid = _sgbm_raw(grey_l, grey_r, max_disparity, cfg)
     warnings = []
     if not valid.any():
         warnings.append("sgbm found no valid disparity; the output is empty")
@@ -153,6 +139,119 @@ def sgbm_disparity(
         timings={"total": time.perf_counter() - t0},
         info=info,
         warnings=warnings,
+    )
+
+
+def _sgbm_raw(grey_l: np.ndarray, grey_r: np.ndarray, max_disparity: int, cfg: SGBMConfig):
+    """OpenCV SGBM on uint8 grey images: float32 disparity (inf invalid) and validity."""
+    bs = cfg.block_size
+    matcher = cv2.StereoSGBM_create(
+        minDisparity=0,
+        numDisparities=_num_disparities(max_disparity),
+        blockSize=bs,
+        P1=8 * bs * bs,
+        P2=32 * bs * bs,
+        disp12MaxDiff=cfg.disp12_max_diff,
+        uniquenessRatio=cfg.uniqueness_ratio,
+        speckleWindowSize=cfg.speckle_window,
+        speckleRange=cfg.speckle_range,
+        mode=_SGBM_MODES[cfg.mode],
+    )
+    raw = matcher.compute(grey_l, grey_r)  # int16, 4 fractional bits
+    disp = raw.astype(np.float32) / 16.0
+    valid = (disp >= 0) & (disp <= max_disparity)
+    disp[~valid] = np.inf
+    return disp, valid
+
+
+def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int, cfg: Config) -> DisparityResult:
+    """PT-SGM: OpenCV SGBM after the perspective transformation of PT-D3Stereo.
+
+    The road model (DESIGN step 6) is fitted with :func:`d3cli.pt.fit_road_model` to
+    SGBM on the pair downsampled to the coarsest pyramid level (``cfg.pyramid.levels``,
+    area averaging, range ``ceil(max_disparity / 2^(k-1))``; a finer level when SGBM's
+    empty left strip would cover more than half of the coarse image); the right image is warped
+    with the same kernel as PT-D3Stereo (``kernels.cpu.pt_warp``), SGBM searches the
+    narrow range [0, 2 margin + slack] (``numDisparities = 16 ceil((2 margin + slack + 1)
+    / 16)``), and the disparity is restored with ``d = d' (1 - b2) + s(u, v)``.
+    Estimates at the ends of the narrow range, and matches left of the right image,
+    become holes; holes are filled as for ``sgbm``.  When the scene is not road-like
+    this is plain SGBM over the full range, with a warning.
+
+    Parameters
+    ----------
+    left, right : ndarray, (H, W) or (H, W, 3)
+        Rectified pair of equal shape.
+    max_disparity : int, keyword-only
+        Largest disparity of the full-range search (coarse fit), pixels.
+    cfg : Config, keyword-only
+        Reads the ``sgbm``, ``pt`` and ``pyramid`` sections.
+
+    Returns
+    -------
+    DisparityResult
+        As :func:`sgbm_disparity`; ``info['pt']`` holds the fitted model.
+    """
+    from .io import to_grey
+    from .kernels import cpu
+    from .pt import fit_road_model
+    from .pyramid import build_pyramid, level_max_disparity, usable_levels
+
+    if max_disparity < 1:
+        raise ValueError(f"max_disparity must be >= 1, got {max_disparity}")
+    t0 = time.perf_counter()
+    pt = cfg.pt
+    grey_l, grey_r = to_grey(left), to_grey(right)
+    levels = usable_levels(grey_l.shape, cfg.pyramid.levels)
+    top = levels - 1
+    # SGBM leaves the leftmost numDisparities columns empty: go finer until at least half
+    # of the columns can hold an estimate.
+    while top > 0 and grey_l.shape[1] >> top < 2 * _num_disparities(level_max_disparity(max_disparity, top)):
+        top -= 1
+    coarse_l = _to_uint8(build_pyramid(grey_l, top + 1)[top])
+    coarse_r = _to_uint8(build_pyramid(grey_r, top + 1)[top])
+    coarse, _ = _sgbm_raw(coarse_l, coarse_r, level_max_disparity(max_disparity, top), cfg.sgbm)
+    model = fit_road_model(
+        coarse,
+        scale=2**top,
+        inlier_threshold=pt.inlier_threshold,
+        iterations=pt.iterations,
+        min_inlier_share=pt.min_inlier_share,
+    )
+    narrow = 2 * pt.margin + pt.slack
+    pt_info = model.to_info() | {"narrow_range": narrow, "fallback": not model.road_like}
+    if not model.road_like:
+        msg = f"perspective transformation skipped: {model.reason}; searched the full range 0-{max_disparity}"
+        log.warning(msg)
+        result = sgbm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.sgbm)
+        pt_info["narrow_range"] = None
+        result.info.update(method="pt-sgm", pt=pt_info)
+        result.warnings.append(msg)
+        result.timings["total"] = time.perf_counter() - t0
+        return result
+    margin = float(pt.margin)
+    warped = cpu.pt_warp(np.ascontiguousarray(grey_r, dtype=np.float32), model.a0, model.b1, model.b2, margin)
+    d_prime, valid = _sgbm_raw(_to_uint8(grey_l), _to_uint8(warped), narrow, cfg.sgbm)
+    # Range ends stand for disparities outside the narrow range (not road): holes.
+    valid &= (d_prime > 0) & (d_prime < narrow)
+    disp = cpu.pt_restore(np.where(valid, d_prime, np.inf).astype(np.float32), model.a0, model.b1, model.b2, margin)
+    valid &= np.arange(disp.shape[1])[None, :] - disp >= -0.5  # match inside the right image
+    disp[~valid] = np.inf
+    warnings = [] if valid.any() else ["pt-sgm found no valid disparity; the output is empty"]
+    if cfg.sgbm.fill:
+        disp = fill_holes_rowwise(disp, valid)
+    info = {
+        "method": "pt-sgm",
+        "backend": "opencv",
+        "num_disparities": _num_disparities(narrow),
+        "block_size": cfg.sgbm.block_size,
+        "mode": cfg.sgbm.mode,
+        "filled": bool(cfg.sgbm.fill),
+        "valid_share": float(valid.mean()),
+        "pt": pt_info,
+    }
+    return DisparityResult(
+        disparity=disp, valid=valid, timings={"total": time.perf_counter() - t0}, info=info, warnings=warnings
     )
 
 
@@ -191,5 +290,5 @@ def compute_pair(
 
         return D3Stereo(cfg).compute(left, right, max_disparity=max_disparity)
     if method == "pt-sgm":
-        raise NotImplementedError("pt-sgm arrives with the road-scene issue")
+        return pt_sgm_disparity(left, right, max_disparity=max_disparity, cfg=cfg)
     raise ConfigError(f"--method {method}: unknown method; use one of {', '.join(METHODS)}")

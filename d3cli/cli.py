@@ -220,7 +220,7 @@ def synth(out_dir, n, seed, width, height, verbose, quiet):
 def info():
     """Versions, threads, CUDA availability and the config file in use."""
     from .batch import package_versions
-    from .kernels import cuda_status
+    from .kernels import cuda_status, device_description
 
     versions = package_versions()
     lines = [f"d3stereo {__version__}", f"python {platform.python_version()} ({sys.executable})",
@@ -230,6 +230,7 @@ def info():
     lines.append(_numba_threads())
     usable, reason = cuda_status()
     lines.append(f"cuda usable: {reason}" if usable else f"cuda not usable: {reason}")
+    lines.append(f"cuda device: {device_description()}")
     path, why = config_search(None)
     lines.append(f"config {path} ({why})" if path else f"config none: {why} "
                  f"(searched -c, ${CONFIG_ENV}, ./{LOCAL_CONFIG})")

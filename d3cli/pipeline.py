@@ -11,15 +11,21 @@ import numpy as np
 from .config import Config
 from .cost import cost_volume
 from .diffusion import diffuse
-from .errors import ConfigError, InputError
+from .errors import InputError
 from .inheritance import inherit
 from .kernels import get_backend
+from .pt import RoadModel, fit_road_model
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
 from .rbf import aggregate
 from .seeds import decisive_seeds
 from .subpixel import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel
 
 log = logging.getLogger(__name__)
+
+# With PT, an estimate at either end of the narrow range [0, 2 margin + slack] most
+# likely stands for a disparity outside it (obstacle, kerb, deep pothole): make it a
+# hole for the filling rather than keep a clipped value.
+PT_DROP_RANGE_ENDS = True
 
 
 @dataclass
@@ -35,7 +41,8 @@ class DisparityResult:
         True where the method decided the disparity itself (before any filling).
     levels : list of ndarray
         Per-level integer disparity maps (int32, -1 = undecided), finest first; empty for
-        baselines.
+        baselines.  With the perspective transformation these are the narrow-range
+        disparities d' against the warped right image (``info['pt']`` has the model).
     timings : dict of str to float
         Seconds per step.
     info : dict
@@ -116,11 +123,6 @@ class D3Stereo:
             [1, W - 1].
         """
         cfg = self.cfg
-        if cfg.pt.enabled:
-            raise ConfigError(
-                "pt.enabled: the perspective transformation is not implemented yet (road-scene issue); "
-                "set pt.enabled=false"
-            )
         timings: dict[str, float] = {}
         t_start = time.perf_counter()
         grey_l, grey_r, dmax = self._prepare(left, right, max_disparity)
@@ -133,7 +135,11 @@ class D3Stereo:
 
         info: dict = {"backend": self.backend_name, "levels": levels, "max_disparity": dmax}
         warnings: list[str] = []
-        match = self._match(pyr_l, pyr_r, dmax, timings)
+        road = None
+        search = dmax
+        if cfg.pt.enabled:
+            road, pyr_r, search = self._perspective(pyr_l, pyr_r, grey_r, dmax, timings, info, warnings)
+        match = self._match(pyr_l, pyr_r, search, timings)
         info["per_level"] = match.per_level
         if match.per_level[0].get("seeds", 0) == 0:
             warnings.append(
@@ -141,7 +147,7 @@ class D3Stereo:
                 "the disparity map is all invalid"
             )
         t0 = time.perf_counter()
-        out, valid = self._finish(match, dmax, info)
+        out, valid = self._finish(match, dmax, info, road=road)
         timings["finish"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
         return DisparityResult(
@@ -275,21 +281,86 @@ class D3Stereo:
                 cost = None  # free the coarse volume before the next, larger one
         return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level)
 
-    def _finish(self, match: "_Match", dmax: int, info: dict) -> tuple[np.ndarray, np.ndarray]:
+    def _perspective(self, pyr_l, pyr_r, grey_r, dmax: int, timings: dict, info: dict, warnings: list):
+        """Step 6: full-range pass at the coarsest level, robust road fit, warped right.
+
+        Returns
+        -------
+        model : RoadModel or None
+            The fitted road model; None when the scene is not road-like (fallback).
+        pyr_r : list of backend arrays
+            Pyramid of the warped right image (the input pyramid on fallback).
+        search : int
+            Full-resolution range to match: ``2 margin + slack``, or ``dmax`` on fallback.
+        """
+        pt = self.cfg.pt
+        backend = self.backend
+        levels = len(pyr_l)
+        t0 = time.perf_counter()
+        coarse = self._match(pyr_l, pyr_r, dmax, {}, stop_level=levels - 1)
+        coarse_map = backend.to_host(coarse.disparity)  # small: 1/4^(k-1) of the image
+        del coarse
+        t1 = time.perf_counter()
+        model = fit_road_model(
+            coarse_map,
+            scale=2 ** (levels - 1),
+            inlier_threshold=pt.inlier_threshold,
+            iterations=pt.iterations,
+            min_inlier_share=pt.min_inlier_share,
+        )
+        t2 = time.perf_counter()
+        timings["pt_coarse"] = t1 - t0
+        timings["pt_fit"] = t2 - t1
+        narrow = 2 * pt.margin + pt.slack
+        info["pt"] = model.to_info() | {"narrow_range": narrow, "fallback": not model.road_like}
+        if not model.road_like:
+            info["pt"]["narrow_range"] = None
+            msg = f"perspective transformation skipped: {model.reason}; searched the full range 0-{dmax}"
+            log.warning(msg)
+            warnings.append(msg)
+            return None, pyr_r, dmax
+        log.info(
+            "PT: d = %.3f + %.5f (v cos %.2f deg - u sin %.2f deg), %.1f%% inliers of %d; range 0-%d",
+            model.a0, model.a1, info["pt"]["theta_deg"], info["pt"]["theta_deg"],
+            100 * model.inlier_share, model.n_points, narrow,
+        )
+        warped = backend.pt_warp(backend.to_device(grey_r), model.a0, model.b1, model.b2, float(pt.margin))
+        pyr_r = [backend.to_device(img) for img in build_pyramid(backend.to_host(warped), levels)]
+        timings["pt_warp"] = time.perf_counter() - t2
+        return model, pyr_r, narrow
+
+    def _pt_restore(self, disp_f, road: RoadModel):
+        """Full-range disparity ``d' (1 - b2) + s(u, v)`` of a backend float32 map."""
+        return self.backend.pt_restore(disp_f, road.a0, road.b1, road.b2, float(self.cfg.pt.margin))
+
+    def _finish(
+        self, match: "_Match", dmax: int, info: dict, *, road: RoadModel | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Step 8: sub-pixel refinement, occlusion check, hole filling; host arrays.
 
         The one download of the result happens here: the integer map and the sub-pixel
-        map; the occlusion tests and the filling are row-wise NumPy on the host.
+        map; the occlusion tests and the filling are row-wise NumPy on the host.  With a
+        road model (step 6) the disparity is restored to the full range first; estimates
+        at the ends of the narrow range (the true match probably lies outside it: not
+        road) and estimates whose match falls left of the right image become holes.
         """
         cfg = self.cfg
         backend = self.backend
         if cfg.refine.subpixel:
-            out = backend.to_host(refine_subpixel(match.cost, match.disparity, backend=backend))
+            sub = refine_subpixel(match.cost, match.disparity, backend=backend)
+            if road is not None:
+                sub = self._pt_restore(sub, road)
+            out = backend.to_host(sub)
             disp = backend.to_host(match.disparity)
         else:
             disp = backend.to_host(match.disparity)
             out = np.where(disp >= 0, disp, np.inf).astype(np.float32)
+            if road is not None:
+                out = backend.to_host(self._pt_restore(backend.to_device(out), road))
         valid = disp >= 0
+        if road is not None:
+            valid = self._pt_valid(valid, disp, out, info)
+            out = np.where(valid, out, np.inf).astype(np.float32)
         occluded = None
         if cfg.refine.occlusion_check:
             occluded = occluded_by_uniqueness(out, valid) | out_of_view(out, valid, max_disparity=dmax)
@@ -302,6 +373,16 @@ class D3Stereo:
             )
         info["decided_share"] = float(valid.mean())
         return np.ascontiguousarray(out, dtype=np.float32), valid
+
+    def _pt_valid(self, valid: np.ndarray, disp: np.ndarray, out: np.ndarray, info: dict) -> np.ndarray:
+        """Validity after PT: drop range-end estimates and matches outside the right image."""
+        narrow = 2 * self.cfg.pt.margin + self.cfg.pt.slack
+        ends = valid & ((disp == 0) | (disp == narrow)) if PT_DROP_RANGE_ENDS else np.zeros_like(valid)
+        cols = np.arange(out.shape[1], dtype=np.float32)[None, :]
+        outside = valid & ~(cols - out >= -0.5)
+        info["pt"]["range_end_share"] = float(ends.mean())
+        info["pt"]["outside_share"] = float(outside.mean())
+        return valid & ~ends & ~outside
 
     def _level_cost(self, left, right, level: int, max_disparity: int):
         """Aggregated cost volume of one level (steps 2-3)."""

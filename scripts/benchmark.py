@@ -1,14 +1,26 @@
-"""Accuracy and speed of d3stereo beside OpenCV SGBM on the same pairs, in one process.
+"""Accuracy and speed of d3stereo and the baselines on the same pairs, in one process.
 
-For every pair: EPE, PEP 0.5/1/2/3 and density of d3stereo and of SGBM (hole-filled,
-same disparity range, block 5, 3-way: the ``sgbm`` section of the config), and the
-ratio of their wall times.  Then means per dataset family and overall.
+For every pair and every method variant: EPE, PEP 0.5/1/2/3, density and wall time
+(pairs with ground truth), or with ``--photometric`` the photometric scores (MSE, PSNR,
+SSIM, coverage) of pairs without ground truth.  Then means per dataset family and
+overall, the variants side by side.
+
+Method variants (``--methods``, comma-separated, in the order printed):
+
+- ``d3``: d3stereo with the configuration exactly as given (``-c``/``--set``),
+- ``d3stereo``: d3stereo with the perspective transformation off (``pt.enabled=false``),
+- ``d3stereo+pt``: PT-D3Stereo (``pt.enabled=true``),
+- ``sgbm``: OpenCV SGBM (the ``sgbm`` section: block 5, 3-way, hole-filled),
+- ``pt-sgm``: SGBM after the same perspective transformation (``pt`` section).
 
 Usage::
 
-    python scripts/benchmark.py ../shared/data                     # every pair with gt
-    python scripts/benchmark.py ../shared/data --family middlebury  # families by prefix
-    python scripts/benchmark.py ../shared/data --set diffusion.max_gap=0.1 --markdown
+    python scripts/benchmark.py ../shared/data                      # d3 and sgbm, pairs with gt
+    python scripts/benchmark.py ../shared/data --family middlebury   # families by prefix
+    python scripts/benchmark.py /tmp/synth12 -c configs/road.yaml \\
+        --methods d3stereo+pt,d3stereo,sgbm,pt-sgm --markdown          # the road table
+    python scripts/benchmark.py ../shared/data --family road --photometric \\
+        -c configs/road.yaml --methods d3stereo+pt,d3stereo,sgbm,pt-sgm
 
 The first d3stereo call compiles (or loads cached) kernels; a warm-up call on a tiny
 pair keeps that out of the timings.
@@ -20,81 +32,137 @@ import argparse
 import sys
 import time
 from collections import defaultdict
+from dataclasses import replace
 
 import numpy as np
 
 from d3cli import D3Stereo, load_config
-from d3cli.baselines import sgbm_disparity
+from d3cli.baselines import pt_sgm_disparity, sgbm_disparity
 from d3cli.datasets import discover, load_ground_truth, load_pair_images, resolve_max_disparity
-from d3cli.metrics import disparity_errors
+from d3cli.io import to_grey
+from d3cli.metrics import disparity_errors, photometric_scores
 
 KEYS = ("epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density")
+PHOTO_KEYS = ("mse", "psnr", "ssim", "coverage")
+VARIANTS = ("d3", "d3stereo", "d3stereo+pt", "sgbm", "pt-sgm")
+LABELS = {"d3": "d3stereo", "d3stereo": "d3stereo (PT off)", "d3stereo+pt": "d3stereo (PT on)",
+          "sgbm": "SGBM", "pt-sgm": "PT-SGM"}
 
 
-def evaluate_pairs(pairs, cfg, *, with_sgbm=True, log=print):
-    """Run d3stereo (and SGBM) on ``pairs``; return a list of per-pair result dicts."""
-    matcher = D3Stereo(cfg)
-    rng = np.random.default_rng(0)
-    warm = (rng.random((48, 64)) * 255).astype(np.uint8)
-    matcher.compute(warm, np.roll(warm, -2, axis=1), max_disparity=8)  # compile outside timings
+def make_runners(cfg, methods):
+    """``{variant: compute(left, right, dmax) -> DisparityResult}`` for ``methods``."""
+    runners = {}
+    for name in methods:
+        if name not in VARIANTS:
+            raise SystemExit(f"--methods: unknown variant {name!r}; use {', '.join(VARIANTS)}")
+        if name in ("d3", "d3stereo", "d3stereo+pt"):
+            vcfg = cfg if name == "d3" else replace(cfg, pt=replace(cfg.pt, enabled=name == "d3stereo+pt"))
+            matcher = D3Stereo(vcfg)
+            rng = np.random.default_rng(0)
+            warm = (rng.random((48, 64)) * 255).astype(np.uint8)
+            matcher.compute(warm, np.roll(warm, -2, axis=1), max_disparity=8)  # compile outside timings
+            runners[name] = lambda left, right, dmax, m=matcher: m.compute(left, right, max_disparity=dmax)
+        elif name == "sgbm":
+            runners[name] = lambda left, right, dmax: sgbm_disparity(left, right, max_disparity=dmax, cfg=cfg.sgbm)
+        else:
+            runners[name] = lambda left, right, dmax: pt_sgm_disparity(left, right, max_disparity=dmax, cfg=cfg)
+    return runners
+
+
+def evaluate_pairs(pairs, cfg, *, with_sgbm=True, methods=None, photometric=False, log=print):
+    """Run the method variants on ``pairs``; return a list of per-pair result dicts.
+
+    Each row holds ``pair``, ``family``, ``size``, ``dmax`` and, per variant, a dict of
+    metrics plus ``time`` (seconds) and ``pt`` (the fitted road model, when any).
+    ``methods`` defaults to ``("d3", "sgbm")`` (``("d3",)`` without ``with_sgbm``).
+    Pairs without ground truth are skipped unless ``photometric``; with it, they are
+    scored by :func:`d3cli.metrics.photometric_scores` instead (and pairs with ground
+    truth are skipped).
+    """
+    if methods is None:
+        methods = ("d3", "sgbm") if with_sgbm else ("d3",)
+    runners = make_runners(cfg, methods)
     rows = []
     for pair in pairs:
         left, right = load_pair_images(pair)
         gt, mask = load_ground_truth(pair, left.shape[:2])
-        if gt is None:
+        if (gt is None) != bool(photometric):
             continue
         dmax = resolve_max_disparity(pair, left.shape[1])
-        t0 = time.perf_counter()
-        ours = matcher.compute(left, right, max_disparity=dmax)
-        t_ours = time.perf_counter() - t0
         row = {"pair": pair.name, "family": pair.family, "size": f"{left.shape[1]}x{left.shape[0]}", "dmax": dmax}
-        row["d3"] = disparity_errors(ours.disparity, gt, mask=mask)
-        row["d3"]["time"] = t_ours
-        row["d3"]["decided"] = 100.0 * float(ours.valid.mean())
-        if with_sgbm:
+        parts = []
+        for name, run in runners.items():
             t0 = time.perf_counter()
-            base = sgbm_disparity(left, right, max_disparity=dmax, cfg=cfg.sgbm)
-            t_sgbm = time.perf_counter() - t0
-            row["sgbm"] = disparity_errors(base.disparity, gt, mask=mask)
-            row["sgbm"]["time"] = t_sgbm
+            result = run(left, right, dmax)
+            elapsed = time.perf_counter() - t0
+            if photometric:
+                scores = photometric_scores(to_grey(left), to_grey(right), result.disparity)
+                parts.append(f"{name} PSNR {scores['psnr']:6.2f} SSIM {scores['ssim']:.3f} t {elapsed:6.2f}s")
+            else:
+                scores = disparity_errors(result.disparity, gt, mask=mask)
+                parts.append(f"{name} EPE {scores['epe']:6.3f} PEP1 {scores['pep_1']:6.2f} t {elapsed:6.2f}s")
+            scores["time"] = elapsed
+            scores["decided"] = 100.0 * float(result.valid.mean())
+            if "pt" in result.info:
+                scores["pt"] = result.info["pt"]
+            row[name] = scores
         rows.append(row)
-        line = f"{pair.name:36s} {row['size']:>9s} d3 EPE {row['d3']['epe']:6.3f} PEP2 {row['d3']['pep_2']:6.2f} t {t_ours:6.2f}s"
-        if with_sgbm:
-            line += (
-                f" | sgbm EPE {row['sgbm']['epe']:6.3f} PEP2 {row['sgbm']['pep_2']:6.2f} t {row['sgbm']['time']:6.3f}s"
-                f" | time ratio {t_ours / max(row['sgbm']['time'], 1e-9):6.1f}x"
-            )
-        log(line)
+        log(f"{pair.name:36s} {row['size']:>9s} | " + " | ".join(parts))
     return rows
 
 
-def family_means(rows, method):
-    """Mean of every metric per family and overall for ``method`` ("d3" or "sgbm")."""
+def family_means(rows, method, keys=KEYS):
+    """Mean of every metric per family and overall for ``method`` (a variant name)."""
     groups = defaultdict(list)
     for row in rows:
         groups[row["family"]].append(row[method])
         groups["overall"].append(row[method])
     return {
-        fam: {k: float(np.mean([r[k] for r in items])) for k in KEYS + ("time",)} | {"n": len(items)}
+        fam: {k: float(np.mean([r[k] for r in items])) for k in keys + ("time",)} | {"n": len(items)}
         for fam, items in groups.items()
     }
 
 
-def markdown_table(rows) -> str:
-    """Per-family table of both methods, d3stereo first."""
-    ours, base = family_means(rows, "d3"), family_means(rows, "sgbm")
-    lines = [
-        "| family | pairs | method | EPE | PEP0.5 % | PEP1 % | PEP2 % | PEP3 % | density % | time s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for fam in sorted(ours, key=lambda f: (f == "overall", f)):
-        for name, table in (("d3stereo", ours), ("SGBM", base)):
+def _methods_of(rows):
+    return [k for k in rows[0] if k in VARIANTS]
+
+
+def markdown_table(rows, *, photometric=False) -> str:
+    """Per-family table of every variant, in the order run."""
+    keys = PHOTO_KEYS if photometric else KEYS
+    if photometric:
+        head = "| family | pairs | method | MSE | PSNR dB | SSIM | coverage % | time s |"
+    else:
+        head = "| family | pairs | method | EPE | PEP0.5 % | PEP1 % | PEP2 % | PEP3 % | density % | time s |"
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    tables = {name: family_means(rows, name, keys) for name in _methods_of(rows)}
+    first = next(iter(tables.values()))
+    for fam in sorted(first, key=lambda f: (f == "overall", f)):
+        for name, table in tables.items():
             m = table[fam]
-            lines.append(
-                f"| {fam} | {m['n']} | {name} | {m['epe']:.3f} | {m['pep_0.5']:.2f} | {m['pep_1']:.2f} | "
-                f"{m['pep_2']:.2f} | {m['pep_3']:.2f} | {m['density']:.1f} | {m['time']:.3f} |"
-            )
+            if photometric:
+                cells = f"{m['mse']:.1f} | {m['psnr']:.2f} | {m['ssim']:.3f} | {m['coverage']:.1f}"
+            else:
+                cells = (f"{m['epe']:.3f} | {m['pep_0.5']:.2f} | {m['pep_1']:.2f} | {m['pep_2']:.2f} | "
+                         f"{m['pep_3']:.2f} | {m['density']:.1f}")
+            lines.append(f"| {fam} | {m['n']} | {LABELS[name]} | {cells} | {m['time']:.3f} |")
     return "\n".join(lines)
+
+
+def print_summary(rows, *, photometric=False) -> None:
+    """One line per family and variant."""
+    keys = PHOTO_KEYS if photometric else KEYS
+    tables = {name: family_means(rows, name, keys) for name in _methods_of(rows)}
+    first = next(iter(tables.values()))
+    for fam in sorted(first, key=lambda f: (f == "overall", f)):
+        for name, table in tables.items():
+            m = table[fam]
+            if photometric:
+                text = f"MSE {m['mse']:7.1f} PSNR {m['psnr']:6.2f} SSIM {m['ssim']:.3f} cov {m['coverage']:5.1f}"
+            else:
+                text = (f"EPE {m['epe']:.3f} PEP0.5 {m['pep_0.5']:6.2f} PEP1 {m['pep_1']:5.2f} "
+                        f"PEP2 {m['pep_2']:5.2f} dens {m['density']:5.1f}")
+            print(f"{fam:16s} n={m['n']:2d} {LABELS[name]:18s} {text} t {m['time']:6.2f}s")
 
 
 def main(argv=None) -> int:
@@ -103,28 +171,25 @@ def main(argv=None) -> int:
     parser.add_argument("-c", "--config", help="YAML config (default: built-in defaults)")
     parser.add_argument("--set", action="append", default=[], help="section.key=value override")
     parser.add_argument("--family", action="append", default=[], help="keep families starting with this")
+    parser.add_argument("--methods", default="d3,sgbm", help=f"comma-separated variants of {', '.join(VARIANTS)}")
+    parser.add_argument("--photometric", action="store_true",
+                        help="score the pairs WITHOUT ground truth photometrically (MSE, PSNR, SSIM)")
     parser.add_argument("--markdown", action="store_true", help="print the per-family Markdown table")
     args = parser.parse_args(argv)
     cfg = load_config(args.config, args.set)
     pairs = discover(args.inputs)
     if args.family:
         pairs = [p for p in pairs if any(p.family.startswith(f) for f in args.family)]
-    rows = evaluate_pairs(pairs, cfg)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    rows = evaluate_pairs(pairs, cfg, methods=methods, photometric=args.photometric)
     if not rows:
-        print("no pairs with ground truth", file=sys.stderr)
+        print("no pairs " + ("without" if args.photometric else "with") + " ground truth", file=sys.stderr)
         return 1
-    ours, base = family_means(rows, "d3"), family_means(rows, "sgbm")
     print()
-    for fam in sorted(ours, key=lambda f: (f == "overall", f)):
-        o, b = ours[fam], base[fam]
-        print(
-            f"{fam:16s} n={o['n']:2d}  d3stereo EPE {o['epe']:.3f} PEP1 {o['pep_1']:.2f} PEP2 {o['pep_2']:.2f} "
-            f"dens {o['density']:.1f} t {o['time']:.3f}s | SGBM EPE {b['epe']:.3f} PEP1 {b['pep_1']:.2f} "
-            f"PEP2 {b['pep_2']:.2f} dens {b['density']:.1f} t {b['time']:.3f}s | time ratio {o['time'] / b['time']:.1f}x"
-        )
+    print_summary(rows, photometric=args.photometric)
     if args.markdown:
         print()
-        print(markdown_table(rows))
+        print(markdown_table(rows, photometric=args.photometric))
     return 0
 
 

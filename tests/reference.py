@@ -388,3 +388,37 @@ def ref_fill_holes(disparity, valid):
             nearest = min(rows_with_data, key=lambda r: (abs(r - v), r))
             out[v] = out[nearest]
     return out.astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- perspective transformation
+def ref_pt_warp(right, a0, b1, b2, delta):
+    """``R'(x, v) = R(x - s(x, v), v)``, ``s = a0 + b1 v + b2 x - delta``; bilinear, border replicated."""
+    right = np.asarray(right, dtype=np.float64)
+    h, w = right.shape
+    out = np.empty((h, w), np.float64)
+    for v in range(h):
+        for x in range(w):
+            src = x - (a0 + b1 * v + b2 * x - delta)
+            if src <= 0:
+                out[v, x] = right[v, 0]
+            elif src >= w - 1:
+                out[v, x] = right[v, w - 1]
+            else:
+                x0 = int(np.floor(src))
+                t = src - x0
+                out[v, x] = (1 - t) * right[v, x0] + t * right[v, x0 + 1]
+    return out.astype(np.float32)
+
+
+def ref_pt_restore(disp, a0, b1, b2, delta):
+    """``d = d' + s(u - d', v)`` written out literally (inf stays inf)."""
+    disp = np.asarray(disp, dtype=np.float64)
+    h, w = disp.shape
+    out = np.full((h, w), np.inf)
+    for v in range(h):
+        for u in range(w):
+            d = disp[v, u]
+            if np.isfinite(d):
+                x = u - d
+                out[v, u] = d + (a0 + b1 * v + b2 * x - delta)
+    return out.astype(np.float32)

@@ -92,7 +92,37 @@ def test_compute_pair_dispatch():
     left, right, _ = textured_pair(4, (32, 64))
     res = compute_pair("sgbm", Config(), left, right, max_disparity=8)
     assert res.info["method"] == "sgbm"
-    with pytest.raises(NotImplementedError, match="pt-sgm"):
-        compute_pair("pt-sgm", Config(), left, right, max_disparity=8)
+    res = compute_pair("pt-sgm", Config(), left, right, max_disparity=8)
+    assert res.info["method"] == "pt-sgm" and "pt" in res.info
     with pytest.raises(ConfigError, match="unknown method"):
         compute_pair("nope", Config(), left, right, max_disparity=8)
+
+
+# ----------------------------------------------------------------------------- pt-sgm
+def road_pair(shape=(96, 200), *, a0=10.0, b1=0.2, seed=0):
+    """Random-dot pair whose disparity grows towards the bottom (integer per row)."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    right = (rng.random((h, w)) * 255).astype(np.float32)
+    right = np.clip(right, 0, 255)
+    truth = np.rint(a0 + b1 * np.arange(h)).astype(int)
+    left = np.stack([np.roll(row, d) for row, d in zip(right, truth)])
+    return left.astype(np.uint8), right.astype(np.uint8), truth
+
+
+def test_pt_sgm_recovers_a_road_ramp_with_a_narrow_search():
+    left, right, truth = road_pair()
+    cfg = Config()
+    res = compute_pair("pt-sgm", cfg, left, right, max_disparity=48)
+    assert res.info["pt"]["fallback"] is False
+    assert res.info["num_disparities"] == 32  # 16 * ceil((2 * 8 + 2 + 1) / 16)
+    inner = res.disparity[:, 64:]
+    assert np.median(np.abs(inner - truth[:, None])) < 0.3
+
+
+def test_pt_sgm_falls_back_to_plain_sgbm_with_a_warning():
+    left, right, truth = road_pair(b1=-0.1, a0=30.0)
+    res = compute_pair("pt-sgm", Config(), left, right, max_disparity=48)
+    assert res.info["pt"]["fallback"] is True
+    assert any("perspective transformation skipped" in w for w in res.warnings)
+    assert res.info["num_disparities"] == 64  # the full range

@@ -9,23 +9,65 @@ from ..errors import BackendUnavailable
 
 log = logging.getLogger(__name__)
 
+#: What :func:`cuda_status` and :func:`device_description` say under the simulator.
+SIMULATOR = "CUDA simulator (NUMBA_ENABLE_CUDASIM=1)"
 
-def cuda_status() -> tuple[bool, str]:
-    """Whether CUDA is usable here, and why not (never raises)."""
+
+def _cuda_probe() -> tuple[str | None, str]:
+    """``(kind, reason)``: kind is "device", "simulator" or None (not usable); never raises."""
     try:
-        from numba import cuda  # noqa: F401  (numba-cuda provides the target)
+        from numba import config as numba_config
+        from numba import cuda  # numba-cuda provides the target
     except Exception as exc:  # ImportError, or a broken CUDA install
-        return False, f"numba.cuda cannot be imported ({exc}); install the cuda extra: pip install 'd3stereo[cuda]'"
-    try:
-        if not cuda.is_available():
-            return False, "no CUDA driver or device found (numba.cuda.is_available() is False)"
-    except Exception as exc:
-        return False, f"CUDA initialisation failed ({exc})"
+        return None, f"numba.cuda cannot be imported ({exc}); install the cuda extra: pip install 'd3stereo[cuda]'"
+    simulator = bool(getattr(numba_config, "ENABLE_CUDASIM", False))
+    if not simulator:
+        try:
+            if not cuda.is_available():
+                return None, "no CUDA driver or device found (numba.cuda.is_available() is False)"
+        except Exception as exc:
+            return None, f"CUDA initialisation failed ({exc})"
     try:
         from . import cuda as _cuda_backend  # noqa: F401
     except ImportError as exc:
-        return False, f"the CUDA backend could not be loaded ({exc})"
-    return True, "CUDA device available"
+        return None, f"the CUDA backend could not be loaded ({exc})"
+    if simulator:
+        return "simulator", SIMULATOR
+    return "device", "CUDA device available"
+
+
+def cuda_status() -> tuple[bool, str]:
+    """Whether the CUDA backend can run here, and why (not); never raises.
+
+    The CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``) counts as usable, with the reason
+    :data:`SIMULATOR`, so that ``--backend cuda`` and the tests run under it; ``auto``
+    never picks it (see :func:`get_backend`).
+    """
+    kind, reason = _cuda_probe()
+    return kind is not None, reason
+
+
+def device_description() -> str:
+    """One line naming the CUDA device: name, compute capability and memory.
+
+    Under the simulator :data:`SIMULATOR`; without a usable device ``"none (<why>)"``.
+    Never raises.
+    """
+    kind, reason = _cuda_probe()
+    if kind is None:
+        return f"none ({reason})"
+    if kind == "simulator":
+        return SIMULATOR
+    try:
+        from numba import cuda
+
+        dev = cuda.get_current_device()
+        name = dev.name.decode() if isinstance(dev.name, bytes) else str(dev.name)
+        major, minor = dev.compute_capability
+        _free, total = cuda.current_context().get_memory_info()
+    except Exception as exc:  # a device that is listed but cannot be opened
+        return f"CUDA device (details unavailable: {exc})"
+    return f"{name}, compute capability {major}.{minor}, {total / 2**30:.1f} GiB"
 
 
 def get_backend(name: str = "auto"):
@@ -34,7 +76,9 @@ def get_backend(name: str = "auto"):
     Parameters
     ----------
     name : {"auto", "cpu", "cuda"}
-        ``auto`` picks CUDA when a device is usable, else the CPU, and logs which and why.
+        ``auto`` picks CUDA when a real device is usable, else the CPU, and logs which
+        and why (the CUDA simulator is far too slow to be picked automatically).
+        ``cuda`` also accepts the simulator.
 
     Raises
     ------
@@ -45,19 +89,23 @@ def get_backend(name: str = "auto"):
         from . import cpu
 
         return cpu, "cpu"
-    ok, reason = cuda_status()
+    kind, reason = _cuda_probe()
     if name == "cuda":
-        if not ok:
+        if kind is None:
             raise BackendUnavailable(f"--backend cuda: {reason}; use --backend cpu or auto")
         from . import cuda as cuda_backend
 
+        if kind == "simulator":
+            log.warning("backend cuda: running on the %s; this is for tests and very slow", SIMULATOR)
         return cuda_backend, "cuda"
-    if ok:
+    if kind == "device":
         from . import cuda as cuda_backend
 
-        log.info("backend auto: using CUDA (%s)", reason)
+        log.info("backend auto: using CUDA (%s)", device_description())
         return cuda_backend, "cuda"
     from . import cpu
 
+    if kind == "simulator":
+        reason = f"only the {SIMULATOR} is available, too slow for auto; pass --backend cuda to use it"
     log.info("backend auto: using the CPU (%s)", reason)
     return cpu, "cpu"

@@ -45,7 +45,7 @@ def build_ops(jit):
     -------
     types.SimpleNamespace
         ``ncc_cost, box_sum, cost_or_inf, right_cost_or_inf, rbf_weight, seed_at,
-        diffuse_at, inherit_at, subpixel_at``.
+        diffuse_at, inherit_at, subpixel_at, pt_shift, bilinear_at, pt_restore_at``.
     """
 
     @jit
@@ -361,6 +361,43 @@ def build_ops(jit):
             offset = -0.5
         return d + offset
 
+    @jit
+    def pt_shift(a0, b1, b2, delta, v, u):
+        """Perspective-transformation shift ``s(u, v) = a0 + b1 v + b2 u - delta`` (DESIGN step 6).
+
+        The road model ``d = a0 + a1 (v cos(theta) - u sin(theta))`` written linearly:
+        ``b1 = a1 cos(theta)``, ``b2 = -a1 sin(theta)``; ``delta`` is the margin.  All in
+        full-resolution pixels.
+        """
+        return a0 + b1 * v + b2 * u - delta
+
+    @jit
+    def bilinear_at(img, v, x):
+        """Bilinear sample of row ``v`` of ``img`` (H, W) at real column ``x``.
+
+        Outside [0, W - 1] the border sample is replicated.
+        """
+        w = img.shape[1]
+        if x <= 0.0:
+            return float(img[v, 0])
+        if x >= w - 1:
+            return float(img[v, w - 1])
+        x0 = int(math.floor(x))
+        t = x - x0
+        return (1.0 - t) * img[v, x0] + t * img[v, x0 + 1]
+
+    @jit
+    def pt_restore_at(d_prime, a0, b1, b2, delta, v, u):
+        """Full-range disparity of a left pixel from its disparity ``d_prime`` against the
+        warped right image (DESIGN step 6).
+
+        Left (u, v) matches ``R'(u - d', v) = R(u - d' - s(u - d', v), v)``, so
+        ``d = d' + s(u - d', v) = d' (1 - b2) + s(u, v)``; inf stays inf.
+        """
+        if not d_prime < INF:
+            return INF
+        return d_prime * (1.0 - b2) + pt_shift(a0, b1, b2, delta, v, u)
+
     return SimpleNamespace(
         ncc_cost=ncc_cost,
         box_sum=box_sum,
@@ -376,4 +413,7 @@ def build_ops(jit):
         pixel_decisive=pixel_decisive,
         inherit_at=inherit_at,
         subpixel_at=subpixel_at,
+        pt_shift=pt_shift,
+        bilinear_at=bilinear_at,
+        pt_restore_at=pt_restore_at,
     )

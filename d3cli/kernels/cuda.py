@@ -1,0 +1,777 @@
+"""CUDA backend: the per-pixel functions of ``pixel.py`` compiled with
+``numba.cuda.jit(device=True)`` and driven by one thread per pixel or per
+(pixel, disparity) cell.
+
+Every public function mirrors the driver of the same name in ``kernels/cpu.py`` (the
+reference: same arguments, shapes, dtypes and results) and accepts device arrays or
+host arrays (uploaded on the way in).  Results stay on the device, so the pipeline
+uploads the pair once and downloads the result once; :func:`to_host` brings any array
+back.  Within a level the only per-step downloads are single counters
+(:func:`count_decided`, the change counter of each diffusion sweep).
+
+Exactness: the drivers evaluate the same expressions in the same order as the CPU
+drivers (float64 window sums, float32 filter accumulation, Jacobi diffusion over the
+same frontier set), so integer maps are equal and costs agree to rounding (the GPU
+may contract a multiply-add into one FMA and its ``exp`` is not libm's).  Under the
+CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``) the kernels run as Python and the tests
+compare them with the CPU drivers.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import cuda
+
+from .pixel import UNDECIDED, build_ops
+
+#: Threads per block (x, y) of the image-shaped grids; x runs along columns (or
+#: column x disparity cells), y along rows.  Tests make it small to get several partly
+#: filled blocks on odd sizes.
+BLOCK_2D = (16, 16)
+#: Threads per block of the one-dimensional grids (rows, columns, pixel lists).
+BLOCK_1D = 256
+#: Largest float64 scratch (bytes) of the NCC cross-term prefix sums; the cost volume
+#: is computed in bands of rows that fit (at least one row per band).
+NCC_SCRATCH_BYTES = 1 << 29
+
+ops = build_ops(cuda.jit(device=True))
+_ncc_cost = ops.ncc_cost
+_box_sum = ops.box_sum
+_rbf_weight = ops.rbf_weight
+_seed_at = ops.seed_at
+_diffuse_at = ops.diffuse_at
+_inherit_at = ops.inherit_at
+_subpixel_at = ops.subpixel_at
+_pt_shift = ops.pt_shift
+_bilinear_at = ops.bilinear_at
+_pt_restore_at = ops.pt_restore_at
+
+
+# ----------------------------------------------------------------------------- launch helpers
+def _grid_1d(n):
+    """(blocks, threads) covering ``n`` items with :data:`BLOCK_1D` threads per block."""
+    threads = int(BLOCK_1D)
+    return (max(1, -(-int(n) // threads)),), (threads,)
+
+
+def _grid_2d(nx, ny):
+    """(blocks, threads) covering an ``nx`` (fast, x) by ``ny`` (rows, y) grid."""
+    bx, by = (int(b) for b in BLOCK_2D)
+    return (max(1, -(-int(nx) // bx)), max(1, -(-int(ny) // by))), (bx, by)
+
+
+def _f64(x):
+    """A float scalar argument as float64 (the CPU drivers' type, also under the simulator)."""
+    return np.float64(x)
+
+
+def _is_device(array) -> bool:
+    """True for a CUDA device array (real or simulated), False for host arrays."""
+    return not isinstance(array, np.ndarray) and hasattr(array, "copy_to_host")
+
+
+def _dev(array):
+    """``array`` on the device (uploaded when it is a host array)."""
+    if _is_device(array):
+        return array
+    return cuda.to_device(np.ascontiguousarray(array))
+
+
+def _copy(d_array):
+    """A device copy of a device array."""
+    out = cuda.device_array(d_array.shape, d_array.dtype)
+    out.copy_to_device(d_array)
+    return out
+
+
+@cuda.jit
+def _fill_zero(flat):
+    i = cuda.grid(1)
+    if i < flat.shape[0]:
+        flat[i] = 0
+
+
+def _zeros(n, dtype):
+    """A zeroed 1-D device array, filled on the device (no host transfer)."""
+    out = cuda.device_array(int(n), dtype)
+    blocks, threads = _grid_1d(n)
+    _fill_zero[blocks, threads](out)
+    return out
+
+
+# ----------------------------------------------------------------------------- NCC cost (step 2)
+@cuda.jit
+def _row_prefix(img, power, rows):
+    """rows[y, x] = sum of img[y, :x + 1] ** power in float64 (one thread per row)."""
+    y = cuda.grid(1)
+    if y < img.shape[0]:
+        row = 0.0
+        for x in range(img.shape[1]):
+            val = numba.float64(img[y, x])
+            if power == 1:
+                row += val
+            else:
+                row += val * val
+            rows[y, x] = row
+
+
+@cuda.jit
+def _column_prefix(rows, ii):
+    """(H+1, W+1) integral image from row prefix sums (one thread per column of ``ii``).
+
+    ``ii[y + 1, x + 1] = ii[y, x + 1] + rows[y, x]``: the CPU's recurrence, hence the
+    same float64 values.
+    """
+    x = cuda.grid(1)
+    if x < ii.shape[1]:
+        acc = 0.0
+        ii[0, x] = acc
+        for y in range(rows.shape[0]):
+            if x > 0:
+                acc = acc + rows[y, x - 1]
+            ii[y + 1, x] = acc
+
+
+def _integral_image(d_img, power):
+    h, w = d_img.shape
+    rows = cuda.device_array((h, w), np.float64)
+    ii = cuda.device_array((h + 1, w + 1), np.float64)
+    blocks, threads = _grid_1d(h)
+    _row_prefix[blocks, threads](d_img, power, rows)
+    blocks, threads = _grid_1d(w + 1)
+    _column_prefix[blocks, threads](rows, ii)
+    return ii
+
+
+@cuda.jit
+def _cross_prefix(left, right, r, v_start, n_rows, prefix):
+    """prefix[b, u + 1, d]: sum over columns <= u of the window-column sums of L(y, u) R(y, u - d).
+
+    One thread per (disparity, row of the band); row v = v_start + b.  The same sums in
+    the same order as ``cpu.ncc_cost_volume``.
+    """
+    d, b = cuda.grid(2)
+    n_disp = prefix.shape[2]
+    if d >= n_disp or b >= n_rows:
+        return
+    h = left.shape[0]
+    w = left.shape[1]
+    v = v_start + b
+    v0 = max(0, v - r)
+    v1 = min(h - 1, v + r)
+    prefix[b, 0, d] = 0.0
+    for u in range(w):
+        s = 0.0
+        if u - d >= 0:
+            for y in range(v0, v1 + 1):
+                s += numba.float64(left[y, u]) * numba.float64(right[y, u - d])
+        prefix[b, u + 1, d] = prefix[b, u, d] + s
+
+
+@cuda.jit
+def _ncc_band(ii_l, ii_ll, ii_r, ii_rr, prefix, r, v_start, n_rows, min_variance, cost):
+    """Cost of every cell of a band of rows; one thread per (u * D + d, row of the band)."""
+    x, b = cuda.grid(2)
+    h = cost.shape[0]
+    w = cost.shape[1]
+    n_disp = cost.shape[2]
+    if x >= w * n_disp or b >= n_rows:
+        return
+    u = x // n_disp
+    d = x % n_disp
+    v = v_start + b
+    if u - d < 0:
+        cost[v, u, d] = 1.0
+        return
+    v0 = max(0, v - r)
+    v1 = min(h - 1, v + r)
+    c0 = max(u - r, d)
+    c1 = min(u + r, w - 1)
+    n = (v1 - v0 + 1) * (c1 - c0 + 1)
+    sl = _box_sum(ii_l, v0, c0, v1, c1)
+    sll = _box_sum(ii_ll, v0, c0, v1, c1)
+    sr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d)
+    srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
+    slr = prefix[b, c1 + 1, d] - prefix[b, c0, d]
+    cost[v, u, d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+
+
+def ncc_cost_volume(left, right, max_disparity, window, min_variance):
+    """NCC cost volume ``(1 - NCC) / 2`` with box sums (DESIGN step 2), on the device.
+
+    Integral images give the window sums of L, L^2, R and R^2; the cross term L*R comes
+    from per-row prefix sums of window-column sums, as on the CPU.  Rows are processed
+    in bands so that the float64 scratch stays under :data:`NCC_SCRATCH_BYTES`.
+
+    Parameters
+    ----------
+    left, right : float32 (H, W), device or host
+        Grey images, 0-255 scale.
+    max_disparity : int
+        Largest disparity; the volume has ``max_disparity + 1`` slices.
+    window : int
+        Odd window size.
+    min_variance : float
+        Grey-level variance at or below which a window is flat (cost 1).
+
+    Returns
+    -------
+    device array, float32, (H, W, max_disparity + 1)
+        1 where u - d < 0 or a window is flat.
+    """
+    d_left = _dev(left)
+    d_right = _dev(right)
+    h, w = d_left.shape
+    n_disp = int(max_disparity) + 1
+    r = int(window) // 2
+    ii_l = _integral_image(d_left, 1)
+    ii_ll = _integral_image(d_left, 2)
+    ii_r = _integral_image(d_right, 1)
+    ii_rr = _integral_image(d_right, 2)
+    cost = cuda.device_array((h, w, n_disp), np.float32)
+    band = max(1, min(h, int(NCC_SCRATCH_BYTES) // ((w + 1) * n_disp * 8)))
+    prefix = cuda.device_array((band, w + 1, n_disp), np.float64)
+    for v_start in range(0, h, band):
+        n_rows = min(band, h - v_start)
+        blocks, threads = _grid_2d(n_disp, n_rows)
+        _cross_prefix[blocks, threads](d_left, d_right, r, v_start, n_rows, prefix)
+        blocks, threads = _grid_2d(w * n_disp, n_rows)
+        _ncc_band[blocks, threads](ii_l, ii_ll, ii_r, ii_rr, prefix, r, v_start, n_rows, _f64(min_variance), cost)
+    return cost
+
+
+@cuda.jit
+def _invalidate(cost):
+    x, v = cuda.grid(2)
+    n_disp = cost.shape[2]
+    if v < cost.shape[0] and x < cost.shape[1] * n_disp:
+        u = x // n_disp
+        d = x % n_disp
+        if d > u:
+            cost[v, u, d] = 1.0
+
+
+def invalidate_out_of_view(cost):
+    """Set every cell whose right pixel u - d is outside the image back to 1, in place.
+
+    A host ``cost`` is updated in place as well; the device array is returned.
+
+    Returns
+    -------
+    device array, float32, (H, W, D)
+    """
+    d_cost = _dev(cost)
+    h, w, n_disp = d_cost.shape
+    blocks, threads = _grid_2d(w * n_disp, h)
+    _invalidate[blocks, threads](d_cost)
+    if not _is_device(cost):
+        d_cost.copy_to_host(cost)
+    return d_cost
+
+
+# ----------------------------------------------------------------------------- aggregation (step 3)
+@cuda.jit
+def _rbf_weights_kernel(img, inv_ss2, inv_sc2, weights):
+    u, v = cuda.grid(2)
+    h = img.shape[0]
+    w = img.shape[1]
+    if v >= h or u >= w:
+        return
+    total = 0.0
+    for k in range(9):
+        dy = k // 3 - 1
+        dx = k % 3 - 1
+        y = v + dy
+        x = u + dx
+        if 0 <= y < h and 0 <= x < w:
+            wk = _rbf_weight(dy, dx, numba.float64(img[v, u]), numba.float64(img[y, x]), inv_ss2, inv_sc2)
+            weights[v, u, k] = wk
+            total += wk
+        else:
+            weights[v, u, k] = 0.0
+    for k in range(9):
+        # float64 division as on the CPU (explicit: the simulator follows NumPy's promotion)
+        weights[v, u, k] = numba.float64(weights[v, u, k]) / total
+
+
+def rbf_weights(img, sigma_space, sigma_color):
+    """Normalised 3x3 bilateral weights per pixel (paper eq. 3), computed once per level.
+
+    Returns
+    -------
+    device array, float32, (H, W, 9)
+        Slot k is the neighbour (dy, dx) = (k // 3 - 1, k % 3 - 1); neighbours outside
+        the image get weight 0.
+    """
+    d_img = _dev(img)
+    h, w = d_img.shape
+    weights = cuda.device_array((h, w, 9), np.float32)
+    blocks, threads = _grid_2d(w, h)
+    inv_ss2 = 1.0 / (sigma_space * sigma_space)
+    inv_sc2 = 1.0 / (sigma_color * sigma_color)
+    _rbf_weights_kernel[blocks, threads](d_img, _f64(inv_ss2), _f64(inv_sc2), weights)
+    return weights
+
+
+@cuda.jit
+def _rbf_pass(src, dst, weights):
+    """One pass of eq. 2; one thread per (u * D + d, v), float32 accumulation as on the CPU."""
+    x, v = cuda.grid(2)
+    n_disp = src.shape[2]
+    if v >= src.shape[0] or x >= src.shape[1] * n_disp:
+        return
+    u = x // n_disp
+    d = x % n_disp
+    acc = numba.float32(0.0)
+    for k in range(9):
+        wk = weights[v, u, k]
+        if wk == 0.0:
+            continue
+        acc += wk * src[v + k // 3 - 1, u + k % 3 - 1, d]
+    dst[v, u, d] = acc
+
+
+def rbf_filter(cost, weights, t_max):
+    """Recursive bilateral filtering: ``t_max`` passes of the 3x3 kernel (paper eq. 2).
+
+    Parameters
+    ----------
+    cost : float32 (H, W, D), device or host
+    weights : float32 (H, W, 9), device or host
+        From :func:`rbf_weights`.
+    t_max : int
+
+    Returns
+    -------
+    device array, float32, (H, W, D)
+        A new array (``cost`` is left untouched).
+    """
+    d_cost = _dev(cost)
+    d_weights = _dev(weights)
+    if t_max == 0:
+        return _copy(d_cost)
+    h, w, n_disp = d_cost.shape
+    blocks, threads = _grid_2d(w * n_disp, h)
+    src = cuda.device_array(d_cost.shape, d_cost.dtype)
+    _rbf_pass[blocks, threads](d_cost, src, d_weights)
+    if t_max == 1:
+        return src
+    dst = cuda.device_array(d_cost.shape, d_cost.dtype)
+    for _ in range(t_max - 1):
+        _rbf_pass[blocks, threads](src, dst, d_weights)
+        src, dst = dst, src
+    return src
+
+
+@cuda.jit
+def _bilateral_kernel(cost, img, radius, inv_ss2, inv_sc2, out):
+    x, v = cuda.grid(2)
+    h = cost.shape[0]
+    w = cost.shape[1]
+    n_disp = cost.shape[2]
+    if v >= h or x >= w * n_disp:
+        return
+    u = x // n_disp
+    d = x % n_disp
+    i_p = numba.float64(img[v, u])
+    acc = 0.0
+    total = 0.0
+    for dy in range(-radius, radius + 1):
+        y = v + dy
+        if y < 0 or y >= h:
+            continue
+        for dx in range(-radius, radius + 1):
+            xx = u + dx
+            if xx < 0 or xx >= w:
+                continue
+            wk = _rbf_weight(dy, dx, i_p, numba.float64(img[y, xx]), inv_ss2, inv_sc2)
+            total += wk
+            acc += wk * numba.float64(cost[y, xx, d])
+    out[v, u, d] = acc / total
+
+
+def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
+    """One pass of a plain (2 radius + 1)^2 bilateral filter over every disparity slice.
+
+    The ablation counterpart of RBF (paper Fig. 4): same kernel as eq. 3, larger
+    support.  Returns a new float32 (H, W, D) device array.
+    """
+    d_cost = _dev(cost)
+    d_img = _dev(img)
+    h, w, n_disp = d_cost.shape
+    out = cuda.device_array(d_cost.shape, d_cost.dtype)
+    inv_ss2 = 1.0 / (sigma_space * sigma_space)
+    inv_sc2 = 1.0 / (sigma_color * sigma_color)
+    blocks, threads = _grid_2d(w * n_disp, h)
+    _bilateral_kernel[blocks, threads](d_cost, d_img, int(radius), _f64(inv_ss2), _f64(inv_sc2), out)
+    return out
+
+
+# ----------------------------------------------------------------------------- seeds (step 4)
+@cuda.jit
+def _seeds_kernel(cost, pkrn_min, epsilon, lr_tolerance, exclusion, out):
+    u, v = cuda.grid(2)
+    if v < cost.shape[0] and u < cost.shape[1]:
+        out[v, u] = _seed_at(cost, v, u, pkrn_min, epsilon, lr_tolerance, exclusion)
+
+
+def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion):
+    """Sparse seed map at the coarsest level (DESIGN step 4); int32 (H, W), -1 undecided."""
+    d_cost = _dev(cost)
+    h, w, _ = d_cost.shape
+    out = cuda.device_array((h, w), np.int32)
+    blocks, threads = _grid_2d(w, h)
+    _seeds_kernel[blocks, threads](d_cost, _f64(pkrn_min), _f64(epsilon), int(lr_tolerance), int(exclusion), out)
+    return out
+
+
+@cuda.jit
+def _min_cost_kernel(cost, out):
+    u, v = cuda.grid(2)
+    if v < cost.shape[0] and u < cost.shape[1]:
+        best = cost[v, u, 0]
+        for d in range(1, cost.shape[2]):
+            if cost[v, u, d] < best:
+                best = cost[v, u, d]
+        out[v, u] = best
+
+
+def min_cost(cost):
+    """Least cost of every pixel over all disparities; float32 (H, W) device array."""
+    d_cost = _dev(cost)
+    h, w, _ = d_cost.shape
+    out = cuda.device_array((h, w), np.float32)
+    blocks, threads = _grid_2d(w, h)
+    _min_cost_kernel[blocks, threads](d_cost, out)
+    return out
+
+
+# ----------------------------------------------------------------------------- diffusion (step 5)
+# Counters of the frontier loop (one int32 device array): the number of active pixels of
+# the sweep and the number of pixels the sweep changed.
+_N_ACTIVE = 0
+_N_CHANGED = 1
+
+
+@cuda.jit
+def _collect_decided(disp, changed, counters):
+    """Flat indices of every decided pixel, appended through an atomic counter."""
+    u, v = cuda.grid(2)
+    w = disp.shape[1]
+    if v < disp.shape[0] and u < w and disp[v, u] != UNDECIDED:
+        i = cuda.atomic.add(counters, _N_CHANGED, 1)
+        changed[i] = v * w + u
+
+
+@cuda.jit
+def _reset_counters(counters):
+    if cuda.grid(1) == 0:
+        counters[_N_ACTIVE] = 0
+        counters[_N_CHANGED] = 0
+
+
+@cuda.jit
+def _build_frontier(changed, n_changed, stamp, sweep, active, counters, h, w, kappa_d):
+    """Pixels within ``kappa_d`` of a changed pixel (the pixel itself excluded), deduplicated.
+
+    One thread per changed pixel.  ``stamp[q]`` holds the last sweep that listed q; the
+    atomic max lets exactly one thread list a pixel per sweep (the set is that of
+    ``cpu._build_frontier``; only the order of the list differs).
+    """
+    i = cuda.grid(1)
+    if i >= n_changed:
+        return
+    p = changed[i]
+    v = p // w
+    u = p % w
+    for dv in range(-kappa_d, kappa_d + 1):
+        y = v + dv
+        if y < 0 or y >= h:
+            continue
+        for du in range(-kappa_d, kappa_d + 1):
+            x = u + du
+            if x < 0 or x >= w or (dv == 0 and du == 0):
+                continue
+            q = y * w + x
+            if cuda.atomic.max(stamp, q, sweep) != sweep:
+                j = cuda.atomic.add(counters, _N_ACTIVE, 1)
+                active[j] = q
+
+
+@cuda.jit
+def _evaluate_frontier(cost, disp, min_cost, max_gap, active, counters, new_values, tau, kappa_d, adversarial):
+    """New state of every frontier pixel, reading the previous map only (Jacobi)."""
+    i = cuda.grid(1)
+    if i < counters[_N_ACTIVE]:
+        p = active[i]
+        w = disp.shape[1]
+        new_values[i] = _diffuse_at(cost, disp, min_cost, max_gap, p // w, p % w, tau, kappa_d, adversarial)
+
+
+@cuda.jit
+def _apply_changes(disp, active, new_values, changed, counters):
+    """Write the new states; list the pixels that changed (each frontier pixel is unique)."""
+    i = cuda.grid(1)
+    if i < counters[_N_ACTIVE]:
+        p = active[i]
+        w = disp.shape[1]
+        v = p // w
+        u = p % w
+        if new_values[i] != disp[v, u]:
+            disp[v, u] = new_values[i]
+            j = cuda.atomic.add(counters, _N_CHANGED, 1)
+            changed[j] = p
+
+
+def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweeps):
+    """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 5-6).
+
+    The frontier lives on the device: each sweep lists the pixels within ``kappa_d`` of
+    the pixels the previous sweep changed (atomic counter + per-pixel stamp), evaluates
+    them against the previous map, then applies the changes (Jacobi).  The only
+    download per sweep is the change counter.
+
+    Parameters
+    ----------
+    cost : float32 (H, W, D), device or host
+    disp0 : int32 (H, W), device or host
+        Sparse decisive map D_i^S (-1 undecided); not modified.
+    min_cost : float32 (H, W), device or host
+        Least cost of each pixel (:func:`min_cost`); not read when ``max_gap < 0``.
+    max_gap : float
+        Accepted states cost at most min_cost + max_gap; < 0: off.
+    tau, kappa_d : int
+        Disparity tolerance and neighbourhood radius.
+    adversarial : bool
+        Allow decided pixels to switch to a strictly cheaper accepted candidate.
+    max_sweeps : int
+        Safeguard on the number of sweeps.
+
+    Returns
+    -------
+    disp : device array, int32, (H, W)
+    sweeps : int
+        Sweeps run (the last one changed nothing unless the safeguard stopped it).
+    """
+    d_cost = _dev(cost)
+    disp = _copy(disp0) if _is_device(disp0) else _dev(disp0)  # a new map either way
+    d_min = _dev(min_cost)
+    h, w = disp.shape
+    n_pixels = h * w
+    tau = int(tau)
+    kappa_d = int(kappa_d)
+    adversarial = bool(adversarial)
+    max_gap = _f64(max_gap)
+    neighbours = (2 * kappa_d + 1) ** 2 - 1
+    counters = _zeros(2, np.int32)
+    changed = cuda.device_array(n_pixels, np.int32)
+    active = cuda.device_array(n_pixels, np.int32)
+    new_values = cuda.device_array(n_pixels, np.int32)
+    stamp = _zeros(n_pixels, np.int32)
+    blocks, threads = _grid_2d(w, h)
+    _collect_decided[blocks, threads](disp, changed, counters)
+    n_changed = int(counters.copy_to_host()[_N_CHANGED])
+    sweeps = 0
+    while n_changed > 0 and sweeps < max_sweeps:
+        sweeps += 1
+        _reset_counters[1, 1](counters)
+        blocks, threads = _grid_1d(n_changed)
+        _build_frontier[blocks, threads](changed, n_changed, stamp, sweeps, active, counters, h, w, kappa_d)
+        # The frontier size stays on the device: the grid covers its upper bound and
+        # threads past the counter return at once.
+        bound = min(n_pixels, n_changed * neighbours)
+        if bound > 0:
+            blocks, threads = _grid_1d(bound)
+            _evaluate_frontier[blocks, threads](
+                d_cost, disp, d_min, max_gap, active, counters, new_values, tau, kappa_d, adversarial
+            )
+            _apply_changes[blocks, threads](disp, active, new_values, changed, counters)
+        n_changed = int(counters.copy_to_host()[_N_CHANGED])
+    return disp, sweeps
+
+
+# ----------------------------------------------------------------------------- inheritance (step 7)
+@cuda.jit
+def _inherit_kernel(cost, coarse, prc, dfm_pkrn_min, epsilon, out):
+    u, v = cuda.grid(2)
+    if v < cost.shape[0] and u < cost.shape[1]:
+        out[v, u] = _inherit_at(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon)
+
+
+def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
+    """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
+
+    Parameters
+    ----------
+    cost : float32 (H, W, D), device or host
+        Cost volume of the finer level i.
+    coarse : int32 (>= H // 2, >= W // 2), device or host
+        Disparity map of level i + 1 (-1 undecided).
+
+    Returns
+    -------
+    device array, int32, (H, W)
+        Sparse map D_i^S.
+    """
+    d_cost = _dev(cost)
+    d_coarse = _dev(coarse)
+    h, w, _ = d_cost.shape
+    out = cuda.device_array((h, w), np.int32)
+    blocks, threads = _grid_2d(w, h)
+    _inherit_kernel[blocks, threads](d_cost, d_coarse, bool(prc), _f64(dfm_pkrn_min), _f64(epsilon), out)
+    return out
+
+
+# ----------------------------------------------------------------------------- sub-pixel (step 8)
+@cuda.jit
+def _subpixel_kernel(cost, disp, out):
+    u, v = cuda.grid(2)
+    if v < disp.shape[0] and u < disp.shape[1]:
+        out[v, u] = _subpixel_at(cost, disp, v, u)
+
+
+def subpixel(cost, disp):
+    """Parabola sub-pixel refinement (DESIGN step 8); float32 (H, W), inf where undecided."""
+    d_cost = _dev(cost)
+    d_disp = _dev(disp)
+    h, w = d_disp.shape
+    out = cuda.device_array((h, w), np.float32)
+    blocks, threads = _grid_2d(w, h)
+    _subpixel_kernel[blocks, threads](d_cost, d_disp, out)
+    return out
+
+
+# ----------------------------------------------------------------------------- perspective transformation (step 6)
+@cuda.jit
+def _pt_warp_kernel(right, a0, b1, b2, delta, out):
+    x, v = cuda.grid(2)
+    if v < right.shape[0] and x < right.shape[1]:
+        out[v, x] = _bilinear_at(right, v, x - _pt_shift(a0, b1, b2, delta, v, x))
+
+
+def pt_warp(right, a0, b1, b2, delta):
+    """Right image warped by the road model (DESIGN step 6): ``R'(x, v) = R(x - s(x, v), v)``.
+
+    Parameters
+    ----------
+    right : float32 (H, W), device or host
+        Full-resolution grey right image.
+    a0, b1, b2, delta : float
+        Road model ``d = a0 + b1 v + b2 u`` and margin, full-resolution pixels.
+
+    Returns
+    -------
+    device array, float32, (H, W)
+        Bilinear samples; columns beyond the image replicate the border.
+    """
+    d_right = _dev(right)
+    h, w = d_right.shape
+    out = cuda.device_array((h, w), np.float32)
+    blocks, threads = _grid_2d(w, h)
+    _pt_warp_kernel[blocks, threads](d_right, _f64(a0), _f64(b1), _f64(b2), _f64(delta), out)
+    return out
+
+
+@cuda.jit
+def _pt_restore_kernel(disp, a0, b1, b2, delta, out):
+    u, v = cuda.grid(2)
+    if v < disp.shape[0] and u < disp.shape[1]:
+        out[v, u] = _pt_restore_at(disp[v, u], a0, b1, b2, delta, v, u)
+
+
+def pt_restore(disp, a0, b1, b2, delta):
+    """Full-range disparity from the disparity against the warped right image.
+
+    ``d = d' (1 - b2) + s(u, v)`` (exact inverse of :func:`pt_warp`); inf stays inf.
+
+    Parameters
+    ----------
+    disp : float32 (H, W), device or host
+        Disparity ``d'`` of the left image against ``pt_warp(right, ...)``.
+
+    Returns
+    -------
+    device array, float32, (H, W)
+    """
+    d_disp = _dev(disp)
+    h, w = d_disp.shape
+    out = cuda.device_array((h, w), np.float32)
+    blocks, threads = _grid_2d(w, h)
+    _pt_restore_kernel[blocks, threads](d_disp, _f64(a0), _f64(b1), _f64(b2), _f64(delta), out)
+    return out
+
+
+# ----------------------------------------------------------------------------- array handling
+def to_device(array):
+    """The array on the device: host arrays are uploaded (C-contiguous), device arrays kept."""
+    return _dev(array)
+
+
+def to_host(array):
+    """NumPy array of a device array (one download); host arrays pass through."""
+    if _is_device(array):
+        return array.copy_to_host()
+    return np.asarray(array)
+
+
+@cuda.jit
+def _merge_kernel(primary, fallback, out):
+    u, v = cuda.grid(2)
+    if v < primary.shape[0] and u < primary.shape[1]:
+        if primary[v, u] >= 0:
+            out[v, u] = primary[v, u]
+        else:
+            out[v, u] = fallback[v, u]
+
+
+def merge_sparse(primary, fallback):
+    """``primary`` where decided (>= 0), else ``fallback``; int32 (H, W), a new device map."""
+    d_primary = _dev(primary)
+    d_fallback = _dev(fallback)
+    h, w = d_primary.shape
+    out = cuda.device_array((h, w), np.int32)
+    blocks, threads = _grid_2d(w, h)
+    _merge_kernel[blocks, threads](d_primary, d_fallback, out)
+    return out
+
+
+@cuda.jit
+def _count_kernel(disp, counter):
+    u, v = cuda.grid(2)
+    if v < disp.shape[0] and u < disp.shape[1] and disp[v, u] >= 0:
+        cuda.atomic.add(counter, 0, 1)
+
+
+def count_decided(disparity) -> int:
+    """Number of decided pixels (>= 0) of an integer disparity map (one scalar download)."""
+    if not _is_device(disparity):
+        return int(np.count_nonzero(np.asarray(disparity) >= 0))
+    h, w = disparity.shape
+    counter = _zeros(1, np.int64)
+    blocks, threads = _grid_2d(w, h)
+    _count_kernel[blocks, threads](disparity, counter)
+    return int(counter.copy_to_host()[0])
+
+
+__all__ = [
+    "BLOCK_1D",
+    "BLOCK_2D",
+    "NCC_SCRATCH_BYTES",
+    "bilateral_filter",
+    "count_decided",
+    "decisive_seeds",
+    "diffuse",
+    "inherit",
+    "invalidate_out_of_view",
+    "min_cost",
+    "merge_sparse",
+    "ncc_cost_volume",
+    "pt_restore",
+    "pt_warp",
+    "rbf_filter",
+    "rbf_weights",
+    "subpixel",
+    "to_device",
+    "to_host",
+]

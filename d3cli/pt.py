@@ -1,0 +1,243 @@
+"""Perspective transformation (PT) for road scenes, DESIGN.md step 6.
+
+A planar road seen by a rectified rig has the disparity
+
+    d(u, v) = a0 + a1 (v cos(theta) - u sin(theta))                      (road model)
+
+(theta = camera roll; theta = 0 gives the v-disparity line).  It is linear in
+disguise: ``d = a0 + b1 v + b2 u`` with ``b1 = a1 cos(theta)``, ``b2 = -a1 sin(theta)``.
+:func:`fit_road_model` fits it robustly to a coarse disparity map (RANSAC start, then
+iteratively re-weighted least squares with Tukey's biweight), so that cars, kerbs and
+potholes do not bend it.  The right image is then warped by the per-pixel shift
+``s(u, v) = a0 + b1 v + b2 u - delta`` (``kernels.*.pt_warp``), the pair is matched over
+the narrow range [0, 2 delta + slack], and the disparity is restored exactly with
+``d = d' (1 - b2) + s(u, v)`` (``kernels.*.pt_restore``).
+
+NumPy helpers :func:`shift_map`, :func:`warp_right` and :func:`restore_disparity` do
+the same on the host (PT-SGM and tests).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+# Fewer decided coarse pixels than this cannot tell a road from noise.
+MIN_POINTS = 50
+_RANSAC_HYPOTHESES = 200
+_RANSAC_SAMPLE = 5000  # points scored per hypothesis (a seeded subsample)
+_TUKEY_C = 4.685  # Tukey biweight constant (95 % efficiency for Gaussian residuals)
+
+
+@dataclass(frozen=True)
+class RoadModel:
+    """A fitted road disparity model, full-resolution pixels.
+
+    Attributes
+    ----------
+    a0, b1, b2 : float
+        ``d(u, v) = a0 + b1 v + b2 u``.
+    a1 : float
+        Signed gradient along the road: ``b1 = a1 cos(theta)``, ``b2 = -a1 sin(theta)``,
+        with theta in (-90, 90) degrees (so ``a1`` has the sign of ``b1``).
+    theta : float
+        Roll angle, radians.
+    inlier_share : float
+        Share of the fitted points within the inlier threshold, in [0, 1].
+    n_points : int
+        Decided coarse pixels the fit used.
+    road_like : bool
+        True when the model may be used (enough points and inliers, ``a1 > 0``).
+    reason : str
+        Why the scene is not road-like ("" when it is).
+    """
+
+    a0: float
+    b1: float
+    b2: float
+    a1: float
+    theta: float
+    inlier_share: float
+    n_points: int
+    road_like: bool = True
+    reason: str = ""
+
+    def predict(self, u, v):
+        """Model disparity at full-resolution pixel coordinates (arrays broadcast)."""
+        return self.a0 + self.b1 * np.asarray(v, dtype=np.float64) + self.b2 * np.asarray(u, dtype=np.float64)
+
+    def to_info(self) -> dict:
+        """JSON-ready summary for ``DisparityResult.info['pt']``."""
+        out = asdict(self)
+        out["theta_deg"] = math.degrees(out.pop("theta"))
+        return {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in out.items()}
+
+
+def coarse_points(disparity: np.ndarray, *, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Decided pixels of a coarse disparity map in full-resolution units.
+
+    Parameters
+    ----------
+    disparity : ndarray, (h, w)
+        Coarse-level disparity: int (``-1`` undecided) or float (non-finite or < 0
+        undecided).
+    scale : float, keyword-only
+        Level scale ``2^(k-1)``: the coarse pixel (u_c, v_c) covers full-resolution
+        pixels ``u = (u_c + 0.5) scale - 0.5`` (area averaging), ``d = d_c scale``.
+
+    Returns
+    -------
+    u, v, d : ndarray, float64, (N,)
+    """
+    disp = np.asarray(disparity)
+    good = disp >= 0
+    if disp.dtype.kind == "f":
+        good &= np.isfinite(disp)
+    vc, uc = np.nonzero(good)
+    u = (uc + 0.5) * scale - 0.5
+    v = (vc + 0.5) * scale - 0.5
+    return u, v, disp[vc, uc].astype(np.float64) * scale
+
+
+def _solve(u, v, d, w=None):
+    """Weighted least squares of d = a0 + b1 v + b2 u; None when singular."""
+    a = np.stack([np.ones_like(u), v, u], axis=1)
+    if w is not None:
+        sw = np.sqrt(w)
+        a, d = a * sw[:, None], d * sw
+    sol, _, rank, _ = np.linalg.lstsq(a, d, rcond=None)
+    return sol if rank == 3 else None
+
+
+def _ransac(u, v, d, threshold, rng):
+    """Best 3-point hypothesis by inlier count on a subsample; None if all degenerate."""
+    n = u.size
+    idx = rng.choice(n, size=min(n, _RANSAC_SAMPLE), replace=False)
+    us, vs, ds = u[idx], v[idx], d[idx]
+    best, best_count = None, -1
+    for _ in range(_RANSAC_HYPOTHESES):
+        pick = rng.choice(us.size, size=3, replace=False)
+        a = np.stack([np.ones(3), vs[pick], us[pick]], axis=1)
+        if abs(np.linalg.det(a)) < 1e-6:
+            continue  # collinear sample
+        sol = np.linalg.solve(a, ds[pick])
+        count = int(np.count_nonzero(np.abs(ds - (sol[0] + sol[1] * vs + sol[2] * us)) <= threshold))
+        if count > best_count:
+            best, best_count = sol, count
+    if best is None:
+        return None
+    # Refit on the hypothesis' inliers: a 3-point model is noisy.
+    inl = np.abs(d - (best[0] + best[1] * v + best[2] * u)) <= threshold
+    refit = _solve(u[inl], v[inl], d[inl]) if inl.sum() >= 3 else None
+    return refit if refit is not None else best
+
+
+def _irls(u, v, d, sol, threshold, iterations):
+    """Tukey-biweight IRLS from ``sol``; the scale never drops below the threshold."""
+    for _ in range(iterations):
+        r = d - (sol[0] + sol[1] * v + sol[2] * u)
+        sigma = 1.4826 * np.median(np.abs(r))
+        c = _TUKEY_C * max(sigma, threshold / 2.5)
+        z = r / c
+        w = np.where(np.abs(z) < 1.0, (1.0 - z * z) ** 2, 0.0)
+        if np.count_nonzero(w) < 3:
+            break
+        new = _solve(u, v, d, w)
+        if new is None:
+            break
+        done = np.max(np.abs(new - sol)) < 1e-9
+        sol = new
+        if done:
+            break
+    return sol
+
+
+def fit_road_model(
+    disparity: np.ndarray,
+    *,
+    scale: float,
+    inlier_threshold: float = 1.0,
+    iterations: int = 10,
+    min_inlier_share: float = 0.5,
+    seed: int = 0,
+) -> RoadModel:
+    """Robust fit of the road disparity model to a coarse disparity map (DESIGN step 6).
+
+    RANSAC (seeded, 3-point hypotheses scored on a subsample) gives the start, IRLS with
+    Tukey's biweight refines it on all points.  Obstacles, kerbs and potholes are
+    outliers and get zero weight.
+
+    Parameters
+    ----------
+    disparity : ndarray, (h, w)
+        Coarse-level disparity (int, ``-1`` undecided; or float, non-finite undecided),
+        in coarse pixels.
+    scale : float, keyword-only
+        Level scale ``2^(k-1)``; the fit is in full-resolution units.
+    inlier_threshold : float, keyword-only
+        |residual| counted as inlier, in coarse pixels (``scale`` full-resolution px).
+    iterations : int, keyword-only
+        IRLS rounds.
+    min_inlier_share : float, keyword-only
+        Below this inlier share the scene is not road-like.
+    seed : int, keyword-only
+        Seed of the RANSAC generator (the fit is deterministic).
+
+    Returns
+    -------
+    RoadModel
+        ``road_like`` False (with ``reason``) when there are fewer than 50 decided
+        pixels, the inlier share is below ``min_inlier_share`` or ``a1 <= 0``
+        (disparity not growing towards the bottom of the image).
+    """
+    u, v, d = coarse_points(disparity, scale=scale)
+    n = int(u.size)
+    threshold = float(inlier_threshold) * float(scale)
+    if n < MIN_POINTS:
+        return RoadModel(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, n, False, f"only {n} decided coarse pixels (< {MIN_POINTS})")
+    rng = np.random.default_rng(seed)
+    sol = _ransac(u, v, d, threshold, rng)
+    if sol is None:
+        return RoadModel(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, n, False, "all decided coarse pixels are collinear")
+    sol = _irls(u, v, d, sol, threshold, int(iterations))
+    a0, b1, b2 = (float(x) for x in sol)
+    share = float(np.mean(np.abs(d - (a0 + b1 * v + b2 * u)) <= threshold))
+    theta = math.atan(-b2 / b1) if b1 != 0.0 else math.copysign(math.pi / 2, -b2)
+    a1 = math.copysign(math.hypot(b1, b2), b1) if b1 != 0.0 else 0.0
+    reason = ""
+    if share < min_inlier_share:
+        reason = f"only {100 * share:.0f}% of the coarse disparities fit a plane (< {100 * min_inlier_share:.0f}%)"
+    elif a1 <= 0.0:
+        reason = f"the disparity does not grow towards the image bottom (a1 = {a1:.4f})"
+    return RoadModel(a0, b1, b2, a1, theta, share, n, not reason, reason)
+
+
+def shift_map(model: RoadModel, shape: tuple[int, int], *, margin: float) -> np.ndarray:
+    """Per-pixel shift ``s(u, v) = a0 + b1 v + b2 u - margin``; float64 (H, W)."""
+    h, w = shape
+    return model.a0 + model.b1 * np.arange(h, dtype=np.float64)[:, None] + model.b2 * np.arange(w)[None, :] - margin
+
+
+def warp_right(right: np.ndarray, model: RoadModel, *, margin: float) -> np.ndarray:
+    """NumPy ``R'(x, v) = R(x - s(x, v), v)`` (bilinear, border replicated); float32 (H, W)."""
+    right = np.asarray(right, dtype=np.float32)
+    h, w = right.shape
+    src = np.clip(np.arange(w)[None, :] - shift_map(model, (h, w), margin=margin), 0.0, w - 1.0)
+    x0 = np.minimum(np.floor(src).astype(np.int64), w - 2) if w > 1 else np.zeros_like(src, dtype=np.int64)
+    t = src - x0
+    rows = np.arange(h)[:, None]
+    x1 = np.minimum(x0 + 1, w - 1)
+    return ((1.0 - t) * right[rows, x0] + t * right[rows, x1]).astype(np.float32)
+
+
+def restore_disparity(disp: np.ndarray, model: RoadModel, *, margin: float) -> np.ndarray:
+    """NumPy ``d = d' (1 - b2) + s(u, v)``; inf stays inf; float32 (H, W)."""
+    disp = np.asarray(disp, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        out = disp * (1.0 - model.b2) + shift_map(model, disp.shape, margin=margin)
+    return np.where(np.isfinite(disp), out, np.inf).astype(np.float32)
