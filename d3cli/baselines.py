@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from .config import METHODS, Config, SGBMConfig
-from .errors import ConfigError
+from .errors import ConfigError, InputError
 from .pipeline import DisparityResult
 
 log = logging.getLogger(__name__)
@@ -112,7 +112,7 @@ def sgbm_disparity(
 
     cfg = cfg if cfg is not None else SGBMConfig()
     if max_disparity < 1:
-        raise ValueError(f"max_disparity must be >= 1, got {max_disparity}")
+        raise InputError(f"pair: max disparity {max_disparity} must be >= 1; pass --max-disparity 1 or more")
     t0 = time.perf_counter()
     grey_l = _to_uint8(to_grey(left))
     grey_r = _to_uint8(to_grey(right))
@@ -143,8 +143,24 @@ def sgbm_disparity(
 
 
 def _sgbm_raw(grey_l: np.ndarray, grey_r: np.ndarray, max_disparity: int, cfg: SGBMConfig):
-    """OpenCV SGBM on uint8 grey images: float32 disparity (inf invalid) and validity."""
+    """OpenCV SGBM on uint8 grey images: float32 disparity (inf invalid) and validity.
+
+    OpenCV needs ``W - numDisparities > block_size // 2`` (it fails with a memory or
+    buffer assertion otherwise); narrower images are padded on the right by replicating
+    the last column, and the padding is cropped from the result.
+    """
+    if grey_l.shape != grey_r.shape:
+        raise InputError(
+            f"pair: left is {grey_l.shape[0]}x{grey_l.shape[1]} but right is "
+            f"{grey_r.shape[0]}x{grey_r.shape[1]}; a stereo pair needs equal sizes"
+        )
     bs = cfg.block_size
+    width = grey_l.shape[1]
+    need = _num_disparities(max_disparity) + bs // 2 + 1
+    if width < need:
+        pad = ((0, 0), (0, need - width))
+        grey_l = np.pad(grey_l, pad, mode="edge")
+        grey_r = np.pad(grey_r, pad, mode="edge")
     matcher = cv2.StereoSGBM_create(
         minDisparity=0,
         numDisparities=_num_disparities(max_disparity),
@@ -157,7 +173,7 @@ def _sgbm_raw(grey_l: np.ndarray, grey_r: np.ndarray, max_disparity: int, cfg: S
         speckleRange=cfg.speckle_range,
         mode=_SGBM_MODES[cfg.mode],
     )
-    raw = matcher.compute(grey_l, grey_r)  # int16, 4 fractional bits
+    raw = matcher.compute(grey_l, grey_r)[:, :width]  # int16, 4 fractional bits
     disp = raw.astype(np.float32) / 16.0
     valid = (disp >= 0) & (disp <= max_disparity)
     disp[~valid] = np.inf
@@ -198,7 +214,7 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
     from .pyramid import build_pyramid, level_max_disparity, usable_levels
 
     if max_disparity < 1:
-        raise ValueError(f"max_disparity must be >= 1, got {max_disparity}")
+        raise InputError(f"pair: max disparity {max_disparity} must be >= 1; pass --max-disparity 1 or more")
     t0 = time.perf_counter()
     pt = cfg.pt
     grey_l, grey_r = to_grey(left), to_grey(right)

@@ -64,6 +64,7 @@ log = logging.getLogger(__name__)
 OUTPUT_FILES = ("disp.pfm", "disp.png", "disp_color.png", "valid.png")
 RESULT_FILE = "result.json"
 ERROR_MAP = "error.png"
+CLOUD_FILE = "cloud.ply"  # only with --pointcloud
 RUN_FILE = "run.json"
 LOCK_FILE = ".d3stereo.lock"
 #: A lock file that cannot be read is taken as stale only when older than this (seconds):
@@ -387,7 +388,7 @@ def _remove_pair_files(pair_dir: Path, *, remove_folder: bool = False) -> None:
     """
     if not pair_dir.is_dir():
         return
-    names = (*OUTPUT_FILES, RESULT_FILE, ERROR_MAP)
+    names = (*OUTPUT_FILES, RESULT_FILE, ERROR_MAP, CLOUD_FILE)
     leftovers = [p for p in pair_dir.iterdir() if p.name.startswith(".") and ".tmp-" in p.name]
     for path in [pair_dir / name for name in names] + leftovers:
         try:
@@ -399,6 +400,34 @@ def _remove_pair_files(pair_dir: Path, *, remove_folder: bool = False) -> None:
             pair_dir.rmdir()  # only when empty: the user's own files stay
         except OSError:
             pass
+
+
+def _write_cloud(pair, pair_dir: Path, stored: dict, cfg) -> dict:
+    """Write ``cloud.ply`` of a complete pair from its stored outputs; returns ``stored``.
+
+    Reads disp.pfm and valid.png back, so a rerun with ``--pointcloud`` adds clouds to
+    pairs computed earlier without computing them again.  Without a camera the pair gets
+    a warning in result.json instead.
+    """
+    from . import datasets, io
+    from .pointcloud import camera_from, save_pair_cloud
+
+    left, _ = datasets.load_pair_images(pair)
+    calib = io.read_calib(pair.calib) if pair.calib is not None else None
+    camera = camera_from(calib, cfg, left.shape[:2])
+    if camera is None:
+        text = ("no cloud.ply: focal length or baseline unknown; add calib.txt to the pair "
+                "or set camera.f and camera.baseline")
+        if text not in stored.get("warnings", []):
+            log.warning("%s: %s", pair.name, text)
+            stored = {**stored, "warnings": [*stored.get("warnings", []), text]}
+            write_json(pair_dir / RESULT_FILE, stored)
+        return stored
+    disparity = io.read_pfm(pair_dir / "disp.pfm")
+    valid = io.read_mask(pair_dir / "valid.png")
+    n_points = save_pair_cloud(pair_dir / CLOUD_FILE, disparity, valid, left, camera)
+    log.info("%s: cloud.ply with %d points", pair.name, n_points)
+    return stored
 
 
 def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
@@ -425,6 +454,7 @@ def run_batch(
     max_disparity: int | None = None,
     progress: bool = True,
     config_source: str | None = None,
+    pointcloud: bool = False,
 ) -> BatchResult:
     """Run ``method`` on every pair, writing ``out_dir/<pair>/...`` and ``out_dir/run.json``.
 
@@ -448,6 +478,10 @@ def run_batch(
         Show a tqdm bar (only on a terminal).
     config_source : str, optional, keyword-only
         Where the configuration came from, recorded in run.json.
+    pointcloud : bool, keyword-only
+        Also write ``cloud.ply`` per pair (decided pixels, metres, left-camera frame) from
+        the pair's calib.txt or the ``camera`` config section; pairs without a focal length
+        and baseline get a warning instead.
 
     Returns
     -------
@@ -468,13 +502,14 @@ def run_batch(
     lock = acquire_lock(out)
     try:
         return _locked_batch(list(pairs), out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
-                             max_disparity=max_disparity, progress=progress, config_source=config_source)
+                             max_disparity=max_disparity, progress=progress, config_source=config_source,
+                             pointcloud=pointcloud)
     finally:
         release_lock(lock)
 
 
 def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, max_disparity, progress,
-                  config_source) -> BatchResult:
+                  config_source, pointcloud) -> BatchResult:
     """The body of :func:`run_batch`, run while holding the output folder's lock."""
     from .io import is_disk_full
 
@@ -489,7 +524,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
         for current in _progress(pairs, progress, method):
             row, record = _batch_pair(current, out / current.name, cfg=cfg, method=method, evaluate=evaluate,
                                       overwrite=overwrite, max_disparity=max_disparity,
-                                      fingerprint=fingerprint)
+                                      fingerprint=fingerprint, pointcloud=pointcloud)
             batch.rows.append(row)
             records.append(record)
         current = None
@@ -520,7 +555,8 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     return batch
 
 
-def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, fingerprint):
+def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, fingerprint,
+                pointcloud=False):
     """One pair of a batch -> (report row, run.json record).
 
     Raises only KeyboardInterrupt and the OutputError of a full disk; any other failure
@@ -537,6 +573,8 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
         else:
             stored = _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
                                max_disparity=max_disparity, fingerprint=fingerprint)
+        if pointcloud and not (pair_dir / CLOUD_FILE).is_file():
+            stored = _write_cloud(pair, pair_dir, stored, cfg)
     except D3Error as exc:
         from .io import is_disk_full
 
@@ -553,6 +591,8 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
     record = {"pair": pair.name, "status": "skipped" if reused else "ok", "wall_s": wall,
               "max_disparity": stored.get("max_disparity"), "backend": stored.get("info", {}).get("backend"),
               "warnings": stored.get("warnings", [])}
+    if stored.get("info", {}).get("pt") is not None:
+        record["pt"] = stored["info"]["pt"]  # the fitted road model and its inlier share
     return row, record
 
 

@@ -117,9 +117,12 @@ def main():
               help="Score each pair (ground truth where present, photometric always).")
 @click.option("--overwrite", is_flag=True, help="Compute pairs again even when their outputs are complete.")
 @click.option("--no-fill", is_flag=True, help="Leave undecided pixels invalid (inf) instead of filling them.")
+@click.option("--pointcloud", is_flag=True,
+              help="Also write OUT/<pair>/cloud.ply (x, y, z metres in the left camera frame, colour from the "
+                   "left image, decided pixels only) from calib.txt or the camera config section.")
 @_verbosity
 def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
-        no_fill, verbose, quiet):
+        no_fill, pointcloud, verbose, quiet):
     """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
 
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
@@ -139,7 +142,7 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     override = max_disparity if max_disparity is not None else cfg.run.max_disparity
     result = batch.run_batch(pairs, out_dir, cfg=cfg, method=method, evaluate=evaluate,
                              overwrite=overwrite, max_disparity=override, progress=not quiet,
-                             config_source=source)
+                             config_source=source, pointcloud=pointcloud)
     if result.summary is not None and not quiet:
         click.echo(report.format_table(result.summary))
     _finish(result.failures, result.n_pairs, result.run_json)

@@ -492,3 +492,64 @@ def test_bundled_samples_are_reproducible(tmp_path):
                                       d3cli.io.read_pfm(samples_dir() / name / "disp_gt.pfm"))
     total = sum(p.stat().st_size for p in samples_dir().glob("*/*") if p.parent.name != "__pycache__")
     assert total < 1.5e6
+
+
+# ----------------------------------------------------------------------------- point clouds, PT record
+
+
+def test_pointcloud_from_calib_matches_the_disparity(tmp_path):
+    from d3cli import io
+    from d3cli.pointcloud import read_ply
+
+    data = tmp_path / "synth"
+    assert invoke("synth", data, "--n", "1", "--seed", "2", "--width", "160", "--height", "96").exit_code == 0
+    out = tmp_path / "out"
+    result = invoke("run", data, "-o", out, "--method", "sgbm", "--pointcloud", "-q")
+    assert result.exit_code == 0, result.output
+    (pair_dir,) = [p for p in out.iterdir() if p.is_dir()]
+    points, colours = read_ply(pair_dir / "cloud.ply")
+    valid = io.read_mask(pair_dir / "valid.png")
+    disp = io.read_pfm(pair_dir / "disp.pfm")
+    calib = io.read_calib(data / pair_dir.name / "calib.txt")
+    doffs = calib.get("doffs", 0.0)
+    keep = valid & (disp + doffs > 0)  # a zero disparity has no finite depth
+    assert keep.sum() > 0.9 * valid.sum()
+    assert points.shape == (int(keep.sum()), 3) and colours.shape == points.shape
+    depth = calib["f"] * calib["baseline"] / (disp[keep] + doffs)
+    np.testing.assert_allclose(np.sort(points[:, 2]), np.sort(depth), rtol=1e-5)
+
+
+def test_pointcloud_added_on_rerun_without_recomputing(tmp_path):
+    data = tmp_path / "synth"
+    assert invoke("synth", data, "--n", "1", "--seed", "2", "--width", "160", "--height", "96").exit_code == 0
+    out = tmp_path / "out"
+    assert invoke("run", data, "-o", out, "--method", "sgbm", "-q").exit_code == 0
+    (pair_dir,) = [p for p in out.iterdir() if p.is_dir()]
+    before = (pair_dir / "disp.pfm").stat().st_mtime_ns
+    assert not (pair_dir / "cloud.ply").exists()
+    assert invoke("run", data, "-o", out, "--method", "sgbm", "--pointcloud", "-q").exit_code == 0
+    assert (pair_dir / "cloud.ply").stat().st_size > 0
+    assert (pair_dir / "disp.pfm").stat().st_mtime_ns == before
+    assert run_json(out)["pairs"][0]["status"] == "skipped"
+
+
+def test_pointcloud_without_camera_is_a_warning(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    make_pair_folder(root, "p", shift=6)
+    out = tmp_path / "out"
+    result = invoke("run", root, "-o", out, "--method", "sgbm", "--pointcloud", "-q")
+    assert result.exit_code == 0, result.output
+    assert not (out / "p" / "cloud.ply").exists()
+    warnings = json.loads((out / "p" / "result.json").read_text())["warnings"]
+    assert any(w.startswith("no cloud.ply: focal length or baseline unknown") for w in warnings)
+
+
+def test_pt_model_is_recorded_per_pair_in_run_json(tmp_path):
+    data = tmp_path / "synth"
+    assert invoke("synth", data, "--n", "1", "--seed", "4", "--width", "320", "--height", "192").exit_code == 0
+    out = tmp_path / "out"
+    result = invoke("run", data, "-o", out, "--backend", "cpu", "--set", "pt.enabled=true", "-q")
+    assert result.exit_code == 0, result.output
+    record = run_json(out)["pairs"][0]
+    assert {"a0", "a1", "theta_deg", "inlier_share", "fallback"} <= set(record["pt"])
+    assert record["pt"]["fallback"] is False and record["pt"]["inlier_share"] > 0.5

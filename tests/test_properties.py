@@ -204,39 +204,25 @@ def test_d3stereo_compute_contract(pair, cfg, data):
         assert isinstance(suspicious_result(result, dmax or 1), list)
 
 
-def _sgbm_width_ok(width: int, max_disparity: int, block_size: int) -> bool:
-    """OpenCV SGBM fails unless W - numDisparities > block_size // 2 (see the xfail below)."""
-    return width - int(np.ceil((max_disparity + 1) / 16.0)) * 16 > block_size // 2
-
-
 @SETTINGS
 @given(image_pairs(), configs(), st.data())
 def test_sgbm_contract(pair, cfg, data):
     left, right = pair
     dmax = data.draw(st.integers(1, max(1, left.shape[1] - 1)))
-    assume(_sgbm_width_ok(min(left.shape[1], right.shape[1]), dmax, cfg.sgbm.block_size))
-    assume(left.shape[:2] == right.shape[:2])  # see test_sgbm_size_mismatch_is_an_input_error
     result = call_or_d3error(lambda: compute_pair("sgbm", cfg, left, right, max_disparity=dmax))
     if result is not None:
         check_result(result, left.shape)
 
 
-@pytest.mark.xfail(strict=True, reason="baselines.sgbm_disparity: OpenCV StereoSGBM raises cv2.error "
-                   "('Insufficient memory ... 18446744073709547101 bytes' or a buffer_area assertion) when "
-                   "W - numDisparities <= block_size // 2 (numDisparities = 16 ceil((dmax + 1) / 16)), e.g. a "
-                   "40 px wide pair with max disparity 39; a 0-2 row image passes. It should raise InputError "
-                   "naming the minimum width (or pad the images). Owner: baselines.py")
-def test_sgbm_narrow_image_is_a_d3error_or_a_map():
-    img = np.zeros((5, 5), np.uint8)  # smallest failing input found: 5x5 (also 3x8), max_disparity 4
+@pytest.mark.parametrize("shape, dmax", [((5, 5), 4), ((3, 8), 4), ((20, 40), 39)])
+def test_sgbm_narrow_image_gives_a_map(shape, dmax):
+    # Found by test_sgbm_contract: OpenCV fails when W - numDisparities <= block_size // 2;
+    # baselines pads such images on the right.
+    img = np.zeros(shape, np.uint8)
     img[:, ::2] = 200
-    result = call_or_d3error(lambda: compute_pair("sgbm", Config(), img, img, max_disparity=4))
-    if result is not None:
-        check_result(result, img.shape)
+    check_result(compute_pair("sgbm", Config(), img, img, max_disparity=dmax), img.shape)
 
 
-@pytest.mark.xfail(strict=True, reason="baselines.sgbm_disparity does not compare the shapes: OpenCV raises "
-                   "cv2.error (-215 'left.size() == right.size()') instead of InputError "
-                   "'pair: left is HxW but right is HxW'. Owner: baselines.py")
 def test_sgbm_size_mismatch_is_an_input_error():
     left = np.zeros((1, 40), np.uint8)  # smallest failing input found: 1x40 vs 1x39, max_disparity 1
     with pytest.raises(D3Error, match="1x40.*1x39"):
