@@ -405,4 +405,5 @@ class D3Stereo:
             sigma_color=agg.sigma_color,
             kappa_a=agg.kappa_a,
             backend=self.backend,
+            overwrite_input=True,  # the raw NCC volume is not needed afterwards
         )

@@ -3,7 +3,18 @@
 from __future__ import annotations
 
 
-def aggregate(cost, image, *, rbf: bool, t_max: int, sigma_space: float, sigma_color: float, kappa_a: int, backend):
+def aggregate(
+    cost,
+    image,
+    *,
+    rbf: bool,
+    t_max: int,
+    sigma_space: float,
+    sigma_color: float,
+    kappa_a: int,
+    backend,
+    overwrite_input: bool = False,
+):
     """Aggregate a cost volume with RBF, or with one plain bilateral pass (ablation).
 
     Parameters
@@ -17,6 +28,8 @@ def aggregate(cost, image, *, rbf: bool, t_max: int, sigma_space: float, sigma_c
     t_max, sigma_space, sigma_color, kappa_a
         Filter parameters (sigma_1, sigma_2 of eq. 3 in pixels and grey levels).
     backend : module
+    overwrite_input : bool
+        ``cost`` may be clobbered (RBF uses it as a buffer): one volume less at the peak.
 
     Returns
     -------
@@ -27,7 +40,7 @@ def aggregate(cost, image, *, rbf: bool, t_max: int, sigma_space: float, sigma_c
         if t_max == 0:
             return cost
         weights = backend.rbf_weights(image, float(sigma_space), float(sigma_color))
-        out = backend.rbf_filter(cost, weights, int(t_max))
+        out = backend.rbf_filter(cost, weights, int(t_max), overwrite_input=overwrite_input)
     else:
         if kappa_a == 0:
             return cost

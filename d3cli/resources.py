@@ -52,12 +52,23 @@ def _sgbm_disparities(max_disparity: int) -> int:
     return int(math.ceil((max_disparity + 1) / 16.0)) * 16
 
 
-def _d3_volumes(cfg: Config) -> int:
-    """Number of full cost volumes alive at once in the pipeline's finest level."""
+def _d3_volume_bytes(cfg: Config, pixels: int, n_disp: int) -> int:
+    """Bytes of the float32 cost volumes alive at once at the finest level.
+
+    RBF: the NCC volume, the filtered output and two scratch chunks of
+    ``kernels.cpu.RBF_CHUNK`` slices (more than one pass); the plain bilateral filter:
+    the NCC volume and its output.
+    """
+    from .kernels.cpu import RBF_CHUNK  # the owner of the chunk size; imported only for d3stereo
+
+    volume = pixels * n_disp * 4
     agg = cfg.aggregation
     if agg.rbf:
-        return 3 if agg.t_max >= 2 else 2  # cost + RBF double buffer (one buffer for one pass)
-    return 2 if agg.kappa_a > 0 else 1  # cost + the bilateral filter's output
+        if agg.t_max == 0:
+            return volume
+        scratch = min(agg.t_max - 1, 2) * pixels * min(RBF_CHUNK, n_disp) * 4
+        return 2 * volume + scratch
+    return 2 * volume if agg.kappa_a > 0 else volume
 
 
 def estimate_peak_bytes(shape, max_disparity: int, cfg: Config, *, method: str) -> int:
@@ -91,7 +102,7 @@ def estimate_peak_bytes(shape, max_disparity: int, cfg: Config, *, method: str) 
         if method == "pt-sgm":
             per_pixel += 2 * 4 * pixels  # the warped right image and the shift map
         return int(path_buffers + per_pixel)
-    volumes = _d3_volumes(cfg) * pixels * n_disp * 4
+    volumes = _d3_volume_bytes(cfg, pixels, n_disp)
     weights = pixels * 9 * 4
     return int(volumes + weights + D3_BYTES_PER_PIXEL * pixels)
 

@@ -169,6 +169,17 @@ def test_rbf_filter_matches_cpu(gpu, t_max):
     np.testing.assert_array_equal(gpu.to_host(d_cost), cost)  # input untouched
 
 
+@pytest.mark.parametrize("t_max", [2, 3])
+def test_rbf_filter_overwriting_its_input_matches_cpu(gpu, t_max):
+    rng = np.random.default_rng(9 + t_max)
+    img = rng.uniform(0, 255, (H, W)).astype(np.float32)
+    cost = random_volume(rng, H, W, 5)
+    weights = cpu.rbf_weights(img, 2.0, 20.0)
+    got = gpu.rbf_filter(gpu.to_device(cost), gpu.to_device(weights), t_max, True)
+    want = cpu.rbf_filter(cost.copy(), weights, t_max, True)
+    np.testing.assert_allclose(host(gpu, got), want, rtol=0, atol=COST_ATOL)
+
+
 @pytest.mark.parametrize("radius", [0, 2])
 def test_bilateral_filter_matches_cpu(gpu, radius):
     rng = np.random.default_rng(6 + radius)

@@ -144,6 +144,16 @@ def test_rbf_filter_matches_reference(shape, t_max):
     assert got is not cost
 
 
+@pytest.mark.parametrize("t_max", [0, 1, 2, 3])
+def test_rbf_filter_overwriting_its_input_gives_the_same_result(t_max):
+    rng = np.random.default_rng(t_max)
+    img = rng.uniform(0, 255, (9, 13)).astype(np.float32)
+    cost = random_volume(rng, 9, 13, 6)
+    weights = cpu.rbf_weights(img, 1.5, 12.0)
+    expected = cpu.rbf_filter(cost, weights, t_max)
+    np.testing.assert_array_equal(cpu.rbf_filter(cost.copy(), weights, t_max, True), expected)
+
+
 def test_rbf_filter_keeps_a_constant_volume():
     img = np.random.default_rng(8).uniform(0, 255, (9, 7)).astype(np.float32)
     cost = np.full((9, 7, 4), 0.37, np.float32)

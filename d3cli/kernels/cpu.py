@@ -186,7 +186,7 @@ def _rbf_pass(src, dst, weights):
                     dst[v, u, d] += wk * src[y, x, d]
 
 
-def rbf_filter(cost, weights, t_max):
+def rbf_filter(cost, weights, t_max, overwrite_input=False):
     """Recursive bilateral filtering: ``t_max`` passes of the 3x3 kernel (paper eq. 2).
 
     Parameters
@@ -195,20 +195,24 @@ def rbf_filter(cost, weights, t_max):
     weights : ndarray, float32, (H, W, 9)
         From :func:`rbf_weights`.
     t_max : int
+    overwrite_input : bool
+        Use ``cost`` as one of the two ping-pong buffers: two volumes at the peak instead
+        of three (the pipeline no longer needs the raw NCC volume).  The result is the
+        same; ``cost`` then holds garbage or the result itself.
 
     Returns
     -------
     ndarray, float32, (H, W, D)
-        A new array (``cost`` is left untouched).
+        A new array, or ``cost`` itself with ``overwrite_input`` and an even ``t_max``.
     """
     if t_max == 0:
-        return cost.copy()
+        return cost if overwrite_input else cost.copy()
     # The first pass reads ``cost`` directly, so no copy of the input volume is made.
     src = np.empty_like(cost)
     _rbf_pass(cost, src, weights)
     if t_max == 1:
         return src
-    dst = np.empty_like(cost)
+    dst = cost if overwrite_input else np.empty_like(cost)
     for _ in range(t_max - 1):
         _rbf_pass(src, dst, weights)
         src, dst = dst, src

@@ -332,7 +332,7 @@ def _rbf_pass(src, dst, weights):
     dst[v, u, d] = acc
 
 
-def rbf_filter(cost, weights, t_max):
+def rbf_filter(cost, weights, t_max, overwrite_input=False):
     """Recursive bilateral filtering: ``t_max`` passes of the 3x3 kernel (paper eq. 2).
 
     Parameters
@@ -341,23 +341,26 @@ def rbf_filter(cost, weights, t_max):
     weights : float32 (H, W, 9), device or host
         From :func:`rbf_weights`.
     t_max : int
+    overwrite_input : bool
+        Use ``cost`` as the second ping-pong buffer (two volumes at the peak, not three);
+        same result, ``cost`` is then clobbered (as ``kernels.cpu.rbf_filter``).
 
     Returns
     -------
     device array, float32, (H, W, D)
-        A new array (``cost`` is left untouched).
+        A new array, or ``cost`` itself with ``overwrite_input`` and an even ``t_max``.
     """
     d_cost = _dev(cost)
     d_weights = _dev(weights)
     if t_max == 0:
-        return _copy(d_cost)
+        return d_cost if overwrite_input else _copy(d_cost)
     h, w, n_disp = d_cost.shape
     blocks, threads = _grid_2d(w * n_disp, h)
     src = cuda.device_array(d_cost.shape, d_cost.dtype)
     _rbf_pass[blocks, threads](d_cost, src, d_weights)
     if t_max == 1:
         return src
-    dst = cuda.device_array(d_cost.shape, d_cost.dtype)
+    dst = d_cost if overwrite_input else cuda.device_array(d_cost.shape, d_cost.dtype)
     for _ in range(t_max - 1):
         _rbf_pass[blocks, threads](src, dst, d_weights)
         src, dst = dst, src
