@@ -118,6 +118,8 @@ class RefineConfig:
     fill: bool = True  # False: undecided pixels stay inf in disp.pfm
     fill_inside: bool = False  # non-occluded holes take the median of 4 directions, not the background side
     smooth_filled: bool = True  # 5x5 median over the filled pixels only
+    smooth_radius: int = 0  # edge-preserving smoothing of the result, box radius in pixels; 0: off
+    smooth_sigma: float = 1.0  # range sigma of that smoothing, disparity pixels (residual to the road model with PT)
 
 
 @dataclass(frozen=True)
@@ -208,6 +210,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "pt.min_inlier_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
     "pt.inlier_threshold": (lambda v: v > 0, "a number > 0"),
     "pt.iterations": (lambda v: 1 <= v <= 100, "an integer in [1, 100]"),
+    "refine.smooth_radius": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
+    "refine.smooth_sigma": (lambda v: v > 0, "a number > 0 (pixels)"),
     "camera.f": (lambda v: v is None or v > 0, "a positive number (pixels) or null"),
     "camera.baseline": (lambda v: v is None or v > 0, "a positive number (metres) or null"),
     "sgbm.block_size": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),

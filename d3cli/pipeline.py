@@ -14,11 +14,11 @@ from .diffusion import diffuse
 from .errors import InputError
 from .inheritance import inherit
 from .kernels import get_backend
-from .pt import RoadModel, fit_road_model
+from .pt import RoadModel, fit_road_model, shift_map
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
 from .rbf import aggregate
 from .seeds import decisive_seeds
-from .subpixel import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel
+from .subpixel import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity
 
 log = logging.getLogger(__name__)
 
@@ -371,6 +371,12 @@ class D3Stereo:
             out = fill_holes(
                 out, valid, smooth=cfg.refine.smooth_filled, occluded=occluded if cfg.refine.fill_inside else None
             )
+        if cfg.refine.smooth_radius > 0:
+            # edge-preserving smoothing of the finished map; the range weight compares
+            # residuals from the road plane when there is one (a slanted road is no edge)
+            plane = None if road is None else shift_map(road, out.shape, margin=0.0)
+            out = smooth_disparity(out, np.isfinite(out), radius=cfg.refine.smooth_radius,
+                                   sigma=cfg.refine.smooth_sigma, plane=plane)
         info["decided_share"] = float(valid.mean())
         return np.ascontiguousarray(out, dtype=np.float32), valid
 

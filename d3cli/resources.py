@@ -55,19 +55,14 @@ def _sgbm_disparities(max_disparity: int) -> int:
 def _d3_volume_bytes(cfg: Config, pixels: int, n_disp: int) -> int:
     """Bytes of the float32 cost volumes alive at once at the finest level.
 
-    RBF: the NCC volume, the filtered output and two scratch chunks of
-    ``kernels.cpu.RBF_CHUNK`` slices (more than one pass); the plain bilateral filter:
-    the NCC volume and its output.
+    RBF reuses the raw NCC volume as its second buffer (``overwrite_input``), so it
+    holds two volumes whatever ``t_max``; the plain bilateral filter holds the NCC volume
+    and its output.
     """
-    from .kernels.cpu import RBF_CHUNK  # the owner of the chunk size; imported only for d3stereo
-
     volume = pixels * n_disp * 4
     agg = cfg.aggregation
     if agg.rbf:
-        if agg.t_max == 0:
-            return volume
-        scratch = min(agg.t_max - 1, 2) * pixels * min(RBF_CHUNK, n_disp) * 4
-        return 2 * volume + scratch
+        return 2 * volume if agg.t_max > 0 else volume
     return 2 * volume if agg.kappa_a > 0 else volume
 
 

@@ -305,3 +305,71 @@ def test_empty_or_wrongly_shaped_input_is_an_input_error(matcher, shape):
     img = np.zeros(shape, np.float32)
     with pytest.raises(InputError):
         matcher.compute(img, img, max_disparity=1)
+
+
+# ----------------------------------------------------------------------------- smoothing (refine.smooth_radius)
+def test_smooth_disparity_averages_noise_and_keeps_a_step():
+    from d3cli.subpixel import smooth_disparity
+
+    rng = np.random.default_rng(3)
+    truth = np.where(np.arange(80)[None, :] < 40, 20.0, 30.0) * np.ones((60, 1))
+    noisy = (truth + rng.normal(0.0, 0.3, truth.shape)).astype(np.float32)
+    out = smooth_disparity(noisy, np.ones(truth.shape, bool), radius=5, sigma=1.0)
+    inner = np.s_[10:50, 10:70]
+    assert np.abs(out - truth)[inner].std() < 0.5 * np.abs(noisy - truth)[inner].std()
+    # The 10 px step stays a step: the columns next to it keep their own side's level.
+    assert np.abs(out[:, 38:40] - 20.0).max() < 0.3
+    assert np.abs(out[:, 40:42] - 30.0).max() < 0.3
+
+
+def test_smooth_disparity_residual_to_plane_and_linear_ramp():
+    from d3cli.subpixel import smooth_disparity
+
+    rows, cols = np.mgrid[0:50, 0:70].astype(np.float32)
+    ramp = (40.0 + 0.3 * rows + 0.1 * cols).astype(np.float32)
+    valid = np.ones(ramp.shape, bool)
+    # A linear ramp is kept away from the border (symmetric box); the range levels of the
+    # piecewise-linear filter leave an error of a few thousandths of a pixel.
+    out = smooth_disparity(ramp, valid, radius=4, sigma=1.0)
+    np.testing.assert_allclose(out[6:-6, 6:-6], ramp[6:-6, 6:-6], atol=0.01)
+    # With the ramp as plane the residual is 0 everywhere: exact even at the border.
+    out = smooth_disparity(ramp, valid, radius=4, sigma=0.5, plane=ramp)
+    np.testing.assert_allclose(out, ramp, atol=1e-4)
+
+
+def test_smooth_disparity_ignores_invalid_and_keeps_inf():
+    from d3cli.subpixel import smooth_disparity
+
+    disp = np.full((20, 20), 10.0, np.float32)
+    disp[5, 5] = np.inf
+    disp[10, 10] = 10.4  # not valid: never averaged into others, itself smoothed
+    valid = np.isfinite(disp)
+    valid[10, 10] = False
+    out = smooth_disparity(disp, valid, radius=2, sigma=1.0)
+    assert np.isinf(out[5, 5])
+    np.testing.assert_allclose(np.delete(out.ravel(), 5 * 20 + 5), 10.0, atol=1e-5)
+    same = smooth_disparity(disp, valid, radius=0, sigma=1.0)
+    assert same is not disp and np.array_equal(same, disp)
+
+
+def test_smooth_keys_are_checked_by_the_config():
+    from d3cli import ConfigError
+
+    cfg = load_config(None, ["refine.smooth_radius=3", "refine.smooth_sigma=0.5"])
+    assert cfg.refine.smooth_radius == 3 and cfg.refine.smooth_sigma == 0.5
+    with pytest.raises(ConfigError, match="smooth_radius"):
+        load_config(None, ["refine.smooth_radius=-1"])
+    with pytest.raises(ConfigError, match="smooth_sigma"):
+        load_config(None, ["refine.smooth_sigma=0"])
+
+
+def test_smooth_radius_changes_the_output_and_lowers_the_error_of_a_noisy_plane():
+    left, right, gt = slanted_scene()
+    rng = np.random.default_rng(0)
+    noisy_l = np.clip(left + rng.normal(0, 10, left.shape), 0, 255).astype(np.float32)
+    noisy_r = np.clip(right + rng.normal(0, 10, right.shape), 0, 255).astype(np.float32)
+    plain = D3Stereo(cfg()).compute(noisy_l, noisy_r, max_disparity=32)
+    smooth = D3Stereo(cfg("refine.smooth_radius=3")).compute(noisy_l, noisy_r, max_disparity=32)
+    mask = interior(32)
+    assert not np.array_equal(plain.disparity, smooth.disparity)
+    assert end_point_error(smooth, gt, mask) < end_point_error(plain, gt, mask)
