@@ -16,6 +16,7 @@ Usage::
     python scripts/bench_speed.py --size 2560x1440 --max-disparity 256
     python scripts/bench_speed.py --pair ../shared/data/middlebury2014-teddy-Q
     python scripts/bench_speed.py --methods sgbm d3stereo d3stereo+pt --backend cuda
+    python scripts/bench_speed.py -c configs/road.yaml --methods sgbm pt-sgm d3stereo d3stereo+pt
 
 Method names: ``sgbm``, ``pt-sgm``, ``d3stereo``, ``d3stereo+pt`` (``pt.enabled=true``).
 """
@@ -82,7 +83,7 @@ def _child(spec: dict) -> dict:
     overrides = [f"run.backend={spec['backend']}"]
     if method == "d3stereo+pt":
         overrides.append("pt.enabled=true")
-    cfg = load_config(None, overrides)
+    cfg = load_config(spec["config"], overrides)
     base_method = "d3stereo" if method.startswith("d3stereo") else method
     rss0 = _rss_mb()
     t0 = time.perf_counter()
@@ -114,6 +115,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=3, help="seed of the synthetic pair")
     parser.add_argument("--max-disparity", type=int, default=None)
     parser.add_argument("--methods", nargs="+", default=["sgbm", "d3stereo", "d3stereo+pt"], choices=METHODS)
+    parser.add_argument("-c", "--config", default=None, help="YAML config for every method (e.g. configs/road.yaml)")
     parser.add_argument("--backend", default="cpu", choices=("cpu", "cuda", "auto"))
     parser.add_argument("--repeats", type=int, default=3, help="warm calls per method (median reported)")
     parser.add_argument("--json", dest="json_out", help="also write the rows to this JSON file")
@@ -130,6 +132,7 @@ def main(argv=None) -> int:
         spec = {
             "pair": args.pair, "size": [width, height], "seed": args.seed, "cache": str(cache),
             "max_disparity": args.max_disparity, "method": method, "backend": args.backend, "repeats": args.repeats,
+            "config": args.config,
         }
         proc = subprocess.run(
             [sys.executable, __file__, "--child", json.dumps(spec)], capture_output=True, text=True, check=False
@@ -142,7 +145,7 @@ def main(argv=None) -> int:
         return 1
     ref = next((r for r in rows if r["method"] == "sgbm"), None)
     print(f"pair {rows[0]['pair']} ({rows[0]['size']}, max disparity {rows[0]['max_disparity']}), "
-          f"{os.cpu_count()} CPUs, backend {args.backend}")
+          f"{os.cpu_count()} CPUs, backend {args.backend}, config {args.config or 'defaults'}")
     print(f"{'method':<13} {'backend':>8} {'cold s':>8} {'warm s':>8} {'x SGBM':>7} {'peak MB':>8} {'x SGBM':>7}")
     for r in rows:
         t_ratio = r["warm_s"] / ref["warm_s"] if ref else float("nan")
