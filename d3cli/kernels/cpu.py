@@ -100,17 +100,40 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance):
     for v in prange(h):
         v0 = max(0, v - r)
         v1 = min(h - 1, v + r)
-        # prefix[u + 1, d]: sum over columns <= u of the column sums of L(y, u) R(y, u - d)
+        # acc[u, d]: column sum over the window rows of L(y, u) R(y, u - d); the rows are
+        # added in the same order as a per-cell loop would, with d innermost (vectorised)
+        acc = np.zeros((w, n_disp), np.float64)
+        for y in range(v0, v1 + 1):
+            for u in range(w):
+                lv = np.float64(left[y, u])
+                for d in range(min(n_disp, u + 1)):
+                    acc[u, d] += lv * np.float64(right[y, u - d])
+        # prefix[u + 1, d]: running sum of acc over the columns <= u
         prefix = np.zeros((w + 1, n_disp), np.float64)
         for u in range(w):
             for d in range(n_disp):
-                s = 0.0
-                if u - d >= 0:
-                    for y in range(v0, v1 + 1):
-                        s += np.float64(left[y, u]) * np.float64(right[y, u - d])
-                prefix[u + 1, d] = prefix[u, d] + s
+                prefix[u + 1, d] = prefix[u, d] + acc[u, d]
+        # Window sums of an unclipped window (columns c - r .. c + r), once per column
+        # instead of once per cell; the same box sums, so the same values.
+        win_l = np.zeros(w, np.float64)
+        win_ll = np.zeros(w, np.float64)
+        win_r = np.zeros(w, np.float64)
+        win_rr = np.zeros(w, np.float64)
+        for c in range(r, w - r):
+            win_l[c] = _box_sum(ii_l, v0, c - r, v1, c + r)
+            win_ll[c] = _box_sum(ii_ll, v0, c - r, v1, c + r)
+            win_r[c] = _box_sum(ii_r, v0, c - r, v1, c + r)
+            win_rr[c] = _box_sum(ii_rr, v0, c - r, v1, c + r)
+        n_full = (v1 - v0 + 1) * (2 * r + 1)
         for u in range(w):
-            for d in range(n_disp):
+            # d < d_fast: neither window is clipped (a branch-free loop that vectorises)
+            d_fast = min(n_disp, u - r + 1) if u + r <= w - 1 else 0
+            sl_u = win_l[u]
+            sll_u = win_ll[u]
+            for d in range(d_fast):
+                slr = prefix[u + r + 1, d] - prefix[u - r, d]
+                cost[v, u, d] = _ncc_cost(n_full, sl_u, sll_u, win_r[u - d], win_rr[u - d], slr, min_variance)
+            for d in range(max(d_fast, 0), n_disp):
                 if u - d < 0:
                     cost[v, u, d] = 1.0
                     continue
