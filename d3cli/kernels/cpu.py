@@ -194,19 +194,41 @@ def rbf_weights(img, sigma_space, sigma_color):
 
 @njit(parallel=True, cache=True)
 def _rbf_pass(src, dst, weights):
+    """One 3x3 pass of eq. 2 from ``src`` into ``dst``.
+
+    The nine terms are added in slot order k = 0..8 in one loop over the disparities
+    (vectorised; one write per cell).  Neighbours outside the image have weight 0 and
+    read a clamped, in-image cell: adding +0.0 leaves the (non-negative) sum unchanged,
+    so the result is the same as skipping them.
+    """
     h, w, n_disp = src.shape
     for v in prange(h):
+        ym = max(v - 1, 0)
+        yp = min(v + 1, h - 1)
         for u in range(w):
+            xm = max(u - 1, 0)
+            xp = min(u + 1, w - 1)
+            w0 = weights[v, u, 0]
+            w1 = weights[v, u, 1]
+            w2 = weights[v, u, 2]
+            w3 = weights[v, u, 3]
+            w4 = weights[v, u, 4]
+            w5 = weights[v, u, 5]
+            w6 = weights[v, u, 6]
+            w7 = weights[v, u, 7]
+            w8 = weights[v, u, 8]
             for d in range(n_disp):
-                dst[v, u, d] = 0.0
-            for k in range(9):
-                wk = weights[v, u, k]
-                if wk == 0.0:
-                    continue
-                y = v + k // 3 - 1
-                x = u + k % 3 - 1
-                for d in range(n_disp):
-                    dst[v, u, d] += wk * src[y, x, d]
+                acc = np.float32(0.0)
+                acc += w0 * src[ym, xm, d]
+                acc += w1 * src[ym, u, d]
+                acc += w2 * src[ym, xp, d]
+                acc += w3 * src[v, xm, d]
+                acc += w4 * src[v, u, d]
+                acc += w5 * src[v, xp, d]
+                acc += w6 * src[yp, xm, d]
+                acc += w7 * src[yp, u, d]
+                acc += w8 * src[yp, xp, d]
+                dst[v, u, d] = acc
 
 
 def rbf_filter(cost, weights, t_max, overwrite_input=False):
