@@ -11,6 +11,8 @@ reproduces on every run; hangs show up as a suite that does not finish.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, event, given, settings
@@ -23,7 +25,9 @@ from d3cli.errors import ConfigError, D3Error
 from d3cli.pipeline import D3Stereo, DisparityResult
 from d3cli.resources import estimate_peak_bytes
 
-SETTINGS = settings(max_examples=80, deadline=None, derandomize=True, database=None,
+# D3_HYPOTHESIS_EXAMPLES=2000 for a longer exploratory run; CI keeps 80 fixed examples.
+SETTINGS = settings(max_examples=int(os.environ.get("D3_HYPOTHESIS_EXAMPLES", "80")), deadline=None,
+                    derandomize=True, database=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 FEW = settings(SETTINGS, max_examples=25)
 
@@ -138,6 +142,12 @@ KEYS = {
     "refine.fill": st.booleans(),
     "refine.fill_inside": st.booleans(),
     "refine.smooth_filled": st.booleans(),
+    "refine.smooth_radius": st.integers(-1, 4),
+    "refine.smooth_sigma": st.floats(-1, 3, allow_nan=False),
+    "pt.enabled": st.booleans(),
+    "pt.margin": st.integers(0, 10),
+    "pt.slack": st.integers(-1, 3),
+    "pt.min_inlier_share": st.floats(-0.5, 1.5, allow_nan=False),
     "sgbm.block_size": st.integers(-1, 13),
     "sgbm.mode": st.sampled_from(["sgbm", "hh", "3way", "hh4", "fast"]),
     "sgbm.uniqueness_ratio": st.integers(-1, 101),
