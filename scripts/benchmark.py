@@ -127,6 +127,15 @@ def _methods_of(rows):
     return [k for k in rows[0] if k in VARIANTS]
 
 
+def _family_rows(rows, keys):
+    """(family, method name, means) in table order: families sorted, overall last."""
+    tables = {name: family_means(rows, name, keys) for name in _methods_of(rows)}
+    first = next(iter(tables.values()))
+    for fam in sorted(first, key=lambda f: (f == "overall", f)):
+        for name, table in tables.items():
+            yield fam, name, table[fam]
+
+
 def markdown_table(rows, *, photometric=False) -> str:
     """Per-family table of every variant, in the order run."""
     keys = PHOTO_KEYS if photometric else KEYS
@@ -135,34 +144,25 @@ def markdown_table(rows, *, photometric=False) -> str:
     else:
         head = "| family | pairs | method | EPE | PEP0.5 % | PEP1 % | PEP2 % | PEP3 % | density % | time s |"
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
-    tables = {name: family_means(rows, name, keys) for name in _methods_of(rows)}
-    first = next(iter(tables.values()))
-    for fam in sorted(first, key=lambda f: (f == "overall", f)):
-        for name, table in tables.items():
-            m = table[fam]
-            if photometric:
-                cells = f"{m['mse']:.1f} | {m['psnr']:.2f} | {m['ssim']:.3f} | {m['coverage']:.1f}"
-            else:
-                cells = (f"{m['epe']:.3f} | {m['pep_0.5']:.2f} | {m['pep_1']:.2f} | {m['pep_2']:.2f} | "
-                         f"{m['pep_3']:.2f} | {m['density']:.1f}")
-            lines.append(f"| {fam} | {m['n']} | {LABELS[name]} | {cells} | {m['time']:.3f} |")
+    for fam, name, m in _family_rows(rows, keys):
+        if photometric:
+            cells = f"{m['mse']:.1f} | {m['psnr']:.2f} | {m['ssim']:.3f} | {m['coverage']:.1f}"
+        else:
+            cells = (f"{m['epe']:.3f} | {m['pep_0.5']:.2f} | {m['pep_1']:.2f} | {m['pep_2']:.2f} | "
+                     f"{m['pep_3']:.2f} | {m['density']:.1f}")
+        lines.append(f"| {fam} | {m['n']} | {LABELS[name]} | {cells} | {m['time']:.3f} |")
     return "\n".join(lines)
 
 
 def print_summary(rows, *, photometric=False) -> None:
     """One line per family and variant."""
-    keys = PHOTO_KEYS if photometric else KEYS
-    tables = {name: family_means(rows, name, keys) for name in _methods_of(rows)}
-    first = next(iter(tables.values()))
-    for fam in sorted(first, key=lambda f: (f == "overall", f)):
-        for name, table in tables.items():
-            m = table[fam]
-            if photometric:
-                text = f"MSE {m['mse']:7.1f} PSNR {m['psnr']:6.2f} SSIM {m['ssim']:.3f} cov {m['coverage']:5.1f}"
-            else:
-                text = (f"EPE {m['epe']:.3f} PEP0.5 {m['pep_0.5']:6.2f} PEP1 {m['pep_1']:5.2f} "
-                        f"PEP2 {m['pep_2']:5.2f} dens {m['density']:5.1f}")
-            print(f"{fam:16s} n={m['n']:2d} {LABELS[name]:18s} {text} t {m['time']:6.2f}s")
+    for fam, name, m in _family_rows(rows, PHOTO_KEYS if photometric else KEYS):
+        if photometric:
+            text = f"MSE {m['mse']:7.1f} PSNR {m['psnr']:6.2f} SSIM {m['ssim']:.3f} cov {m['coverage']:5.1f}"
+        else:
+            text = (f"EPE {m['epe']:.3f} PEP0.5 {m['pep_0.5']:6.2f} PEP1 {m['pep_1']:5.2f} "
+                    f"PEP2 {m['pep_2']:5.2f} dens {m['density']:5.1f}")
+        print(f"{fam:16s} n={m['n']:2d} {LABELS[name]:18s} {text} t {m['time']:6.2f}s")
 
 
 def main(argv=None) -> int:

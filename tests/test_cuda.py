@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import textured_pair
+from volumes import mark_missing_cells, random_images, random_volume, sparse_map, structured_volume
 
 from d3cli.kernels import cpu, cuda_status
 
@@ -43,41 +44,6 @@ def small_blocks(gpu, monkeypatch):
     """Blocks of 4 x 4 (2D) and 8 (1D) threads: many partly filled blocks on odd sizes."""
     monkeypatch.setattr(gpu, "BLOCK_2D", (4, 4))
     monkeypatch.setattr(gpu, "BLOCK_1D", 8)
-
-
-# ----------------------------------------------------------------------------- fixtures
-def random_images(rng, shape=(H, W)):
-    return (
-        rng.uniform(0, 255, shape).astype(np.float32),
-        rng.uniform(0, 255, shape).astype(np.float32),
-    )
-
-
-def mark_missing_cells(cost):
-    for u in range(cost.shape[1]):
-        cost[:, u, u + 1:] = 1.0
-    return cost
-
-
-def random_volume(rng, h, w, n_disp, *, share_of_ones=0.1, levels=None):
-    """Costs uniform in [0, 1), some cells = 1; ``levels`` quantises them to force ties."""
-    cost = rng.random((h, w, n_disp))
-    if levels:
-        cost = np.floor(cost * levels) / levels
-    cost[rng.random(cost.shape) < share_of_ones] = 1.0
-    return mark_missing_cells(cost.astype(np.float32))
-
-
-def structured_volume(rng, true_disp, n_disp, *, noise=0.05, slope=0.15, floor=0.1):
-    d = np.arange(n_disp)[None, None, :]
-    cost = floor + slope * np.abs(d - true_disp[:, :, None]) + noise * rng.random(true_disp.shape + (n_disp,))
-    return mark_missing_cells(np.clip(cost, 0, 0.999).astype(np.float32))
-
-
-def sparse_map(rng, shape, n_disp, share=0.15):
-    disp = rng.integers(0, n_disp, shape).astype(np.int32)
-    disp[rng.random(shape) >= share] = -1
-    return disp
 
 
 def host(gpu, array):
@@ -121,7 +87,7 @@ def test_arrays_round_trip_and_host_inputs_are_accepted(gpu):
 @pytest.mark.parametrize("window, max_disparity, band_rows", [(3, 6, None), (5, 7, 3), (1, 0, None)])
 def test_ncc_cost_volume_matches_cpu(gpu, monkeypatch, window, max_disparity, band_rows):
     rng = np.random.default_rng(window)
-    left, right = random_images(rng)
+    left, right = random_images(rng, (H, W))
     left[2:9, 1:6] = 117.0  # flat windows: cost 1
     right[6:, 15:] = 40.0
     if band_rows:  # a scratch of 3 rows: the volume is computed in 4 bands
@@ -364,7 +330,7 @@ def test_a_level_stays_on_the_device(gpu, monkeypatch):
     """Cost, aggregation, seeds, diffusion, inheritance and sub-pixel on device arrays:
     no upload at all, and only counters (<= 2 numbers) come back to the host."""
     rng = np.random.default_rng(40)
-    left, right = random_images(rng)
+    left, right = random_images(rng, (H, W))
     d_left, d_right = gpu.to_device(left), gpu.to_device(right)
     spy = TransferSpy(gpu, monkeypatch)
     cost = gpu.ncc_cost_volume(d_left, d_right, 5, 3, 1e-2)

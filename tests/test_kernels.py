@@ -14,6 +14,7 @@ import numba
 import numpy as np
 import pytest
 import reference as ref
+from volumes import mark_missing_cells, random_images, random_volume, sparse_map, structured_volume
 
 from d3cli.kernels import cpu
 from d3cli.pyramid import build_pyramid, downsample, level_max_disparity
@@ -21,43 +22,6 @@ from d3cli.subpixel import fill_holes
 
 COST_ATOL = 1e-5
 SHAPES = [(7, 9), (13, 11), (1, 12), (12, 1), (1, 1), (5, 6)]
-
-
-# ----------------------------------------------------------------------------- fixtures
-def random_images(rng, shape):
-    return (
-        rng.uniform(0, 255, shape).astype(np.float32),
-        rng.uniform(0, 255, shape).astype(np.float32),
-    )
-
-
-def mark_missing_cells(cost):
-    """Cells whose right pixel u - d is outside the image hold 1 (the volume convention)."""
-    for u in range(cost.shape[1]):
-        cost[:, u, u + 1:] = 1.0
-    return cost
-
-
-def random_volume(rng, h, w, n_disp, *, share_of_ones=0.1, levels=None):
-    """Costs uniform in [0, 1), some cells = 1; ``levels`` quantises them to force ties."""
-    cost = rng.random((h, w, n_disp))
-    if levels:
-        cost = np.floor(cost * levels) / levels
-    cost[rng.random(cost.shape) < share_of_ones] = 1.0
-    return mark_missing_cells(cost.astype(np.float32))
-
-
-def structured_volume(rng, true_disp, n_disp, *, noise=0.05, slope=0.15, floor=0.1):
-    """Cost curves with a clear minimum at ``true_disp`` (H, W), plus noise."""
-    d = np.arange(n_disp)[None, None, :]
-    cost = floor + slope * np.abs(d - true_disp[:, :, None]) + noise * rng.random(true_disp.shape + (n_disp,))
-    return mark_missing_cells(np.clip(cost, 0, 0.999).astype(np.float32))
-
-
-def sparse_map(rng, shape, n_disp, share=0.15):
-    disp = rng.integers(0, n_disp, shape).astype(np.int32)
-    disp[rng.random(shape) >= share] = -1
-    return disp
 
 
 # ----------------------------------------------------------------------------- NCC cost
@@ -350,8 +314,6 @@ def test_inheritance_with_prc_and_zero_disparity_matches_reference():
             coarse = np.where(rng.random((h // 2, w // 2)) < 0.8, 0, -1).astype(np.int32)
             got = cpu.inherit(cost, coarse, True, 1.05, 1e-3)
             np.testing.assert_array_equal(got, ref.ref_inherit(cost, coarse, True, 1.05, 1e-3))
-
-
 
 
 def test_inheritance_with_prc_matches_reference():
