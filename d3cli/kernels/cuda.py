@@ -61,6 +61,19 @@ def _grid_2d(nx, ny):
     return (max(1, -(-int(nx) // bx)), max(1, -(-int(ny) // by))), (bx, by)
 
 
+def _per_pixel(kernel, shape, dtype, *args):
+    """Launch ``kernel(*args, out)`` with one thread per pixel of an (H, W) map.
+
+    ``out`` is a new (H, W) device array of ``dtype`` (the kernel's last argument), and
+    is returned.
+    """
+    h, w = int(shape[0]), int(shape[1])
+    out = cuda.device_array((h, w), dtype)
+    blocks, threads = _grid_2d(w, h)
+    kernel[blocks, threads](*args, out)
+    return out
+
+
 def _f64(x):
     """A float scalar argument as float64 (the CPU drivers' type, also under the simulator)."""
     return np.float64(x)
@@ -422,11 +435,9 @@ def _seeds_kernel(cost, pkrn_min, epsilon, lr_tolerance, exclusion, out):
 def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion):
     """Sparse seed map at the coarsest level (DESIGN step 4); int32 (H, W), -1 undecided."""
     d_cost = _dev(cost)
-    h, w, _ = d_cost.shape
-    out = cuda.device_array((h, w), np.int32)
-    blocks, threads = _grid_2d(w, h)
-    _seeds_kernel[blocks, threads](d_cost, _f64(pkrn_min), _f64(epsilon), int(lr_tolerance), int(exclusion), out)
-    return out
+    return _per_pixel(
+        _seeds_kernel, d_cost.shape, np.int32, d_cost, _f64(pkrn_min), _f64(epsilon), int(lr_tolerance), int(exclusion)
+    )
 
 
 @cuda.jit
@@ -443,11 +454,7 @@ def _min_cost_kernel(cost, out):
 def min_cost(cost):
     """Least cost of every pixel over all disparities; float32 (H, W) device array."""
     d_cost = _dev(cost)
-    h, w, _ = d_cost.shape
-    out = cuda.device_array((h, w), np.float32)
-    blocks, threads = _grid_2d(w, h)
-    _min_cost_kernel[blocks, threads](d_cost, out)
-    return out
+    return _per_pixel(_min_cost_kernel, d_cost.shape, np.float32, d_cost)
 
 
 # ----------------------------------------------------------------------------- diffusion (step 5)
@@ -618,12 +625,9 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
         Sparse map D_i^S.
     """
     d_cost = _dev(cost)
-    d_coarse = _dev(coarse)
-    h, w, _ = d_cost.shape
-    out = cuda.device_array((h, w), np.int32)
-    blocks, threads = _grid_2d(w, h)
-    _inherit_kernel[blocks, threads](d_cost, d_coarse, bool(prc), _f64(dfm_pkrn_min), _f64(epsilon), out)
-    return out
+    return _per_pixel(
+        _inherit_kernel, d_cost.shape, np.int32, d_cost, _dev(coarse), bool(prc), _f64(dfm_pkrn_min), _f64(epsilon)
+    )
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)
@@ -636,13 +640,8 @@ def _subpixel_kernel(cost, disp, out):
 
 def subpixel(cost, disp):
     """Parabola sub-pixel refinement (DESIGN step 8); float32 (H, W), inf where undecided."""
-    d_cost = _dev(cost)
     d_disp = _dev(disp)
-    h, w = d_disp.shape
-    out = cuda.device_array((h, w), np.float32)
-    blocks, threads = _grid_2d(w, h)
-    _subpixel_kernel[blocks, threads](d_cost, d_disp, out)
-    return out
+    return _per_pixel(_subpixel_kernel, d_disp.shape, np.float32, _dev(cost), d_disp)
 
 
 # ----------------------------------------------------------------------------- perspective transformation (step 6)
@@ -669,11 +668,7 @@ def pt_warp(right, a0, b1, b2, delta):
         Bilinear samples; columns beyond the image replicate the border.
     """
     d_right = _dev(right)
-    h, w = d_right.shape
-    out = cuda.device_array((h, w), np.float32)
-    blocks, threads = _grid_2d(w, h)
-    _pt_warp_kernel[blocks, threads](d_right, _f64(a0), _f64(b1), _f64(b2), _f64(delta), out)
-    return out
+    return _per_pixel(_pt_warp_kernel, d_right.shape, np.float32, d_right, _f64(a0), _f64(b1), _f64(b2), _f64(delta))
 
 
 @cuda.jit
@@ -698,11 +693,7 @@ def pt_restore(disp, a0, b1, b2, delta):
     device array, float32, (H, W)
     """
     d_disp = _dev(disp)
-    h, w = d_disp.shape
-    out = cuda.device_array((h, w), np.float32)
-    blocks, threads = _grid_2d(w, h)
-    _pt_restore_kernel[blocks, threads](d_disp, _f64(a0), _f64(b1), _f64(b2), _f64(delta), out)
-    return out
+    return _per_pixel(_pt_restore_kernel, d_disp.shape, np.float32, d_disp, _f64(a0), _f64(b1), _f64(b2), _f64(delta))
 
 
 # ----------------------------------------------------------------------------- array handling
@@ -731,12 +722,7 @@ def _merge_kernel(primary, fallback, out):
 def merge_sparse(primary, fallback):
     """``primary`` where decided (>= 0), else ``fallback``; int32 (H, W), a new device map."""
     d_primary = _dev(primary)
-    d_fallback = _dev(fallback)
-    h, w = d_primary.shape
-    out = cuda.device_array((h, w), np.int32)
-    blocks, threads = _grid_2d(w, h)
-    _merge_kernel[blocks, threads](d_primary, d_fallback, out)
-    return out
+    return _per_pixel(_merge_kernel, d_primary.shape, np.int32, d_primary, _dev(fallback))
 
 
 @cuda.jit
