@@ -210,7 +210,7 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
     """
     from .io import to_grey
     from .kernels import cpu
-    from .pt import fit_road_model
+    from .pt import fit_road_model, match_in_right_image
     from .pyramid import build_pyramid, level_max_disparity, usable_levels
 
     if max_disparity < 1:
@@ -234,13 +234,12 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
         iterations=pt.iterations,
         min_inlier_share=pt.min_inlier_share,
     )
-    narrow = 2 * pt.margin + pt.slack
-    pt_info = model.to_info() | {"narrow_range": narrow, "fallback": not model.road_like}
+    narrow = pt.narrow_range
+    pt_info = model.to_info(narrow_range=narrow)
     if not model.road_like:
-        msg = f"perspective transformation skipped: {model.reason}; searched the full range 0-{max_disparity}"
+        msg = model.fallback_warning(max_disparity)
         log.warning(msg)
         result = sgbm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.sgbm)
-        pt_info["narrow_range"] = None
         result.info.update(method="pt-sgm", pt=pt_info)
         result.warnings.append(msg)
         result.timings["total"] = time.perf_counter() - t0
@@ -251,7 +250,7 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
     # Range ends stand for disparities outside the narrow range (not road): holes.
     valid &= (d_prime > 0) & (d_prime < narrow)
     disp = cpu.pt_restore(np.where(valid, d_prime, np.inf).astype(np.float32), model.a0, model.b1, model.b2, margin)
-    valid &= np.arange(disp.shape[1])[None, :] - disp >= -0.5  # match inside the right image
+    valid &= match_in_right_image(disp)
     disp[~valid] = np.inf
     warnings = [] if valid.any() else ["pt-sgm found no valid disparity; the output is empty"]
     if cfg.sgbm.fill:

@@ -108,6 +108,11 @@ class PTConfig:
     inlier_threshold: float = 1.0  # |residual| in coarse-level pixels counted as inlier
     iterations: int = 10  # iteratively re-weighted least-squares rounds
 
+    @property
+    def narrow_range(self) -> int:
+        """Largest disparity searched after the transformation: ``2 margin + slack``."""
+        return 2 * self.margin + self.slack
+
 
 @dataclass(frozen=True)
 class RefineConfig:

@@ -14,18 +14,13 @@ from .diffusion import diffuse
 from .errors import InputError
 from .inheritance import inherit
 from .kernels import get_backend
-from .pt import RoadModel, fit_road_model, shift_map
+from .pt import RoadModel, fit_road_model, match_in_right_image, shift_map
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
 from .rbf import aggregate
 from .seeds import decisive_seeds
 from .subpixel import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity
 
 log = logging.getLogger(__name__)
-
-# With PT, an estimate at either end of the narrow range [0, 2 margin + slack] most
-# likely stands for a disparity outside it (obstacle, kerb, deep pothole): make it a
-# hole for the filling rather than keep a clipped value.
-PT_DROP_RANGE_ENDS = True
 
 
 @dataclass
@@ -138,7 +133,7 @@ class D3Stereo:
         road = None
         search = dmax
         if cfg.pt.enabled:
-            road, pyr_r, search = self._perspective(pyr_l, pyr_r, grey_r, dmax, timings, info, warnings)
+            road, pyr_r, search = self._perspective(pyr_l, pyr_r, dmax, timings, info, warnings)
         match = self._match(pyr_l, pyr_r, search, timings)
         info["per_level"] = match.per_level
         if match.per_level[0].get("seeds", 0) == 0:
@@ -281,7 +276,7 @@ class D3Stereo:
                 cost = None  # free the coarse volume before the next, larger one
         return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level)
 
-    def _perspective(self, pyr_l, pyr_r, grey_r, dmax: int, timings: dict, info: dict, warnings: list):
+    def _perspective(self, pyr_l, pyr_r, dmax: int, timings: dict, info: dict, warnings: list):
         """Step 6: full-range pass at the coarsest level, robust road fit, warped right.
 
         Returns
@@ -311,11 +306,10 @@ class D3Stereo:
         t2 = time.perf_counter()
         timings["pt_coarse"] = t1 - t0
         timings["pt_fit"] = t2 - t1
-        narrow = 2 * pt.margin + pt.slack
-        info["pt"] = model.to_info() | {"narrow_range": narrow, "fallback": not model.road_like}
+        narrow = pt.narrow_range
+        info["pt"] = model.to_info(narrow_range=narrow)
         if not model.road_like:
-            info["pt"]["narrow_range"] = None
-            msg = f"perspective transformation skipped: {model.reason}; searched the full range 0-{dmax}"
+            msg = model.fallback_warning(dmax)
             log.warning(msg)
             warnings.append(msg)
             return None, pyr_r, dmax
@@ -324,7 +318,8 @@ class D3Stereo:
             model.a0, model.a1, info["pt"]["theta_deg"], info["pt"]["theta_deg"],
             100 * model.inlier_share, model.n_points, narrow,
         )
-        warped = backend.pt_warp(backend.to_device(grey_r), model.a0, model.b1, model.b2, float(pt.margin))
+        # pyr_r[0] is the full-resolution right image, already on the backend
+        warped = backend.pt_warp(pyr_r[0], model.a0, model.b1, model.b2, float(pt.margin))
         pyr_r = [backend.to_device(img) for img in build_pyramid(backend.to_host(warped), levels)]
         timings["pt_warp"] = time.perf_counter() - t2
         return model, pyr_r, narrow
@@ -382,10 +377,11 @@ class D3Stereo:
 
     def _pt_valid(self, valid: np.ndarray, disp: np.ndarray, out: np.ndarray, info: dict) -> np.ndarray:
         """Validity after PT: drop range-end estimates and matches outside the right image."""
-        narrow = 2 * self.cfg.pt.margin + self.cfg.pt.slack
-        ends = valid & ((disp == 0) | (disp == narrow)) if PT_DROP_RANGE_ENDS else np.zeros_like(valid)
-        cols = np.arange(out.shape[1], dtype=np.float32)[None, :]
-        outside = valid & ~(cols - out >= -0.5)
+        # An estimate at either end of the narrow range most likely stands for a disparity
+        # outside it (obstacle, kerb, deep pothole): a hole for the filling, not a clipped
+        # value (measured: EPE 0.317 vs 0.340 kept, see configs/road.yaml).
+        ends = valid & ((disp == 0) | (disp == self.cfg.pt.narrow_range))
+        outside = valid & ~match_in_right_image(out)
         info["pt"]["range_end_share"] = float(ends.mean())
         info["pt"]["outside_share"] = float(outside.mean())
         return valid & ~ends & ~outside

@@ -13,8 +13,8 @@ potholes do not bend it.  The right image is then warped by the per-pixel shift
 the narrow range [0, 2 delta + slack], and the disparity is restored exactly with
 ``d = d' (1 - b2) + s(u, v)`` (``kernels.*.pt_restore``).
 
-NumPy helpers :func:`shift_map`, :func:`warp_right` and :func:`restore_disparity` do
-the same on the host (PT-SGM and tests).
+:func:`shift_map` gives the shift on the host (the road plane of the smoothing in
+step 8); :func:`match_in_right_image` is the validity test after restoring.
 """
 
 from __future__ import annotations
@@ -71,11 +71,20 @@ class RoadModel:
         """Model disparity at full-resolution pixel coordinates (arrays broadcast)."""
         return self.a0 + self.b1 * np.asarray(v, dtype=np.float64) + self.b2 * np.asarray(u, dtype=np.float64)
 
-    def to_info(self) -> dict:
-        """JSON-ready summary for ``DisparityResult.info['pt']``."""
+    def to_info(self, *, narrow_range: int) -> dict:
+        """JSON-ready summary for ``DisparityResult.info['pt']``.
+
+        ``narrow_range`` is the range searched after the transformation; it is recorded as
+        None, with ``fallback`` True, when the model is not road-like.
+        """
         out = asdict(self)
         out["theta_deg"] = math.degrees(out.pop("theta"))
-        return {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in out.items()}
+        out = {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in out.items()}
+        return out | {"narrow_range": narrow_range if self.road_like else None, "fallback": not self.road_like}
+
+    def fallback_warning(self, max_disparity: int) -> str:
+        """The warning of a pair that is matched over the full range instead."""
+        return f"perspective transformation skipped: {self.reason}; searched the full range 0-{max_disparity}"
 
 
 def coarse_points(disparity: np.ndarray, *, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -223,21 +232,13 @@ def shift_map(model: RoadModel, shape: tuple[int, int], *, margin: float) -> np.
     return model.a0 + model.b1 * np.arange(h, dtype=np.float64)[:, None] + model.b2 * np.arange(w)[None, :] - margin
 
 
-def warp_right(right: np.ndarray, model: RoadModel, *, margin: float) -> np.ndarray:
-    """NumPy ``R'(x, v) = R(x - s(x, v), v)`` (bilinear, border replicated); float32 (H, W)."""
-    right = np.asarray(right, dtype=np.float32)
-    h, w = right.shape
-    src = np.clip(np.arange(w)[None, :] - shift_map(model, (h, w), margin=margin), 0.0, w - 1.0)
-    x0 = np.minimum(np.floor(src).astype(np.int64), w - 2) if w > 1 else np.zeros_like(src, dtype=np.int64)
-    t = src - x0
-    rows = np.arange(h)[:, None]
-    x1 = np.minimum(x0 + 1, w - 1)
-    return ((1.0 - t) * right[rows, x0] + t * right[rows, x1]).astype(np.float32)
+def match_in_right_image(disparity: np.ndarray) -> np.ndarray:
+    """True where the match ``u - d`` of a restored disparity lies in the right image.
 
-
-def restore_disparity(disp: np.ndarray, model: RoadModel, *, margin: float) -> np.ndarray:
-    """NumPy ``d = d' (1 - b2) + s(u, v)``; inf stays inf; float32 (H, W)."""
-    disp = np.asarray(disp, dtype=np.float64)
+    Half a pixel of slack; non-finite disparities give False.  After the transformation
+    a narrow-range estimate can restore to a match left of the right image: no true
+    match, so a hole.
+    """
+    cols = np.arange(disparity.shape[1], dtype=np.float32)[None, :]
     with np.errstate(invalid="ignore"):
-        out = disp * (1.0 - model.b2) + shift_map(model, disp.shape, margin=margin)
-    return np.where(np.isfinite(disp), out, np.inf).astype(np.float32)
+        return cols - disparity >= -0.5
