@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import textured_pair
-from volumes import mark_missing_cells, random_images, random_volume, sparse_map, structured_volume
+from volumes import DIFFUSION_SETTINGS, mark_missing_cells, random_images, random_volume, sparse_map, structured_volume
 
 from d3cli.kernels import cpu, cuda_status
 
@@ -187,15 +187,6 @@ def test_min_cost_matches_cpu(gpu):
 
 
 # ----------------------------------------------------------------------------- diffusion
-DIFFUSION_SETTINGS = [
-    dict(max_gap=-1.0, tau=1, kappa_d=1, adversarial=True),
-    dict(max_gap=-1.0, tau=1, kappa_d=1, adversarial=False),
-    dict(max_gap=0.05, tau=1, kappa_d=1, adversarial=True),
-    dict(max_gap=0.2, tau=0, kappa_d=2, adversarial=True),
-    dict(max_gap=-1.0, tau=2, kappa_d=1, adversarial=True),
-]
-
-
 def diffusion_cases():
     rng = np.random.default_rng(15)
     true = (np.arange(W)[None, :] // 8 + np.arange(H)[:, None] // 4).astype(np.int64) + 1

@@ -14,7 +14,7 @@ import numba
 import numpy as np
 import pytest
 import reference as ref
-from volumes import mark_missing_cells, random_images, random_volume, sparse_map, structured_volume
+from volumes import DIFFUSION_SETTINGS, mark_missing_cells, random_images, random_volume, sparse_map, structured_volume
 
 from d3cli.kernels import cpu
 from d3cli.pyramid import build_pyramid, downsample, level_max_disparity
@@ -203,15 +203,6 @@ def test_min_cost_matches_reference():
 # ----------------------------------------------------------------------------- diffusion
 def run_diffusion(cost, disp, *, max_gap, tau, kappa_d, adversarial, max_sweeps=100000):
     return cpu.diffuse(cost, disp, cpu.min_cost(cost), float(max_gap), tau, kappa_d, adversarial, max_sweeps)
-
-
-DIFFUSION_SETTINGS = [
-    dict(max_gap=-1.0, tau=1, kappa_d=1, adversarial=True),
-    dict(max_gap=-1.0, tau=1, kappa_d=1, adversarial=False),
-    dict(max_gap=0.05, tau=1, kappa_d=1, adversarial=True),
-    dict(max_gap=0.2, tau=0, kappa_d=2, adversarial=True),
-    dict(max_gap=-1.0, tau=2, kappa_d=1, adversarial=True),
-]
 
 
 @pytest.mark.parametrize("settings", DIFFUSION_SETTINGS, ids=lambda s: "-".join(f"{k}{v}" for k, v in s.items()))

@@ -4,6 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
+#: Diffusion parameters every diffusion test runs: paper defaults, no adversarial update,
+#: the near-optimality gap, a wider neighbourhood, a wider tolerance.
+DIFFUSION_SETTINGS = [
+    dict(max_gap=-1.0, tau=1, kappa_d=1, adversarial=True),
+    dict(max_gap=-1.0, tau=1, kappa_d=1, adversarial=False),
+    dict(max_gap=0.05, tau=1, kappa_d=1, adversarial=True),
+    dict(max_gap=0.2, tau=0, kappa_d=2, adversarial=True),
+    dict(max_gap=-1.0, tau=2, kappa_d=1, adversarial=True),
+]
+
 
 def random_images(rng, shape):
     """Two float32 (H, W) images of uniform grey levels on the 0-255 scale."""
