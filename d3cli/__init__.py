@@ -17,9 +17,9 @@ def __getattr__(name):
     # The pipeline pulls in numba; import it lazily so `d3stereo info` and the config
     # checks stay fast.
     if name in ("D3Stereo", "DisparityResult"):
-        from . import pipeline
+        from . import method
 
-        return getattr(pipeline, name)
+        return getattr(method, name)
     raise AttributeError(name)
 
 

@@ -87,7 +87,7 @@ def config_search(explicit: str | None) -> tuple[str | None, str]:
 
 def samples_dir() -> Path:
     """Folder of the bundled sample pairs (pair-folder layout)."""
-    from . import samples
+    from .data import samples
 
     return Path(samples.__file__).resolve().parent
 
@@ -128,7 +128,9 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
     KITTI root, a manifest YAML, or two image files.
     """
-    from . import batch, datasets, report
+    from . import batch
+    from .data import datasets
+    from .evaluation import report
 
     _setup_logging(verbose, quiet)
     if max_disparity is not None and max_disparity <= 0:
@@ -184,7 +186,9 @@ def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
 
     Several PRED_DIRs give one side-by-side table (comparison.md).
     """
-    from . import batch, datasets, report
+    from . import batch
+    from .data import datasets
+    from .evaluation import report
 
     _setup_logging(verbose, quiet)
     pairs = datasets.discover(list(gt_input))
@@ -210,7 +214,7 @@ def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
 @_verbosity
 def synth(out_dir, n, seed, width, height, verbose, quiet):
     """Write N synthetic road stereo pairs with exact ground truth into OUT_DIR."""
-    from . import synth as synth_mod
+    from .data import synth as synth_mod
 
     _setup_logging(verbose, quiet)
     written = synth_mod.generate_dataset(out_dir, n=n, seed=seed, width=width, height=height)

@@ -51,7 +51,7 @@ def _load_pair(spec: dict):
     import numpy as np
 
     if spec["pair"]:
-        from d3cli.datasets import discover, load_pair_images, resolve_max_disparity
+        from d3cli.data.datasets import discover, load_pair_images, resolve_max_disparity
 
         pair = discover([spec["pair"]])[0]
         left, right = load_pair_images(pair)
@@ -59,7 +59,7 @@ def _load_pair(spec: dict):
         return left, right, dmax, pair.name
     cache = Path(spec["cache"])
     if not (cache / "left.npy").exists():
-        from d3cli.synth import render_pair
+        from d3cli.data.synth import render_pair
 
         width, height = spec["size"]
         synth = render_pair(seed=spec["seed"], width=width, height=height)
@@ -76,7 +76,7 @@ def _load_pair(spec: dict):
 def _child(spec: dict) -> dict:
     """Time and measure one method in this (fresh) process."""
     from d3cli import load_config
-    from d3cli.baselines import compute_pair
+    from d3cli.batch import compute_pair
 
     left, right, dmax, name = _load_pair(spec)
     method = spec["method"]

@@ -38,9 +38,9 @@ import numpy as np
 
 from d3cli import D3Stereo, load_config
 from d3cli.baselines import pt_sgm_disparity, sgbm_disparity
-from d3cli.datasets import discover, load_ground_truth, load_pair_images, resolve_max_disparity
-from d3cli.io import to_grey
-from d3cli.metrics import disparity_errors, photometric_scores
+from d3cli.data.datasets import discover, load_ground_truth, load_pair_images, resolve_max_disparity
+from d3cli.data.io import to_grey
+from d3cli.evaluation.metrics import disparity_errors, photometric_scores
 
 KEYS = ("epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density")
 PHOTO_KEYS = ("mse", "psnr", "ssim", "coverage")
@@ -76,7 +76,7 @@ def evaluate_pairs(pairs, cfg, *, with_sgbm=True, methods=None, photometric=Fals
     metrics plus ``time`` (seconds) and ``pt`` (the fitted road model, when any).
     ``methods`` defaults to ``("d3", "sgbm")`` (``("d3",)`` without ``with_sgbm``).
     Pairs without ground truth are skipped unless ``photometric``; with it, they are
-    scored by :func:`d3cli.metrics.photometric_scores` instead (and pairs with ground
+    scored by :func:`d3cli.evaluation.metrics.photometric_scores` instead (and pairs with ground
     truth are skipped).
     """
     if methods is None:

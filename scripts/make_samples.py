@@ -1,6 +1,6 @@
-"""Regenerate the bundled sample pairs in d3cli/samples/ (deterministic).
+"""Regenerate the bundled sample pairs in d3cli/data/samples/ (deterministic).
 
-    python scripts/make_samples.py [--out d3cli/samples]
+    python scripts/make_samples.py [--out d3cli/data/samples]
 
 Two pairs in the pair-folder layout (left.png, right.png, disp_gt.pfm, calib.txt,
 SOURCE.txt), kept small so CI stays fast and the wheel stays light (< 1.5 MB):
@@ -24,9 +24,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from d3cli.io import write_image, write_pfm
+from d3cli.data.io import write_image, write_pfm
 
-SAMPLES = Path(__file__).resolve().parents[1] / "d3cli" / "samples"
+SAMPLES = Path(__file__).resolve().parents[1] / "d3cli" / "data" / "samples"
 
 MOTORCYCLE_SOURCE = """\
 provenance: Middlebury 2014 stereo dataset, scene Motorcycle (default exposure, perfect rectification),
@@ -194,7 +194,7 @@ def make_road(folder: Path, *, seed: int = 2024) -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=SAMPLES, help="samples folder (default: d3cli/samples)")
+    parser.add_argument("--out", type=Path, default=SAMPLES, help="samples folder (default: d3cli/data/samples)")
     args = parser.parse_args(argv)
     make_motorcycle(args.out / "motorcycle")
     make_road(args.out / "road")

@@ -13,11 +13,13 @@ import tempfile
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import write_png
+from tests.helpers import write_png
 
-import d3cli.baselines
-import d3cli.io
-import d3cli.pipeline
+import d3cli.batch.methods
+import d3cli.batch.outputs
+import d3cli.batch.runner
+import d3cli.data.io
+import d3cli.method.pipeline
 from d3cli.batch import OUTPUT_FILES, run_batch
 from d3cli.cli import main
 from d3cli.config import Config
@@ -83,11 +85,11 @@ def test_disparity_is_read_back_in_pixels(tmp_path, make_pair_folder):
     make_pair_folder(root, "p", shift=6, size=(48, 96))
     out = tmp_path / "out"
     assert invoke("run", root, "-o", out, "--method", "sgbm", "--no-fill").exit_code == 0
-    disp = d3cli.io.read_pfm(out / "p" / "disp.pfm")
+    disp = d3cli.data.io.read_pfm(out / "p" / "disp.pfm")
     inner = disp[8:-8, 40:-8]
     assert np.nanmedian(np.where(np.isfinite(inner), inner, np.nan)) == pytest.approx(6, abs=0.25)
     assert np.isinf(disp[:, :8]).all()  # --no-fill leaves SGBM's border invalid
-    valid = d3cli.io.read_image(out / "p" / "valid.png")
+    valid = d3cli.data.io.read_image(out / "p" / "valid.png")
     assert set(np.unique(valid)) <= {0, 255}
 
 
@@ -169,7 +171,7 @@ def test_bundled_samples_run_by_default(tmp_path):
         assert json.loads((out / name / "result.json").read_text())["metrics"]["epe"] < bound
 
 
-@pytest.mark.skipif(not hasattr(d3cli.pipeline, "D3Stereo"), reason="d3cli.pipeline.D3Stereo is not implemented yet")
+@pytest.mark.skipif(not hasattr(d3cli.method.pipeline, "D3Stereo"), reason="d3cli.method.pipeline.D3Stereo is not implemented yet")
 def test_run_d3stereo_method(tmp_path, make_pair_folder):
     root = tmp_path / "pairs"
     make_pair_folder(root, "p", shift=6, size=(128, 256))
@@ -189,7 +191,7 @@ def test_warnings_are_logged_and_stored(tmp_path, make_pair_folder, monkeypatch)
         res.warnings.append("few seeds")
         return res
 
-    monkeypatch.setattr(d3cli.baselines, "sgbm_disparity", with_warning)
+    monkeypatch.setattr(d3cli.batch.methods, "sgbm_disparity", with_warning)
     out = tmp_path / "out"
     result = invoke("run", root, "-o", out, "--method", "sgbm")
     assert result.exit_code == 0
@@ -236,7 +238,7 @@ def test_missing_input(tmp_path):
 def test_gt_of_another_size(tmp_path, make_pair_folder):
     root = tmp_path / "pairs"
     folder = make_pair_folder(root, "p", size=(48, 96))
-    d3cli.io.write_pfm(folder / "disp_gt.pfm", np.full((40, 96), 5, np.float32))
+    d3cli.data.io.write_pfm(folder / "disp_gt.pfm", np.full((40, 96), 5, np.float32))
     result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm", "--eval")
     assert_user_error(result, contains="1 of 1 pairs failed")
     assert "disp_gt.pfm" in result.output or "ground truth" in result.output
@@ -319,7 +321,7 @@ def test_failing_pair_in_the_middle(tmp_path, pairs_root):
 
 
 def test_unexpected_exception_in_a_pair_is_recorded(tmp_path, pairs_root, monkeypatch):
-    real = d3cli.baselines.compute_pair
+    real = d3cli.batch.runner.compute_pair
 
     def flaky(method, cfg, left, right, *, max_disparity):
         flaky.calls += 1
@@ -328,7 +330,7 @@ def test_unexpected_exception_in_a_pair_is_recorded(tmp_path, pairs_root, monkey
         return real(method, cfg, left, right, max_disparity=max_disparity)
 
     flaky.calls = 0
-    monkeypatch.setattr(d3cli.baselines, "compute_pair", flaky)
+    monkeypatch.setattr(d3cli.batch.runner, "compute_pair", flaky)
     out = tmp_path / "out"
     result = invoke("run", pairs_root, "-o", out, "--method", "sgbm")
     assert_user_error(result, contains="1 of 3 pairs failed")
@@ -340,7 +342,7 @@ def test_unexpected_exception_in_a_pair_is_recorded(tmp_path, pairs_root, monkey
 def test_writer_failure_leaves_no_half_written_files(tmp_path, pairs_root, monkeypatch):
     out = tmp_path / "out"
     assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
-    real = d3cli.io.write_kitti_png
+    real = d3cli.batch.outputs.write_kitti_png
 
     def half_then_crash(path, disp):
         if "b" == os.path.basename(os.path.dirname(path)):
@@ -349,10 +351,10 @@ def test_writer_failure_leaves_no_half_written_files(tmp_path, pairs_root, monke
                     fh.write(b"\x89PNG\r\n\x1a\n-half")
                 raise RuntimeError("disk on fire")
 
-            return d3cli.io.atomic_write(path, partial)
+            return d3cli.data.io.atomic_write(path, partial)
         return real(path, disp)
 
-    monkeypatch.setattr(d3cli.io, "write_kitti_png", half_then_crash)
+    monkeypatch.setattr(d3cli.batch.outputs, "write_kitti_png", half_then_crash)
     result = invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--overwrite")
     assert_user_error(result, contains="1 of 3 pairs failed")
     assert leftover_temp_files(out) == []
@@ -363,16 +365,16 @@ def test_writer_failure_leaves_no_half_written_files(tmp_path, pairs_root, monke
         path = out / "b" / f
         if path.exists():
             if f.endswith(".pfm"):
-                d3cli.io.read_pfm(path)
+                d3cli.data.io.read_pfm(path)
             else:
-                d3cli.io.read_image(path)
-    monkeypatch.setattr(d3cli.io, "write_kitti_png", real)
+                d3cli.data.io.read_image(path)
+    monkeypatch.setattr(d3cli.batch.outputs, "write_kitti_png", real)
     assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
     assert [p["status"] for p in run_json(out)["pairs"]] == ["skipped", "ok", "skipped"]
 
 
 def test_keyboard_interrupt_propagates_and_is_recorded(tmp_path, pairs_root, monkeypatch):
-    from d3cli.datasets import discover
+    from d3cli.data.datasets import discover
 
     calls = []
 
@@ -382,7 +384,7 @@ def test_keyboard_interrupt_propagates_and_is_recorded(tmp_path, pairs_root, mon
             raise KeyboardInterrupt
         return d3cli.baselines.sgbm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.sgbm)
 
-    monkeypatch.setattr(d3cli.baselines, "compute_pair", interrupt)
+    monkeypatch.setattr(d3cli.batch.runner, "compute_pair", interrupt)
     out = tmp_path / "out"
     with pytest.raises(KeyboardInterrupt):
         run_batch(discover([pairs_root]), out, cfg=Config(), method="sgbm", progress=False)
@@ -453,7 +455,7 @@ def test_version():
     assert result.exit_code == 0 and "0.1.0" in result.output
 
 
-@pytest.mark.skipif(importlib.util.find_spec("d3cli.synth") is None, reason="d3cli.synth is not written yet")
+@pytest.mark.skipif(importlib.util.find_spec("d3cli.data.synth") is None, reason="d3cli.data.synth is not written yet")
 def test_synth_then_run(tmp_path):
     data = tmp_path / "synth"
     result = invoke("synth", data, "--n", "2", "--seed", "1", "--width", "160", "--height", "96")
@@ -486,10 +488,10 @@ def test_bundled_samples_are_reproducible(tmp_path):
     runpy.run_path(str(script), run_name="make_samples")["main"](["--out", str(tmp_path)])
     for name in ("motorcycle", "road"):
         for f in ("left.png", "right.png"):
-            np.testing.assert_array_equal(d3cli.io.read_image(tmp_path / name / f),
-                                          d3cli.io.read_image(samples_dir() / name / f))
-        np.testing.assert_array_equal(d3cli.io.read_pfm(tmp_path / name / "disp_gt.pfm"),
-                                      d3cli.io.read_pfm(samples_dir() / name / "disp_gt.pfm"))
+            np.testing.assert_array_equal(d3cli.data.io.read_image(tmp_path / name / f),
+                                          d3cli.data.io.read_image(samples_dir() / name / f))
+        np.testing.assert_array_equal(d3cli.data.io.read_pfm(tmp_path / name / "disp_gt.pfm"),
+                                      d3cli.data.io.read_pfm(samples_dir() / name / "disp_gt.pfm"))
     total = sum(p.stat().st_size for p in samples_dir().glob("*/*") if p.parent.name != "__pycache__")
     assert total < 1.5e6
 
@@ -498,8 +500,8 @@ def test_bundled_samples_are_reproducible(tmp_path):
 
 
 def test_pointcloud_from_calib_matches_the_disparity(tmp_path):
-    from d3cli import io
-    from d3cli.pointcloud import read_ply
+    from d3cli.data import io
+    from d3cli.road.pointcloud import read_ply
 
     data = tmp_path / "synth"
     assert invoke("synth", data, "--n", "1", "--seed", "2", "--width", "160", "--height", "96").exit_code == 0
@@ -553,3 +555,12 @@ def test_pt_model_is_recorded_per_pair_in_run_json(tmp_path):
     record = run_json(out)["pairs"][0]
     assert {"a0", "a1", "theta_deg", "inlier_share", "fallback"} <= set(record["pt"])
     assert record["pt"]["fallback"] is False and record["pt"]["inlier_share"] > 0.5
+
+
+def test_python_dash_m_d3cli_is_the_d3stereo_command():
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "d3cli", "--help"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("Usage: d3stereo ") and "run" in done.stdout and "synth" in done.stdout

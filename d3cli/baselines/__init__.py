@@ -1,0 +1,12 @@
+"""Baseline stereo methods for side-by-side tables: OpenCV SGBM and PT-SGM.
+
+May import: :mod:`d3cli.method` (the result type, PT model and pyramid, so that PT-SGM
+uses exactly PT-D3Stereo's transformation), :mod:`d3cli.kernels`, :mod:`d3cli.data`,
+:mod:`d3cli.config`, :mod:`d3cli.errors`.  Method names are mapped to these functions in
+:mod:`d3cli.batch.methods`.
+"""
+
+from .pt_sgm import pt_sgm_disparity
+from .sgbm import fill_holes_rowwise, sgbm_disparity
+
+__all__ = ["fill_holes_rowwise", "pt_sgm_disparity", "sgbm_disparity"]

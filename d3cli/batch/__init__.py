@@ -1,0 +1,38 @@
+"""Running many pairs: discovery results in, one output folder out.
+
+- ``runner``: :func:`run_batch` (``d3stereo run``), resume, interruption;
+- ``methods``: method name -> code (:func:`compute_pair`);
+- ``evaluate``: scoring a pair or folders of predictions (``d3stereo eval``);
+- ``outputs``: the per-pair files, written atomically, read back, removed;
+- ``fingerprint``: what a stored result depends on (resume decisions), versions;
+- ``lock``: one run per output folder;
+- ``resources``: the memory check before a pair is computed.
+
+May import everything below it: method, baselines, evaluation, road, kernels, data,
+config, errors.  Only :mod:`d3cli.cli` imports this package.
+"""
+
+from .evaluate import evaluate_folders, evaluate_predictions
+from .fingerprint import package_versions, settings_fingerprint
+from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock
+from .methods import compute_pair
+from .outputs import OUTPUT_FILES, RESULT_FILE, RUN_FILE
+from .runner import BatchInterrupted, BatchResult, run_batch
+
+__all__ = [
+    "BatchInterrupted",
+    "BatchResult",
+    "LOCK_FILE",
+    "OUTPUT_FILES",
+    "RESULT_FILE",
+    "RUN_FILE",
+    "acquire_lock",
+    "compute_pair",
+    "ensure_writable",
+    "evaluate_folders",
+    "evaluate_predictions",
+    "package_versions",
+    "release_lock",
+    "run_batch",
+    "settings_fingerprint",
+]

@@ -1,0 +1,178 @@
+"""Scoring estimates: one pair right after it is computed, or folders of predictions.
+
+Also the report rows (one per pair) that :mod:`d3cli.evaluation.report` summarises.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Iterable, Sequence
+
+from tqdm import tqdm
+
+from ..data import datasets, io
+from ..errors import D3Error, InputError, where_what_fix
+from ..evaluation import metrics, report
+from .lock import ensure_writable
+from .outputs import ERROR_MAP, RESULT_FILE, RUN_FILE
+
+log = logging.getLogger(__name__)
+
+
+def pair_row(pair, status: str, *, time_s: float | None = None, error: str = "", metrics=None) -> dict:
+    row = {"pair": pair.name, "family": pair.family, "status": status, "time_s": time_s, "error": error}
+    row.update(metrics or {})
+    return row
+
+
+def progress_bar(pairs: Sequence, enabled: bool, desc: str):
+    return tqdm(pairs, desc=desc, unit="pair", disable=not (enabled and sys.stderr.isatty()))
+
+
+def failed_row(pair, message: str, wall: float):
+    log.debug("%s failed: %s", pair.name, message)
+    row = pair_row(pair, "failed", time_s=wall, error=message)
+    return row, {"pair": pair.name, "status": "failed", "wall_s": wall, "error": message}
+
+
+def evaluate_pair(pair, left, right, disparity, pair_dir: Path) -> dict:
+    """Metrics of one estimate: against ground truth when there is one, photometric always.
+
+    Writes the error map ``pair_dir/error.png`` when the pair has ground truth.
+    """
+    shape = left.shape[:2]
+    scores = {}
+    gt, mask = datasets.load_ground_truth(pair, shape)
+    if gt is not None:
+        scores.update(metrics.disparity_errors(disparity, gt, mask=mask))
+        pair_dir.mkdir(parents=True, exist_ok=True)
+        io.write_image(pair_dir / ERROR_MAP, metrics.error_map(disparity, gt, mask=mask))
+    scores.update(metrics.photometric_scores(io.to_grey(left), io.to_grey(right), disparity))
+    return scores
+
+
+def method_names(pred_dirs: Sequence[Path]) -> list[str]:
+    """Column names for prediction folders: run.json's method when unique, else the folder name."""
+    from_run = []
+    for folder in pred_dirs:
+        try:
+            from_run.append(json.loads((Path(folder) / RUN_FILE).read_text(encoding="utf-8")).get("method"))
+        except (OSError, ValueError, AttributeError):
+            from_run.append(None)
+    names = []
+    for folder, name in zip(pred_dirs, from_run):
+        unique = name and from_run.count(name) == 1
+        names.append(name if unique else Path(folder).resolve().name)
+    if len(set(names)) < len(names):  # same folder names: fall back to the full paths
+        names = [str(Path(f)) for f in pred_dirs]
+    return names
+
+
+def evaluate_predictions(
+    pred_dir: str | os.PathLike,
+    pairs: Iterable,
+    *,
+    report_dir: str | os.PathLike | None = None,
+    progress: bool = True,
+) -> list[dict]:
+    """Score ``pred_dir/<pair>/disp.pfm`` for each pair; rows for :mod:`d3cli.evaluation.report`.
+
+    Error maps go to ``report_dir/<pair>/error.png`` (default: beside the prediction).
+    A pair without a prediction, or whose prediction cannot be scored, becomes a
+    ``failed`` row naming the problem.
+    """
+    pred_dir = Path(pred_dir)
+    report_dir = Path(report_dir) if report_dir is not None else pred_dir
+    rows = []
+    for pair in progress_bar(list(pairs), progress, pred_dir.name):
+        t0 = time.perf_counter()
+        pred_path = pred_dir / pair.name / "disp.pfm"
+        try:
+            if not pred_path.is_file():
+                raise InputError(where_what_fix(str(pred_path), "no prediction for this pair",
+                                                "run `d3stereo run` on the pair or check --gt"))
+            left, right = _load_images(pair)
+            disparity = io.read_pfm(pred_path)
+            scores = evaluate_pair(pair, left, right, disparity, report_dir / pair.name)
+        except D3Error as exc:
+            rows.append(failed_row(pair, str(exc), time.perf_counter() - t0)[0])
+            continue
+        except Exception as exc:  # noqa: BLE001 - one broken pair must not end the evaluation
+            log.debug("%s: unexpected error", pair.name, exc_info=True)
+            rows.append(failed_row(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)[0])
+            continue
+        rows.append(pair_row(pair, "ok", time_s=_stored_time(pred_dir / pair.name), metrics=scores))
+    return rows
+
+
+def _load_images(pair):
+    return datasets.load_pair_images(pair)
+
+
+def _stored_time(pair_dir: Path) -> float | None:
+    """The wall time recorded by the run that made a prediction, if any."""
+    try:
+        return json.loads((pair_dir / RESULT_FILE).read_text(encoding="utf-8"))["timings"]["wall"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def evaluate_folders(
+    pred_dirs: Sequence[str | os.PathLike],
+    pairs: Sequence,
+    *,
+    out_dir: str | os.PathLike | None = None,
+    progress: bool = True,
+) -> dict:
+    """Score one or more prediction folders against the same pairs and write the reports.
+
+    One folder: ``metrics.csv``, ``summary.json``, ``summary.md`` and the error maps
+    ``<pair>/error.png`` in ``out_dir`` (default: the prediction folder).  Several: each
+    folder's reports go to ``out_dir/<method>/`` (default: the prediction folder itself)
+    and the side-by-side table to ``out_dir/comparison.md`` (default: in the first
+    prediction folder).
+
+    Returns
+    -------
+    dict
+        ``results`` (method -> rows), ``summaries`` (method -> summary dict),
+        ``comparison`` (Markdown text or None), ``comparison_path``, ``n_failed``,
+        ``n_rows``, ``out_dir``.
+    """
+    pred_dirs = [Path(p) for p in pred_dirs]
+    for folder in pred_dirs:
+        if not folder.is_dir():
+            raise InputError(where_what_fix(str(folder), "prediction folder not found",
+                                            "give the -o folder of a `d3stereo run`"))
+    names = method_names(pred_dirs)
+    out = Path(out_dir) if out_dir is not None else pred_dirs[0]
+    ensure_writable(out)
+    results, summaries = {}, {}
+    for folder, name in zip(pred_dirs, names):
+        if len(pred_dirs) == 1:
+            target = out
+        else:
+            target = ensure_writable(out / name) if out_dir is not None else folder
+        rows = evaluate_predictions(folder, pairs, report_dir=target, progress=progress)
+        report.write_summary(target, rows, method=name, extra={"predictions": str(folder)})
+        results[name] = rows
+        summaries[name] = report.summarize(rows)
+    comparison = comparison_path = None
+    if len(pred_dirs) > 1:
+        comparison = report.side_by_side(results)
+        comparison_path = out / "comparison.md"
+        io.atomic_write(comparison_path, lambda tmp: Path(tmp).write_text(comparison + "\n", encoding="utf-8"))
+    return {
+        "results": results,
+        "summaries": summaries,
+        "comparison": comparison,
+        "comparison_path": comparison_path,
+        "n_failed": sum(r["status"] == "failed" for rows in results.values() for r in rows),
+        "n_rows": sum(len(rows) for rows in results.values()),
+        "out_dir": out,
+    }

@@ -1,0 +1,49 @@
+"""The one place that maps a method name (``--method``) to code.
+
+- ``d3stereo``: :class:`d3cli.method.D3Stereo` (the paper's method),
+- ``sgbm``: OpenCV's semi-global block matching (:func:`d3cli.baselines.sgbm_disparity`),
+- ``pt-sgm``: SGBM after the same perspective transformation as PT-D3Stereo
+  (:func:`d3cli.baselines.pt_sgm_disparity`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..baselines import pt_sgm_disparity, sgbm_disparity
+from ..config import METHODS, Config
+from ..errors import ConfigError
+from ..method import D3Stereo, DisparityResult
+
+
+def compute_pair(
+    method: str,
+    cfg: Config,
+    left: np.ndarray,
+    right: np.ndarray,
+    *,
+    max_disparity: int,
+) -> DisparityResult:
+    """Run the stereo method named ``method`` on one pair.
+
+    Parameters
+    ----------
+    method : {"d3stereo", "sgbm", "pt-sgm"}
+    cfg : Config
+        Full configuration; each method reads its own sections.
+    left, right : ndarray, (H, W) or (H, W, 3)
+        Raw images of equal shape (any dtype).
+    max_disparity : int
+        Largest disparity searched, pixels.
+
+    Returns
+    -------
+    DisparityResult
+    """
+    if method == "sgbm":
+        return sgbm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.sgbm)
+    if method == "d3stereo":
+        return D3Stereo(cfg).compute(left, right, max_disparity=max_disparity)
+    if method == "pt-sgm":
+        return pt_sgm_disparity(left, right, max_disparity=max_disparity, cfg=cfg)
+    raise ConfigError(f"--method {method}: unknown method; use one of {', '.join(METHODS)}")

@@ -1,0 +1,371 @@
+"""Running a method over many pairs into one output folder (``d3stereo run``).
+
+The files a batch writes are described in :mod:`d3cli.batch.outputs`.  A pair whose
+stored ``result.json`` is complete and was made with the same settings fingerprint
+(:mod:`d3cli.batch.fingerprint`) is skipped, so an interrupted batch resumes where it
+stopped.
+
+One failing pair never stops a batch: its error is recorded (``run.json``, the
+summary) and the next pair runs.  Two things end a batch early:
+
+* Ctrl-C (KeyboardInterrupt): the pair in progress leaves no file behind (its temporary
+  files and any of its outputs already renamed are removed; ``result.json`` is written
+  last, so it never marks a half pair complete), ``run.json`` records the interruption,
+  and :class:`BatchInterrupted` says how many pairs are done.  Rerunning the same command
+  resumes and gives byte-identical per-pair files.
+* A full disk (ENOSPC/EDQUOT on a write): every later pair would fail the same way, so
+  the OutputError ends the batch; finished pairs stay complete.
+
+Only one run writes into a folder at a time (:mod:`d3cli.batch.lock`).  Before a pair is
+computed its estimated peak memory is checked (:func:`d3cli.batch.resources.check_memory`;
+a per-pair failure), and after it the map is checked for the symptoms of an unrectified
+or swapped pair (:func:`d3cli.evaluation.diagnostics.suspicious_result`; warnings in
+``result.json``, ``run.json`` and the summary).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Sequence
+
+from .. import __version__
+from ..config import Config
+from ..data import datasets, io
+from ..errors import D3Error, OutputError
+from ..evaluation import diagnostics, report
+from ..road.pointcloud import camera_from, save_pair_cloud
+from . import resources
+from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar
+from .fingerprint import package_versions, settings_fingerprint
+from .lock import acquire_lock, ensure_writable, release_lock
+from .methods import compute_pair
+from .outputs import (
+    CLOUD_FILE,
+    RESULT_FILE,
+    RUN_FILE,
+    read_result,
+    remove_pair_files,
+    write_disparity_outputs,
+    write_json,
+)
+
+log = logging.getLogger(__name__)
+
+
+class BatchInterrupted(KeyboardInterrupt):
+    """Ctrl-C ended a batch; finished pairs are complete, the pair in progress left nothing.
+
+    A KeyboardInterrupt, so code that does not know it still stops.
+
+    Attributes
+    ----------
+    n_done : int
+        Pairs complete in the output folder (computed now or skipped as complete).
+    n_total : int
+        Pairs of the batch.
+    run_json : Path
+        ``run.json`` recording the interruption.
+    """
+
+    def __init__(self, n_done: int, n_total: int, run_json: Path):
+        super().__init__(f"Interrupted: {n_done} of {n_total} pairs done; rerun the same command to resume")
+        self.n_done, self.n_total, self.run_json = n_done, n_total, run_json
+
+    def __str__(self) -> str:
+        return self.args[0]
+
+
+@dataclass
+class BatchResult:
+    """What a batch did.
+
+    Attributes
+    ----------
+    out_dir : Path
+        The output folder.
+    rows : list of dict
+        One row per pair for :mod:`d3cli.evaluation.report` (``pair``, ``family``, ``status``,
+        metric keys, ``time_s``, ``error``).
+    n_failed : int
+        Number of pairs that failed.
+    run_json : Path
+        Path of ``run.json``.
+    summary : dict or None
+        :func:`d3cli.evaluation.report.summarize` of the rows when evaluating, else None.
+    """
+
+    out_dir: Path
+    rows: list = field(default_factory=list)
+    n_failed: int = 0
+    run_json: Path | None = None
+    summary: dict | None = None
+
+    @property
+    def n_pairs(self) -> int:
+        return len(self.rows)
+
+    @property
+    def failures(self) -> list[tuple[str, str]]:
+        """(pair, error message) of each failed pair."""
+        return [(r["pair"], r.get("error", "")) for r in self.rows if r["status"] == "failed"]
+
+
+def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fingerprint) -> dict:
+    """Compute, write and (optionally) score one pair; returns the stored result dict."""
+    t0 = time.perf_counter()
+    left, right = datasets.load_pair_images(pair)
+    height, width = left.shape[:2]
+    dmax = datasets.resolve_max_disparity(pair, width, override=max_disparity)
+    resources.check_memory((height, width), dmax, cfg, method=method, where=pair.name)
+    result = compute_pair(method, cfg, left, right, max_disparity=dmax)
+    result.warnings.extend(diagnostics.suspicious_result(result, dmax))
+    for text in result.warnings:
+        log.warning("%s: %s", pair.name, text)
+    try:
+        # An old result.json beside new, maybe half-written outputs would mark them complete;
+        # an old error map would describe another estimate.
+        remove_pair_files(pair_dir)
+        write_disparity_outputs(pair_dir, result.disparity, result.valid, vmax=dmax)
+        scores = evaluate_pair(pair, left, right, result.disparity, pair_dir) if evaluate else None
+    except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
+        remove_pair_files(pair_dir, remove_folder=True)
+        raise
+    wall = time.perf_counter() - t0
+    stored = {
+        "pair": pair.name,
+        "family": pair.family,
+        "method": method,
+        "settings": fingerprint,
+        "inputs": {"left": pair.left, "right": pair.right, "gt": pair.gt},
+        "shape": [height, width],
+        "max_disparity": dmax,
+        "color_range": [0, dmax],
+        "valid_share": float(result.valid.mean()) if result.valid.size else 0.0,
+        "timings": {**result.timings, "wall": wall},
+        "metrics": scores,
+        "info": result.info,
+        "warnings": list(result.warnings),
+    }
+    try:
+        write_json(pair_dir / RESULT_FILE, stored)  # last: marks the pair complete
+    except BaseException:
+        remove_pair_files(pair_dir, remove_folder=True)
+        raise
+    return stored
+
+
+def _write_cloud(pair, pair_dir: Path, stored: dict, cfg) -> dict:
+    """Write ``cloud.ply`` of a complete pair from its stored outputs; returns ``stored``.
+
+    Reads disp.pfm and valid.png back, so a rerun with ``--pointcloud`` adds clouds to
+    pairs computed earlier without computing them again.  Without a camera the pair gets
+    a warning in result.json instead.
+    """
+    left, _ = datasets.load_pair_images(pair)
+    calib = io.read_calib(pair.calib) if pair.calib is not None else None
+    camera = camera_from(calib, cfg, left.shape[:2])
+    if camera is None:
+        text = ("no cloud.ply: focal length or baseline unknown; add calib.txt to the pair "
+                "or set camera.f and camera.baseline")
+        if text not in stored.get("warnings", []):
+            log.warning("%s: %s", pair.name, text)
+            stored = {**stored, "warnings": [*stored.get("warnings", []), text]}
+            write_json(pair_dir / RESULT_FILE, stored)
+        return stored
+    disparity = io.read_pfm(pair_dir / "disp.pfm")
+    valid = io.read_mask(pair_dir / "valid.png")
+    n_points = save_pair_cloud(pair_dir / CLOUD_FILE, disparity, valid, left, camera)
+    log.info("%s: cloud.ply with %d points", pair.name, n_points)
+    return stored
+
+
+def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
+    """A complete earlier result; scored now from disp.pfm if it was stored unscored."""
+    if evaluate and not stored.get("metrics"):
+        left, right = datasets.load_pair_images(pair)
+        disparity = io.read_pfm(pair_dir / "disp.pfm")
+        stored = {**stored, "metrics": evaluate_pair(pair, left, right, disparity, pair_dir)}
+        write_json(pair_dir / RESULT_FILE, stored)
+    return stored
+
+
+def run_batch(
+    pairs: Sequence,
+    out_dir: str | os.PathLike,
+    *,
+    cfg: Config,
+    method: str,
+    evaluate: bool = False,
+    overwrite: bool = False,
+    max_disparity: int | None = None,
+    progress: bool = True,
+    config_source: str | None = None,
+    pointcloud: bool = False,
+) -> BatchResult:
+    """Run ``method`` on every pair, writing ``out_dir/<pair>/...`` and ``out_dir/run.json``.
+
+    Parameters
+    ----------
+    pairs : sequence of d3cli.data.datasets.Pair
+        The pairs, e.g. from :func:`d3cli.data.datasets.discover`.
+    out_dir : path-like
+        Output folder; created when missing.
+    cfg : Config, keyword-only
+        Resolved configuration (stored in run.json).
+    method : {"d3stereo", "sgbm", "pt-sgm"}, keyword-only
+    evaluate : bool, keyword-only
+        Score each result: against ground truth where the pair has it (EPE, PEP,
+        density, ``error.png``), photometric scores always; writes the summary files.
+    overwrite : bool, keyword-only
+        Compute pairs again even when their outputs are complete.
+    max_disparity : int, optional, keyword-only
+        Override of every pair's disparity range, pixels.
+    progress : bool, keyword-only
+        Show a tqdm bar (only on a terminal).
+    config_source : str, optional, keyword-only
+        Where the configuration came from, recorded in run.json.
+    pointcloud : bool, keyword-only
+        Also write ``cloud.ply`` per pair (decided pixels, metres, left-camera frame) from
+        the pair's calib.txt or the ``camera`` config section; pairs without a focal length
+        and baseline get a warning instead.
+
+    Returns
+    -------
+    BatchResult
+
+    Raises
+    ------
+    OutputError
+        When ``out_dir`` cannot be written (checked before any pair runs).
+    BackendUnavailable
+        When ``cfg.run.backend`` is ``cuda`` and CUDA cannot be used (checked up front).
+    """
+    out = ensure_writable(out_dir)
+    if method != "sgbm" and cfg.run.backend == "cuda":
+        from ..kernels import get_backend
+
+        get_backend("cuda")  # BackendUnavailable now, not once per pair
+    lock = acquire_lock(out)
+    try:
+        return _locked_batch(list(pairs), out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
+                             max_disparity=max_disparity, progress=progress, config_source=config_source,
+                             pointcloud=pointcloud)
+    finally:
+        release_lock(lock)
+
+
+def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, max_disparity, progress,
+                  config_source, pointcloud) -> BatchResult:
+    """The body of :func:`run_batch`, run while holding the output folder's lock."""
+    fingerprint = settings_fingerprint(cfg, method, max_disparity)
+    batch = BatchResult(out_dir=out, run_json=out / RUN_FILE)
+    records = []
+    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    meta = dict(cfg=cfg, method=method, max_disparity=max_disparity, started=started,
+                config_source=config_source, n_total=len(pairs))
+    current = None
+    try:
+        for current in progress_bar(pairs, progress, method):
+            row, record = _batch_pair(current, out / current.name, cfg=cfg, method=method, evaluate=evaluate,
+                                      overwrite=overwrite, max_disparity=max_disparity,
+                                      fingerprint=fingerprint, pointcloud=pointcloud)
+            batch.rows.append(row)
+            records.append(record)
+        current = None
+    except KeyboardInterrupt:
+        _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
+                        stop_reason="interrupted (Ctrl-C / SIGINT)")
+        n_done = sum(r["status"] in ("ok", "skipped") for r in records)
+        raise BatchInterrupted(n_done, len(pairs), batch.run_json) from None
+    except OutputError as exc:
+        if not io.is_disk_full(exc):
+            raise
+        row, record = failed_row(current, str(exc), 0.0)
+        batch.rows.append(row)
+        records.append(record)
+        try:  # the disk is full: this may well fail too
+            _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current.name,
+                            stop_reason=str(exc))
+        except OutputError as again:
+            log.warning("run.json not written: %s", again)
+        raise
+    batch.n_failed = sum(r["status"] == "failed" for r in batch.rows)
+    if evaluate:
+        report.write_summary(out, batch.rows, method=method, extra={"settings": fingerprint})
+        batch.summary = report.summarize(batch.rows)
+    _write_run_json(batch, records, **meta, interrupted=False)
+    return batch
+
+
+def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, fingerprint,
+                pointcloud=False):
+    """One pair of a batch -> (report row, run.json record).
+
+    Raises only KeyboardInterrupt and the OutputError of a full disk; any other failure
+    becomes a ``failed`` row.
+    """
+    t0 = time.perf_counter()
+    reused = False
+    try:
+        stored = None if overwrite else read_result(pair_dir)
+        if stored is not None and stored.get("settings") == fingerprint:
+            log.info("%s: complete, skipped (use --overwrite to compute it again)", pair.name)
+            stored = _reuse_pair(pair, pair_dir, stored, evaluate=evaluate)
+            reused = True
+        else:
+            stored = _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
+                               max_disparity=max_disparity, fingerprint=fingerprint)
+        if pointcloud and not (pair_dir / CLOUD_FILE).is_file():
+            stored = _write_cloud(pair, pair_dir, stored, cfg)
+    except D3Error as exc:
+        if io.is_disk_full(exc):
+            raise  # every later pair would fail the same way: the batch stops
+        return failed_row(pair, str(exc), time.perf_counter() - t0)
+    except Exception as exc:  # noqa: BLE001 - one broken pair must not end the batch
+        log.debug("%s: unexpected error", pair.name, exc_info=True)
+        return failed_row(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
+    wall = stored.get("timings", {}).get("wall")
+    row = pair_row(pair, "ok", time_s=wall, metrics=stored.get("metrics"))
+    if stored.get("warnings"):
+        row["warnings"] = list(stored["warnings"])
+    record = {"pair": pair.name, "status": "skipped" if reused else "ok", "wall_s": wall,
+              "max_disparity": stored.get("max_disparity"), "backend": stored.get("info", {}).get("backend"),
+              "warnings": stored.get("warnings", [])}
+    if stored.get("info", {}).get("pt") is not None:
+        record["pt"] = stored["info"]["pt"]  # the fitted road model and its inlier share
+    return row, record
+
+
+def _write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, started,
+                    config_source, interrupted, n_total=None, stopped_at=None, stop_reason=None) -> None:
+    failed = [{"pair": r["pair"], "error": r["error"]} for r in records if r["status"] == "failed"]
+    data = {
+        "d3stereo": __version__,
+        "started": started,
+        "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "interrupted": interrupted,
+        "method": method,
+        "backend": cfg.run.backend,
+        "backends_used": sorted({r["backend"] for r in records if r.get("backend")}),
+        "max_disparity_override": max_disparity,
+        "config_source": config_source,
+        "config": cfg.to_dict(),
+        "versions": package_versions(),
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        "n_pairs": len(records),
+        "n_total": len(records) if n_total is None else n_total,
+        "stopped_at": stopped_at,
+        "stop_reason": stop_reason,
+        "n_failed": len(failed),
+        "pairs": records,
+        "failed": failed,
+    }
+    write_json(batch.run_json, data)

@@ -1,0 +1,329 @@
+"""Scores of a disparity estimate: against ground truth, or by photometric consistency.
+
+Definitions (DESIGN.md section 4), fixed so that nobody can misread a table:
+
+* **Evaluated pixels**: finite, positive ground truth, intersected with the
+  non-occlusion mask when one is given.  ``n_px`` is their number.
+* **EPE** (px): mean ``|d - gt|`` over the evaluated pixels.
+* **PEP(delta)** (%): 100 x share of evaluated pixels with ``|d - gt| > delta``
+  (strictly greater: an error of exactly delta is not an error).
+* A pixel the method left **without an estimate** (non-finite ``d``) counts as an error
+  of ``|gt|``, as if ``d = 0``; **density** (%) is the share of evaluated pixels that
+  have an estimate, reported beside the errors so a sparse method cannot hide.
+* **Photometric** (no ground truth): the right image warped into the left view with
+  the estimate, scored over the pixels that have an estimate whose match lies inside
+  the right image; **coverage** (%) is that share of all pixels.
+
+Everything is computed in float64 and returned as plain Python numbers so the results
+go straight into CSV/JSON (:mod:`d3cli.evaluation.report`).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+from skimage.metrics import structural_similarity
+
+from ..errors import InputError, where_what_fix
+
+logger = logging.getLogger(__name__)
+
+#: Thresholds (px) of the PEP columns that the paper reports.
+PEP_THRESHOLDS = (0.5, 1, 2, 3)
+
+#: Keys returned by :func:`disparity_errors` with the default thresholds.
+DISPARITY_KEYS = ("epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density", "n_px")
+
+#: Keys returned by :func:`photometric_scores`.
+PHOTOMETRIC_KEYS = ("mse", "psnr", "ssim", "coverage")
+
+#: SSIM settings of DESIGN.md section 4 (Wang et al. 2004: Gaussian window, sigma 1.5).
+SSIM_SIGMA = 1.5
+DATA_RANGE = 255.0
+
+#: RGB colour of pixels with ground truth but no estimate in :func:`error_map`.
+MISSING_COLOUR = (255, 0, 255)
+
+
+def pep_key(threshold: float) -> str:
+    """Name of the PEP column for a threshold in pixels: 0.5 -> ``"pep_0.5"``, 1 -> ``"pep_1"``."""
+    return f"pep_{float(threshold):g}"
+
+
+def disparity_errors(
+    pred: np.ndarray,
+    gt: np.ndarray,
+    *,
+    mask: np.ndarray | None = None,
+    thresholds: Sequence[float] = PEP_THRESHOLDS,
+) -> dict:
+    """End-point error, percentages of error pixels and density against ground truth.
+
+    Parameters
+    ----------
+    pred : ndarray, float, (H, W)
+        Estimated left-view disparity in pixels; any non-finite value (inf, nan) means
+        "no estimate".
+    gt : ndarray, float, (H, W)
+        Ground-truth disparity in pixels; only finite values > 0 are evaluated.
+    mask : ndarray, bool, (H, W), optional
+        Pixels allowed into the evaluation (e.g. the non-occlusion mask; nonzero = use).
+    thresholds : sequence of float, keyword-only
+        PEP thresholds in pixels.
+
+    Returns
+    -------
+    dict
+        ``epe`` (px), ``pep_<t>`` for every threshold (%, see :func:`pep_key`),
+        ``density`` (%), all float; ``n_px`` (int, number of evaluated pixels).
+        With no evaluable pixel the floats are NaN and ``n_px`` is 0.
+
+    Raises
+    ------
+    InputError
+        When the shapes of ``pred``, ``gt`` and ``mask`` differ or are not 2-D.
+
+    Notes
+    -----
+    A pixel without an estimate counts as an error of ``|gt|`` (as if ``d = 0``), so
+    EPE and PEP never improve by leaving hard pixels out; ``density`` says how many
+    pixels actually had an estimate.
+
+    Examples
+    --------
+    >>> gt = np.array([[1.0, 2.0]])
+    >>> pred = np.array([[1.25, np.inf]])
+    >>> r = disparity_errors(pred, gt)
+    >>> r["epe"], r["pep_1"], r["density"], r["n_px"]
+    (1.125, 50.0, 50.0, 2)
+    """
+    pred = np.asarray(pred, dtype=np.float64)
+    gt = np.asarray(gt, dtype=np.float64)
+    _check_same_2d_shape("disparity_errors", prediction=pred, ground_truth=gt, mask=mask)
+
+    evaluated = _evaluable_ground_truth(gt, mask)
+    n_px = int(np.count_nonzero(evaluated))
+    keys = ["epe", *(pep_key(t) for t in thresholds), "density"]
+    if n_px == 0:
+        result = {key: math.nan for key in keys}
+        result["n_px"] = 0
+        return result
+
+    d = pred[evaluated]
+    g = gt[evaluated]
+    has_estimate = np.isfinite(d)
+    # A missing estimate is scored as d = 0: its error is the whole ground truth.
+    error = np.abs(np.where(has_estimate, d, 0.0) - g)
+
+    result = {"epe": float(error.mean())}
+    for t in thresholds:
+        result[pep_key(t)] = 100.0 * float(np.count_nonzero(error > t)) / n_px
+    result["density"] = 100.0 * float(np.count_nonzero(has_estimate)) / n_px
+    result["n_px"] = n_px
+    return result
+
+
+def photometric_scores(left: np.ndarray, right: np.ndarray, pred: np.ndarray) -> dict:
+    """Photometric consistency of a disparity map: the right image warped into the left view.
+
+    The warped image is ``W(u, v) = R(u - d(u, v), v)`` with linear interpolation along
+    the row (rectified pair: rows are identical).  A pixel is *scored* when ``d`` is
+    finite and the match falls inside the right image, ``0 <= u - d <= width - 1``.
+
+    Parameters
+    ----------
+    left, right : ndarray, float, (H, W)
+        Grey images on the 0-255 scale (e.g. from :func:`d3cli.data.io.to_grey`).
+    pred : ndarray, float, (H, W)
+        Left-view disparity in pixels; non-finite = no estimate.
+
+    Returns
+    -------
+    dict
+        ``mse`` (0-255 scale, mean squared difference left - warped over the scored
+        pixels), ``psnr`` (dB, ``10 log10(255^2 / mse)``, ``inf`` when ``mse == 0``),
+        ``ssim`` (mean of the SSIM map over the scored pixels) and ``coverage`` (%,
+        scored pixels over all pixels).  With no scored pixel, ``mse``, ``psnr`` and
+        ``ssim`` are NaN and ``coverage`` is 0.
+
+    Raises
+    ------
+    InputError
+        When the arrays are not 2-D or their shapes differ.
+
+    Notes
+    -----
+    SSIM uses the settings of Wang et al. (2004) as in DESIGN.md section 4:
+    ``skimage.metrics.structural_similarity(left, warped, gaussian_weights=True,
+    sigma=1.5, use_sample_covariance=False, data_range=255, full=True)``, and averages
+    the full-size SSIM map over the scored pixels only.  Where the warp is undefined
+    (no estimate, or the match falls outside the right image) the warped image takes
+    the *left* image's value before SSIM runs, so that the 11 x 11 windows of scored
+    pixels next to holes stay defined; those filler pixels agree perfectly with the
+    left image, which biases SSIM slightly upwards right next to holes (report the
+    coverage beside it).  Images smaller than the 11 x 11 SSIM window give
+    ``ssim = NaN``.
+    """
+    left = np.asarray(left, dtype=np.float64)
+    right = np.asarray(right, dtype=np.float64)
+    pred = np.asarray(pred, dtype=np.float64)
+    _check_same_2d_shape("photometric_scores", left=left, right=right, prediction=pred)
+
+    warped, scored = warp_right_to_left(right, pred)
+    n_scored = int(np.count_nonzero(scored))
+    coverage = 100.0 * n_scored / scored.size
+    if n_scored == 0:
+        return {"mse": math.nan, "psnr": math.nan, "ssim": math.nan, "coverage": coverage}
+
+    mse = float(np.mean((left[scored] - warped[scored]) ** 2))
+    psnr = math.inf if mse == 0.0 else 10.0 * math.log10(DATA_RANGE**2 / mse)
+    filled = np.where(scored, warped, left)
+    ssim = _mean_ssim(left, filled, scored)
+    return {"mse": mse, "psnr": psnr, "ssim": ssim, "coverage": coverage}
+
+
+def warp_right_to_left(right: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sample the right image at each left pixel's match, ``R(u - d, v)``, linearly in u.
+
+    Parameters
+    ----------
+    right : ndarray, float, (H, W)
+        Right image.
+    pred : ndarray, float, (H, W)
+        Left-view disparity in pixels; non-finite = no estimate.
+
+    Returns
+    -------
+    warped : ndarray, float64, (H, W)
+        The warped right image; NaN where ``defined`` is False.
+    defined : ndarray, bool, (H, W)
+        True where ``d`` is finite and ``0 <= u - d <= W - 1``.
+    """
+    right = np.asarray(right, dtype=np.float64)
+    pred = np.asarray(pred, dtype=np.float64)
+    height, width = right.shape
+    u = np.arange(width, dtype=np.float64)[None, :]
+    with np.errstate(invalid="ignore"):
+        x = u - pred  # inf/nan disparities give non-finite x, dropped just below
+        defined = np.isfinite(x) & (x >= 0.0) & (x <= width - 1)
+    x = np.where(defined, x, 0.0)
+    x0 = np.floor(x).astype(np.intp)
+    x1 = np.minimum(x0 + 1, width - 1)  # x == W - 1 exactly: weight of x1 is 0 anyway
+    frac = x - x0
+    rows = np.arange(height)[:, None]
+    warped = (1.0 - frac) * right[rows, x0] + frac * right[rows, x1]
+    warped[~defined] = np.nan
+    return warped, defined
+
+
+def error_map(
+    pred: np.ndarray,
+    gt: np.ndarray,
+    *,
+    mask: np.ndarray | None = None,
+    max_error: float = 4.0,
+) -> np.ndarray:
+    """Colour-coded absolute disparity error, for looking at where a method fails.
+
+    Parameters
+    ----------
+    pred : ndarray, float, (H, W)
+        Estimated disparity in pixels; non-finite = no estimate.
+    gt : ndarray, float, (H, W)
+        Ground-truth disparity in pixels; finite values > 0 are valid.
+    mask : ndarray, bool, (H, W), optional
+        Pixels that are evaluated (e.g. non-occlusion mask); the others are drawn black
+        like pixels without ground truth.
+    max_error : float, keyword-only
+        Error in pixels that maps to the top of the colour scale; larger errors saturate.
+
+    Returns
+    -------
+    ndarray, uint8, (H, W, 3)
+        RGB image: ``|d - gt|`` on OpenCV's JET scale from 0 (dark blue) to
+        ``>= max_error`` (dark red); black where the pixel is not evaluated (no valid
+        ground truth, or outside ``mask``); magenta (255, 0, 255) where ground truth
+        exists but the method gave no estimate.
+
+    Raises
+    ------
+    InputError
+        When shapes differ or ``max_error`` is not a positive number.
+    """
+    pred = np.asarray(pred, dtype=np.float64)
+    gt = np.asarray(gt, dtype=np.float64)
+    _check_same_2d_shape("error_map", prediction=pred, ground_truth=gt, mask=mask)
+    if not (math.isfinite(max_error) and max_error > 0):
+        raise InputError(
+            where_what_fix(
+                "error_map", f"max_error is {max_error}", "give a positive number of pixels"
+            )
+        )
+
+    evaluated = _evaluable_ground_truth(gt, mask)
+    has_estimate = np.isfinite(pred)
+    with np.errstate(invalid="ignore"):
+        error = np.abs(pred - gt)
+    scaled = np.clip(np.where(evaluated & has_estimate, error, 0.0) / max_error, 0.0, 1.0)
+    ramp = np.round(scaled * 255.0).astype(np.uint8)
+    rgb = cv2.cvtColor(cv2.applyColorMap(ramp, cv2.COLORMAP_JET), cv2.COLOR_BGR2RGB)
+    rgb[~evaluated] = 0
+    rgb[evaluated & ~has_estimate] = MISSING_COLOUR
+    return rgb
+
+
+def _evaluable_ground_truth(gt: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    """Boolean map of pixels with finite, positive ground truth (and inside ``mask``)."""
+    with np.errstate(invalid="ignore"):
+        evaluated = np.isfinite(gt) & (gt > 0)
+    if mask is not None:
+        evaluated &= np.asarray(mask) != 0
+    return evaluated
+
+
+def _mean_ssim(left: np.ndarray, filled: np.ndarray, scored: np.ndarray) -> float:
+    """Mean of the SSIM map of (left, filled) over ``scored``; NaN for images below the window."""
+    window = 2 * int(3.5 * SSIM_SIGMA + 0.5) + 1  # skimage's Gaussian window (truncate 3.5)
+    if min(left.shape) < window:
+        logger.warning(
+            "SSIM needs images of at least %dx%d pixels, got %dx%d; reporting NaN",
+            window,
+            window,
+            *left.shape,
+        )
+        return math.nan
+    _, ssim_map = structural_similarity(
+        left,
+        filled,
+        gaussian_weights=True,
+        sigma=SSIM_SIGMA,
+        use_sample_covariance=False,
+        data_range=DATA_RANGE,
+        full=True,
+    )
+    return float(np.mean(ssim_map[scored]))
+
+
+def _check_same_2d_shape(where: str, **arrays: np.ndarray | None) -> None:
+    """Raise InputError unless every given array is 2-D and all shapes are equal."""
+    given = {name: np.shape(a) for name, a in arrays.items() if a is not None}
+    for name, shape in given.items():
+        if len(shape) != 2:
+            raise InputError(
+                where_what_fix(
+                    where,
+                    f"{name} has shape {shape}",
+                    "give a single-channel (H, W) array (convert colour images with "
+                    "d3cli.data.io.to_grey)",
+                )
+            )
+    shapes = set(given.values())
+    if len(shapes) > 1:
+        described = ", ".join(f"{name} is {s[0]}x{s[1]}" for name, s in given.items())
+        raise InputError(
+            where_what_fix(where, described, "all arrays must have the same height x width")
+        )

@@ -1,0 +1,125 @@
+"""Steps 2-3: the aggregated matching cost volume of one pyramid level.
+
+Step 2 (DESIGN section 1): NCC cost ``C(p, d) = (1 - NCC) / 2`` over a w x w window.
+Step 3 (paper eq. 2-3): recursive bilateral filtering (RBF) of every disparity slice,
+or the plain bilateral filter of the ablation.  :func:`level_cost` turns the
+configuration into the scalars the kernels take; the kernels live in
+:mod:`d3cli.kernels`.
+"""
+
+from __future__ import annotations
+
+from ..config import Config
+from .pyramid import level_max_disparity
+
+
+def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: float, backend):
+    """NCC cost volume ``C(p, d) = (1 - NCC) / 2`` of one level (DESIGN step 2).
+
+    Parameters
+    ----------
+    left, right : float32 (H, W) arrays of the backend (``backend.to_device``)
+        Grey images of the level, 0-255 scale, C-contiguous.
+    max_disparity : int
+        Largest disparity of the level (the volume has max_disparity + 1 slices).
+    window : int
+        Odd NCC window size.
+    min_variance : float
+        Variance (grey levels^2) at or below which a window counts as flat (cost 1).
+    backend : module
+        Kernel backend from :func:`d3cli.kernels.get_backend`.
+
+    Returns
+    -------
+    ndarray, float32, (H, W, max_disparity + 1)
+        Lower is better; 1 where u - d < 0 or a window is flat.
+    """
+    return backend.ncc_cost_volume(left, right, int(max_disparity), int(window), float(min_variance))
+
+
+def aggregate(
+    cost,
+    image,
+    *,
+    rbf: bool,
+    t_max: int,
+    sigma_space: float,
+    sigma_color: float,
+    kappa_a: int,
+    backend,
+    overwrite_input: bool = False,
+):
+    """Aggregate a cost volume with RBF, or with one plain bilateral pass (ablation).
+
+    Parameters
+    ----------
+    cost : ndarray, float32, (H, W, D)
+    image : float32 (H, W) array of the backend (``backend.to_device``)
+        Left grey image of the level; guides the bilateral weights.
+    rbf : bool
+        True: ``t_max`` passes of the 3x3 kernel of eq. 3 with weights computed once
+        (paper eq. 2).  False: one pass of a (2 kappa_a + 1)^2 bilateral filter.
+    t_max, sigma_space, sigma_color, kappa_a
+        Filter parameters (sigma_1, sigma_2 of eq. 3 in pixels and grey levels).
+    backend : module
+    overwrite_input : bool
+        ``cost`` may be clobbered (RBF uses it as a buffer): one volume less at the peak.
+
+    Returns
+    -------
+    ndarray, float32, (H, W, D)
+        Cells with u - d < 0 stay exactly 1.
+    """
+    if rbf:
+        if t_max == 0:
+            return cost
+        weights = backend.rbf_weights(image, float(sigma_space), float(sigma_color))
+        out = backend.rbf_filter(cost, weights, int(t_max), overwrite_input=overwrite_input)
+    else:
+        if kappa_a == 0:
+            return cost
+        out = backend.bilateral_filter(cost, image, int(kappa_a), float(sigma_space), float(sigma_color))
+    # Filtering mixes the out-of-view cells (u - d < 0, cost 1) with valid neighbours;
+    # put them back to 1 so that they never win.
+    return backend.invalidate_out_of_view(out)
+
+
+def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, backend):
+    """Aggregated cost volume of one level (steps 2-3).
+
+    Parameters
+    ----------
+    left, right : float32 (H, W) arrays of the backend
+        Grey images of the level.
+    level : int
+        Pyramid level, 0 = full resolution; the level searches
+        ``ceil(max_disparity / 2^level)`` disparities and uses ``cfg.level_window(level)``.
+    max_disparity : int
+        Largest disparity at full resolution.
+    cfg : Config
+    backend : module
+
+    Returns
+    -------
+    ndarray, float32, (H, W, D)
+    """
+    cost = cost_volume(
+        left,
+        right,
+        max_disparity=level_max_disparity(max_disparity, level),
+        window=cfg.level_window(level),
+        min_variance=cfg.cost.min_variance,
+        backend=backend,
+    )
+    agg = cfg.aggregation
+    return aggregate(
+        cost,
+        left,
+        rbf=agg.rbf,
+        t_max=agg.t_max,
+        sigma_space=agg.sigma_space,
+        sigma_color=agg.sigma_color,
+        kappa_a=agg.kappa_a,
+        backend=backend,
+        overwrite_input=True,  # the raw NCC volume is not needed afterwards
+    )

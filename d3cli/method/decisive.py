@@ -1,0 +1,97 @@
+"""Steps 4, 5 and 7: the decisive disparities of a level.
+
+- Step 4, decisive seeds at the coarsest level (WTA + PKRN + left-right check, paper
+  section III-B);
+- step 5, intra-scale decisive diffusion (paper Algorithm 1, eq. 5-6);
+- step 7, inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
+
+Each function turns keyword scalars into one kernel call of the backend
+(:mod:`d3cli.kernels`); the per-pixel rules live in :mod:`d3cli.kernels.pixel`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, exclusion: int, backend):
+    """Sparse decisive disparity map D_k^S (paper section III-B, DESIGN step 4).
+
+    Parameters
+    ----------
+    cost : ndarray, float32, (H, W, D)
+        Aggregated cost volume of the coarsest level.
+    pkrn_min : float
+        Keep the WTA disparity when (c2 + eps) / (c1 + eps) >= pkrn_min.
+    epsilon : float
+    lr_tolerance : int
+        Largest |d_left - d_right| accepted by the left-right check; the right view's
+        costs are the same volume re-indexed.
+    exclusion : int
+        0: naive PKRN (c2 over every other disparity); r > 0 ignores |d - d*| <= r.
+    backend : module
+
+    Returns
+    -------
+    ndarray, int32, (H, W)
+        Seed disparities, -1 where undecided.
+    """
+    return backend.decisive_seeds(cost, float(pkrn_min), float(epsilon), int(lr_tolerance), int(exclusion))
+
+
+def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, adversarial: bool, max_sweeps: int, backend):
+    """Grow a sparse decisive map over one level with a frontier of changed pixels.
+
+    Parameters
+    ----------
+    cost : ndarray, float32, (H, W, D)
+    disparity : ndarray, int32, (H, W)
+        Sparse map (-1 undecided); not modified.
+    max_gap : float
+        Accepted states cost at most the pixel's least cost + ``max_gap`` (an addition
+        to the paper, see ``DiffusionConfig.max_gap``); < 0 turns the test off.
+    tau : int
+        Candidates are neighbour disparities + r, r in [-tau, tau] (eq. 5).
+    kappa_d : int
+        Neighbourhood radius.
+    adversarial : bool
+        Decided pixels switch to a strictly cheaper accepted candidate (eq. 6).
+    max_sweeps : int
+        Safeguard; diffusion stops earlier when a sweep changes nothing.
+    backend : module
+
+    Returns
+    -------
+    disparity : ndarray, int32, (H, W)
+    sweeps : int
+    """
+    if max_gap >= 0:
+        least = backend.min_cost(cost)
+    else:
+        least = backend.to_device(np.zeros((1, 1), np.float32))  # never read
+    return backend.diffuse(cost, disparity, least, float(max_gap), int(tau), int(kappa_d), bool(adversarial), int(max_sweeps))
+
+
+def inherit(cost, coarse, *, prc: bool, dfm_pkrn_min: float, epsilon: float, backend):
+    """Map decided coarse disparities into 2x2 patches of the finer level.
+
+    Parameters
+    ----------
+    cost : ndarray, float32, (H, W, D)
+        Cost volume of the finer level.
+    coarse : ndarray, int32
+        Disparity map of the coarser level (-1 undecided), shape (H // 2, W // 2) or
+        larger.
+    prc : bool
+        Patch reliability + local-minimum constraints (eq. 7-9); False: the DFM-style
+        PKRN test in the patch (ablation).
+    dfm_pkrn_min, epsilon : float
+        PKRN threshold and epsilon of the DFM-style test.
+    backend : module
+
+    Returns
+    -------
+    ndarray, int32, (H, W)
+        Sparse map D_i^S (-1 undecided).
+    """
+    return backend.inherit(cost, coarse, bool(prc), float(dfm_pkrn_min), float(epsilon))

@@ -1,0 +1,580 @@
+"""The Numba CPU kernels against the slow references of tests/reference.py.
+
+Every driver of ``d3cli.kernels.cpu`` is compared with a reference written from the
+specification on small random inputs (odd sizes, one-row and one-column images,
+1..7 disparities): costs to 1e-5, integer maps exactly.  Hand-made cases with a known
+answer pin the behaviour the references could share a mistake about, and every driver
+is checked to give bit-identical results with one thread and with all threads.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numba
+import numpy as np
+import pytest
+from tests import reference as ref
+from tests.volumes import DIFFUSION_SETTINGS, mark_missing_cells, random_images, random_volume, sparse_map, structured_volume
+
+from d3cli.kernels import cpu
+from d3cli.method.pyramid import build_pyramid, downsample, level_max_disparity
+from d3cli.method.refinement import fill_holes
+
+COST_ATOL = 1e-5
+SHAPES = [(7, 9), (13, 11), (1, 12), (12, 1), (1, 1), (5, 6)]
+
+
+# ----------------------------------------------------------------------------- NCC cost
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("window", [1, 3, 5, 7])
+def test_ncc_cost_volume_matches_reference(shape, window):
+    rng = np.random.default_rng(hash((shape, window)) % 2**32)
+    left, right = random_images(rng, shape)
+    for max_disparity in (0, 3, 6):
+        got = cpu.ncc_cost_volume(left, right, max_disparity, window, 1e-2)
+        want = ref.ref_ncc_cost_volume(left, right, max_disparity, window, 1e-2)
+        assert got.shape == shape + (max_disparity + 1,) and got.dtype == np.float32
+        np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
+
+
+def test_ncc_cost_volume_with_flat_regions_matches_reference():
+    rng = np.random.default_rng(3)
+    left, right = random_images(rng, (13, 11))
+    left[2:9, 1:6] = 117.0  # flat windows inside: cost 1
+    right[5:, 6:] = 40.0
+    got = cpu.ncc_cost_volume(left, right, 5, 3, 0.5)
+    want = ref.ref_ncc_cost_volume(left, right, 5, 3, 0.5)
+    np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
+    assert (got[4:7, 2:5, :] == 1.0).all()
+
+
+def test_ncc_identical_windows_cost_zero():
+    rng = np.random.default_rng(4)
+    left = rng.uniform(0, 255, (9, 15)).astype(np.float32)
+    shift = 3
+    right = rng.uniform(0, 255, left.shape).astype(np.float32)
+    right[:, : 15 - shift] = left[:, shift:]  # right (x) = left (x + shift)
+    cost = cpu.ncc_cost_volume(left, right, 5, 5, 1e-2)
+    np.testing.assert_allclose(cost[:, shift:, shift], 0.0, atol=COST_ATOL)
+
+
+def test_ncc_negated_windows_cost_one_and_missing_cells_one():
+    rng = np.random.default_rng(5)
+    left = rng.uniform(0, 255, (7, 12)).astype(np.float32)
+    right = 255.0 - left
+    cost = cpu.ncc_cost_volume(left, right, 4, 3, 1e-2)
+    np.testing.assert_allclose(cost[:, :, 0], 1.0, atol=COST_ATOL)
+    for u in range(4):  # u - d < 0: no right pixel
+        assert (cost[:, u, u + 1:] == 1.0).all()
+
+
+def test_ncc_affine_intensity_change_is_free():
+    rng = np.random.default_rng(6)
+    left = rng.uniform(0, 200, (7, 9)).astype(np.float32)
+    cost = cpu.ncc_cost_volume(left, 0.5 * left + 30.0, 2, 5, 1e-2)
+    np.testing.assert_allclose(cost[:, :, 0], 0.0, atol=COST_ATOL)
+
+
+def test_ncc_flat_window_costs_one():
+    rng = np.random.default_rng(7)
+    left = np.full((7, 9), 80.0, np.float32)
+    right = rng.uniform(0, 255, (7, 9)).astype(np.float32)
+    assert (cpu.ncc_cost_volume(left, right, 3, 5, 1e-2) == 1.0).all()
+    assert (cpu.ncc_cost_volume(right, left, 3, 5, 1e-2) == 1.0).all()
+
+
+# ----------------------------------------------------------------------------- aggregation
+@pytest.mark.parametrize("shape", SHAPES)
+def test_rbf_weights_match_reference(shape):
+    rng = np.random.default_rng(sum(shape))
+    img = rng.uniform(0, 255, shape).astype(np.float32)
+    got = cpu.rbf_weights(img, 1.5, 12.0)
+    np.testing.assert_allclose(got, ref.ref_rbf_weights(img, 1.5, 12.0), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.sum(axis=2), 1.0, atol=1e-6)
+    assert (got[0, :, :3] == 0).all() and (got[:, 0, ::3] == 0).all()  # outside the image
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("t_max", [0, 1, 3])
+def test_rbf_filter_matches_reference(shape, t_max):
+    rng = np.random.default_rng(t_max + sum(shape))
+    img = rng.uniform(0, 255, shape).astype(np.float32)
+    cost = random_volume(rng, *shape, 5)
+    before = cost.copy()
+    weights = ref.ref_rbf_weights(img, 2.0, 20.0)
+    got = cpu.rbf_filter(cost, weights, t_max)
+    np.testing.assert_allclose(got, ref.ref_rbf_filter(cost, weights, t_max), rtol=0, atol=COST_ATOL)
+    np.testing.assert_array_equal(cost, before)
+    assert got is not cost
+
+
+@pytest.mark.parametrize("t_max", [0, 1, 2, 3])
+def test_rbf_filter_overwriting_its_input_gives_the_same_result(t_max):
+    rng = np.random.default_rng(t_max)
+    img = rng.uniform(0, 255, (9, 13)).astype(np.float32)
+    cost = random_volume(rng, 9, 13, 6)
+    weights = cpu.rbf_weights(img, 1.5, 12.0)
+    expected = cpu.rbf_filter(cost, weights, t_max)
+    np.testing.assert_array_equal(cpu.rbf_filter(cost.copy(), weights, t_max, True), expected)
+
+
+def test_rbf_filter_keeps_a_constant_volume():
+    img = np.random.default_rng(8).uniform(0, 255, (9, 7)).astype(np.float32)
+    cost = np.full((9, 7, 4), 0.37, np.float32)
+    got = cpu.rbf_filter(cost, cpu.rbf_weights(img, 1.5, 12.0), 4)
+    np.testing.assert_allclose(got, 0.37, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape", [(7, 9), (1, 8), (8, 1), (6, 5)])
+@pytest.mark.parametrize("radius", [0, 1, 3])
+def test_bilateral_filter_matches_reference(shape, radius):
+    rng = np.random.default_rng(radius + 10 * sum(shape))
+    img = rng.uniform(0, 255, shape).astype(np.float32)
+    cost = random_volume(rng, *shape, 4)
+    got = cpu.bilateral_filter(cost, img, radius, 2.0, 15.0)
+    want = ref.ref_bilateral_filter(cost, img, radius, 2.0, 15.0)
+    np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
+
+
+# ----------------------------------------------------------------------------- seeds
+@pytest.mark.parametrize("levels", [None, 8])
+def test_seeds_match_reference_on_random_volumes(levels):
+    rng = np.random.default_rng(11 if levels else 12)
+    for h, w in SHAPES:
+        for n_disp in (1, 2, 4, 7):
+            cost = random_volume(rng, h, w, n_disp, levels=levels)
+            for pkrn_min, exclusion, lr_tol in [(1.0, 0, 1), (1.2, 0, 0), (1.1, 1, 1), (2.0, 2, 2)]:
+                got = cpu.decisive_seeds(cost, pkrn_min, 1e-3, lr_tol, exclusion)
+                want = ref.ref_decisive_seeds(cost, pkrn_min, 1e-3, lr_tol, exclusion)
+                np.testing.assert_array_equal(got, want, err_msg=f"{h}x{w}x{n_disp} {pkrn_min=} {exclusion=}")
+
+
+def test_seeds_match_reference_on_structured_volumes():
+    rng = np.random.default_rng(13)
+    true = (np.arange(11)[None, :] // 4 + np.arange(13)[:, None] // 5).astype(np.int64) + 1
+    cost = structured_volume(rng, true, 7, noise=0.1)
+    for pkrn_min in (1.0, 1.3, 2.0):
+        got = cpu.decisive_seeds(cost, pkrn_min, 1e-3, 1, 0)
+        np.testing.assert_array_equal(got, ref.ref_decisive_seeds(cost, pkrn_min, 1e-3, 1, 0))
+    assert (cpu.decisive_seeds(cost, 1.2, 1e-3, 1, 0) >= 0).sum() > 20
+
+
+def test_seeds_single_clear_minimum():
+    h, w, d0 = 5, 9, 3
+    cost = np.full((h, w, 6), 0.8, np.float32)
+    cost[:, :, d0] = 0.1
+    mark_missing_cells(cost)
+    seeds = cpu.decisive_seeds(cost, 1.2, 1e-3, 1, 0)
+    want = np.where(np.arange(w)[None, :] >= d0, d0, -1) * np.ones((h, 1), int)
+    np.testing.assert_array_equal(seeds, want)
+    assert seeds.dtype == np.int32
+
+
+def test_seeds_reject_ambiguous_and_inconsistent_pixels():
+    cost = np.full((1, 8, 4), 0.8, np.float32)
+    cost[0, 5, 2] = 0.1  # clear minimum at (5, 0) with d = 2 ...
+    cost[0, 6, 3] = 0.05  # ... but right pixel 3 prefers d = 3 (left pixel 6): within tolerance 1
+    cost[0, 7, 0] = 0.3
+    cost[0, 7, 1] = 0.3  # tie at (7, 0): PKRN = 1 -> no seed
+    mark_missing_cells(cost)
+    assert cpu.decisive_seeds(cost, 1.2, 1e-3, 1, 0)[0, 5] == 2
+    assert cpu.decisive_seeds(cost, 1.2, 1e-3, 0, 0)[0, 5] == -1  # strict LR check
+    assert cpu.decisive_seeds(cost, 1.2, 1e-3, 1, 0)[0, 7] == -1
+    assert cpu.decisive_seeds(cost, 1.2, 1e-3, 1, 1)[0, 7] == 0  # tie is inside the exclusion zone
+
+
+def test_seed_whose_right_pixel_is_outside_is_rejected():
+    cost = np.full((1, 6, 4), 0.9, np.float32)
+    cost[0, 0, 2] = 0.1  # an aggregated 'missing' cell that wins: right pixel u - d = -2
+    verdicts = set()
+    for far_value in (0.5, 0.05):
+        cost[0, 4, 0] = far_value  # unrelated pixel that Numba reads through the wrap-around
+        verdicts.add(int(cpu.decisive_seeds(cost, 1.2, 1e-3, 1, 0)[0, 0]))
+    assert verdicts == {-1}
+
+
+# ----------------------------------------------------------------------------- min cost
+def test_min_cost_matches_reference():
+    rng = np.random.default_rng(14)
+    cost = random_volume(rng, 7, 9, 5)
+    np.testing.assert_array_equal(cpu.min_cost(cost), ref.ref_min_cost(cost))
+
+
+# ----------------------------------------------------------------------------- diffusion
+def run_diffusion(cost, disp, *, max_gap, tau, kappa_d, adversarial, max_sweeps=100000):
+    return cpu.diffuse(cost, disp, cpu.min_cost(cost), float(max_gap), tau, kappa_d, adversarial, max_sweeps)
+
+
+@pytest.mark.parametrize("settings", DIFFUSION_SETTINGS, ids=lambda s: "-".join(f"{k}{v}" for k, v in s.items()))
+def test_diffusion_matches_whole_image_jacobi_reference(settings):
+    rng = np.random.default_rng(15)
+    cases = []
+    for h, w in SHAPES:
+        for n_disp in (1, 3, 7):
+            cases.append((random_volume(rng, h, w, n_disp), sparse_map(rng, (h, w), n_disp)))
+            cases.append((random_volume(rng, h, w, n_disp, levels=6), sparse_map(rng, (h, w), n_disp)))
+    true = (np.arange(11)[None, :] // 5 + np.arange(13)[:, None] // 4).astype(np.int64) + 1
+    for noise in (0.02, 0.3):
+        cost = structured_volume(rng, true, 7, noise=noise)
+        cases.append((cost, sparse_map(rng, true.shape, 7, share=0.05)))  # some seeds wrong
+    for cost, disp in cases:
+        before = disp.copy()
+        got, sweeps = run_diffusion(cost, disp, **settings)
+        want, want_sweeps = ref.ref_diffuse(cost, disp, **settings)
+        np.testing.assert_array_equal(got, want, err_msg=f"{cost.shape}")
+        assert sweeps == want_sweeps
+        np.testing.assert_array_equal(disp, before)  # input untouched
+        if not settings["adversarial"]:
+            assert (got[before >= 0] == before[before >= 0]).all()
+
+
+def test_diffusion_from_one_seed_fills_the_known_minimum_map():
+    rng = np.random.default_rng(16)
+    h, w, n_disp = 13, 17, 8
+    true = np.broadcast_to((2 + np.arange(h) // 3)[:, None], (h, w)).astype(np.int64)  # road-like: d grows with v
+    cost = structured_volume(rng, true, n_disp, noise=0.01)
+    seeds = np.full((h, w), -1, np.int32)
+    seeds[h // 2, w // 2] = true[h // 2, w // 2]
+    got, sweeps = run_diffusion(cost, seeds, max_gap=-1.0, tau=1, kappa_d=1, adversarial=True)
+    exists = np.arange(w)[None, :] >= true  # the true cell has a right pixel
+    np.testing.assert_array_equal(got[exists], true[exists])
+    want, want_sweeps = ref.ref_diffuse(cost, seeds, -1.0, 1, 1, True)
+    np.testing.assert_array_equal(got, want)
+    assert sweeps == want_sweeps >= max(h, w) // 2
+
+
+def test_diffusion_adversarial_update_corrects_a_wrong_seed():
+    h, w = 5, 9
+    true = np.full((h, w), 2)
+    cost = structured_volume(np.random.default_rng(17), true, 6, noise=0.0)
+    seeds = np.full((h, w), -1, np.int32)
+    seeds[2, 4] = 2
+    seeds[2, 6] = 4  # wrong, and a local minimum of nothing: its neighbours will overrule it
+    got, _ = run_diffusion(cost, seeds, max_gap=-1.0, tau=2, kappa_d=1, adversarial=True)
+    assert got[2, 6] == 2
+    kept, _ = run_diffusion(cost, seeds, max_gap=-1.0, tau=2, kappa_d=1, adversarial=False)
+    assert kept[2, 6] == 4
+
+
+def test_diffusion_without_seeds_runs_no_sweep():
+    cost = random_volume(np.random.default_rng(18), 5, 7, 3)
+    got, sweeps = run_diffusion(cost, np.full((5, 7), -1, np.int32), max_gap=-1.0, tau=1, kappa_d=1, adversarial=True)
+    assert sweeps == 0 and (got == -1).all()
+
+
+def test_diffusion_max_sweeps_safeguard_matches_truncated_reference():
+    rng = np.random.default_rng(19)
+    true = np.full((9, 11), 3)
+    cost = structured_volume(rng, true, 6, noise=0.02)
+    seeds = np.full((9, 11), -1, np.int32)
+    seeds[4, 5] = 3
+    for limit in (1, 2, 3):
+        got, sweeps = run_diffusion(cost, seeds, max_gap=-1.0, tau=1, kappa_d=1, adversarial=True, max_sweeps=limit)
+        want, _ = ref.ref_diffuse(cost, seeds, -1.0, 1, 1, True, max_sweeps=limit)
+        assert sweeps == limit
+        np.testing.assert_array_equal(got, want)
+
+
+# ----------------------------------------------------------------------------- inheritance
+def coarse_map_for(rng, shape, n_disp, share=0.7):
+    h, w = shape
+    coarse = rng.integers(0, (n_disp + 1) // 2, (h // 2, w // 2)).astype(np.int32)
+    coarse[rng.random(coarse.shape) >= share] = -1
+    return coarse
+
+
+def test_inheritance_without_prc_matches_reference():
+    rng = np.random.default_rng(20)
+    for h, w in [(7, 9), (13, 11), (2, 12), (12, 2), (6, 6)]:
+        for n_disp in (3, 5, 7):
+            for levels in (None, 5):
+                cost = random_volume(rng, h, w, n_disp, levels=levels)
+                coarse = coarse_map_for(rng, (h, w), n_disp)
+                for pkrn in (1.0, 1.05, 1.5):
+                    got = cpu.inherit(cost, coarse, False, pkrn, 1e-3)
+                    np.testing.assert_array_equal(got, ref.ref_inherit(cost, coarse, False, pkrn, 1e-3))
+
+
+def test_inheritance_with_prc_and_zero_disparity_matches_reference():
+    # dc = 0: the left and right patches coincide, so this part of the PRC is pinned
+    # independently of which patch each view looks at.
+    rng = np.random.default_rng(21)
+    for h, w in [(7, 9), (13, 11), (2, 12), (6, 6)]:
+        for n_disp in (2, 5):
+            cost = random_volume(rng, h, w, n_disp, levels=8)
+            coarse = np.where(rng.random((h // 2, w // 2)) < 0.8, 0, -1).astype(np.int32)
+            got = cpu.inherit(cost, coarse, True, 1.05, 1e-3)
+            np.testing.assert_array_equal(got, ref.ref_inherit(cost, coarse, True, 1.05, 1e-3))
+
+
+def test_inheritance_with_prc_matches_reference():
+    rng = np.random.default_rng(22)
+    for h, w in [(7, 9), (13, 11), (2, 12), (12, 2), (6, 6)]:
+        for n_disp in (3, 5, 7):
+            for _ in range(4):
+                cost = random_volume(rng, h, w, n_disp, levels=8)
+                coarse = coarse_map_for(rng, (h, w), n_disp)
+                got = cpu.inherit(cost, coarse, True, 1.05, 1e-3)
+                np.testing.assert_array_equal(got, ref.ref_inherit(cost, coarse, True, 1.05, 1e-3))
+
+
+def sharp_volume(true, n_disp):
+    """Cost 0.05 at the true disparity, 0.9 elsewhere, 1 where the right pixel is missing."""
+    cost = np.full(true.shape + (n_disp,), 0.9, np.float32)
+    v, u = np.indices(true.shape)
+    cost[v, u, true] = 0.05
+    return mark_missing_cells(cost)
+
+
+def inside_patches(true, coarse_true):
+    """Fine pixels whose left patch, right patch and outside cells all lie in the image."""
+    h, w = true.shape
+    v, u = np.indices((h, w))
+    u0 = 2 * (u // 2)
+    x0 = u0 - 2 * coarse_true[v // 2, u // 2]
+    return (x0 - 2 >= 0) & (u0 + 3 < w) & (v < 2 * (h // 2))
+
+
+@pytest.mark.parametrize("prc", [True, False])
+def test_inheritance_of_a_perfect_coarse_map_constant_disparity(prc):
+    # With the bug, columns within 2 dc of either border are dropped: the left-view PRC
+    # looks at left pixels u0 - 2dc (missing cells, cost 1) and the right-view PRC at
+    # C_R(u0, .) = C_L(u0 + 2dc, .) (outside the image, inf).
+    h, w, n_disp = 8, 24, 10
+    true = np.full((h, w), 6)
+    coarse = np.full((h // 2, w // 2), 3, np.int32)
+    got = cpu.inherit(sharp_volume(true, n_disp), coarse, prc, 1.05, 1e-3)
+    inside = inside_patches(true, coarse)
+    assert inside.sum() > 40
+    np.testing.assert_array_equal(got[inside], 6)
+    np.testing.assert_array_equal(got, ref.ref_inherit(sharp_volume(true, n_disp), coarse, prc, 1.05, 1e-3))
+
+
+def test_inheritance_of_a_perfect_coarse_map_rejects_wrong_coarse_disparity():
+    true = np.full((8, 24), 6)
+    coarse = np.full((4, 12), 1, np.int32)  # 2 dc = 2: the true minimum is far outside {1, 2, 3}
+    assert (cpu.inherit(sharp_volume(true, 10), coarse, True, 1.05, 1e-3) == -1).all()
+
+
+def test_inheritance_of_a_perfect_coarse_map_with_a_disparity_step():
+    h, w, n_disp = 6, 40, 12
+    true = np.where(np.arange(w)[None, :] < 16, 2, 8) * np.ones((h, 1), int)
+    coarse = (true[::2, ::2] // 2).astype(np.int32)
+    got = cpu.inherit(sharp_volume(true, n_disp), coarse, True, 1.05, 1e-3)
+    # Every pixel of the far plane whose patches lie inside it inherits its disparity,
+    # including u in [16, 24) where the right patch u0 - 8 lies over the near plane's columns.
+    u = np.broadcast_to(np.arange(w)[None, :], (h, w))
+    far = (u >= 16) & (u + 3 < w)
+    np.testing.assert_array_equal(got[far], 8)
+
+
+# ----------------------------------------------------------------------------- sub-pixel
+def test_subpixel_matches_reference():
+    rng = np.random.default_rng(23)
+    for h, w in SHAPES:
+        for n_disp in (1, 2, 5):
+            cost = random_volume(rng, h, w, n_disp, levels=None if n_disp != 5 else 4)
+            disp = sparse_map(rng, (h, w), n_disp, share=0.8)
+            got = cpu.subpixel(cost, disp)
+            np.testing.assert_allclose(got, ref.ref_subpixel(cost, disp), rtol=0, atol=COST_ATOL)
+            assert got.dtype == np.float32 and (np.isinf(got) == (disp < 0)).all()
+
+
+def parabola_volume(d0, n_disp=8, a=0.02, b=0.1):
+    d = np.arange(n_disp, dtype=np.float64)
+    return (a * (d - d0) ** 2 + b).astype(np.float32).reshape(1, 1, n_disp)
+
+
+def test_subpixel_known_answers():
+    one = np.array([[3]], np.int32)
+    assert cpu.subpixel(parabola_volume(3.0), one)[0, 0] == 3.0  # symmetric: exactly integer
+    np.testing.assert_allclose(cpu.subpixel(parabola_volume(3.3), one)[0, 0], 3.3, atol=1e-5)
+    np.testing.assert_allclose(cpu.subpixel(parabola_volume(2.75), one)[0, 0], 2.75, atol=1e-5)
+    # at d = 2 the parabola through 0.1, 0.2, 0.5 has its vertex 1 px to the left: clamped to -0.5
+    steep = np.array([0.9, 0.1, 0.2, 0.5, 0.9], np.float32).reshape(1, 1, 5)
+    assert cpu.subpixel(steep, np.array([[2]], np.int32))[0, 0] == 1.5
+    concave = np.array([0.2, 0.5, 0.2], np.float32).reshape(1, 1, 3)
+    assert cpu.subpixel(concave, np.array([[1]], np.int32))[0, 0] == 1.0
+    flat = np.full((1, 1, 3), 0.4, np.float32)
+    assert cpu.subpixel(flat, np.array([[1]], np.int32))[0, 0] == 1.0
+    ends = parabola_volume(0.3, n_disp=4)
+    assert cpu.subpixel(ends, np.array([[0]], np.int32))[0, 0] == 0.0
+    assert cpu.subpixel(ends, np.array([[3]], np.int32))[0, 0] == 3.0
+    assert np.isinf(cpu.subpixel(ends, np.array([[-1]], np.int32))[0, 0])
+
+
+# ----------------------------------------------------------------------------- pyramid
+@pytest.mark.parametrize("shape", [(7, 9), (8, 8), (13, 2), (2, 13), (1, 5), (3, 3)])
+def test_downsample_matches_reference(shape):
+    img = np.random.default_rng(sum(shape)).uniform(0, 255, shape).astype(np.float32)
+    got = downsample(img)
+    assert got.shape == (shape[0] // 2, shape[1] // 2) and got.dtype == np.float32
+    np.testing.assert_allclose(got, ref.ref_downsample(img), rtol=1e-6, atol=1e-4)
+
+
+def test_pyramid_shapes_and_level_ranges():
+    pyr = build_pyramid(np.zeros((37, 50), np.uint8), 4)
+    assert [p.shape for p in pyr] == [(37, 50), (18, 25), (9, 12), (4, 6)]
+    assert all(p.dtype == np.float32 for p in pyr)
+    assert [level_max_disparity(37, lv) for lv in range(4)] == [37, 19, 10, 5]
+    assert level_max_disparity(1, 3) == 1
+
+
+# ----------------------------------------------------------------------------- hole filling
+def test_fill_holes_without_smoothing_matches_reference():
+    rng = np.random.default_rng(24)
+    for shape in [(7, 9), (13, 11), (1, 12), (12, 1), (6, 6)]:
+        for share in (0.2, 0.6, 0.95):
+            disp = rng.uniform(0, 30, shape).astype(np.float32)
+            valid = rng.random(shape) < share
+            valid[rng.random(shape[0]) < 0.2] = False  # whole empty rows
+            disp[~valid & (rng.random(shape) < 0.5)] = np.inf
+            got = fill_holes(disp, valid, smooth=False)
+            np.testing.assert_array_equal(got, ref.ref_fill_holes(disp, valid), err_msg=f"{shape} {share}")
+
+
+def test_fill_holes_known_rows():
+    inf = np.inf
+    disp = np.array([[5, inf, inf, 2, 3], [inf, inf, inf, inf, inf], [inf, 7, inf, inf, inf]], np.float32)
+    got = fill_holes(disp, np.isfinite(disp), smooth=False)
+    np.testing.assert_array_equal(got, [[5, 2, 2, 2, 3], [5, 2, 2, 2, 3], [7, 7, 7, 7, 7]])
+
+
+def test_fill_holes_smoothing_keeps_decided_pixels():
+    rng = np.random.default_rng(25)
+    disp = rng.uniform(0, 30, (12, 15)).astype(np.float32)
+    valid = rng.random(disp.shape) < 0.5
+    got = fill_holes(disp, valid, smooth=True)
+    np.testing.assert_array_equal(got[valid], disp[valid])
+    assert np.isfinite(got).all()
+
+
+def test_fill_holes_with_nothing_valid_is_all_inf():
+    got = fill_holes(np.zeros((3, 4), np.float32), np.zeros((3, 4), bool), smooth=False)
+    assert np.isinf(got).all()
+
+
+# ----------------------------------------------------------------------------- realistic volumes
+@pytest.fixture(scope="module")
+def aggregated_levels():
+    """Aggregated NCC volumes of a textured slanted pair at 30x40 and 60x80 (as the pipeline makes).
+
+    Unlike the random volumes above, the cells whose right pixel is outside the image hold
+    averages below 1 here, as after RBF in the pipeline.
+    """
+    rng = np.random.default_rng(27)
+    h, w = 60, 80
+    tex = cv2.GaussianBlur(rng.uniform(0, 255, (h, w + 40)).astype(np.float32), (0, 0), 1.2)
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    # d = 3 + 0.04 u + 0.02 v; right pixel x shows the left point u with u - d(u) = x
+    source = (u + 3.0 + 0.02 * v) / 0.96
+    x0 = np.floor(source).astype(int)
+    frac = source - x0
+    left = tex[:, :w].copy()
+    right = ((1 - frac) * tex[v.astype(int), x0] + frac * tex[v.astype(int), x0 + 1]).astype(np.float32)
+    out = []
+    for img_l, img_r, dmax in ((left, right, 10), (downsample(left), downsample(right), 5)):
+        cost = cpu.ncc_cost_volume(img_l, img_r, dmax, 5, 1e-2)
+        out.append(cpu.rbf_filter(cost, cpu.rbf_weights(img_l, 1.5, 12.0), 4))
+    return out  # [fine, coarse]
+
+
+def test_seeds_on_an_aggregated_volume_match_reference(aggregated_levels):
+    for cost in aggregated_levels:
+        got = cpu.decisive_seeds(cost, 1.2, 1e-3, 1, 0)
+        np.testing.assert_array_equal(got, ref.ref_decisive_seeds(cost, 1.2, 1e-3, 1, 0))
+
+
+def test_diffusion_and_inheritance_on_aggregated_volumes_match_reference(aggregated_levels):
+    fine, coarse = aggregated_levels
+    seeds = ref.ref_decisive_seeds(coarse, 1.2, 1e-3, 1, 0)
+    assert (seeds >= 0).mean() > 0.5
+    for max_gap in (-1.0, 0.05):
+        got, sweeps = run_diffusion(coarse, seeds, max_gap=max_gap, tau=1, kappa_d=1, adversarial=True)
+        want, want_sweeps = ref.ref_diffuse(coarse, seeds, max_gap, 1, 1, True)
+        np.testing.assert_array_equal(got, want)
+        assert sweeps == want_sweeps
+    assert (got >= 0).mean() > 0.9
+    inherited = cpu.inherit(fine, got, False, 1.05, 1e-3)
+    np.testing.assert_array_equal(inherited, ref.ref_inherit(fine, got, False, 1.05, 1e-3))
+    assert (inherited >= 0).mean() > 0.5
+    got_fine, sweeps = run_diffusion(fine, inherited, max_gap=0.05, tau=1, kappa_d=1, adversarial=True)
+    want_fine, want_sweeps = ref.ref_diffuse(fine, inherited, 0.05, 1, 1, True)
+    np.testing.assert_array_equal(got_fine, want_fine)
+    assert sweeps == want_sweeps
+
+
+def test_inheritance_with_prc_on_an_aggregated_volume_matches_reference(aggregated_levels):
+    fine, coarse = aggregated_levels
+    seeds = ref.ref_decisive_seeds(coarse, 1.2, 1e-3, 1, 0)
+    coarse_map, _ = run_diffusion(coarse, seeds, max_gap=0.05, tau=1, kappa_d=1, adversarial=True)
+    got = cpu.inherit(fine, coarse_map, True, 1.05, 1e-3)
+    np.testing.assert_array_equal(got, ref.ref_inherit(fine, coarse_map, True, 1.05, 1e-3))
+
+
+# ----------------------------------------------------------------------------- determinism
+def outputs_of_every_driver():
+    rng = np.random.default_rng(26)
+    left, right = random_images(rng, (48, 64))
+    cost = cpu.ncc_cost_volume(left, right, 15, 5, 1e-2)
+    weights = cpu.rbf_weights(left, 1.5, 12.0)
+    agg = cpu.rbf_filter(cost, weights, 3)
+    seeds = cpu.decisive_seeds(agg, 1.05, 1e-3, 1, 0)
+    disp, sweeps = cpu.diffuse(agg, seeds, cpu.min_cost(agg), 0.1, 1, 1, True, 100000)
+    def upsample(img):
+        return np.repeat(np.repeat(img, 2, 0), 2, 1)
+
+    fine = cpu.ncc_cost_volume(upsample(left), upsample(right), 31, 5, 1e-2)
+    return {
+        "cost": cost,
+        "weights": weights,
+        "rbf": agg,
+        "bilateral": cpu.bilateral_filter(cost, left, 2, 1.5, 12.0),
+        "seeds": seeds,
+        "diffused": disp,
+        "sweeps": np.array(sweeps),
+        "inherit_prc": cpu.inherit(fine, disp, True, 1.05, 1e-3),
+        "inherit_dfm": cpu.inherit(fine, disp, False, 1.05, 1e-3),
+        "subpixel": cpu.subpixel(agg, disp),
+    }
+
+
+def test_drivers_are_bit_identical_with_one_and_all_threads():
+    all_threads = numba.config.NUMBA_NUM_THREADS
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        single = outputs_of_every_driver()
+        numba.set_num_threads(all_threads)
+        multi = outputs_of_every_driver()
+    finally:
+        numba.set_num_threads(before)
+    assert (single["seeds"] >= 0).sum() > 0 and (single["diffused"] >= 0).sum() > (single["seeds"] >= 0).sum()
+    for name in single:
+        assert single[name].tobytes() == multi[name].tobytes(), name
+
+
+# ----------------------------------------------------------------------------- perspective transformation
+@pytest.mark.parametrize("model", [(20.0, 0.1, 0.0, 4.0), (35.5, 0.08, -0.004, 8.0), (3.0, 0.02, 0.01, 2.0)])
+def test_pt_warp_matches_reference(model):
+    rng = np.random.default_rng(11)
+    right = (rng.random((23, 41)) * 255).astype(np.float32)
+    got = cpu.pt_warp(right, *model)
+    np.testing.assert_allclose(got, ref.ref_pt_warp(right, *model), atol=1e-3)
+
+
+def test_pt_warp_of_an_integer_shift_is_a_translation_with_replicated_border():
+    right = np.tile(np.arange(30, dtype=np.float32) * 3, (5, 1))
+    got = cpu.pt_warp(right, 7.0, 0.0, 0.0, 2.0)  # s = 5 everywhere
+    np.testing.assert_array_equal(got[:, 5:], right[:, :-5])
+    np.testing.assert_array_equal(got[:, :5], np.full((5, 5), right[0, 0]))
+
+
+@pytest.mark.parametrize("model", [(20.0, 0.1, 0.0, 4.0), (35.5, 0.08, -0.004, 8.0)])
+def test_pt_restore_matches_reference_and_keeps_inf(model):
+    rng = np.random.default_rng(12)
+    disp = (rng.random((17, 29)) * 18).astype(np.float32)
+    disp[rng.random(disp.shape) < 0.2] = np.inf
+    got = cpu.pt_restore(disp, *model)
+    np.testing.assert_allclose(got, ref.ref_pt_restore(disp, *model), rtol=1e-6, atol=1e-4)
+    np.testing.assert_array_equal(np.isinf(got), np.isinf(disp))

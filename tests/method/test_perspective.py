@@ -1,0 +1,175 @@
+"""Perspective transformation (DESIGN step 6): road fit, warp/restore, PT in the pipeline and PT-SGM."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from tests import reference as ref
+
+from d3cli import D3Stereo, load_config
+from d3cli.batch import compute_pair
+from d3cli.kernels import cpu
+from d3cli.method.perspective import RoadModel, coarse_points, fit_road_model
+from d3cli.data.synth import render_pair
+
+A0, A1, THETA_DEG = 30.0, 0.12, 2.5
+B1, B2 = A1 * math.cos(math.radians(THETA_DEG)), -A1 * math.sin(math.radians(THETA_DEG))
+SCALE = 8
+
+
+def road_coarse_map(rng, shape=(45, 80), *, outliers=0.3, noise=0.15):
+    """Coarse-level float map of the road model (coarse px), with a share of gross outliers.
+
+    Half of the outliers are a 'car' (a block far above the road), half scattered
+    random disparities; a few pixels are undecided.
+    """
+    h, w = shape
+    vc, uc = np.mgrid[0:h, 0:w]
+    u, v = (uc + 0.5) * SCALE - 0.5, (vc + 0.5) * SCALE - 0.5
+    disp = (A0 + B1 * v + B2 * u) / SCALE + rng.normal(0, noise, shape)
+    n_out = int(outliers * h * w)
+    flat = disp.reshape(-1)
+    car = np.zeros(shape, bool)
+    car[5:25, 10:10 + max(1, n_out // 2 // 20)] = True
+    flat[car.reshape(-1)] += 6.0  # nearer than the road
+    rest = rng.choice(np.flatnonzero(~car.reshape(-1)), size=n_out - int(car.sum()), replace=False)
+    flat[rest] = rng.uniform(0, 20, rest.size)
+    flat[rng.choice(flat.size, size=40, replace=False)] = np.inf
+    return disp
+
+
+def test_fit_recovers_the_road_model_with_30_percent_outliers():
+    rng = np.random.default_rng(0)
+    model = fit_road_model(road_coarse_map(rng), scale=SCALE, inlier_threshold=1.0, iterations=10)
+    assert model.road_like, model.reason
+    assert model.a0 == pytest.approx(A0, abs=0.3)
+    assert model.a1 == pytest.approx(A1, rel=0.01)
+    assert math.degrees(model.theta) == pytest.approx(THETA_DEG, abs=0.1)
+    assert model.b1 == pytest.approx(B1, rel=0.01)
+    assert model.b2 == pytest.approx(B2, abs=2e-4)
+    assert 0.65 <= model.inlier_share <= 0.75  # ~70 % road, the rest outliers
+
+
+def test_fit_is_deterministic_and_integer_maps_work():
+    rng = np.random.default_rng(1)
+    coarse = road_coarse_map(rng, outliers=0.2)
+    ints = np.where(np.isfinite(coarse), np.rint(np.clip(coarse, 0, None)), -1).astype(np.int32)
+    first = fit_road_model(ints, scale=SCALE)
+    assert first == fit_road_model(ints, scale=SCALE)
+    assert first.a0 == pytest.approx(A0, abs=1.0)
+    assert first.a1 == pytest.approx(A1, rel=0.03)
+
+
+def test_coarse_points_use_area_averaging_centres():
+    disp = np.full((2, 3), -1, np.int32)
+    disp[1, 2] = 5
+    u, v, d = coarse_points(disp, scale=4)
+    assert (u[0], v[0], d[0]) == (2 * 4 + 1.5, 1 * 4 + 1.5, 20.0)
+
+
+@pytest.mark.parametrize(
+    "case, expect",
+    [("few", "decided coarse pixels"), ("random", "fit a plane"), ("upside_down", "does not grow")],
+)
+def test_not_road_like_scenes_are_flagged(case, expect):
+    rng = np.random.default_rng(2)
+    if case == "few":
+        coarse = np.full((45, 80), -1, np.int32)
+        coarse[rng.integers(0, 45, 20), rng.integers(0, 80, 20)] = 7
+    elif case == "random":
+        coarse = rng.uniform(0, 20, (45, 80))
+    else:
+        vc = np.mgrid[0:45, 0:80][0]
+        coarse = 15.0 - 0.2 * vc
+    model = fit_road_model(coarse, scale=SCALE, min_inlier_share=0.5)
+    assert not model.road_like
+    assert expect in model.reason
+
+
+def linear_rows(shape, rng):
+    """An image linear in x on each row: bilinear interpolation of it is exact."""
+    h, w = shape
+    slope = rng.uniform(0.5, 2.0, (h, 1))
+    offset = rng.uniform(0, 50, (h, 1))
+    return slope, offset
+
+
+def test_warp_then_restore_round_trip_is_exact_for_a_planar_road():
+    """With R(x, v) linear in x and L(u, v) = R(u - d(u, v), v) for a planar road d,
+    the warped right image matches L at the constant d' = delta / (1 - b2), and the
+    restore gives back d exactly."""
+    rng = np.random.default_rng(3)
+    h, w, delta = 40, 200, 6.0
+    model = RoadModel(a0=20.0, b1=0.3, b2=-0.01, a1=0.0, theta=0.0, inlier_share=1.0, n_points=1)
+    slope, offset = linear_rows((h, w), rng)
+    xs = np.arange(w, dtype=np.float64)[None, :]
+    right = (slope * xs + offset).astype(np.float32)
+    vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
+    d_true = model.a0 + model.b1 * vv + model.b2 * uu
+    left = slope * (uu - d_true) + offset
+
+    warped = cpu.pt_warp(right, model.a0, model.b1, model.b2, delta)
+    np.testing.assert_allclose(warped, ref.ref_pt_warp(right, model.a0, model.b1, model.b2, delta), atol=1e-4)
+    d_prime = delta / (1.0 - model.b2)
+    x = uu - d_prime
+    x0 = np.floor(x).astype(int)
+    t = x - x0
+    def source(col):  # column of the right image that the warped column samples
+        return col - (model.a0 + model.b1 * vv + model.b2 * col - delta)
+
+    inside = (x0 >= 0) & (x0 + 1 < w) & (source(x0) >= 0) & (source(x0 + 1) <= w - 1)
+    rows = vv.astype(int)
+    sampled = (1 - t) * warped[rows, np.clip(x0, 0, w - 1)] + t * warped[rows, np.clip(x0 + 1, 0, w - 1)]
+    np.testing.assert_allclose(sampled[inside], left[inside], atol=2e-3)
+
+    const = np.full((h, w), d_prime, np.float32)
+    np.testing.assert_allclose(cpu.pt_restore(const, model.a0, model.b1, model.b2, delta), d_true, atol=1e-4)
+    np.testing.assert_allclose(ref.ref_pt_restore(const, model.a0, model.b1, model.b2, delta), d_true, atol=1e-4)
+
+
+@pytest.fixture(scope="module")
+def flat_road():
+    return render_pair(seed=5, width=320, height=180, variant="sun", flat=True, noise=False)
+
+
+def test_pipeline_with_pt_on_a_flat_road_is_accurate_and_reports_the_model(flat_road):
+    p = flat_road
+    cfg = load_config(None, ["pt.enabled=true", "pyramid.levels=3"])
+    result = D3Stereo(cfg).compute(p.left, p.right, max_disparity=p.calib["ndisp"])
+    info = result.info["pt"]
+    assert not info["fallback"] and info["narrow_range"] == 18
+    assert info["theta_deg"] == pytest.approx(p.calib["roll_deg"], abs=0.3)
+    assert info["inlier_share"] > 0.9
+    gt = p.disparity
+    mask = p.nocc & np.isfinite(gt)
+    err = np.abs(result.disparity - gt)[mask]
+    assert np.mean(err) < 0.15
+    assert result.warnings == []
+
+
+def test_pipeline_falls_back_to_the_full_range_when_not_road_like():
+    """Disparity shrinking towards the bottom (a ceiling, not a road): full-range search."""
+    rng = np.random.default_rng(4)
+    right = (rng.random((64, 96)) * 255).astype(np.float32)
+    truth = 12 - np.arange(64) // 8  # 12 ... 5
+    left = np.stack([np.roll(row, d) for row, d in zip(right, truth)])
+    cfg = load_config(None, ["pt.enabled=true", "pyramid.levels=2"])
+    result = D3Stereo(cfg).compute(left, right, max_disparity=16)
+    assert result.info["pt"]["fallback"] is True
+    assert result.info["pt"]["a1"] < 0
+    assert any("perspective transformation skipped" in w for w in result.warnings)
+    inner = result.disparity[:, 20:]
+    assert np.median(np.abs(inner - truth[:, None])) < 0.25
+
+
+def test_pt_sgm_on_a_flat_road_beats_nothing_less_than_half_a_pixel(flat_road):
+    p = flat_road
+    cfg = load_config(None, ["pyramid.levels=3"])
+    result = compute_pair("pt-sgm", cfg, p.left, p.right, max_disparity=p.calib["ndisp"])
+    assert result.info["method"] == "pt-sgm" and not result.info["pt"]["fallback"]
+    assert result.info["num_disparities"] == 32
+    mask = p.nocc & np.isfinite(p.disparity)
+    assert np.mean(np.abs(result.disparity - p.disparity)[mask]) < 0.5
+    assert np.isfinite(result.disparity).all()
