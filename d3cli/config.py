@@ -16,6 +16,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
+import stat
 import types
 import typing
 from dataclasses import dataclass, field, fields, replace
@@ -26,6 +28,16 @@ import yaml
 from .errors import ConfigError
 
 METHODS = ("d3stereo", "sgbm", "pt-sgm")
+
+#: Largest config or manifest file read (bytes): a YAML file bigger than this is a mistake.
+MAX_YAML_BYTES = 1_000_000
+#: Largest YAML document, counted in nodes after expanding every alias: a few hundred
+#: bytes of nested aliases ("billion laughs") would otherwise expand to gigabytes.
+MAX_YAML_NODES = 100_000
+#: Integers in a config are bounded: the kernels take 32-bit scalars.
+MAX_CONFIG_INT = 2**31 - 1
+#: How much of an offending value an error message quotes.
+QUOTE_CHARS = 60
 BACKENDS = ("auto", "cpu", "cuda")
 
 
@@ -240,6 +252,18 @@ def _type_name(tp) -> str:
     return names.get(tp, str(tp))
 
 
+def quote(value: Any, limit: int = QUOTE_CHARS) -> str:
+    """``repr(value)`` cut to ``limit`` characters, for error messages.
+
+    A long or deeply nested value is quoted by its start, so that an error about it stays
+    one readable line (and cannot itself exhaust memory).
+    """
+    if isinstance(value, (list, tuple, dict, set)) and len(value) > limit:
+        return f"<{type(value).__name__} of {len(value)} items>"
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def _coerce(value: Any, tp, where: str, key: str):
     """Check ``value`` against the annotation ``tp``; return it in canonical form."""
     origin = typing.get_origin(tp)
@@ -261,8 +285,14 @@ def _coerce(value: Any, tp, where: str, key: str):
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             if isinstance(value, float) and value.is_integer():
-                return int(value)
-            _bad_type(value, tp, where, key)
+                value = int(value)
+            else:
+                _bad_type(value, tp, where, key)
+        if abs(value) > MAX_CONFIG_INT:
+            raise ConfigError(
+                f"{where}: {key} must be an integer of at most {MAX_CONFIG_INT} in size, got {quote(value)}; "
+                f"fix the value of {key} (see configs/default.yaml)"
+            )
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -279,7 +309,7 @@ def _coerce(value: Any, tp, where: str, key: str):
 
 def _bad_type(value, tp, where, key):
     raise ConfigError(
-        f"{where}: {key} must be {_type_name(tp)}, got {value!r}; "
+        f"{where}: {key} must be {_type_name(tp)}, got {quote(value)}; "
         f"fix the value of {key} (see configs/default.yaml)"
     )
 
@@ -322,14 +352,14 @@ def _apply(cfg: Config, data: Mapping, where: str, lines: Mapping | None = None)
     for sec_name, sec_data in data.items():
         if sec_name not in sections:
             raise ConfigError(
-                f"{_at(where, lines, sec_name)}: unknown section {sec_name!r}; valid sections: {', '.join(sections)}"
+                f"{_at(where, lines, sec_name)}: unknown section {quote(sec_name)}; valid sections: {', '.join(sections)}"
             )
         if sec_data is None:
             continue
         sec_cls = sections[sec_name]
         if not isinstance(sec_data, Mapping):
             raise ConfigError(
-                f"{_at(where, lines, sec_name)}: section {sec_name} must be a mapping of keys, got {sec_data!r}; "
+                f"{_at(where, lines, sec_name)}: section {sec_name} must be a mapping of keys, got {quote(sec_data)}; "
                 f"valid keys: {', '.join(f.name for f in fields(sec_cls))}"
             )
         hints = _hints(sec_cls)
@@ -339,14 +369,14 @@ def _apply(cfg: Config, data: Mapping, where: str, lines: Mapping | None = None)
             at = _at(where, lines, sec_name, key)
             if key not in hints:
                 raise ConfigError(
-                    f"{at}: unknown key {dotted!r}; valid keys of {sec_name}: "
+                    f"{at}: unknown key {quote(dotted)}; valid keys of {sec_name}: "
                     f"{', '.join(f.name for f in fields(sec_cls))}"
                 )
             value = _coerce(value, hints[key], at, dotted)
             check = _RANGES.get(dotted)
             if check is not None and not check[0](value):
                 raise ConfigError(
-                    f"{at}: {dotted} must be {check[1]}, got {value!r}; "
+                    f"{at}: {dotted} must be {check[1]}, got {quote(value)}; "
                     f"fix the value of {dotted}"
                 )
             changes[key] = value
@@ -355,16 +385,34 @@ def _apply(cfg: Config, data: Mapping, where: str, lines: Mapping | None = None)
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
-    """SafeLoader that rejects duplicate keys (a silent override is a user error)."""
+    """SafeLoader that rejects duplicate and non-scalar keys (a silent override or an
+    unhashable key is a user error) and reads YAML 1.2 numbers such as ``1e-3``.
+
+    PyYAML implements YAML 1.1, where a float needs a dot (``1.0e-3``): ``1e-3`` would
+    be the string "1e-3" and fail as "must be a number".
+    """
+
+
+_UniqueKeyLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
 
 
 def _construct_mapping(loader, node, deep=False):
     seen = {}
     for key_node, _ in node.value:
+        if not isinstance(key_node, yaml.ScalarNode):
+            kind = "list" if isinstance(key_node, yaml.SequenceNode) else "mapping"
+            raise ConfigError(
+                f"{loader.name}:{key_node.start_mark.line + 1}: a {kind} used as a key; "
+                "keys must be plain names (e.g. tau:)"
+            )
         key = loader.construct_object(key_node, deep=deep)
         if key in seen:
             raise ConfigError(
-                f"{loader.name}:{key_node.start_mark.line + 1}: duplicate key {key!r} "
+                f"{loader.name}:{key_node.start_mark.line + 1}: duplicate key {quote(key)} "
                 f"(first at line {seen[key]}); keep only one"
             )
         seen[key] = key_node.start_mark.line + 1
@@ -416,25 +464,80 @@ def read_yaml_lines(path: str | os.PathLike) -> tuple[Any, dict[tuple, int]]:
         file and the line.
     """
     path = os.fspath(path)
+    raw = read_bounded(path, what="config file", missing_fix="check the path given to -c", error=ConfigError)
+    return parse_yaml(raw, path, what="config file", error=ConfigError)
+
+
+def read_bounded(path: str, *, what: str, missing_fix: str, error: type = ConfigError) -> bytes:
+    """The bytes of a small regular file, refusing FIFOs, devices and huge files.
+
+    ``-c`` on a FIFO would block forever and ``-c /dev/zero`` would read without end:
+    only regular files of at most :data:`MAX_YAML_BYTES` are read.
+    """
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise error(f"{path}: {what} not found; {missing_fix}") from None
+    except OSError as exc:
+        raise error(f"{path}: cannot read {what} ({exc.strerror or exc}); give a readable UTF-8 YAML file") from None
+    if not stat.S_ISREG(info.st_mode):
+        kind = "a folder" if stat.S_ISDIR(info.st_mode) else "not a regular file (a FIFO, socket or device)"
+        raise error(f"{path}: cannot read {what}: {kind}; give a YAML file")
+    if info.st_size > MAX_YAML_BYTES:
+        raise error(
+            f"{path}: {what} of {info.st_size} bytes is larger than {MAX_YAML_BYTES} bytes; "
+            "give the YAML file itself (is this the right file?)"
+        )
     try:
         with open(path, "rb") as fh:
-            raw = fh.read()
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: config file not found; check the path given to -c") from None
+            return fh.read(MAX_YAML_BYTES + 1)
     except OSError as exc:
-        raise ConfigError(f"{path}: cannot read config file ({exc}); give a readable UTF-8 YAML file") from None
+        raise error(f"{path}: cannot read {what} ({exc.strerror or exc}); give a readable UTF-8 YAML file") from None
+
+
+def _expanded_nodes(node, seen: dict, stack: set, name: str, error: type) -> int:
+    """Number of nodes of ``node`` with every alias expanded (memoised, cycle-checked)."""
+    key = id(node)
+    if key in seen:
+        return seen[key]
+    if key in stack:
+        raise error(f"{name}:{node.start_mark.line + 1}: a recursive YAML alias; write the value out instead")
+    stack.add(key)
+    if isinstance(node, yaml.SequenceNode):
+        children = node.value
+    elif isinstance(node, yaml.MappingNode):
+        children = [n for pair in node.value for n in pair]
+    else:
+        children = []
+    total = 1
+    for child in children:
+        total += _expanded_nodes(child, seen, stack, name, error)
+        if total > MAX_YAML_NODES:
+            break
+    stack.discard(key)
+    seen[key] = total
+    return total
+
+
+def parse_yaml(raw: bytes, path: str, *, what: str = "config file", error: type = ConfigError):
+    """Parse YAML bytes safely; return ``(data, lines)`` as :func:`read_yaml_lines` does.
+
+    Refuses non-UTF-8 text, NUL bytes, invalid YAML, duplicate or non-scalar keys,
+    recursive aliases and documents that expand beyond :data:`MAX_YAML_NODES` nodes,
+    each with ``error`` naming the file and the line.
+    """
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = raw.count(b"\n", 0, exc.start) + 1
-        raise ConfigError(
-            f"{path}:{line}: cannot read config file (not UTF-8 text: byte 0x{raw[exc.start]:02x} at offset "
+        raise error(
+            f"{path}:{line}: cannot read {what} (not UTF-8 text: byte 0x{raw[exc.start]:02x} at offset "
             f"{exc.start}; is it a YAML file?); give a readable UTF-8 YAML file"
         ) from None
     if "\x00" in text:
         line = text.count("\n", 0, text.index("\x00")) + 1
-        raise ConfigError(
-            f"{path}:{line}: cannot read config file (a NUL byte: binary data, not YAML); "
+        raise error(
+            f"{path}:{line}: cannot read {what} (a NUL byte: binary data, not YAML); "
             "give a readable UTF-8 YAML file"
         )
     try:
@@ -444,6 +547,11 @@ def read_yaml_lines(path: str | os.PathLike) -> tuple[Any, dict[tuple, int]]:
             node = loader.get_single_node()
             if node is None:
                 return None, {}
+            if _expanded_nodes(node, {}, set(), path, error) > MAX_YAML_NODES:
+                raise error(
+                    f"{path}: YAML aliases expand to more than {MAX_YAML_NODES} values (an alias bomb?); "
+                    "write the values out instead of nesting aliases"
+                )
             data = loader.construct_document(node)
             lines = _key_lines(node, loader)
         finally:
@@ -452,7 +560,11 @@ def read_yaml_lines(path: str | os.PathLike) -> tuple[Any, dict[tuple, int]]:
         mark = getattr(exc, "problem_mark", None)
         line = f":{mark.line + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ConfigError(f"{path}{line}: not valid YAML ({problem}); fix the syntax") from None
+        raise error(f"{path}{line}: not valid YAML ({problem}); fix the syntax") from None
+    except ConfigError as exc:  # the loader's key checks raise ConfigError
+        if isinstance(exc, error):
+            raise
+        raise error(str(exc)) from None
     return data, lines
 
 
@@ -465,7 +577,7 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     dotted, raw = text.split("=", 1)
     section, key = dotted.strip().split(".", 1)
     try:
-        value = yaml.safe_load(raw) if raw.strip() else None
+        value = yaml.load(raw, Loader=_UniqueKeyLoader) if raw.strip() else None
     except yaml.YAMLError:
         value = raw
     return section, key, value

@@ -75,10 +75,10 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import numpy as np
-import yaml
 
-from . import io
+from ..config import parse_yaml, read_bounded
 from ..errors import InputError, where_what_fix
+from . import io
 
 log = logging.getLogger(__name__)
 
@@ -629,19 +629,10 @@ def expand_layout(folder: str | os.PathLike, layout: str = "auto") -> list[Pair]
 
 
 def _read_manifest_yaml(path: Path) -> Any:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(where_what_fix(str(path), "manifest file not found", "check the path")) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(where_what_fix(str(path), f"cannot read manifest ({exc})", "give a UTF-8 YAML file")) from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f":{mark.line + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise InputError(f"{path}{line}: not valid YAML ({problem}); fix the syntax") from None
+    """The parsed manifest: a bounded regular file, safe YAML (no alias bombs, no
+    duplicate keys), every problem an InputError naming the file and the line."""
+    raw = read_bounded(str(path), what="manifest file", missing_fix="check the path", error=InputError)
+    return parse_yaml(raw, str(path), what="manifest file", error=InputError)[0]
 
 
 def _check_value(key: str, value: Any, where: str) -> Any:

@@ -256,12 +256,22 @@ def _parse_pfm_header(path: Path, data: bytes) -> tuple[int, int, int, str, int]
         raise bad from None
     if width <= 0 or height <= 0 or not math.isfinite(scale):
         raise bad
+    if scale == 0:
+        # the sign of the scale is the byte order: 0 (or -0) says neither
+        raise InputError(where_what_fix(str(path), "PFM scale is 0, so the byte order is unknown",
+                                        "write the file with scale -1 (little-endian) or 1 (big-endian)"))
     channels = 3 if tokens[0] == b"PF" else 1
     # The sign of the scale is the byte order; its magnitude is not applied to the data
     # (Middlebury writes -1/255 and stores disparities in pixels).
     byte_order = "<" if math.copysign(1.0, scale) < 0 else ">"
-    # Exactly one whitespace character separates the header from the raster.
-    return channels, width, height, byte_order, pos + 1
+    # One whitespace character separates the header from the raster; files written on
+    # Windows end the header with CRLF.  The raster size decides, since a raster may
+    # itself start with the byte 0x0A.
+    offset = pos + 1
+    raster_bytes = 4 * width * height * channels
+    if data[pos:pos + 2] == b"\r\n" and len(data) - (pos + 2) == raster_bytes:
+        offset = pos + 2
+    return channels, width, height, byte_order, offset
 
 
 def read_pfm_raw(path: str | os.PathLike) -> np.ndarray:
