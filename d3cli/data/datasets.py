@@ -88,8 +88,9 @@ GT_NAMES = ("disp_gt.pfm", "disp_gt.png", "disp_gt.pgm", "disp_gt.npy", "disp_gt
 NOCC_NAMES = ("mask0nocc.png", "disp_gt_nocc.png", "nonocc.png", "mask_nonocc.png")
 # Family of pair folders whose name prefix is a road sequence without ground truth.
 ROAD_PREFIXES = ("karlsruhe", "sid", "stereo-road", "road")
-PAIR_KEYS = ("name", "left", "right", "gt", "gt_scale", "gt_invalid", "nocc", "calib", "max_disparity", "family")
-DEFAULT_KEYS = ("gt_scale", "gt_invalid", "family", "max_disparity")
+PAIR_KEYS = ("name", "left", "right", "gt", "gt_scale", "gt_invalid", "nocc", "calib", "max_disparity", "family",
+             "bit_depth")
+DEFAULT_KEYS = ("gt_scale", "gt_invalid", "family", "max_disparity", "bit_depth")
 MANIFEST_KEYS = ("root", "layout", "pairs", "description", *DEFAULT_KEYS)
 
 _EXPECTED = (
@@ -127,6 +128,15 @@ class Pair:
     family : str
         Dataset family for per-family tables, e.g. ``"middlebury2014"``, ``"kitti2012"``,
         ``"road"``.
+    bit_depth : int or None
+        Bits per sample actually used in the image files (e.g. 10 or 12 for camera data
+        stored in 16-bit PNGs); None: detected from the pair's largest value
+        (:func:`normalise_bit_depth`).  From ``bit_depth:`` in SOURCE.txt or a manifest.
+    error : str or None
+        Why this pair folder cannot be used (e.g. a left image without a right one).  A
+        broken folder inside a dataset is listed with its error instead of stopping the
+        discovery of the others; loading it raises that error, so a batch records the
+        pair as failed and runs the rest.
     """
 
     name: str
@@ -139,6 +149,8 @@ class Pair:
     calib: Path | None = None
     max_disparity: int | None = None
     family: str = ""
+    bit_depth: int | None = None
+    error: str | None = None
 
 
 # --------------------------------------------------------------------------- small helpers
@@ -167,20 +179,39 @@ def family_from_name(name: str) -> str:
     return lowered.split("-", 1)[0] if "-" in lowered else ""
 
 
-def _files_by_lower_name(folder: Path) -> dict[str, Path]:
+def _entries(folder: Path, keep) -> list[Path]:
+    """Entries of ``folder`` for which ``keep(entry)`` holds, skipping broken ones.
+
+    An entry that cannot be examined (a symlink loop, a dangling or forbidden link) is
+    skipped with a warning naming that entry: one bad link must not hide the rest of a
+    dataset (nor be blamed on the root folder).
+    """
     try:
-        return {entry.name.lower(): Path(entry.path) for entry in os.scandir(folder) if entry.is_file()}
+        entries = list(os.scandir(folder))
     except OSError as exc:
         raise InputError(where_what_fix(str(folder), f"cannot list folder ({exc.strerror})", "check permissions")) from None
+    kept = []
+    for entry in entries:
+        try:
+            if keep(entry):
+                kept.append(Path(entry.path))
+        except OSError as exc:
+            log.warning("%s: skipped (%s); fix or remove the link", entry.path, exc.strerror or exc)
+    return kept
+
+
+def _files_by_lower_name(folder: Path) -> dict[str, Path]:
+    return {path.name.lower(): path for path in _entries(folder, lambda entry: entry.is_file())}
 
 
 def _subfolders(folder: Path) -> list[Path]:
-    try:
-        return sorted(
-            Path(entry.path) for entry in os.scandir(folder) if entry.is_dir() and not entry.name.startswith(".")
-        )
-    except OSError as exc:
-        raise InputError(where_what_fix(str(folder), f"cannot list folder ({exc.strerror})", "check permissions")) from None
+    return sorted(_entries(folder, lambda entry: not entry.name.startswith(".") and _is_folder(entry)))
+
+
+def _is_folder(entry: os.DirEntry) -> bool:
+    if entry.is_symlink():
+        os.stat(entry.path)  # raises ELOOP for a symlink loop (is_dir() would say False)
+    return entry.is_dir()
 
 
 def _find_view(files: dict[str, Path], stem: str) -> Path | None:
@@ -309,6 +340,10 @@ def read_pair_folder(folder: str | os.PathLike) -> Pair:
     name = safe_name(folder.name)
     family = _first_word(source.get("family", "")) or family_from_name(name)
     gt_scale = _source_number(source, "gt_scale", source_path) if source_path else None
+    bit_depth = _source_number(source, "bit_depth", source_path, int) if source_path else None
+    if bit_depth is not None and not 1 <= bit_depth <= 16:
+        raise InputError(where_what_fix(str(source_path), f"bit_depth must be in [1, 16], got {bit_depth}",
+                                        "write the bits per sample of the images, e.g. bit_depth: 12"))
     return Pair(
         name=name,
         left=left,
@@ -320,6 +355,7 @@ def read_pair_folder(folder: str | os.PathLike) -> Pair:
         calib=calib,
         max_disparity=max_disparity,
         family=family,
+        bit_depth=bit_depth,
     )
 
 
@@ -327,15 +363,25 @@ def _pair_folders(root: Path) -> list[Pair]:
     pairs = []
     for sub in _subfolders(root):
         files = _files_by_lower_name(sub)
-        if _find_view(files, "left") is not None:
-            pairs.append(read_pair_folder(sub))
-        elif _find_view(files, "right") is not None:
-            raise InputError(
-                where_what_fix(str(sub), "found a right image but no left image", "add left.png or remove the folder")
-            )
-        else:
-            log.debug("skipping %s: no left/right images", sub)
+        try:
+            if _find_view(files, "left") is not None:
+                pairs.append(read_pair_folder(sub))
+            elif _find_view(files, "right") is not None:
+                raise InputError(
+                    where_what_fix(str(sub), "found a right image but no left image", "add left.png or remove the folder")
+                )
+            else:
+                log.debug("skipping %s: no left/right images", sub)
+        except InputError as exc:
+            # one broken folder must not stop the batch: list it with its error
+            log.warning("%s", exc)
+            pairs.append(_broken_pair(sub, str(exc)))
     return pairs
+
+
+def _broken_pair(folder: Path, error: str) -> Pair:
+    name = safe_name(folder.name)
+    return Pair(name=name, left=folder, right=folder, family=family_from_name(name), error=error)
 
 
 # --------------------------------------------------------------------------- Middlebury 2014
@@ -655,6 +701,14 @@ def _check_value(key: str, value: Any, where: str) -> Any:
         return float(value)
     if key == "gt_invalid":
         return _canonical_invalid(value, where)
+    if key == "bit_depth":
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 16:
+            raise InputError(
+                where_what_fix(where, f"bit_depth must be an integer in [1, 16], got {value!r}", "e.g. bit_depth: 12")
+            )
+        return value
     if key == "max_disparity":
         if value is None:
             return None
@@ -690,7 +744,8 @@ def _manifest_pair(entry: Any, index: int, root: Path, defaults: dict, manifest:
         if key not in entry:
             raise InputError(where_what_fix(where, f"missing key {key!r}", "every pair needs name, left and right"))
     values = {**defaults, **{key: _check_value(key, value, where) for key, value in entry.items()}}
-    fields = {key: values[key] for key in ("name", "gt_scale", "gt_invalid", "max_disparity", "family") if key in values}
+    fields = {key: values[key] for key in ("name", "gt_scale", "gt_invalid", "max_disparity", "family", "bit_depth")
+              if key in values}
     for key in ("left", "right", "gt", "nocc", "calib"):
         if values.get(key) is not None:
             fields[key] = _manifest_path(root, values[key], key, where)
@@ -840,7 +895,66 @@ def _as_grey_like(image: np.ndarray) -> np.ndarray:
     grey = io.to_grey(image)
     if image.dtype == np.uint16:
         grey = grey * 257.0
+    if image.dtype.kind == "f":
+        return grey
     return np.round(grey).astype(image.dtype)
+
+
+def normalise_bit_depth(left: np.ndarray, right: np.ndarray, *, bits: int | None = None,
+                        where: str = "pair") -> tuple[np.ndarray, np.ndarray, int]:
+    """Bring the samples of a pair to the full range of their type, with one factor.
+
+    10- and 12-bit camera data stored in 16-bit PNGs would otherwise be read as 0-4 or
+    0-16 grey levels (16-bit values are mapped to 0-255 by /257).  Both views get the same
+    factor, so that matching and photometric scores see the same scale.
+
+    Parameters
+    ----------
+    left, right : ndarray
+        uint8, uint16 or float32 images of one pair (same dtype).
+    bits : int, optional, keyword-only
+        Bits per sample declared by the dataset; None: the smallest bit count (>= 8) that
+        holds the pair's largest value.  Float images: values <= 1 are taken as 0-1,
+        values <= 255 as 0-255, larger ones as ``bits``-bit integers.
+    where : str
+        Names the pair in errors.
+
+    Returns
+    -------
+    left, right : ndarray
+        uint16 scaled by ``2^(16 - bits)`` (exact), uint8 unchanged, float32 on 0-255.
+    bits : int
+        The bit depth used.
+
+    Raises
+    ------
+    InputError
+        Values beyond the declared bit depth, or negative float samples.
+    """
+    top = float(max(left.max(initial=0), right.max(initial=0)))
+    if left.dtype == np.uint8:
+        return left, right, 8
+    if left.dtype == np.uint16:
+        used = bits if bits is not None else max(8, int(top).bit_length())
+        if top >= 2 ** used:
+            raise InputError(where_what_fix(where, f"samples up to {int(top)} do not fit bit_depth {used}",
+                                            f"fix bit_depth (at least {int(top).bit_length()}) or remove it"))
+        if used >= 16:
+            return left, right, 16
+        shift = 16 - used
+        return (left.astype(np.uint16) << shift), (right.astype(np.uint16) << shift), used
+    low = float(min(left.min(initial=0), right.min(initial=0)))
+    if low < 0:
+        raise InputError(where_what_fix(where, f"negative intensities (down to {low:g}) in a float image",
+                                        "give intensities >= 0 (0-1, 0-255 or integer counts)"))
+    if bits is None and top <= 1.0:
+        scale, used = 255.0, 0
+    elif bits is None and top <= 255.0:
+        scale, used = 1.0, 8
+    else:
+        used = bits if bits is not None else max(8, math.ceil(math.log2(top + 1)))
+        scale = 255.0 / (2 ** used - 1)
+    return (left * np.float32(scale)).astype(np.float32), (right * np.float32(scale)).astype(np.float32), used
 
 
 def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
@@ -849,14 +963,18 @@ def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
     Returns
     -------
     left, right : ndarray
-        uint8 or uint16, ``(H, W)`` or ``(H, W, 3)`` RGB, same shape and dtype.  When one
-        view is grey and the other colour, the colour one is converted to grey.
+        uint8, uint16 or float32 (0-255), ``(H, W)`` or ``(H, W, 3)`` RGB, same shape and
+        dtype.  When one view is grey and the other colour, the colour one is converted
+        to grey.  16-bit and float data are scaled to their type's full range with the
+        pair's bit depth (:func:`normalise_bit_depth`).
 
     Raises
     ------
     InputError
         Unreadable image, different sizes, or different bit depths.
     """
+    if pair.error is not None:
+        raise InputError(pair.error)
     left = io.read_image(pair.left)
     right = io.read_image(pair.right)
     if left.shape[:2] != right.shape[:2]:
@@ -875,6 +993,9 @@ def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
                 "give both views with the same bit depth",
             )
         )
+    left, right, bits = normalise_bit_depth(left, right, bits=pair.bit_depth, where=pair.name)
+    if bits not in (8, 16):
+        log.debug("%s: %d-bit samples scaled to the full range", pair.name, bits)
     if left.ndim != right.ndim:
         log.warning("%s: one view is grey, the other colour; using grey for both", pair.name)
         left = _as_grey_like(left) if left.ndim == 3 else left

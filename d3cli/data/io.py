@@ -138,8 +138,8 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     Returns
     -------
     ndarray
-        uint8 or uint16, ``(H, W)`` for grey images, ``(H, W, 3)`` RGB otherwise
-        (alpha dropped).
+        uint8, uint16 or float32 (float TIFF; values as stored), ``(H, W)`` for grey
+        images, ``(H, W, 3)`` RGB otherwise (alpha dropped).
 
     Raises
     ------
@@ -148,11 +148,16 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     """
     path = _existing_file(path, "image file")
     image = _decode_unchanged(path)
-    if image.dtype not in (np.uint8, np.uint16):
+    if image.dtype.kind == "f":
+        image = image.astype(np.float32, copy=False)
+        if not np.isfinite(image).all():
+            raise InputError(where_what_fix(str(path), "float image with NaN or inf samples",
+                                            "give finite intensities (or an 8/16-bit image)"))
+    elif image.dtype not in (np.uint8, np.uint16):
         raise InputError(
             where_what_fix(
                 str(path),
-                f"unsupported pixel type {image.dtype} (expected 8- or 16-bit integers)",
+                f"unsupported pixel type {image.dtype} (expected 8/16-bit integers or float)",
                 "convert the image to 8- or 16-bit PNG",
             )
         )

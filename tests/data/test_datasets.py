@@ -398,11 +398,33 @@ def test_public_dataset_manifests_work_on_a_download(tmp_path, filename, layout)
 # --------------------------------------------------------------------------- bad inputs
 
 
-def test_missing_right_image_in_pair_folder(tmp_path):
+def test_missing_right_image_in_pair_folder_is_listed_broken_and_the_rest_kept(tmp_path):
     _pair_folder(tmp_path / "ok")
     _img(tmp_path / "broken" / "left.png")
+    _img(tmp_path / "noleft" / "right.png")
+    pairs = {p.name: p for p in discover([tmp_path])}
+    assert sorted(pairs) == ["broken", "noleft", "ok"] and pairs["ok"].error is None
     with pytest.raises(InputError, match=r"broken: found left\.png but no right image; add the right view as right\.png"):
-        discover([tmp_path])
+        load_pair_images(pairs["broken"])
+    with pytest.raises(InputError, match=r"noleft: found a right image but no left image; add left\.png"):
+        load_pair_images(pairs["noleft"])
+    load_pair_images(pairs["ok"])
+
+
+def test_a_single_broken_pair_folder_given_directly_is_still_an_error(tmp_path):
+    _img(tmp_path / "broken" / "left.png")
+    with pytest.raises(InputError, match=r"broken: found left\.png but no right image"):
+        discover([tmp_path / "broken"])
+
+
+def test_symlink_loop_is_skipped_and_named(tmp_path, caplog):
+    _pair_folder(tmp_path / "ok")
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")
+    (tmp_path / "ok" / "self").symlink_to(tmp_path / "ok" / "self")
+    with caplog.at_level("WARNING"):
+        pairs = discover([tmp_path])
+    assert [p.name for p in pairs] == ["ok"]
+    assert any(str(tmp_path / "loop") in r.getMessage() and "skipped" in r.getMessage() for r in caplog.records)
 
 
 def test_left_right_size_mismatch(tmp_path):

@@ -95,10 +95,18 @@ def test_read_image_truncated_png(tmp_path):
         io.read_image(tmp_path / "cut.png")
 
 
-def test_read_image_float_tiff_is_rejected(tmp_path):
-    cv2.imwrite(str(tmp_path / "f.tif"), np.ones((3, 3), np.float32))
-    with pytest.raises(InputError, match="unsupported pixel type float32"):
-        io.read_image(tmp_path / "f.tif")
+def test_read_image_float_tiff_is_read_as_stored(tmp_path):
+    image = np.arange(12, dtype=np.float32).reshape(3, 4) / 11
+    cv2.imwrite(str(tmp_path / "f.tif"), image)
+    got = io.read_image(tmp_path / "f.tif")
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, image)
+
+
+def test_read_image_float_tiff_with_nan_is_an_error(tmp_path):
+    cv2.imwrite(str(tmp_path / "nan.tif"), np.full((3, 3), np.nan, np.float32))
+    with pytest.raises(InputError, match=r"nan\.tif: float image with NaN or inf samples"):
+        io.read_image(tmp_path / "nan.tif")
 
 
 def test_read_image_folder_instead_of_file(tmp_path):
