@@ -209,8 +209,10 @@ def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
 @click.argument("out_dir", type=click.Path(path_type=Path))
 @click.option("--n", "n", type=click.IntRange(min=1), default=12, show_default=True, help="Number of pairs.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same pairs).")
-@click.option("--width", type=click.IntRange(min=16), default=1280, show_default=True, help="Image width, pixels.")
-@click.option("--height", type=click.IntRange(min=16), default=720, show_default=True, help="Image height, pixels.")
+@click.option("--width", type=click.IntRange(min=32, max=8192), default=1280, show_default=True,
+              help="Image width, pixels.")
+@click.option("--height", type=click.IntRange(min=32, max=8192), default=720, show_default=True,
+              help="Image height, pixels.")
 @_verbosity
 def synth(out_dir, n, seed, width, height, verbose, quiet):
     """Write N synthetic road stereo pairs with exact ground truth into OUT_DIR."""

@@ -899,10 +899,45 @@ def _check_choice(name: str, value: str, choices) -> None:
         raise InputError(where_what_fix("synth", f"unknown {name} {value!r}", f"use one of {', '.join(choices)}"))
 
 
+#: Image sides accepted by the generator: smaller cannot hold a road scene, larger would
+#: need tens of GB while rendering (a 200000-pixel width used to end in a MemoryError).
+MIN_SIDE, MAX_SIDE = 32, 8192
+#: The file that marks a folder as one synthetic dataset (seed and size).
+DATASET_FILE = "synth.json"
+
+
 def _check_size(width: int, height: int) -> None:
-    if width < 32 or height < 32:
+    if width < MIN_SIDE or height < MIN_SIDE:
         raise InputError(where_what_fix("synth", f"image size {width}x{height} is too small",
-                                        "use a width and height of at least 32 pixels"))
+                                        f"use a width and height of at least {MIN_SIDE} pixels"))
+    if width > MAX_SIDE or height > MAX_SIDE:
+        raise InputError(where_what_fix("synth", f"image size {width}x{height} is too large",
+                                        f"use a width and height of at most {MAX_SIDE} pixels"))
+
+
+def _claim_folder(out_dir: Path, identity: dict) -> None:
+    """Refuse to mix two datasets in one folder; mark the folder as this dataset.
+
+    A folder may be empty, or hold a dataset made with the same seed and size (a rerun,
+    or more pairs of the same set: pairs are deterministic).  Anything else is refused,
+    so that pairs of two seeds or sizes never end up side by side.
+    """
+    import json
+
+    marker = out_dir / DATASET_FILE
+    entries = [p.name for p in out_dir.iterdir()] if out_dir.is_dir() else []
+    if entries:
+        try:
+            stored = json.loads(marker.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            stored = None
+        if stored != identity:
+            made_by = (f"a synthetic set with seed {stored.get('seed')} and size {stored.get('width')}x"
+                       f"{stored.get('height')}" if isinstance(stored, dict) else f"{len(entries)} other entries")
+            raise OutputError(where_what_fix(
+                str(out_dir), f"the folder is not empty (it holds {made_by})",
+                "give an empty or new folder, or the same --seed/--width/--height as before"))
+    _atomic_write(marker, lambda tmp: tmp.write_text(json.dumps(identity) + "\n", encoding="utf-8"))
 
 
 def render_pair(
@@ -1161,6 +1196,8 @@ def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, 
     except OSError as exc:
         raise OutputError(where_what_fix(str(out_dir), f"cannot create the folder ({exc.strerror or exc})",
                                          "choose a writable output folder")) from exc
+    _claim_folder(out_dir, {"generator": "d3stereo synth", "seed": int(seed), "width": int(width),
+                            "height": int(height)})
     folders = []
     for index in range(int(n)):
         variant = VARIANTS[index % len(VARIANTS)]
