@@ -957,6 +957,22 @@ def normalise_bit_depth(left: np.ndarray, right: np.ndarray, *, bits: int | None
     return (left * np.float32(scale)).astype(np.float32), (right * np.float32(scale)).astype(np.float32), used
 
 
+def pair_image_size(pair: Pair, *, both: bool = False):
+    """The pair's image size from the file headers, without decoding.
+
+    Returns
+    -------
+    (height, width), or with ``both`` ((w_left, h_left), (w_right, h_right)); None when a
+    header cannot be read without decoding.  Lets a batch check memory before it decodes.
+    """
+    if pair.error is not None:
+        raise InputError(pair.error)
+    left, right = io.image_size(pair.left), io.image_size(pair.right)
+    if left is None or right is None:
+        return None
+    return (left, right) if both else (left[1], left[0])
+
+
 def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
     """Read the two views of a pair.
 
@@ -975,6 +991,11 @@ def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
     """
     if pair.error is not None:
         raise InputError(pair.error)
+    sizes = pair_image_size(pair, both=True)
+    if sizes is not None and sizes[0] != sizes[1]:  # refused before decoding either view
+        (wl, hl), (wr, hr) = sizes
+        raise InputError(where_what_fix(pair.name, f"left is {hl}x{wl} but right is {hr}x{wr}",
+                                        "a stereo pair needs equal sizes"))
     left = io.read_image(pair.left)
     right = io.read_image(pair.right)
     if left.shape[:2] != right.shape[:2]:

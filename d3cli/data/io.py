@@ -42,6 +42,8 @@ from ..errors import InputError, OutputError, where_what_fix
 
 log = logging.getLogger(__name__)
 
+#: Largest image decoded (pixels): 16384^2, ~1.6 GB as 16-bit RGB.
+MAX_IMAGE_PIXELS = 16384 * 16384
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".tif", ".tiff", ".bmp")
 DISPARITY_EXTENSIONS = (".pfm", ".png", ".pgm", ".ppm", ".tif", ".tiff", ".npy")
 INVALID_CONVENTIONS = ("auto", "zero", "inf", "none")
@@ -90,12 +92,46 @@ def _read_bytes(path: Path) -> bytes:
         ) from None
 
 
+def image_size(path: str | os.PathLike) -> tuple[int, int] | None:
+    """(width, height) from the image file's header, without decoding the pixels.
+
+    A 1 MB PNG can claim 32000x32000 pixels (3 GB once decoded): sizes are checked from
+    the header first.  Returns None when the header cannot be read this way (the decoder
+    then says what is wrong).  Uses Pillow (a dependency of scikit-image) for the header.
+    """
+    from PIL import Image  # header parsing only; OpenCV has no header-only reader
+
+    try:
+        with Image.open(path) as image:  # lazy: reads the header, decodes nothing
+            return int(image.size[0]), int(image.size[1])
+    except Image.DecompressionBombError:  # Pillow refuses > 179 Mpx even to open
+        limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+        try:
+            with Image.open(path) as image:
+                return int(image.size[0]), int(image.size[1])
+        finally:
+            Image.MAX_IMAGE_PIXELS = limit
+    except Exception:  # noqa: BLE001 - any header Pillow cannot parse: let OpenCV decide
+        return None
+
+
 def _decode_unchanged(path: Path) -> np.ndarray:
     """Decode an image file with OpenCV keeping bit depth and channels (BGR order)."""
     # imdecode on the raw bytes instead of imread(path): imread cannot open non-ASCII
     # paths on some platforms and says nothing about why it failed.
+    size = image_size(path)
+    if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:
+        raise InputError(where_what_fix(
+            str(path), f"image of {size[0]}x{size[1]} pixels is larger than {MAX_IMAGE_PIXELS} pixels "
+                       f"(about {size[0] * size[1] * 6 / 1e9:.1f} GB to decode)",
+            "give an image of at most 16384x16384 pixels, or crop or downscale it"))
     data = np.frombuffer(_read_bytes(path), dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    try:
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    except cv2.error as exc:  # e.g. a header beyond OpenCV's own size limit
+        reason = str(exc).strip().splitlines()[-1][:120]
+        raise InputError(where_what_fix(str(path), f"cannot decode image (OpenCV: {reason})",
+                                        "give an 8/16-bit PNG, JPEG, PPM/PGM or TIFF of a sensible size")) from None
     if image is None:
         raise InputError(
             where_what_fix(
