@@ -140,6 +140,10 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     method = cfg.run.method
     if method == "sgbm" and cfg.run.backend == "cuda":
         log.warning("--backend cuda: sgbm runs on OpenCV's CPU implementation")
+    if method in ("elas", "pandora-sgm"):
+        from .baselines.peers import require
+
+        require(method)  # an Error now, not one failed pair after another
     pairs = datasets.discover(list(inputs) if inputs else [samples_dir()])
     override = max_disparity if max_disparity is not None else cfg.run.max_disparity
     result = batch.run_batch(pairs, out_dir, cfg=cfg, method=method, evaluate=evaluate,

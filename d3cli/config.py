@@ -27,7 +27,7 @@ import yaml
 
 from .errors import ConfigError
 
-METHODS = ("d3stereo", "sgbm", "pt-sgm")
+METHODS = ("d3stereo", "sgbm", "pt-sgm", "elas", "pandora-sgm")
 
 #: Largest config or manifest file read (bytes): a YAML file bigger than this is a mistake.
 MAX_YAML_BYTES = 1_000_000
@@ -153,6 +153,16 @@ class SGBMConfig:
 
 
 @dataclass(frozen=True)
+class PeersConfig:
+    """Optional peers for comparison tables (``--method elas`` / ``pandora-sgm``)."""
+
+    fill: bool = True  # fill their holes row-wise (background side) like SGBM, for a dense comparison
+    elas_preset: str = "middlebury"  # libelas preset: middlebury (indoor scenes) | robotics (KITTI-like)
+    pandora_p1: float = 8.0  # SGM penalty for disparity changes of 1 (census costs)
+    pandora_p2: float = 32.0  # SGM penalty for larger changes
+
+
+@dataclass(frozen=True)
 class CameraConfig:
     """Camera for point clouds when the pair has no calib.txt (``--pointcloud``)."""
 
@@ -176,6 +186,7 @@ class Config:
     pt: PTConfig = field(default_factory=PTConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)
     sgbm: SGBMConfig = field(default_factory=SGBMConfig)
+    peers: PeersConfig = field(default_factory=PeersConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
 
     def to_dict(self) -> dict:
@@ -231,6 +242,9 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "refine.smooth_sigma": (lambda v: v > 0, "a number > 0 (pixels)"),
     "camera.f": (lambda v: v is None or v > 0, "a positive number (pixels) or null"),
     "camera.baseline": (lambda v: v is None or v > 0, "a positive number (metres) or null"),
+    "peers.elas_preset": (lambda v: v in ("middlebury", "robotics"), "one of middlebury, robotics"),
+    "peers.pandora_p1": (lambda v: v >= 0, "a number >= 0"),
+    "peers.pandora_p2": (lambda v: v >= 0, "a number >= 0"),
     "sgbm.block_size": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "sgbm.mode": (lambda v: v in ("sgbm", "hh", "3way", "hh4"), "one of sgbm, hh, 3way, hh4"),
     # 100 kills the process: OpenCV's 3-way SGBM divides by (100 - uniquenessRatio) (SIGFPE).

@@ -11,7 +11,9 @@ Method variants (``--methods``, comma-separated, in the order printed):
 - ``d3stereo``: d3stereo with the perspective transformation off (``pt.enabled=false``),
 - ``d3stereo+pt``: PT-D3Stereo (``pt.enabled=true``),
 - ``sgbm``: OpenCV SGBM (the ``sgbm`` section: block 5, 3-way, hole-filled),
-- ``pt-sgm``: SGBM after the same perspective transformation (``pt`` section).
+- ``pt-sgm``: SGBM after the same perspective transformation (``pt`` section),
+- ``elas``, ``pandora-sgm``: the optional peers (extra ``peers``; ``peers`` section:
+  holes filled row-wise like SGBM's unless ``--set peers.fill=false``).
 
 Usage::
 
@@ -21,6 +23,7 @@ Usage::
         --methods d3stereo+pt,d3stereo,sgbm,pt-sgm --markdown          # the road table
     python scripts/benchmark.py ../shared/data --family road --photometric \\
         -c configs/road.yaml --methods d3stereo+pt,d3stereo,sgbm,pt-sgm
+    python scripts/benchmark.py ../shared/data --methods d3,sgbm,elas,pandora-sgm --markdown  # peers
 
 The first d3stereo call compiles (or loads cached) kernels; a warm-up call on a tiny
 pair keeps that out of the timings.
@@ -37,16 +40,17 @@ from dataclasses import replace
 import numpy as np
 
 from d3cli import D3Stereo, load_config
-from d3cli.baselines import pt_sgm_disparity, sgbm_disparity
+from d3cli.baselines import elas_disparity, pandora_sgm_disparity, pt_sgm_disparity, sgbm_disparity
+from d3cli.baselines.peers import require
 from d3cli.data.datasets import discover, load_ground_truth, load_pair_images, resolve_max_disparity
 from d3cli.data.io import to_grey
 from d3cli.evaluation.metrics import disparity_errors, photometric_scores
 
 KEYS = ("epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density")
 PHOTO_KEYS = ("mse", "psnr", "ssim", "coverage")
-VARIANTS = ("d3", "d3stereo", "d3stereo+pt", "sgbm", "pt-sgm")
+VARIANTS = ("d3", "d3stereo", "d3stereo+pt", "sgbm", "pt-sgm", "elas", "pandora-sgm")
 LABELS = {"d3": "d3stereo", "d3stereo": "d3stereo (PT off)", "d3stereo+pt": "d3stereo (PT on)",
-          "sgbm": "SGBM", "pt-sgm": "PT-SGM"}
+          "sgbm": "SGBM", "pt-sgm": "PT-SGM", "elas": "ELAS", "pandora-sgm": "pandora census+SGM"}
 
 
 def make_runners(cfg, methods):
@@ -64,6 +68,10 @@ def make_runners(cfg, methods):
             runners[name] = lambda left, right, dmax, m=matcher: m.compute(left, right, max_disparity=dmax)
         elif name == "sgbm":
             runners[name] = lambda left, right, dmax: sgbm_disparity(left, right, max_disparity=dmax, cfg=cfg.sgbm)
+        elif name in ("elas", "pandora-sgm"):
+            require(name)
+            peer = elas_disparity if name == "elas" else pandora_sgm_disparity
+            runners[name] = lambda left, right, dmax, run=peer: run(left, right, max_disparity=dmax, cfg=cfg.peers)
         else:
             runners[name] = lambda left, right, dmax: pt_sgm_disparity(left, right, max_disparity=dmax, cfg=cfg)
     return runners

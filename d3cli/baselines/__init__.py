@@ -1,4 +1,5 @@
-"""Baseline stereo methods for side-by-side tables: OpenCV SGBM and PT-SGM.
+"""Baseline stereo methods for side-by-side tables: OpenCV SGBM and PT-SGM, and the
+optional peers ELAS and pandora census + SGM (``peers``, imported only when they run).
 
 May import: :mod:`d3cli.method` (the result type, PT model and pyramid, so that PT-SGM
 uses exactly PT-D3Stereo's transformation), :mod:`d3cli.kernels`, :mod:`d3cli.data`,
@@ -6,7 +7,8 @@ uses exactly PT-D3Stereo's transformation), :mod:`d3cli.kernels`, :mod:`d3cli.da
 :mod:`d3cli.batch.methods`.
 """
 
+from .peers import elas_disparity, pandora_sgm_disparity
 from .pt_sgm import pt_sgm_disparity
 from .sgbm import fill_holes_rowwise, sgbm_disparity
 
-__all__ = ["fill_holes_rowwise", "pt_sgm_disparity", "sgbm_disparity"]
+__all__ = ["elas_disparity", "fill_holes_rowwise", "pandora_sgm_disparity", "pt_sgm_disparity", "sgbm_disparity"]

@@ -12,7 +12,7 @@ from .. import __version__
 from ..config import Config
 
 #: Config sections that shape each baseline's result; d3stereo uses all but run and sgbm.
-_BASELINE_SECTIONS = {"sgbm": ("sgbm",), "pt-sgm": ("sgbm", "pt")}
+_BASELINE_SECTIONS = {"sgbm": ("sgbm",), "pt-sgm": ("sgbm", "pt"), "elas": ("peers",), "pandora-sgm": ("peers",)}
 
 
 def settings_fingerprint(cfg: Config, method: str, max_disparity: int | None) -> str:
@@ -25,7 +25,7 @@ def settings_fingerprint(cfg: Config, method: str, max_disparity: int | None) ->
     if method in _BASELINE_SECTIONS:
         sections = {name: sections[name] for name in _BASELINE_SECTIONS[method]}
     else:
-        del sections["sgbm"]
+        del sections["sgbm"], sections["peers"]  # d3stereo reads neither
     blob = json.dumps([method, sections, max_disparity], sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 

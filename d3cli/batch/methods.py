@@ -3,14 +3,15 @@
 - ``d3stereo``: :class:`d3cli.method.D3Stereo` (the paper's method),
 - ``sgbm``: OpenCV's semi-global block matching (:func:`d3cli.baselines.sgbm_disparity`),
 - ``pt-sgm``: SGBM after the same perspective transformation as PT-D3Stereo
-  (:func:`d3cli.baselines.pt_sgm_disparity`).
+  (:func:`d3cli.baselines.pt_sgm_disparity`),
+- ``elas``, ``pandora-sgm``: optional peers (:mod:`d3cli.baselines.peers`, extra ``peers``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..baselines import pt_sgm_disparity, sgbm_disparity
+from ..baselines import elas_disparity, pandora_sgm_disparity, pt_sgm_disparity, sgbm_disparity
 from ..config import METHODS, Config
 from ..errors import ConfigError
 from ..method import D3Stereo, DisparityResult
@@ -28,7 +29,7 @@ def compute_pair(
 
     Parameters
     ----------
-    method : {"d3stereo", "sgbm", "pt-sgm"}
+    method : {"d3stereo", "sgbm", "pt-sgm", "elas", "pandora-sgm"}
     cfg : Config
         Full configuration; each method reads its own sections.
     left, right : ndarray, (H, W) or (H, W, 3)
@@ -46,4 +47,8 @@ def compute_pair(
         return D3Stereo(cfg).compute(left, right, max_disparity=max_disparity)
     if method == "pt-sgm":
         return pt_sgm_disparity(left, right, max_disparity=max_disparity, cfg=cfg)
+    if method == "elas":
+        return elas_disparity(left, right, max_disparity=max_disparity, cfg=cfg.peers)
+    if method == "pandora-sgm":
+        return pandora_sgm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.peers)
     raise ConfigError(f"--method {method}: unknown method; use one of {', '.join(METHODS)}")

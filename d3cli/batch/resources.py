@@ -40,6 +40,9 @@ D3_BYTES_PER_PIXEL = 12 + 2 * 4 * 4 / 3 + 8 + 4 + 4 + 3 * 8 + 4 + 4 + 2 + 8
 #: Bytes per pixel around OpenCV SGBM: raw images, grey float32 and uint8, int16
 #: disparity, float32 disparity and filled copy, valid mask, index maps of the filling.
 SGBM_BYTES_PER_PIXEL = 12 + 2 * (4 + 1) + 2 + 2 * 4 + 1 + 4 * 8
+#: Bytes per pixel around libelas: 8-bit images, two 16-byte descriptor images, two float
+#: disparity maps, the support grid and the filled copy (a generous bound).
+ELAS_BYTES_PER_PIXEL = 2 + 2 * 16 + 2 * 4 + 16 + SGBM_BYTES_PER_PIXEL
 #: Rows of SGBM path buffers kept by the one-pass modes (a generous bound).
 SGBM_BUFFER_ROWS = 16
 #: Share of the physical memory used as the limit when run.max_memory_gb is unset.
@@ -78,7 +81,7 @@ def estimate_peak_bytes(shape, max_disparity: int, cfg: Config, *, method: str) 
         ``max_disparity + 1`` slices).
     cfg : Config
         Resolved configuration (aggregation settings change the number of volumes).
-    method : {"d3stereo", "sgbm", "pt-sgm"}, keyword-only
+    method : {"d3stereo", "sgbm", "pt-sgm", "elas", "pandora-sgm"}, keyword-only
 
     Returns
     -------
@@ -97,6 +100,12 @@ def estimate_peak_bytes(shape, max_disparity: int, cfg: Config, *, method: str) 
         if method == "pt-sgm":
             per_pixel += 2 * 4 * pixels  # the warped right image and the shift map
         return int(path_buffers + per_pixel)
+    if method == "elas":
+        return int(ELAS_BYTES_PER_PIXEL * pixels)
+    if method == "pandora-sgm":
+        # float32 cost volume, SGM's aggregated volume and the right view's for the
+        # cross-check, plus an xarray copy of each: a generous four volumes
+        return int(4 * pixels * n_disp * 4 + SGBM_BYTES_PER_PIXEL * pixels)
     volumes = _d3_volume_bytes(cfg, pixels, n_disp)
     weights = pixels * 9 * 4
     return int(volumes + weights + D3_BYTES_PER_PIXEL * pixels)
