@@ -77,7 +77,7 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
     pt_info = model.to_info(narrow_range=narrow)
     if not model.road_like:
         msg = model.fallback_warning(max_disparity)
-        log.warning(msg)
+        log.debug(msg)  # returned in result.warnings; the batch logs those once
         result = sgbm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.sgbm)
         result.info.update(method="pt-sgm", pt=pt_info)
         result.warnings.append(msg)

@@ -42,6 +42,10 @@ from ..errors import InputError, OutputError, where_what_fix
 
 log = logging.getLogger(__name__)
 
+# OpenCV prints its own "[ WARN:0@...] PNG input buffer is incomplete" lines to stderr for
+# files that this module then reports as one Error naming the file: keep only errors.
+cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+
 #: Largest image decoded (pixels): 16384^2, ~1.6 GB as 16-bit RGB.
 MAX_IMAGE_PIXELS = 16384 * 16384
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".tif", ".tiff", ".bmp")

@@ -306,7 +306,7 @@ class D3Stereo:
         info["pt"] = model.to_info(narrow_range=narrow)
         if not model.road_like:
             msg = model.fallback_warning(dmax)
-            log.warning(msg)
+            log.debug(msg)  # returned in result.warnings; the batch logs those once
             warnings.append(msg)
             return None, pyr_r, dmax
         log.info(

@@ -46,3 +46,17 @@ def test_pair_sizes_from_headers_and_mismatch_refused_before_decoding(tmp_path):
     assert pair_image_size(pair) == (6, 10)
     with pytest.raises(InputError, match=r"p: left is 6x10 but right is 20000x20000; a stereo pair needs equal sizes"):
         load_pair_images(pair)
+
+
+def test_a_truncated_png_gives_our_error_and_no_opencv_warning(tmp_path):
+    import subprocess
+    import sys
+
+    write_png(tmp_path / "ok.png", (np.arange(2500) % 251).astype(np.uint8).reshape(50, 50))
+    data = (tmp_path / "ok.png").read_bytes()
+    (tmp_path / "cut.png").write_bytes(data[: len(data) // 2])
+    code = "import sys; from d3cli.data import io\ntry:\n    io.read_image(sys.argv[1])\nexcept Exception as e:\n    print(e)"
+    done = subprocess.run([sys.executable, "-c", code, str(tmp_path / "cut.png")], capture_output=True, text=True,
+                          timeout=60)
+    assert "cannot read image (corrupt or not an image)" in done.stdout
+    assert "WARN" not in done.stderr, done.stderr
