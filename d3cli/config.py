@@ -61,11 +61,24 @@ class PyramidConfig:
 
 @dataclass(frozen=True)
 class CostConfig:
-    """NCC matching cost (DESIGN step 2)."""
+    """Matching cost (DESIGN step 2): NCC, or the cosine of deep features."""
 
     window: int = 5  # odd NCC window size at every level ...
     level_windows: tuple[int, ...] = ()  # ... unless given per level, finest first
     min_variance: float = 1e-2  # grey-level variance (0-255 scale) below which a window is flat
+    kind: str = "ncc"  # ncc | features (the features section; levels without a feature map use NCC)
+
+
+@dataclass(frozen=True)
+class FeaturesConfig:
+    """Deep-feature cost pyramid from an ONNX backbone (``cost.kind: features``)."""
+
+    model: str | None = None  # ONNX file (run with onnxruntime, extra "features")
+    outputs: tuple[str, ...] = ()  # output names, finest first; each one pyramid level (stride 2^level)
+    channel_order: str = "rgb"  # order of the colour channels the model expects: rgb | bgr
+    scale: float = 1.0 / 255.0  # pixel values (0-255) are multiplied by this ...
+    mean: tuple[float, ...] = (0.485, 0.456, 0.406)  # ... then (x - mean) / std per channel (ImageNet)
+    std: tuple[float, ...] = (0.229, 0.224, 0.225)
 
 
 @dataclass(frozen=True)
@@ -179,6 +192,7 @@ class Config:
     run: RunConfig = field(default_factory=RunConfig)
     pyramid: PyramidConfig = field(default_factory=PyramidConfig)
     cost: CostConfig = field(default_factory=CostConfig)
+    features: FeaturesConfig = field(default_factory=FeaturesConfig)
     aggregation: AggregationConfig = field(default_factory=AggregationConfig)
     seeds: SeedConfig = field(default_factory=SeedConfig)
     diffusion: DiffusionConfig = field(default_factory=DiffusionConfig)
@@ -220,6 +234,11 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
         "a list of odd integers in [1, 31]",
     ),
     "cost.min_variance": (lambda v: v >= 0, "a number >= 0"),
+    "cost.kind": (lambda v: v in ("ncc", "features"), "one of ncc, features"),
+    "features.channel_order": (lambda v: v in ("rgb", "bgr"), "one of rgb, bgr"),
+    "features.scale": (lambda v: v > 0, "a number > 0"),
+    "features.mean": (lambda v: len(v) in (1, 3), "a list of 1 or 3 numbers"),
+    "features.std": (lambda v: len(v) in (1, 3) and all(s > 0 for s in v), "a list of 1 or 3 numbers > 0"),
     "aggregation.t_max": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
     "aggregation.sigma_space": (lambda v: v > 0, "a number > 0"),
     "aggregation.sigma_color": (lambda v: v > 0, "a number > 0"),

@@ -44,6 +44,7 @@ from .pixel import UNDECIDED, build_ops  # noqa: E402
 
 ops = build_ops(njit(cache=True))
 _ncc_cost = ops.ncc_cost
+_cosine_cost = ops.cosine_cost
 _box_sum = ops.box_sum
 _rbf_weight = ops.rbf_weight
 _seed_at = ops.seed_at
@@ -146,6 +147,34 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance):
                 srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
                 slr = prefix[c1 + 1, d] - prefix[c0, d]
                 cost[v, u, d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+    return cost
+
+
+@njit(parallel=True, cache=True)
+def cosine_cost_volume(fl, fr, nl, nr, max_disparity):
+    """Deep-feature cost volume ``(1 - cos) / 2`` of one level (DESIGN step 2, features).
+
+    Parameters
+    ----------
+    fl, fr : ndarray, float32, (H, W, C)
+        L2-normalised feature maps of the left and right image at this level.
+    nl, nr : ndarray, float32, (H, W)
+        Their squared norms: 1, or 0 for a zero feature vector (cost 1).
+    max_disparity : int
+        The volume has ``max_disparity + 1`` slices.
+
+    Returns
+    -------
+    ndarray, float32, (H, W, max_disparity + 1)
+        1 where u - d < 0 or a feature vector is zero.
+    """
+    h, w = nl.shape
+    n_disp = max_disparity + 1
+    cost = np.empty((h, w, n_disp), np.float32)
+    for v in prange(h):
+        for u in range(w):
+            for d in range(n_disp):
+                cost[v, u, d] = _cosine_cost(fl, fr, nl, nr, v, u, d)
     return cost
 
 

@@ -37,6 +37,7 @@ NCC_SCRATCH_BYTES = 1 << 29
 
 ops = build_ops(cuda.jit(device=True))
 _ncc_cost = ops.ncc_cost
+_cosine_cost = ops.cosine_cost
 _box_sum = ops.box_sum
 _rbf_weight = ops.rbf_weight
 _seed_at = ops.seed_at
@@ -696,6 +697,31 @@ def pt_restore(disp, a0, b1, b2, delta):
     return _per_pixel(_pt_restore_kernel, d_disp.shape, np.float32, d_disp, _f64(a0), _f64(b1), _f64(b2), _f64(delta))
 
 
+# ----------------------------------------------------------------------------- feature cost
+@cuda.jit
+def _cosine_kernel(fl, fr, nl, nr, cost):
+    x, v = cuda.grid(2)  # x runs over (column, disparity) cells of row v
+    n_disp = cost.shape[2]
+    if v < cost.shape[0] and x < cost.shape[1] * n_disp:
+        u = x // n_disp
+        d = x - u * n_disp
+        cost[v, u, d] = _cosine_cost(fl, fr, nl, nr, v, u, d)
+
+
+def cosine_cost_volume(fl, fr, nl, nr, max_disparity):
+    """Deep-feature cost volume ``(1 - cos) / 2`` (see the CPU driver); a device array.
+
+    One thread per (pixel, disparity) cell.
+    """
+    d_fl, d_fr, d_nl, d_nr = _dev(fl), _dev(fr), _dev(nl), _dev(nr)
+    h, w = d_nl.shape
+    n_disp = int(max_disparity) + 1
+    cost = cuda.device_array((h, w, n_disp), np.float32)
+    blocks, threads = _grid_2d(w * n_disp, h)
+    _cosine_kernel[blocks, threads](d_fl, d_fr, d_nl, d_nr, cost)
+    return cost
+
+
 # ----------------------------------------------------------------------------- array handling
 def to_device(array):
     """The array on the device: host arrays are uploaded (C-contiguous), device arrays kept."""
@@ -748,6 +774,7 @@ __all__ = [
     "BLOCK_2D",
     "NCC_SCRATCH_BYTES",
     "bilateral_filter",
+    "cosine_cost_volume",
     "count_decided",
     "decisive_seeds",
     "diffuse",

@@ -44,7 +44,7 @@ def build_ops(jit):
     Returns
     -------
     types.SimpleNamespace
-        ``ncc_cost, box_sum, cost_or_inf, right_cost_or_inf, rbf_weight, seed_at,
+        ``ncc_cost, cosine_cost, box_sum, cost_or_inf, right_cost_or_inf, rbf_weight, seed_at,
         diffuse_at, inherit_at, subpixel_at, pt_shift, bilinear_at, pt_restore_at``.
     """
 
@@ -71,6 +71,26 @@ def build_ops(jit):
         elif ncc < -1.0:
             ncc = -1.0
         return 0.5 * (1.0 - ncc)
+
+    @jit
+    def cosine_cost(fl, fr, nl, nr, v, u, d):
+        """Feature cost ``(1 - cos(f_L(u, v), f_R(u - d, v))) / 2`` (paper section III-A).
+
+        ``fl, fr`` are (H, W, C) L2-normalised feature maps of the level and ``nl, nr``
+        their (H, W) squared norms (1, or 0 where a feature vector is zero: "flat", cost
+        1 like a flat NCC window).  ``u - d < 0`` costs 1.  Accumulated in float64.
+        """
+        x = u - d
+        if x < 0 or nl[v, u] <= 0.0 or nr[v, x] <= 0.0:
+            return 1.0
+        dot = 0.0
+        for c in range(fl.shape[2]):
+            dot += float(fl[v, u, c]) * float(fr[v, x, c])
+        if dot > 1.0:
+            dot = 1.0
+        elif dot < -1.0:
+            dot = -1.0
+        return 0.5 * (1.0 - dot)
 
     @jit
     def box_sum(ii, r0, c0, r1, c1):
@@ -400,6 +420,7 @@ def build_ops(jit):
 
     return SimpleNamespace(
         ncc_cost=ncc_cost,
+        cosine_cost=cosine_cost,
         box_sum=box_sum,
         cost_or_inf=cost_or_inf,
         right_cost_or_inf=right_cost_or_inf,

@@ -84,7 +84,27 @@ def aggregate(
     return backend.invalidate_out_of_view(out)
 
 
-def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, backend):
+def feature_cost_volume(features, *, max_disparity: int, backend):
+    """Deep-feature cost volume ``(1 - cos) / 2`` of one level (paper section III-A).
+
+    Parameters
+    ----------
+    features : d3cli.method.features.LevelFeatures
+        Normalised feature maps of the level (left and right).
+    max_disparity : int
+        Largest disparity of the level (the volume has max_disparity + 1 slices).
+    backend : module
+
+    Returns
+    -------
+    ndarray, float32, (H, W, max_disparity + 1)
+        1 where u - d < 0 or a feature vector is zero.
+    """
+    return backend.cosine_cost_volume(features.left, features.right, features.left_norm, features.right_norm,
+                                      int(max_disparity))
+
+
+def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, backend, features=None):
     """Aggregated cost volume of one level (steps 2-3).
 
     Parameters
@@ -98,19 +118,25 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
         Largest disparity at full resolution.
     cfg : Config
     backend : module
+    features : LevelFeatures, optional
+        The level's deep features (``cost.kind: features``): the cosine cost replaces NCC.
 
     Returns
     -------
     ndarray, float32, (H, W, D)
     """
-    cost = cost_volume(
-        left,
-        right,
-        max_disparity=level_max_disparity(max_disparity, level),
-        window=cfg.level_window(level),
-        min_variance=cfg.cost.min_variance,
-        backend=backend,
-    )
+    if features is not None:
+        cost = feature_cost_volume(features, max_disparity=level_max_disparity(max_disparity, level),
+                                   backend=backend)
+    else:
+        cost = cost_volume(
+            left,
+            right,
+            max_disparity=level_max_disparity(max_disparity, level),
+            window=cfg.level_window(level),
+            min_variance=cfg.cost.min_variance,
+            backend=backend,
+        )
     agg = cfg.aggregation
     return aggregate(
         cost,

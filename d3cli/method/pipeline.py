@@ -14,6 +14,7 @@ from ..errors import InputError
 from ..kernels import get_backend
 from .cost import level_cost
 from .decisive import decisive_seeds, diffuse, inherit
+from .features import feature_pyramid
 from .perspective import RoadModel, fit_road_model, match_in_right_image, shift_map
 from .pyramid import build_pyramid, usable_levels
 from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity
@@ -60,6 +61,14 @@ def _grey(img: np.ndarray, name: str) -> np.ndarray:
     if arr.dtype.kind == "f" and not np.isfinite(arr).all():
         raise InputError(f"{name} image: contains NaN or inf values; pass finite intensities")
     return to_grey(arr)
+
+
+def _as_0_255(img) -> np.ndarray:
+    """A raw image as float32 on the 0-255 scale, channels kept (the networks want colour)."""
+    arr = np.asarray(img)
+    if arr.dtype == np.uint16:
+        return arr.astype(np.float32) / np.float32(257.0)
+    return arr.astype(np.float32)
 
 
 @dataclass
@@ -130,7 +139,14 @@ class D3Stereo:
         search = dmax
         if cfg.pt.enabled:
             road, pyr_r, search = self._perspective(pyr_l, pyr_r, dmax, timings, info, warnings)
-        match = self._match(pyr_l, pyr_r, search, timings)
+        features = None
+        if cfg.cost.kind == "features":
+            t0 = time.perf_counter()
+            features = self._features(left, right if road is None else self._warped_right(right, road),
+                                      [tuple(p.shape) for p in pyr_l])
+            timings["features"] = time.perf_counter() - t0
+            info["feature_levels"] = [level + 1 for level, f in enumerate(features) if f is not None]
+        match = self._match(pyr_l, pyr_r, search, timings, features=features)
         info["per_level"] = match.per_level
         if match.per_level[0].get("seeds", 0) == 0:
             warnings.append(
@@ -170,7 +186,27 @@ class D3Stereo:
             )
         return grey_l, grey_r, int(dmax)
 
-    def _match(self, pyr_l, pyr_r, dmax: int, timings: dict, *, stop_level: int = 0) -> "_Match":
+    def _features(self, left, right, shapes):
+        """Feature pyramid of the pair (step 2 with deep features), finest level first."""
+        return feature_pyramid(_as_0_255(left), _as_0_255(right), shapes, self.cfg.features)
+
+    def _warped_right(self, right, road: RoadModel):
+        """The right image warped by the road model, every channel (PT with features).
+
+        Features are extracted again from the warped image (step 6 with deep features):
+        warping feature maps instead would blur them across the stride of coarse taps.
+        """
+        from ..kernels import cpu  # the same bilinear warp kernel as the grey pyramid's
+
+        img = _as_0_255(right)
+        pt = self.cfg.pt
+        channels = [img] if img.ndim == 2 else [img[:, :, c] for c in range(img.shape[2])]
+        warped = [cpu.pt_warp(np.ascontiguousarray(c, np.float32), road.a0, road.b1, road.b2, float(pt.margin))
+                  for c in channels]
+        return warped[0] if img.ndim == 2 else np.stack(warped, axis=2)
+
+    def _match(self, pyr_l, pyr_r, dmax: int, timings: dict, *, stop_level: int = 0,
+               features=None) -> "_Match":
         """Steps 2-5 and 7 over the pyramid, coarsest level first (paper Fig. 1).
 
         Parameters
@@ -201,7 +237,8 @@ class D3Stereo:
             shape = tuple(pyr_l[level].shape)
             stats: dict = {"level": level + 1, "shape": list(shape)}
             t0 = time.perf_counter()
-            cost = level_cost(pyr_l[level], pyr_r[level], level=level, max_disparity=dmax, cfg=cfg, backend=backend)
+            cost = level_cost(pyr_l[level], pyr_r[level], level=level, max_disparity=dmax, cfg=cfg, backend=backend,
+                              features=None if features is None else features[level])
             t1 = time.perf_counter()
             seeds = None
             if level == levels - 1 or cfg.seeds.every_level:

@@ -368,3 +368,17 @@ def test_pipeline_on_cuda_equals_cpu(gpu, monkeypatch):
         return [{k: s[k] for k in keys if k in s} for s in result.info["per_level"]]
 
     assert facts(got) == facts(want)
+
+
+# ----------------------------------------------------------------------------- deep features
+@pytest.mark.parametrize("max_disparity", [0, 5])
+def test_cosine_cost_volume_matches_cpu(gpu, max_disparity):
+    from d3cli.method.features import normalise
+
+    rng = np.random.default_rng(7)
+    fl, nl = normalise(rng.normal(size=(H, W, 5)).astype(np.float32))
+    fr, nr = normalise(rng.normal(size=(H, W, 5)).astype(np.float32))
+    fl[3, 4], nl[3, 4] = 0.0, 0.0  # a zero feature vector: cost 1 on both backends
+    want = cpu.cosine_cost_volume(fl, fr, nl, nr, max_disparity)
+    got = host(gpu, gpu.cosine_cost_volume(fl, fr, nl, nr, max_disparity))
+    np.testing.assert_allclose(got, want, atol=COST_ATOL)
