@@ -42,8 +42,10 @@ def ncc_equivalent_model(path, levels: int, *, nan: bool = False, rank3: bool = 
                                           strides=[kernel, kernel]))
             current = pooled
         out = f"f{level}"
-        nodes.append(helper.make_node("Conv", [current, "w"], [out if not (nan or rank3) else out + "_c"],
-                                      pads=[2, 2, 2, 2]))
+        # edge padding: a border window repeats the border pixels (NCC clips it instead)
+        inits.append(helper.make_tensor(f"p{level}", TensorProto.INT64, [8], [0, 0, 2, 2, 0, 0, 2, 2]))
+        nodes.append(helper.make_node("Pad", [current, f"p{level}"], [f"x{level}_pad"], mode="edge"))
+        nodes.append(helper.make_node("Conv", [f"x{level}_pad", "w"], [out if not (nan or rank3) else out + "_c"]))
         if nan:
             inits.append(helper.make_tensor(f"z{level}", TensorProto.FLOAT, [1], [0.0]))
             nodes.append(helper.make_node("Div", [out + "_c", f"z{level}"], [out]))  # 0/0 = NaN, x/0 = inf
