@@ -6,7 +6,7 @@ torch, and never downloads weights at run time: it reads the ONNX file this writ
     pip install torch torchvision onnx
     python scripts/export_backbone.py vgg16 -o vgg16.onnx
     d3stereo run PAIRS -o OUT --set cost.kind=features --set features.model=vgg16.onnx \\
-        --set "features.outputs=[s2, s4, s8, s16]"
+        --set "features.outputs=[s1, s2, s4, s8]"
 
 The outputs are named ``s<stride>`` (stride relative to the input image), finest first;
 list the ones to use in ``features.outputs``.  The taps (the paper's Table IV backbones):
