@@ -15,7 +15,7 @@ from ..config import Config
 from ..data.io import to_grey
 from ..errors import InputError
 from ..method import DisparityResult
-from ..method.perspective import fit_road_model, match_in_right_image
+from ..method.perspective import fit_road_model, restored_validity
 from ..method.pyramid import build_pyramid, level_max_disparity, usable_levels
 from .sgbm import _num_disparities, _sgbm_raw, _to_uint8, fill_holes_rowwise, sgbm_disparity
 
@@ -86,10 +86,9 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
     margin = float(pt.margin)
     warped = cpu.pt_warp(np.ascontiguousarray(grey_r, dtype=np.float32), model.a0, model.b1, model.b2, margin)
     d_prime, valid = _sgbm_raw(_to_uint8(grey_l), _to_uint8(warped), narrow, cfg.sgbm)
-    # Range ends stand for disparities outside the narrow range (not road): holes.
-    valid &= (d_prime > 0) & (d_prime < narrow)
     disp = cpu.pt_restore(np.where(valid, d_prime, np.inf).astype(np.float32), model.a0, model.b1, model.b2, margin)
-    valid &= match_in_right_image(disp)
+    valid, shares = restored_validity(valid, d_prime, disp, narrow_range=narrow)  # as PT-D3Stereo
+    pt_info.update(shares)
     disp[~valid] = np.inf
     warnings = [] if valid.any() else ["pt-sgm found no valid disparity; the output is empty"]
     if cfg.sgbm.fill:

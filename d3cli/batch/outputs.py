@@ -111,6 +111,10 @@ def write_disparity_outputs(folder: str | os.PathLike, disp: np.ndarray, valid: 
     valid = np.asarray(valid, dtype=bool)
     if valid.shape != disp.shape:
         raise ValueError(f"valid mask shape {valid.shape} differs from disparity shape {disp.shape}")
+    with np.errstate(invalid="ignore"):
+        if (disp < 0).any():  # disparities are >= 0 by contract: a method bug, never written
+            raise ValueError(f"{folder.name}: the method returned negative disparities (down to "
+                             f"{float(np.nanmin(disp)):.3f}); please report this")
     return {
         "disp.pfm": write_pfm(folder / "disp.pfm", disp),
         "disp.png": write_kitti_png(folder / "disp.png", disp),

@@ -15,7 +15,7 @@ from ..kernels import get_backend
 from .cost import level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid
-from .perspective import RoadModel, fit_road_model, match_in_right_image, shift_map
+from .perspective import RoadModel, fit_road_model, restored_validity, shift_map
 from .pyramid import build_pyramid, usable_levels
 from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity
 
@@ -405,16 +405,15 @@ class D3Stereo:
             plane = None if road is None else shift_map(road, out.shape, margin=0.0)
             out = smooth_disparity(out, np.isfinite(out), radius=cfg.refine.smooth_radius,
                                    sigma=cfg.refine.smooth_sigma, plane=plane)
+            # averaging residuals to a plane that dips below zero (far road, sky) can end
+            # a hair below 0; disparities are >= 0 by contract
+            with np.errstate(invalid="ignore"):
+                out = np.where(out < 0, np.float32(0.0), out)
         info["decided_share"] = float(valid.mean())
         return np.ascontiguousarray(out, dtype=np.float32), valid
 
     def _pt_valid(self, valid: np.ndarray, disp: np.ndarray, out: np.ndarray, info: dict) -> np.ndarray:
-        """Validity after PT: drop range-end estimates and matches outside the right image."""
-        # An estimate at either end of the narrow range most likely stands for a disparity
-        # outside it (obstacle, kerb, deep pothole): a hole for the filling, not a clipped
-        # value (measured: EPE 0.317 vs 0.340 kept, see configs/road.yaml).
-        ends = valid & ((disp == 0) | (disp == self.cfg.pt.narrow_range))
-        outside = valid & ~match_in_right_image(out)
-        info["pt"]["range_end_share"] = float(ends.mean())
-        info["pt"]["outside_share"] = float(outside.mean())
-        return valid & ~ends & ~outside
+        """Validity after PT (:func:`restored_validity`); its shares go to ``info['pt']``."""
+        valid, shares = restored_validity(valid, disp, out, narrow_range=self.cfg.pt.narrow_range)
+        info["pt"].update(shares)
+        return valid

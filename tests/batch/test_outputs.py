@@ -18,3 +18,12 @@ def test_write_disparity_outputs(tmp_path):
     np.testing.assert_array_equal(io.read_image(folder / "valid.png"), valid.astype(np.uint8) * 255)
     colour = io.read_image(folder / "disp_color.png")
     assert colour.shape == (2, 3, 3) and tuple(colour[0, 1]) == (0, 0, 0)
+
+
+def test_negative_disparities_are_never_written(tmp_path):
+    import pytest
+
+    disp = np.array([[1.0, -0.5]], np.float32)
+    with pytest.raises(ValueError, match="negative disparities"):
+        write_disparity_outputs(tmp_path / "p", disp, np.ones_like(disp, bool), vmax=4)
+    assert not (tmp_path / "p" / "disp.pfm").exists()
