@@ -39,6 +39,30 @@ CLOUD_FILE = "cloud.ply"  # only with --pointcloud
 RUN_FILE = "run.json"
 
 
+def check_output_folder(out: Path, pairs) -> None:
+    """Refuse an output folder that overlaps the inputs (issue: a ground truth named
+    ``disp.png`` in the input folder was replaced by the prediction and then scored).
+
+    Each pair writes ``out/<pair>/``; that folder must neither be a folder holding one of
+    the pair's input files, nor lie inside one, nor contain one (compared by real path,
+    so links and ``..`` do not hide an overlap).
+
+    Raises
+    ------
+    OutputError
+        Naming the pair, the input folder and the fix.
+    """
+    root = Path(os.path.realpath(out))
+    for pair in pairs:
+        target = root / pair.name
+        files = [getattr(pair, key, None) for key in ("left", "right", "gt", "nocc", "calib")]
+        for folder in {Path(os.path.realpath(f)).parent for f in files if f is not None}:
+            if target == folder or folder in target.parents or target in folder.parents:
+                raise OutputError(where_what_fix(
+                    str(out), f"pair {pair.name} would write its outputs into or next to its own input files "
+                              f"({folder})", "choose an output folder outside the input data with -o"))
+
+
 def write_json(path: Path, data: dict) -> None:
     """Write ``data`` as indented JSON (NaN/inf as null), atomically."""
     text = json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n"

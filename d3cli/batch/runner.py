@@ -50,6 +50,7 @@ from .outputs import (
     CLOUD_FILE,
     RESULT_FILE,
     RUN_FILE,
+    check_output_folder,
     read_result,
     remove_pair_files,
     write_disparity_outputs,
@@ -247,6 +248,7 @@ def run_batch(
     BackendUnavailable
         When ``cfg.run.backend`` is ``cuda`` and CUDA cannot be used (checked up front).
     """
+    check_output_folder(Path(out_dir), pairs)  # before anything is written or removed
     out = ensure_writable(out_dir)
     if method != "sgbm" and cfg.run.backend == "cuda":
         from ..kernels import get_backend
