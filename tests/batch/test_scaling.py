@@ -1,0 +1,235 @@
+"""--workers, --scheduler (Dask) and --shard give the same per-pair files as a serial run."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from d3cli.batch import parse_shard, parse_workers, run_batch, select_shard
+from d3cli.cli import main
+from d3cli.config import load_config
+from d3cli.data import datasets
+from d3cli.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[2]
+PAIRS = "abcd"
+BIN = Path(sys.executable).parent
+
+
+def invoke(*args):
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.fixture
+def pair_root(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    for i, name in enumerate(PAIRS):
+        make_pair_folder(root, name, shift=3 + i, seed=i)
+    return root
+
+
+@pytest.fixture
+def serial_sgbm(tmp_path, pair_root):
+    out = tmp_path / "serial"
+    assert invoke("run", pair_root, "-o", out, "--method", "sgbm", "-q").exit_code == 0
+    return out
+
+
+def assert_same_maps(first, second, names=PAIRS):
+    for name in names:
+        assert (first / name / "disp.pfm").read_bytes() == (second / name / "disp.pfm").read_bytes(), name
+        assert (first / name / "valid.png").read_bytes() == (second / name / "valid.png").read_bytes(), name
+
+
+def env_with_package():
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
+    return env
+
+
+# ----------------------------------------------------------------------------- options
+def test_parse_workers_and_shard():
+    assert parse_workers("3") == 3
+    assert parse_workers("auto") >= 1
+    assert parse_shard("2/5") == (2, 5)
+    for bad in ("0", "-1", "many"):
+        with pytest.raises(ConfigError, match="--workers"):
+            parse_workers(bad)
+    for bad in ("0/3", "4/3", "1", "a/b"):
+        with pytest.raises(ConfigError, match="--shard"):
+            parse_shard(bad)
+
+
+def test_shards_partition_the_pairs_whatever_the_order(pair_root):
+    pairs = datasets.discover([pair_root])
+    shards = [[p.name for p in select_shard(pairs, i, 3)] for i in (1, 2, 3)]
+    assert shards == [["a", "d"], ["b"], ["c"]]
+    assert [[p.name for p in select_shard(pairs[::-1], i, 3)] for i in (1, 2, 3)] == shards
+
+
+def test_bad_workers_value_is_one_error_line(tmp_path, pair_root):
+    result = invoke("run", pair_root, "-o", tmp_path / "o", "--workers", "zero")
+    assert result.exit_code == 1
+    assert result.output.strip().splitlines()[-1].startswith("Error: --workers zero")
+
+
+# ----------------------------------------------------------------------------- local pool
+@pytest.mark.parametrize("method", ["sgbm", "d3stereo"])
+def test_workers_2_is_byte_identical_to_serial(tmp_path, pair_root, method):
+    serial, pool = tmp_path / "s", tmp_path / "p"
+    assert invoke("run", pair_root, "-o", serial, "--method", method, "-q").exit_code == 0
+    assert invoke("run", pair_root, "-o", pool, "--method", method, "-q", "--workers", "2").exit_code == 0
+    assert_same_maps(serial, pool)
+    run = json.loads((pool / "run.json").read_text())
+    assert run["execution"]["mode"] == "local-pool" and run["execution"]["workers"] == 2
+    assert [p["pair"] for p in run["pairs"]] == list(PAIRS)  # input order, whatever finished first
+    assert all(p["status"] == "ok" for p in run["pairs"])
+    assert run["compile_s"] >= 0.0
+
+
+def test_warm_up_keeps_compile_time_out_of_the_first_pair(tmp_path, pair_root):
+    out = tmp_path / "o"
+    assert invoke("run", pair_root, "-o", out, "--method", "d3stereo", "-q").exit_code == 0
+    run = json.loads((out / "run.json").read_text())
+    walls = [p["wall_s"] for p in run["pairs"]]
+    assert run["compile_s"] > 0.0
+    # Same-size pairs: the first no longer carries the JIT (a compile or cache load is > 0.3 s).
+    assert walls[0] < 3 * max(walls[1:]) + 0.3
+
+
+def test_shards_fill_one_out_and_eval_covers_all(tmp_path, pair_root, serial_sgbm):
+    out = tmp_path / "sharded"
+    for i in (1, 2):
+        assert invoke("run", pair_root, "-o", out, "--method", "sgbm", "-q", "--shard", f"{i}/2").exit_code == 0
+    assert_same_maps(serial_sgbm, out)
+    names = {i: [p["pair"] for p in json.loads((out / f"run-{i}-of-2.json").read_text())["pairs"]] for i in (1, 2)}
+    assert names == {1: ["a", "c"], 2: ["b", "d"]}
+    assert not (out / "run.json").exists()
+    result = invoke("eval", out, "--gt", pair_root, "-q")
+    assert result.exit_code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["overall"]["pairs"] == summary["overall"]["ok"] == summary["overall"]["with_gt"] == len(PAIRS)
+    assert summary["overall"]["means"]["pep_1"] == 0.0  # integer shifts: every pair exact to 1 px
+
+
+# ----------------------------------------------------------------------------- Dask
+distributed = pytest.importorskip("distributed")
+
+
+@pytest.fixture
+def local_cluster():
+    cluster = distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1, host="127.0.0.1",
+                                       dashboard_address=None, worker_dashboard_address=None)
+    try:
+        yield cluster
+    finally:
+        cluster.close()
+
+
+def test_local_cluster_is_byte_identical_and_survives_a_killed_worker(tmp_path, pair_root, serial_sgbm,
+                                                                      local_cluster):
+    cfg = load_config(None)
+    pairs = datasets.discover([pair_root])
+    out = tmp_path / "dask"
+    result = run_batch(pairs, out, cfg=cfg, method="sgbm", progress=False, scheduler=local_cluster.scheduler_address)
+    assert result.n_failed == 0
+    assert_same_maps(serial_sgbm, out)
+    run = json.loads((out / "run.json").read_text())
+    assert run["execution"] == {"mode": "dask", "scheduler": local_cluster.scheduler_address, "workers": 2,
+                                "threads": 2}
+
+    # Kill one worker process (SIGKILL) once the first pair is done: the scheduler moves its work.
+    killed = []
+    out2 = tmp_path / "dask-killed"
+    with distributed.Client(local_cluster.scheduler_address) as client:
+        pids = client.run(os.getpid)
+
+        def watch():
+            while not any((out2 / n / "result.json").exists() for n in PAIRS):
+                time.sleep(0.005)
+            victim = sorted(pids.values())[0]
+            os.kill(victim, signal.SIGKILL)
+            killed.append(victim)
+
+        import threading
+
+        thread = threading.Thread(target=watch, daemon=True)
+        thread.start()
+        result = run_batch(pairs, out2, cfg=cfg, method="sgbm", progress=False,
+                           scheduler=local_cluster.scheduler_address)
+        thread.join(timeout=30)
+    assert killed, "no worker was killed"
+    assert result.n_failed == 0
+    assert_same_maps(serial_sgbm, out2)
+
+
+def test_dask_d3stereo_is_byte_identical(tmp_path, pair_root, local_cluster):
+    serial, out = tmp_path / "s", tmp_path / "d"
+    assert invoke("run", pair_root, "-o", serial, "--method", "d3stereo", "-q").exit_code == 0
+    env_before = os.environ.get("DASK_SCHEDULER_ADDRESS")
+    os.environ["DASK_SCHEDULER_ADDRESS"] = local_cluster.scheduler_address
+    try:
+        assert invoke("run", pair_root, "-o", out, "--method", "d3stereo", "-q").exit_code == 0
+    finally:
+        if env_before is None:
+            del os.environ["DASK_SCHEDULER_ADDRESS"]
+        else:
+            os.environ["DASK_SCHEDULER_ADDRESS"] = env_before
+    assert_same_maps(serial, out)
+    assert json.loads((out / "run.json").read_text())["execution"]["mode"] == "dask"
+
+
+def test_unreachable_scheduler_is_one_error_line(tmp_path, pair_root):
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    t0 = time.monotonic()
+    result = invoke("run", pair_root, "-o", tmp_path / "o", "--method", "sgbm", "-q",
+                    "--scheduler", f"tcp://127.0.0.1:{port}")
+    assert result.exit_code == 1
+    last = result.output.strip().splitlines()[-1]
+    assert last.startswith(f"Error: --scheduler tcp://127.0.0.1:{port}: scheduler unreachable")
+    assert time.monotonic() - t0 < 30
+    assert not list((tmp_path / "o").glob("*/disp.pfm"))
+
+
+def test_dask_scheduler_and_worker_subprocesses(tmp_path, pair_root, serial_sgbm):
+    """`dask scheduler` + two `dask worker --no-nanny` on 127.0.0.1, then `python -m d3cli run --scheduler`."""
+    env = env_with_package()
+    sched_file = tmp_path / "scheduler.json"
+    procs = []
+    try:
+        procs.append(subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
+                                       "--no-dashboard", "--scheduler-file", str(sched_file)],
+                                      env=env, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        deadline = time.monotonic() + 30
+        while not sched_file.exists():
+            assert time.monotonic() < deadline, "scheduler did not start"
+            time.sleep(0.1)
+        address = json.loads(sched_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        for _ in range(2):
+            procs.append(subprocess.Popen([str(BIN / "dask"), "worker", address, "--no-nanny", "--nthreads", "1",
+                                           "--host", "127.0.0.1", "--no-dashboard"],
+                                          env=env, cwd=tmp_path, stdout=subprocess.DEVNULL,
+                                          stderr=subprocess.DEVNULL))
+        out = tmp_path / "cluster-out"
+        done = subprocess.run([sys.executable, "-m", "d3cli", "run", str(pair_root), "-o", str(out), "--method",
+                               "sgbm", "-q", "--scheduler", address], env=env, cwd=tmp_path, capture_output=True,
+                              text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert_same_maps(serial_sgbm, out)
+    finally:
+        for proc in reversed(procs):
+            proc.kill()
+            proc.wait(timeout=10)
