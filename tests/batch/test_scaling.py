@@ -203,8 +203,23 @@ def test_unreachable_scheduler_is_one_error_line(tmp_path, pair_root):
     assert not list((tmp_path / "o").glob("*/disp.pfm"))
 
 
-def test_dask_scheduler_and_worker_subprocesses(tmp_path, pair_root, serial_sgbm):
-    """`dask scheduler` + two `dask worker --no-nanny` on 127.0.0.1, then `python -m d3cli run --scheduler`."""
+BIG = "abcdefgh"
+
+
+@pytest.fixture
+def big_pairs(tmp_path, make_pair_folder):
+    """Eight 720x1280 pairs: about 0.1 s of SGBM each, so a batch is still running after its first pair."""
+    root = tmp_path / "big"
+    for i, name in enumerate(BIG):
+        make_pair_folder(root, name, shift=3 + i, size=(720, 1280), seed=i, gt=False)
+    return root
+
+
+def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, big_pairs):
+    """`dask scheduler` + two `dask worker --no-nanny` on 127.0.0.1, `python -m d3cli run --scheduler`;
+    one worker is SIGKILLed after the first pair finishes: exit 0, every map as serial."""
+    serial = tmp_path / "serial"
+    assert invoke("run", big_pairs, "-o", serial, "--method", "sgbm", "-q").exit_code == 0
     env = env_with_package()
     sched_file = tmp_path / "scheduler.json"
     procs = []
@@ -218,18 +233,65 @@ def test_dask_scheduler_and_worker_subprocesses(tmp_path, pair_root, serial_sgbm
             time.sleep(0.1)
         address = json.loads(sched_file.read_text())["address"]
         assert address.startswith("tcp://127.0.0.1:")
-        for _ in range(2):
-            procs.append(subprocess.Popen([str(BIN / "dask"), "worker", address, "--no-nanny", "--nthreads", "1",
-                                           "--host", "127.0.0.1", "--no-dashboard"],
-                                          env=env, cwd=tmp_path, stdout=subprocess.DEVNULL,
-                                          stderr=subprocess.DEVNULL))
+        workers = [subprocess.Popen([str(BIN / "dask"), "worker", address, "--no-nanny", "--nthreads", "1",
+                                     "--host", "127.0.0.1", "--no-dashboard"],
+                                    env=env, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                   for _ in range(2)]
+        procs += workers
         out = tmp_path / "cluster-out"
-        done = subprocess.run([sys.executable, "-m", "d3cli", "run", str(pair_root), "-o", str(out), "--method",
-                               "sgbm", "-q", "--scheduler", address], env=env, cwd=tmp_path, capture_output=True,
-                              text=True, timeout=120)
-        assert done.returncode == 0, done.stderr
-        assert_same_maps(serial_sgbm, out)
+        client = subprocess.Popen([sys.executable, "-m", "d3cli", "run", str(big_pairs), "-o", str(out),
+                                   "--method", "sgbm", "-q", "--scheduler", address],
+                                  env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        procs.append(client)
+        deadline = time.monotonic() + 90
+        while not list(out.glob("*/result.json")):
+            assert client.poll() is None, client.communicate()
+            assert time.monotonic() < deadline, "no pair finished"
+            time.sleep(0.005)
+        workers[0].send_signal(signal.SIGKILL)
+        done_at_kill = len(list(out.glob("*/result.json")))
+        _, stderr = client.communicate(timeout=120)
+        assert client.returncode == 0, stderr
+        assert done_at_kill < len(BIG)  # the kill happened while pairs were still to do
+        assert workers[0].wait(timeout=10) == -signal.SIGKILL
+        assert_same_maps(serial, out, BIG)
+        run = json.loads((out / "run.json").read_text())
+        # A pair the killed worker had written but not reported is found complete by its rerun: "skipped".
+        assert [p["pair"] for p in run["pairs"]] == list(BIG)
+        assert {p["status"] for p in run["pairs"]} <= {"ok", "skipped"} and run["n_failed"] == 0
     finally:
         for proc in reversed(procs):
-            proc.kill()
+            if proc.poll() is None:
+                proc.kill()
             proc.wait(timeout=10)
+
+
+# ----------------------------------------------------------------------------- numba cache
+READ_ONLY_PACKAGE = """
+import os, sys
+real_access = os.access
+kernels = os.path.join(sys.argv[1], "d3cli", "kernels")
+# A read-only install, as the OS would answer it (root ignores permission bits, so chmod cannot show it).
+os.access = lambda path, mode, **kw: (False if str(path).startswith(kernels) and mode & os.W_OK
+                                      else real_access(path, mode, **kw))
+import numpy as np
+import numba
+from d3cli.kernels import cpu
+print(numba.config.CACHE_DIR, os.environ.get("NUMBA_CACHE_DIR"))
+print(cpu.integral_image(np.ones((2, 3), np.float32), 1)[-1, -1])
+"""
+
+
+def test_read_only_package_caches_kernels_in_the_user_cache(tmp_path):
+    env = env_with_package()
+    env.pop("NUMBA_CACHE_DIR", None)
+    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    done = subprocess.run([sys.executable, "-c", READ_ONLY_PACKAGE, str(ROOT)], env=env, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    where, again, total = done.stdout.split()
+    expected = tmp_path / "xdg" / "d3stereo" / "numba"
+    assert where == again == str(expected)
+    assert float(total) == 6.0  # sum of a 2x3 block of ones
+    assert list(expected.rglob("cpu.integral_image-*.nbi")), list(expected.rglob("*"))
+    assert list(expected.rglob("pixel.sha256"))
