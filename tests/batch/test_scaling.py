@@ -266,6 +266,35 @@ def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, bi
             proc.wait(timeout=10)
 
 
+def test_ctrl_c_with_workers_exits_130_and_rerun_resumes(tmp_path, big_pairs):
+    serial, out = tmp_path / "serial", tmp_path / "pool"
+    assert invoke("run", big_pairs, "-o", serial, "--method", "sgbm", "-q").exit_code == 0
+    cmd = [sys.executable, "-m", "d3cli", "run", str(big_pairs), "-o", str(out), "--method", "sgbm", "-q",
+           "--workers", "2"]
+    proc = subprocess.Popen(cmd, env=env_with_package(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 90
+        while not list(out.glob("*/result.json")):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no pair finished"
+            time.sleep(0.005)
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 130, stderr
+    assert "rerun the same command to resume" in stderr.strip().splitlines()[-1]
+    run = json.loads((out / "run.json").read_text())
+    assert run["interrupted"] is True and run["n_pairs"] < len(BIG)
+    again = subprocess.run(cmd, env=env_with_package(), capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0, again.stderr
+    assert_same_maps(serial, out, BIG)
+    statuses = [p["status"] for p in json.loads((out / "run.json").read_text())["pairs"]]
+    assert "skipped" in statuses and "ok" in statuses  # resumed: kept the finished pairs, computed the rest
+
+
 # ----------------------------------------------------------------------------- numba cache
 READ_ONLY_PACKAGE = """
 import os, sys
