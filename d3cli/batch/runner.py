@@ -30,7 +30,9 @@ import functools
 import logging
 import os
 import platform
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -275,13 +277,30 @@ def run_batch(
         out = out.resolve()
         pairs = [_absolute(p) for p in pairs]
     lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard))
+    previous = _sigterm_as_interrupt()
     try:
         executor = make_executor(workers, scheduler, out)
         return _locked_batch(pairs, out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
                              max_disparity=max_disparity, progress=progress, config_source=config_source,
                              pointcloud=pointcloud, executor=executor, shard=shard)
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
         release_lock(lock)
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _sigterm_as_interrupt():
+    """Make SIGTERM (a scheduler cancelling the job, ``kill``) end the batch like Ctrl-C.
+
+    Returns the previous handler, or None where signals cannot be set (not the main thread).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_interrupt)
 
 
 def _absolute(pair):
@@ -326,7 +345,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     except KeyboardInterrupt:
         current = executor.current
         _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
-                        stop_reason="interrupted (Ctrl-C / SIGINT)")
+                        stop_reason="interrupted (Ctrl-C / SIGINT / SIGTERM)")
         n_done = sum(r["status"] in ("ok", "skipped") for r in records)
         raise BatchInterrupted(n_done, len(pairs), batch.run_json) from None
     except OutputError as exc:

@@ -266,7 +266,8 @@ def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, bi
             proc.wait(timeout=10)
 
 
-def test_ctrl_c_with_workers_exits_130_and_rerun_resumes(tmp_path, big_pairs):
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_or_sigterm_with_workers_exits_130_and_rerun_resumes(tmp_path, big_pairs, signum):
     serial, out = tmp_path / "serial", tmp_path / "pool"
     assert invoke("run", big_pairs, "-o", serial, "--method", "sgbm", "-q").exit_code == 0
     cmd = [sys.executable, "-m", "d3cli", "run", str(big_pairs), "-o", str(out), "--method", "sgbm", "-q",
@@ -278,7 +279,7 @@ def test_ctrl_c_with_workers_exits_130_and_rerun_resumes(tmp_path, big_pairs):
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < deadline, "no pair finished"
             time.sleep(0.005)
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signum)
         _, stderr = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
