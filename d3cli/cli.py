@@ -120,9 +120,17 @@ def main():
 @click.option("--pointcloud", is_flag=True,
               help="Also write OUT/<pair>/cloud.ply (x, y, z metres in the left camera frame, colour from the "
                    "left image, decided pixels only) from calib.txt or the camera config section.")
+@click.option("--workers", default="1", show_default=True, metavar="N|auto",
+              help="Local worker processes, each taking whole pairs (auto: one per core); numba threads "
+                   "per worker = cores // N.")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
+              help="Run each pair as a task on this Dask scheduler [default: $DASK_SCHEDULER_ADDRESS]; "
+                   "OUT must be shared with the workers. Needs the 'distributed' extra.")
+@click.option("--shard", default=None, metavar="I/N",
+              help="Run only shard I of N (every N-th pair by name); shards share OUT and write run-I-of-N.json.")
 @_verbosity
 def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
-        no_fill, pointcloud, verbose, quiet):
+        no_fill, pointcloud, workers, scheduler, shard, verbose, quiet):
     """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
 
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
@@ -144,11 +152,15 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
         from .baselines.peers import require
 
         require(method)  # an Error now, not one failed pair after another
+    n_workers = batch.parse_workers(workers)
+    shard_of = batch.parse_shard(shard) if shard else None
+    scheduler = scheduler or os.environ.get(batch.SCHEDULER_ENV) or None
     pairs = datasets.discover(list(inputs) if inputs else [samples_dir()])
     override = max_disparity if max_disparity is not None else cfg.run.max_disparity
     result = batch.run_batch(pairs, out_dir, cfg=cfg, method=method, evaluate=evaluate,
                              overwrite=overwrite, max_disparity=override, progress=not quiet,
-                             config_source=source, pointcloud=pointcloud)
+                             config_source=source, pointcloud=pointcloud, workers=n_workers,
+                             scheduler=scheduler, shard=shard_of)
     if result.summary is not None and not quiet:
         click.echo(report.format_table(result.summary))
     _finish(result.failures, result.n_pairs, result.run_json)

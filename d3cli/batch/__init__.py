@@ -5,13 +5,16 @@
 - ``evaluate``: scoring a pair or folders of predictions (``d3stereo eval``);
 - ``outputs``: the per-pair files, written atomically, read back, removed;
 - ``fingerprint``: what a stored result depends on (resume decisions), versions;
-- ``lock``: one run per output folder;
+- ``lock``: one run per output folder (one per shard with ``--shard``);
+- ``executors``: where pairs run - here, a local process pool, a Dask cluster; shards;
+- ``warmup``: compiling the numba kernels once before the first pair;
 - ``resources``: the memory check before a pair is computed.
 
 May import everything below it: method, baselines, evaluation, road, kernels, data,
 config, errors.  Only :mod:`d3cli.cli` imports this package.
 """
 
+from .executors import SCHEDULER_ENV, parse_shard, parse_workers, select_shard
 from .evaluate import evaluate_folders, evaluate_predictions
 from .fingerprint import package_versions, settings_fingerprint
 from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock
@@ -26,13 +29,17 @@ __all__ = [
     "OUTPUT_FILES",
     "RESULT_FILE",
     "RUN_FILE",
+    "SCHEDULER_ENV",
     "acquire_lock",
     "compute_pair",
     "ensure_writable",
     "evaluate_folders",
     "evaluate_predictions",
     "package_versions",
+    "parse_shard",
+    "parse_workers",
     "release_lock",
     "run_batch",
+    "select_shard",
     "settings_fingerprint",
 ]

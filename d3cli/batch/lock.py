@@ -87,8 +87,11 @@ def _lock_is_stale(path: Path, holder: dict | None) -> bool:
     return not _pid_alive(holder["pid"])
 
 
-def acquire_lock(out: Path) -> Path:
-    """Create ``out/.d3stereo.lock`` (O_EXCL) holding this process's pid and host.
+def acquire_lock(out: Path, name: str = LOCK_FILE) -> Path:
+    """Create ``out/<name>`` (default ``.d3stereo.lock``; O_EXCL) holding this process's pid and host.
+
+    ``--shard I/N`` runs take a lock of their own (:func:`shard_lock_name`), so shards
+    share one output folder while two runs of the same shard still exclude each other.
 
     A lock whose process is gone (same host) or that is unreadable and older than
     :data:`LOCK_GRACE_S` is taken over with a warning.
@@ -104,7 +107,7 @@ def acquire_lock(out: Path) -> Path:
         ``OUT: another d3stereo run (pid N) is writing here; wait for it or use another
         -o folder``, or when the lock cannot be created.
     """
-    path = out / LOCK_FILE
+    path = out / name
     for attempt in range(2):
         try:
             fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
@@ -129,6 +132,11 @@ def acquire_lock(out: Path) -> Path:
         return path
     raise OutputError(where_what_fix(str(out), "another d3stereo run took the lock over at the same moment",
                                      "wait for it or use another -o folder"))
+
+
+def shard_lock_name(index: int, total: int) -> str:
+    """Lock file name of shard ``index`` of ``total``."""
+    return f".d3stereo-shard-{index}-of-{total}.lock"
 
 
 def release_lock(path: Path) -> None:

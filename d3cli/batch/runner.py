@@ -25,10 +25,14 @@ or swapped pair (:func:`d3cli.evaluation.diagnostics.suspicious_result`; warning
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import logging
 import os
 import platform
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -43,8 +47,9 @@ from ..evaluation import diagnostics, report
 from ..road.pointcloud import camera_from, save_pair_cloud
 from . import resources
 from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar
+from .executors import make_executor, select_shard
 from .fingerprint import package_versions, settings_fingerprint
-from .lock import acquire_lock, ensure_writable, release_lock
+from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock, shard_lock_name
 from .methods import compute_pair
 from .outputs import (
     CLOUD_FILE,
@@ -209,6 +214,9 @@ def run_batch(
     progress: bool = True,
     config_source: str | None = None,
     pointcloud: bool = False,
+    workers: int = 1,
+    scheduler: str | None = None,
+    shard: tuple[int, int] | None = None,
 ) -> BatchResult:
     """Run ``method`` on every pair, writing ``out_dir/<pair>/...`` and ``out_dir/run.json``.
 
@@ -236,6 +244,15 @@ def run_batch(
         Also write ``cloud.ply`` per pair (decided pixels, metres, left-camera frame) from
         the pair's calib.txt or the ``camera`` config section; pairs without a focal length
         and baseline get a warning instead.
+    workers : int, keyword-only
+        Local worker processes (:class:`d3cli.batch.executors.PoolExecutor`); 1 runs here.
+    scheduler : str, optional, keyword-only
+        Address of a Dask scheduler (:class:`d3cli.batch.executors.DaskExecutor`); wins over
+        ``workers``.  OUT must be the same path on the client and every worker.
+    shard : (int, int), optional, keyword-only
+        ``(I, N)``: run only shard I of N (:func:`d3cli.batch.executors.select_shard`),
+        writing ``run-I-of-N.json`` under its own lock, so N runs share one OUT; the
+        summary files are left to ``d3stereo eval`` over OUT.
 
     Returns
     -------
@@ -254,40 +271,88 @@ def run_batch(
         from ..kernels import get_backend
 
         get_backend("cuda")  # BackendUnavailable now, not once per pair
-    lock = acquire_lock(out)
+    pairs = list(pairs)
+    if shard is not None:
+        pairs = select_shard(pairs, *shard)
+    if scheduler:
+        # Workers may run in another folder, on another machine: only absolute paths mean the same there.
+        out = out.resolve()
+        pairs = [_absolute(p) for p in pairs]
+    lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard))
+    previous = _sigterm_as_interrupt()
     try:
-        return _locked_batch(list(pairs), out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
+        executor = make_executor(workers, scheduler, out)
+        return _locked_batch(pairs, out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
                              max_disparity=max_disparity, progress=progress, config_source=config_source,
-                             pointcloud=pointcloud)
+                             pointcloud=pointcloud, executor=executor, shard=shard)
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
         release_lock(lock)
 
 
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _sigterm_as_interrupt():
+    """Make SIGTERM (a scheduler cancelling the job, ``kill``) end the batch like Ctrl-C.
+
+    Returns the previous handler, or None where signals cannot be set (not the main thread).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_interrupt)
+
+
+def _absolute(pair):
+    """``pair`` with every path made absolute."""
+    changes = {f.name: Path(getattr(pair, f.name)).resolve() for f in dataclasses.fields(pair)
+               if isinstance(getattr(pair, f.name), Path)}
+    return dataclasses.replace(pair, **changes)
+
+
+def _pair_task(pair, *, out: Path, **kwargs):
+    """The task every executor runs for one pair: :func:`_batch_pair` into ``out/<pair>``."""
+    return _batch_pair(pair, out / pair.name, **kwargs)
+
+
 def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, max_disparity, progress,
-                  config_source, pointcloud) -> BatchResult:
-    """The body of :func:`run_batch`, run while holding the output folder's lock."""
+                  config_source, pointcloud, executor, shard=None) -> BatchResult:
+    """The body of :func:`run_batch`, run while holding the output folder's (or shard's) lock."""
     fingerprint = settings_fingerprint(cfg, method, max_disparity)
-    batch = BatchResult(out_dir=out, run_json=out / RUN_FILE)
+    run_name = RUN_FILE if shard is None else "run-{}-of-{}.json".format(*shard)
+    batch = BatchResult(out_dir=out, run_json=out / run_name)
     records = []
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     meta = dict(cfg=cfg, method=method, max_disparity=max_disparity, started=started,
-                config_source=config_source, n_total=len(pairs))
-    current = None
+                config_source=config_source, n_total=len(pairs), shard=shard)
+    task = functools.partial(_pair_task, out=out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
+                             max_disparity=max_disparity, fingerprint=fingerprint, pointcloud=pointcloud)
+    order = {pair.name: i for i, pair in enumerate(pairs)}
     try:
-        for current in progress_bar(pairs, progress, method):
-            row, record = _batch_pair(current, out / current.name, cfg=cfg, method=method, evaluate=evaluate,
-                                      overwrite=overwrite, max_disparity=max_disparity,
-                                      fingerprint=fingerprint, pointcloud=pointcloud)
-            batch.rows.append(row)
-            records.append(record)
-        current = None
+        with executor:
+            meta["execution"] = executor.describe()
+            # Compile before the first pair (and before a pool fans out): no pair's time includes it.
+            meta["compile_s"] = round(executor.warm(cfg, method), 3) if pairs else 0.0
+            bar = progress_bar(None, progress, method)
+            bar.reset(total=len(pairs))
+            try:
+                for _pair, (row, record) in executor.imap(task, pairs):
+                    batch.rows.append(row)
+                    records.append(record)
+                    bar.update()
+            finally:
+                bar.close()
     except KeyboardInterrupt:
+        current = executor.current
         _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
-                        stop_reason="interrupted (Ctrl-C / SIGINT)")
+                        stop_reason="interrupted (Ctrl-C / SIGINT / SIGTERM)")
         n_done = sum(r["status"] in ("ok", "skipped") for r in records)
         raise BatchInterrupted(n_done, len(pairs), batch.run_json) from None
     except OutputError as exc:
-        if not io.is_disk_full(exc):
+        current = executor.current
+        if not io.is_disk_full(exc) or current is None:
             raise
         row, record = failed_row(current, str(exc), 0.0)
         batch.rows.append(row)
@@ -298,8 +363,13 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
         except OutputError as again:
             log.warning("run.json not written: %s", again)
         raise
+    # Parallel executors finish pairs in any order; the files list them in input order.
+    batch.rows.sort(key=lambda r: order[r["pair"]])
+    records.sort(key=lambda r: order[r["pair"]])
     batch.n_failed = sum(r["status"] == "failed" for r in batch.rows)
-    if evaluate:
+    if evaluate and shard is not None:
+        log.info("--shard: summary files are left to `d3stereo eval %s --gt ...` once every shard is done", out)
+    elif evaluate:
         report.write_summary(out, batch.rows, method=method, extra={"settings": fingerprint})
         batch.summary = report.summarize(batch.rows)
     _write_run_json(batch, records, **meta, interrupted=False)
@@ -346,7 +416,8 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
 
 
 def _write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, started,
-                    config_source, interrupted, n_total=None, stopped_at=None, stop_reason=None) -> None:
+                    config_source, interrupted, n_total=None, stopped_at=None, stop_reason=None,
+                    execution=None, compile_s=None, shard=None) -> None:
     failed = [{"pair": r["pair"], "error": r["error"]} for r in records if r["status"] == "failed"]
     data = {
         "d3stereo": __version__,
@@ -367,6 +438,10 @@ def _write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, 
         "stopped_at": stopped_at,
         "stop_reason": stop_reason,
         "n_failed": len(failed),
+        # Seconds spent compiling numba kernels up front; not part of any pair's wall time.
+        "compile_s": compile_s,
+        "execution": execution or {"mode": "serial", "workers": 1},
+        "shard": list(shard) if shard else None,
         "pairs": records,
         "failed": failed,
     }

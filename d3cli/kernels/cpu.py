@@ -17,14 +17,33 @@ from numba import njit, prange
 
 
 def _drop_stale_cache() -> None:
-    """Delete this module's numba cache when pixel.py changed since it was written.
+    """Pick a writable numba cache folder, and delete this module's cache there when
+    pixel.py changed since it was written.
 
     Numba keys a cached function on its own source file only, so the drivers below
     would keep stale copies of the per-pixel functions they inline after an edit of
     pixel.py.
+
+    When the package's ``__pycache__`` cannot be written (a read-only install, a shared
+    site-packages), ``NUMBA_CACHE_DIR`` is set to ``$XDG_CACHE_HOME/d3stereo/numba``
+    (default ``~/.cache/d3stereo/numba``) before anything here is compiled, so every
+    process (each ``--workers`` process too) loads the kernels from one cache instead of
+    compiling them again; a ``NUMBA_CACHE_DIR`` the user set is kept.
     """
+    import os
+
+    from numba import config as numba_config
+    from numba.core.caching import UserProvidedCacheLocator
+
     here = Path(__file__).resolve().parent
     cache = here / "__pycache__"
+    writable = os.access(cache if cache.is_dir() else here, os.W_OK)
+    if not writable and not numba_config.CACHE_DIR:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+        os.environ["NUMBA_CACHE_DIR"] = str(base / "d3stereo" / "numba")
+        numba_config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # numba read the variable at import already
+    if numba_config.CACHE_DIR:  # where numba will look for this module's cache
+        cache = Path(numba_config.CACHE_DIR) / UserProvidedCacheLocator.get_suitable_cache_subpath(__file__)
     try:
         digest = hashlib.sha256((here / "pixel.py").read_bytes()).hexdigest()
         stamp = cache / "pixel.sha256"
@@ -32,9 +51,9 @@ def _drop_stale_cache() -> None:
             return
         for f in list(cache.glob("cpu.*.nbi")) + list(cache.glob("cpu.*.nbc")):
             f.unlink()
-        cache.mkdir(exist_ok=True)
+        cache.mkdir(parents=True, exist_ok=True)
         stamp.write_text(digest)
-    except OSError:  # read-only install: numba then caches elsewhere or not at all
+    except OSError:  # no writable cache anywhere: numba then compiles in every process
         pass
 
 

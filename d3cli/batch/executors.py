@@ -1,0 +1,382 @@
+"""Where the pairs of a batch run: in this process, a local process pool, or a Dask cluster.
+
+Every executor runs the same picklable per-pair task (a ``functools.partial`` of
+:func:`d3cli.batch.runner._batch_pair`, which writes one pair's outputs atomically into
+OUT and returns its report row and run.json record), so the per-pair files are the same
+whichever runs them.  The parent (client) keeps the OUT lock, collects the results and
+writes ``run.json`` / the summary.
+
+* :class:`SerialExecutor` - one pair after the other, here (``--workers 1``, the default).
+* :class:`PoolExecutor` - ``--workers N``: N spawned processes, each taking whole pairs,
+  ``NUMBA_NUM_THREADS`` set per worker so that workers x threads <= cores.  At most
+  2 N pairs are in flight, so a huge manifest never becomes a huge queue.
+* :class:`DaskExecutor` - ``--scheduler tcp://HOST:PORT``: each pair a task on an existing
+  ``dask.distributed`` cluster, submitted through a window of in-flight futures
+  (``as_completed``), checked up front (scheduler reachable, workers present with the
+  same d3stereo version, OUT writable from every worker).  A worker that dies mid-pair
+  has its task rescheduled elsewhere by the scheduler (``distributed.scheduler.
+  allowed-failures``); a pair failing deterministically returns a ``failed`` record from
+  inside the task, so it is recorded once and never retried.
+
+Ctrl-C: queued pairs are cancelled; pool workers ignore SIGINT and finish the pair they
+hold (whole pairs only, written atomically), Dask tasks in flight are cancelled (a
+cancelled pair leaves no ``result.json``, so a rerun computes it again).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import tempfile
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import Callable, Iterator, Sequence
+
+from .. import __version__
+from ..errors import ConfigError, D3Error, OutputError, where_what_fix
+from .warmup import warm_jit
+
+log = logging.getLogger(__name__)
+
+#: Environment variable naming the scheduler when --scheduler is not given (Dask's own name).
+SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
+#: Seconds to wait for the scheduler to answer, and for a first worker to join.
+CONNECT_TIMEOUT_S = 5
+WORKER_TIMEOUT_S = 30
+
+
+def available_cores() -> int:
+    """CPU cores this process may use (affinity mask where the OS has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # macOS, Windows
+        return max(1, os.cpu_count() or 1)
+
+
+def parse_workers(value: str | int) -> int:
+    """``--workers`` value -> number of worker processes (``auto``: one per core).
+
+    Raises
+    ------
+    ConfigError
+        When the value is neither a positive integer nor ``auto``.
+    """
+    if isinstance(value, int):
+        n = value
+    elif str(value).strip().lower() == "auto":
+        return available_cores()
+    else:
+        try:
+            n = int(value)
+        except ValueError:
+            n = 0
+    if n < 1:
+        raise ConfigError(f"--workers {value}: use a positive number of processes or 'auto'")
+    return n
+
+
+def parse_shard(value: str) -> tuple[int, int]:
+    """``--shard I/N`` -> (I, N) with 1 <= I <= N.
+
+    Raises
+    ------
+    ConfigError
+        When the value is not of the form ``I/N`` with 1 <= I <= N.
+    """
+    try:
+        index, total = (int(part) for part in str(value).split("/"))
+    except ValueError:
+        index, total = 0, 0
+    if not (total >= 1 and 1 <= index <= total):
+        raise ConfigError(f"--shard {value}: use I/N with 1 <= I <= N, e.g. --shard 3/8 for the third of eight")
+    return index, total
+
+
+def select_shard(pairs: Sequence, index: int, total: int) -> list:
+    """Shard ``index`` (1-based) of ``total``: the pairs at positions index-1, index-1+total, ...
+    of the pairs sorted by name.
+
+    Every pair lands in exactly one shard, whatever order discovery returned them in.
+    """
+    ordered = sorted(pairs, key=lambda p: p.name)
+    return [p for i, p in enumerate(ordered) if i % total == index - 1]
+
+
+# ----------------------------------------------------------------------------- serial
+class SerialExecutor:
+    """One pair after the other in this process."""
+
+    mode = "serial"
+
+    def __init__(self):
+        self.current = None  # the pair in progress, for run.json after an interruption
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def describe(self) -> dict:
+        return {"mode": self.mode, "workers": 1}
+
+    def warm(self, cfg, method) -> float:
+        return warm_jit(cfg, method)
+
+    def imap(self, task: Callable, pairs: Sequence) -> Iterator:
+        """Yield ``(pair, task(pair))`` in order."""
+        for pair in pairs:
+            self.current = pair
+            result = task(pair)
+            self.current = None
+            yield pair, result
+
+
+# ----------------------------------------------------------------------------- local pool
+def _init_pool_worker(threads: int, log_level: int, cfg=None, method: str | None = None) -> None:
+    """Runs first in each spawned worker, before it imports numba; then loads the kernels."""
+    # Before numba is imported: it reads the variable once, at import.
+    os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    # Ctrl-C goes to the whole process group; the parent decides, the worker finishes its pair.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.basicConfig(level=log_level, format="%(levelname)s: %(message)s", force=True)
+    logging.getLogger("numba").setLevel(max(log_level, logging.INFO))
+    if method is not None:
+        # Loads the kernels from the cache the parent wrote (about 1.5 s per worker here),
+        # so the worker's first pair is timed without it.
+        warm_jit(cfg, method)
+
+
+class PoolExecutor:
+    """``workers`` spawned processes taking whole pairs; ``threads`` numba threads each.
+
+    Parameters
+    ----------
+    workers : int
+        Number of worker processes (>= 2; 1 is :class:`SerialExecutor`).
+    threads : int, optional, keyword-only
+        Numba threads per worker; default ``max(1, cores // workers)``.
+    """
+
+    mode = "local-pool"
+
+    def __init__(self, workers: int, *, threads: int | None = None):
+        self.workers = workers
+        self.threads = threads or max(1, available_cores() // workers)
+        self.current = None
+        self._pool = None
+
+    def describe(self) -> dict:
+        return {"mode": self.mode, "workers": self.workers, "threads_per_worker": self.threads}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        # Queued pairs are dropped; pairs in flight finish (workers ignore SIGINT) and are complete.
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+        return False
+
+    def warm(self, cfg, method) -> float:
+        """Compile in the parent (writing the on-disk numba cache), then start the workers,
+        which load that cache in their initializer instead of compiling at once."""
+        import multiprocessing
+
+        seconds = warm_jit(cfg, method)
+        # spawn, not fork: a fork of a parent whose numba thread pool is running can hang.
+        self._pool = ProcessPoolExecutor(
+            max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"), initializer=_init_pool_worker,
+            initargs=(self.threads, logging.getLogger().getEffectiveLevel(), cfg, method))
+        return seconds
+
+    def imap(self, task: Callable, pairs: Sequence) -> Iterator:
+        """Yield ``(pair, result)`` as pairs complete, with at most 2 x workers in flight."""
+        todo = iter(pairs)
+        pending = {}
+
+        def submit_next() -> bool:
+            pair = next(todo, None)
+            if pair is None:
+                return False
+            pending[self._pool.submit(task, pair)] = pair
+            return True
+
+        for _ in range(2 * self.workers):
+            if not submit_next():
+                break
+        try:
+            while pending:
+                done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+                for future in done:
+                    pair = pending.pop(future)
+                    self.current = pair  # the pair an exception belongs to
+                    result = future.result()
+                    self.current = None
+                    submit_next()
+                    yield pair, result
+        except BrokenProcessPool:
+            raise D3Error("a --workers process died (killed, or out of memory); finished pairs are complete: "
+                          "rerun the same command to resume, with fewer --workers if memory ran out") from None
+        finally:
+            for future in pending:
+                future.cancel()
+
+
+# ----------------------------------------------------------------------------- Dask
+def _worker_identity() -> dict:
+    """Runs on each Dask worker: the d3stereo it imports (proves it is importable)."""
+    import d3cli
+
+    return {"version": d3cli.__version__, "path": str(Path(d3cli.__file__).resolve().parent)}
+
+
+def _worker_probe(out: str) -> str:
+    """Runs on each Dask worker: create and delete a file in OUT; returns '' or the reason."""
+    try:
+        fd, probe = tempfile.mkstemp(dir=out, prefix=".d3stereo-worker-probe-")
+        os.close(fd)
+        os.remove(probe)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return ""
+
+
+class DaskExecutor:
+    """Pairs as tasks on a ``dask.distributed`` cluster reached at ``address``.
+
+    Parameters
+    ----------
+    address : str
+        Scheduler address, e.g. ``tcp://10.0.0.5:8786``.
+    out : Path
+        Output folder, absolute; must be the same path on every worker (shared filesystem).
+    connect_timeout, worker_timeout : float, keyword-only
+        Seconds to wait for the scheduler, and for a first worker.
+    """
+
+    mode = "dask"
+
+    def __init__(self, address: str, out: Path, *, connect_timeout: float = CONNECT_TIMEOUT_S,
+                 worker_timeout: float = WORKER_TIMEOUT_S):
+        self.address, self.out = address, Path(out)
+        self.connect_timeout, self.worker_timeout = connect_timeout, worker_timeout
+        self.client = None
+        self.current = None
+        self.workers: dict = {}
+
+    def describe(self) -> dict:
+        return {"mode": self.mode, "scheduler": self.address, "workers": len(self.workers),
+                "threads": sum(self.workers.values())}
+
+    def __enter__(self):
+        try:
+            from distributed import Client
+        except ImportError:
+            raise ConfigError("--scheduler needs dask.distributed: pip install 'd3stereo[distributed]'") from None
+        try:
+            self.client = Client(self.address, timeout=self.connect_timeout, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ConfigError(where_what_fix(
+                f"--scheduler {self.address}", f"scheduler unreachable ({type(exc).__name__}: {exc})",
+                f"start one with `dask scheduler` or fix the address (also ${SCHEDULER_ENV})")) from None
+        try:
+            self._check_workers()
+        except BaseException:
+            self.client.close()
+            raise
+        return self
+
+    def __exit__(self, *exc):
+        self.client.close()
+        return False
+
+    def _check_workers(self) -> None:
+        """No worker, d3stereo missing or of another version, OUT not writable: ConfigError/OutputError."""
+        where = f"--scheduler {self.address}"
+        try:
+            self.client.wait_for_workers(1, timeout=self.worker_timeout)
+        except (TimeoutError, OSError):
+            raise ConfigError(where_what_fix(where, f"no worker joined within {self.worker_timeout:.0f} s",
+                                             "start workers with `dask worker ADDRESS`")) from None
+        self.workers = dict(self.client.nthreads())
+        found = self.client.run(_worker_identity, on_error="return")
+        for worker, identity in sorted(found.items()):
+            if isinstance(identity, BaseException):
+                raise ConfigError(where_what_fix(
+                    where, f"worker {worker} cannot import d3stereo ({type(identity).__name__}: {identity})",
+                    "install the same d3stereo on every worker (or set PYTHONPATH there)"))
+            if identity["version"] != __version__:
+                raise ConfigError(where_what_fix(
+                    where, f"worker {worker} has d3stereo {identity['version']}, this client {__version__}",
+                    "install the same version on the workers and here"))
+        probes = self.client.run(_worker_probe, str(self.out), on_error="return")
+        for worker, reason in sorted(probes.items()):
+            if isinstance(reason, BaseException) or reason:
+                raise OutputError(where_what_fix(
+                    str(self.out), f"worker {worker} cannot write the output folder ({reason})",
+                    "use -o on a filesystem shared by the client and every worker, writable by them"))
+
+    def warm(self, cfg, method) -> float:
+        """Compile (or load the cache) on every worker at once; the slowest worker's seconds."""
+        times = self.client.run(warm_jit, cfg, method)
+        return max(times.values(), default=0.0)
+
+    def imap(self, task: Callable, pairs: Sequence) -> Iterator:
+        """Yield ``(pair, result)`` as tasks complete, with at most 2 x worker threads in flight."""
+        from distributed import as_completed
+        from distributed.client import FutureCancelledError
+        from distributed.scheduler import KilledWorker
+
+        window = max(2, 2 * sum(self.client.nthreads().values()))
+        todo = iter(pairs)
+        pending = {}
+
+        def submit_next():
+            pair = next(todo, None)
+            if pair is None:
+                return None
+            # pure=False: a rerun must compute again, never reuse a result the scheduler still holds;
+            # retries=0: deterministic failures come back as records, only a dead worker reschedules.
+            future = self.client.submit(task, pair, pure=False, retries=0,
+                                        key=f"d3stereo-{pair.name}-{time.time_ns()}")
+            pending[future.key] = (future, pair)
+            return future
+
+        first = [f for f in (submit_next() for _ in range(window)) if f is not None]
+        if not first:
+            return
+        completed = as_completed(first, loop=self.client.loop)
+        try:
+            for future in completed:
+                _, pair = pending.pop(future.key)
+                self.current = pair  # the pair an exception belongs to
+                try:
+                    result = future.result()
+                except KilledWorker:
+                    raise D3Error(f"{pair.name}: the workers running it died several times (out of memory?); "
+                                  "finished pairs are complete, rerun the same command to resume") from None
+                except FutureCancelledError:
+                    raise D3Error(f"{pair.name}: the task was cancelled on the cluster; rerun to resume") from None
+                self.current = None
+                future.release()
+                following = submit_next()
+                if following is not None:
+                    completed.add(following)
+                yield pair, result
+        finally:
+            if pending:  # Ctrl-C or an error: nothing queued keeps running for nobody
+                self.client.cancel([future for future, _ in pending.values()])
+                completed.clear()
+
+
+def make_executor(workers: int = 1, scheduler: str | None = None, out: Path | None = None):
+    """The executor for ``--workers`` / ``--scheduler`` (scheduler wins; 1 worker is serial)."""
+    if scheduler:
+        return DaskExecutor(scheduler, Path(out).resolve())
+    if workers > 1:
+        return PoolExecutor(workers)
+    return SerialExecutor()
