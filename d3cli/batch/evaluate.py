@@ -50,10 +50,26 @@ def evaluate_pair(pair, left, right, disparity, pair_dir: Path) -> dict:
     gt, mask = datasets.load_ground_truth(pair, shape)
     if gt is not None:
         scores.update(metrics.disparity_errors(disparity, gt, mask=mask))
+        object_map = _object_map(pair, gt.shape)
+        scores.update(metrics.benchmark_metrics(disparity, gt, noc_mask=mask, object_map=object_map))
+        # Name the pixels behind the _all and _noc figures (a NaN _noc = no mask file).
+        scores["mask_all"] = f"{Path(pair.gt).name} > 0"
+        scores["mask_noc"] = f"{Path(pair.nocc).name}" if mask is not None else ""
         pair_dir.mkdir(parents=True, exist_ok=True)
         io.write_image(pair_dir / ERROR_MAP, metrics.error_map(disparity, gt, mask=mask))
     scores.update(metrics.photometric_scores(io.to_grey(left), io.to_grey(right), disparity))
     return scores
+
+
+def _object_map(pair, shape):
+    """KITTI 2015 ``obj_map.png`` beside the ground truth (0 = background), or None."""
+    for candidate in (Path(pair.gt).parent / "obj_map.png",
+                      Path(pair.gt).parent.parent / "obj_map" / Path(pair.gt).name):
+        if candidate.is_file():
+            obj = io.read_image(candidate)
+            obj = obj if obj.ndim == 2 else obj[..., 0]
+            return obj if obj.shape == tuple(shape) else None
+    return None
 
 
 def method_names(pred_dirs: Sequence[Path]) -> list[str]:
