@@ -178,13 +178,15 @@ def _finish(failures, n_total: int, where) -> None:
 @click.argument("pred_dirs", nargs=-1, required=True, metavar="PRED_DIR...", type=click.Path(path_type=Path))
 @click.option("--gt", "gt_input", required=True, multiple=True, type=click.Path(path_type=Path),
               help="The pairs with ground truth (any layout `run` accepts); repeatable.")
-@click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), default=None,
-              help="Folder for the reports [default: the first PRED_DIR].")
+@click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), required=True,
+              help="Folder for the reports (the prediction folders are only read).")
 @_verbosity
 def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
-    """Score the disp.pfm files of PRED_DIR(s) against the pairs of --gt.
+    """Score the predictions in PRED_DIR(s) against the pairs of --gt.
 
-    Several PRED_DIRs give one side-by-side table (comparison.md).
+    A prediction is <pair>/disp.{pfm,png,npy} or <pair>.{pfm,png,npy} (PNG: KITTI
+    uint16, value/256). Only pairs present in every PRED_DIR are compared. Several
+    PRED_DIRs give one side-by-side table (comparison.md).
     """
     from . import batch
     from .data import datasets
