@@ -17,7 +17,7 @@ from tqdm import tqdm
 
 from ..data import datasets, io
 from ..errors import D3Error, InputError, where_what_fix
-from ..evaluation import metrics, report
+from ..evaluation import metrics, pictures, report
 from .lock import ensure_writable
 from .outputs import ERROR_MAP, RESULT_FILE, RUN_FILE
 
@@ -56,7 +56,7 @@ def evaluate_pair(pair, left, right, disparity, pair_dir: Path) -> dict:
         scores["mask_all"] = f"{Path(pair.gt).name} > 0"
         scores["mask_noc"] = f"{Path(pair.nocc).name}" if mask is not None else ""
         pair_dir.mkdir(parents=True, exist_ok=True)
-        io.write_image(pair_dir / ERROR_MAP, metrics.error_map(disparity, gt, mask=mask))
+        io.write_image(pair_dir / ERROR_MAP, pictures.error_picture(disparity, gt, noc_mask=mask))
     scores.update(metrics.photometric_scores(io.to_grey(left), io.to_grey(right), disparity))
     return scores
 

@@ -54,6 +54,7 @@ from .outputs import (
     remove_pair_files,
     write_disparity_outputs,
     write_json,
+    write_panel,
 )
 
 log = logging.getLogger(__name__)
@@ -132,8 +133,10 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
         # An old result.json beside new, maybe half-written outputs would mark them complete;
         # an old error map would describe another estimate.
         remove_pair_files(pair_dir)
-        write_disparity_outputs(pair_dir, result.disparity, result.valid, vmax=dmax)
+        written = write_disparity_outputs(pair_dir, result.disparity, result.valid, left=left,
+                                          color_range=getattr(cfg.run, "color_range", None))
         scores = evaluate_pair(pair, left, right, result.disparity, pair_dir) if evaluate else None
+        write_panel(pair_dir, pair.name, left, scores)  # issue 13: panel.png
     except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
         remove_pair_files(pair_dir, remove_folder=True)
         raise
@@ -146,7 +149,7 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
         "inputs": {"left": pair.left, "right": pair.right, "gt": pair.gt},
         "shape": [height, width],
         "max_disparity": dmax,
-        "color_range": [0, dmax],
+        "color_range": written["color_range"],  # issue 13: robust range, stated
         "valid_share": float(result.valid.mean()) if result.valid.size else 0.0,
         "timings": {**result.timings, "wall": wall},
         "metrics": scores,
@@ -192,6 +195,7 @@ def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
         left, right = datasets.load_pair_images(pair)
         disparity = io.read_pfm(pair_dir / "disp.pfm")
         stored = {**stored, "metrics": evaluate_pair(pair, left, right, disparity, pair_dir)}
+        write_panel(pair_dir, pair.name, left, stored["metrics"])  # issue 13: panel with the error tile
         write_json(pair_dir / RESULT_FILE, stored)
     return stored
 
