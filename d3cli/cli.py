@@ -147,7 +147,16 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
                              config_source=source, pointcloud=pointcloud)
     if result.summary is not None and not quiet:
         click.echo(report.format_table(result.summary))
+    if not quiet:
+        _say_where(Path(out_dir), evaluate)
     _finish(result.failures, result.n_pairs, result.run_json)
+
+
+def _say_where(folder: Path, with_summary: bool = True) -> None:
+    """The end-of-run lines: where the page and the summary are."""
+    click.echo(f"report: {folder / 'report.html'}")
+    if with_summary:
+        click.echo(f"summary: {folder / 'summary.md'}")
 
 
 def _resolve_config(config_path, overrides, *, method, backend, no_fill) -> tuple[Config, str]:
@@ -202,6 +211,9 @@ def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
         click.echo(report.format_table(summary))
     failures = [(f"{name}/{pair}", msg) for name, rows in outcome["results"].items()
                 for pair, msg in ((r["pair"], r.get("error", "")) for r in rows if r["status"] == "failed")]
+    if not quiet:
+        for target in ([Path(out_dir)] if len(pred_dirs) == 1 else [Path(out_dir) / n for n in outcome["results"]]):
+            _say_where(target)
     report_file = outcome["comparison_path"] or Path(outcome["out_dir"]) / "summary.json"
     _finish(failures, outcome["n_rows"], report_file)
 

@@ -18,6 +18,8 @@ from tqdm import tqdm
 from ..data import datasets, io
 from ..errors import D3Error, InputError, where_what_fix
 from ..evaluation import metrics, pictures, report
+from ..evaluation.html import write_report_html
+from .fingerprint import package_versions
 from .lock import ensure_writable
 from .outputs import ERROR_MAP, RESULT_FILE, RUN_FILE
 
@@ -225,6 +227,9 @@ def evaluate_folders(
         rows = evaluate_predictions(folder, compared, report_dir=target, progress=progress)
         report.write_summary(target, rows, method=name,
                              extra={"predictions": str(folder), "not_compared": not_compared})
+        write_report_html(target, rows, title=f"d3stereo eval: {name}",
+                          config={"predictions": str(folder), "not_compared": not_compared},
+                          versions=package_versions())
         results[name] = rows
         summaries[name] = report.summarize(rows)
     comparison = comparison_path = None

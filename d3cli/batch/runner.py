@@ -46,6 +46,8 @@ from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar
 from .fingerprint import package_versions, settings_fingerprint
 from .lock import acquire_lock, ensure_writable, release_lock
 from .methods import compute_pair
+from ..evaluation.html import write_report_html  # issue 13
+from .fingerprint import package_versions  # issue 13
 from .outputs import (
     CLOUD_FILE,
     RESULT_FILE,
@@ -305,6 +307,9 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
         report.write_summary(out, batch.rows, method=method, extra={"settings": fingerprint})
         batch.summary = report.summarize(batch.rows)
     _write_run_json(batch, records, **meta, interrupted=False)
+    # issue 13: the page people look at, after every batch.
+    write_report_html(out, batch.rows, title=f"d3stereo {method}: {out}",
+                                          config=cfg.to_dict(), versions=package_versions())
     return batch
 
 
