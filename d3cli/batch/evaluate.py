@@ -33,7 +33,32 @@ def pair_row(pair, status: str, *, time_s: float | None = None, error: str = "",
 
 
 def progress_bar(pairs: Sequence, enabled: bool, desc: str):
-    return tqdm(pairs, desc=desc, unit="pair", disable=not (enabled and sys.stderr.isatty()))
+    bar = tqdm(pairs, desc=desc, unit="pair", disable=not (enabled and sys.stderr.isatty()))
+    bar.lines = enabled and not sys.stderr.isatty()  # no terminal: one line per pair instead
+    return bar
+
+
+def progress_start(bar, pair) -> None:
+    """Show the pair being computed in the bar."""
+    if not bar.disable:
+        bar.set_postfix_str(pair.name, refresh=True)
+
+
+def progress_done(bar, row: dict) -> None:
+    """Without a terminal: one line per finished pair (name, seconds, EPE when known).
+
+    Written to stderr like the bar, so long jobs' logs show life.
+    """
+    if not getattr(bar, "lines", False):
+        return
+    bar.n_done = getattr(bar, "n_done", 0) + 1  # a disabled tqdm does not count
+    parts = [f"[{bar.n_done}/{bar.total}]", row["pair"], row["status"]]
+    if isinstance(row.get("time_s"), (int, float)):
+        parts.append(f"{row['time_s']:.2f} s")
+    if isinstance(row.get("epe"), (int, float)):
+        parts.append(f"EPE {row['epe']:.3f}")
+    sys.stderr.write("  ".join(parts) + "\n")
+    sys.stderr.flush()
 
 
 def failed_row(pair, message: str, wall: float):
@@ -133,7 +158,9 @@ def evaluate_predictions(
     pred_dir = Path(pred_dir)
     report_dir = Path(report_dir)
     rows = []
-    for pair in progress_bar(list(pairs), progress, pred_dir.name):
+    bar = progress_bar(list(pairs), progress, pred_dir.name)
+    for pair in bar:
+        progress_start(bar, pair)
         t0 = time.perf_counter()
         pred_path = find_prediction(pred_dir, pair.name)
         try:
@@ -151,6 +178,7 @@ def evaluate_predictions(
             rows.append(failed_row(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)[0])
             continue
         rows.append(pair_row(pair, "ok", time_s=_stored_time(pred_path.parent), metrics=scores))
+        progress_done(bar, rows[-1])
     return rows
 
 

@@ -42,7 +42,7 @@ from ..errors import D3Error, OutputError
 from ..evaluation import diagnostics, report
 from ..road.pointcloud import camera_from, save_pair_cloud
 from . import resources
-from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar
+from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .fingerprint import package_versions, settings_fingerprint
 from .lock import acquire_lock, ensure_writable, release_lock
 from .methods import compute_pair
@@ -278,10 +278,13 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
                 config_source=config_source, n_total=len(pairs))
     current = None
     try:
-        for current in progress_bar(pairs, progress, method):
+        bar = progress_bar(pairs, progress, method)
+        for current in bar:
+            progress_start(bar, current)  # issue 13
             row, record = _batch_pair(current, out / current.name, cfg=cfg, method=method, evaluate=evaluate,
                                       overwrite=overwrite, max_disparity=max_disparity,
                                       fingerprint=fingerprint, pointcloud=pointcloud)
+            progress_done(bar, row)  # issue 13
             batch.rows.append(row)
             records.append(record)
         current = None

