@@ -108,7 +108,8 @@ def main():
 @click.option("--backend", type=click.Choice(BACKENDS), default=None,
               help="Compute backend [default: run.backend of the config, auto].")
 @click.option("-c", "--config", "config_path", type=click.Path(path_type=Path), default=None,
-              help=f"YAML config (see configs/default.yaml); else ${CONFIG_ENV} or ./{LOCAL_CONFIG}.")
+              help=f"YAML config file, or a name (road, kitti, middlebury) looked up in configs/; "
+                   f"else ${CONFIG_ENV} or ./{LOCAL_CONFIG}.")
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
               help="Override one config value; repeatable.")
 @click.option("--max-disparity", type=int, default=None, metavar="N",
@@ -159,7 +160,27 @@ def _say_where(folder: Path, with_summary: bool = True) -> None:
         click.echo(f"summary: {folder / 'summary.md'}")
 
 
+def config_by_name(config_path):
+    """``-c road`` -> ``configs/road.yaml``: a bare name (no suffix, no folder) that is not a file.
+
+    Searched in ``./configs/`` and then in the ``configs/`` folder of the source checkout
+    this package runs from (configs are not bundled in a wheel); otherwise the value is
+    returned unchanged, so the usual "file not found" error names it.
+    """
+    if config_path is None:
+        return None
+    given = Path(config_path)
+    if given.exists() or given.suffix or len(given.parts) != 1:
+        return config_path
+    for folder in (Path.cwd() / "configs", Path(__file__).resolve().parent.parent / "configs"):
+        candidate = folder / f"{given.name}.yaml"
+        if candidate.is_file():
+            return candidate
+    return config_path
+
+
 def _resolve_config(config_path, overrides, *, method, backend, no_fill) -> tuple[Config, str]:
+    config_path = config_by_name(config_path)
     path, why = config_search(str(config_path) if config_path else None)
     cfg = load_config(path, overrides)
     if path:

@@ -568,3 +568,13 @@ def test_python_dash_m_d3cli_is_the_d3stereo_command():
     done = subprocess.run([sys.executable, "-m", "d3cli", "--help"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("Usage: d3stereo ") and "run" in done.stdout and "synth" in done.stdout
+
+
+def test_config_by_name_finds_the_repository_configs(tmp_path, monkeypatch):
+    from d3cli.cli import config_by_name
+
+    monkeypatch.chdir(tmp_path)
+    assert config_by_name("road").name == "road.yaml" and config_by_name("road").is_file()
+    assert config_by_name("no-such-config") == "no-such-config"  # left for the file-not-found error
+    (tmp_path / "road").write_text("")  # an existing file of that name wins
+    assert config_by_name("road") == "road"
