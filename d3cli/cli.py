@@ -108,7 +108,8 @@ def main():
 @click.option("--backend", type=click.Choice(BACKENDS), default=None,
               help="Compute backend [default: run.backend of the config, auto].")
 @click.option("-c", "--config", "config_path", type=click.Path(path_type=Path), default=None,
-              help=f"YAML config (see configs/default.yaml); else ${CONFIG_ENV} or ./{LOCAL_CONFIG}.")
+              help=f"YAML config file, or a name (road, kitti, middlebury) looked up in configs/; "
+                   f"else ${CONFIG_ENV} or ./{LOCAL_CONFIG}.")
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
               help="Override one config value; repeatable.")
 @click.option("--max-disparity", type=int, default=None, metavar="N",
@@ -163,10 +164,39 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
                              scheduler=scheduler, shard=shard_of)
     if result.summary is not None and not quiet:
         click.echo(report.format_table(result.summary))
+    if not quiet:
+        _say_where(Path(out_dir), evaluate)
     _finish(result.failures, result.n_pairs, result.run_json)
 
 
+def _say_where(folder: Path, with_summary: bool = True) -> None:
+    """The end-of-run lines: where the page and the summary are."""
+    click.echo(f"report: {folder / 'report.html'}")
+    if with_summary:
+        click.echo(f"summary: {folder / 'summary.md'}")
+
+
+def config_by_name(config_path):
+    """``-c road`` -> ``configs/road.yaml``: a bare name (no suffix, no folder) that is not a file.
+
+    Searched in ``./configs/`` and then in the ``configs/`` folder of the source checkout
+    this package runs from (configs are not bundled in a wheel); otherwise the value is
+    returned unchanged, so the usual "file not found" error names it.
+    """
+    if config_path is None:
+        return None
+    given = Path(config_path)
+    if given.exists() or given.suffix or len(given.parts) != 1:
+        return config_path
+    for folder in (Path.cwd() / "configs", Path(__file__).resolve().parent.parent / "configs"):
+        candidate = folder / f"{given.name}.yaml"
+        if candidate.is_file():
+            return candidate
+    return config_path
+
+
 def _resolve_config(config_path, overrides, *, method, backend, no_fill) -> tuple[Config, str]:
+    config_path = config_by_name(config_path)
     path, why = config_search(str(config_path) if config_path else None)
     cfg = load_config(path, overrides)
     if path:
@@ -194,13 +224,15 @@ def _finish(failures, n_total: int, where) -> None:
 @click.argument("pred_dirs", nargs=-1, required=True, metavar="PRED_DIR...", type=click.Path(path_type=Path))
 @click.option("--gt", "gt_input", required=True, multiple=True, type=click.Path(path_type=Path),
               help="The pairs with ground truth (any layout `run` accepts); repeatable.")
-@click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), default=None,
-              help="Folder for the reports [default: the first PRED_DIR].")
+@click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), required=True,
+              help="Folder for the reports (the prediction folders are only read).")
 @_verbosity
 def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
-    """Score the disp.pfm files of PRED_DIR(s) against the pairs of --gt.
+    """Score the predictions in PRED_DIR(s) against the pairs of --gt.
 
-    Several PRED_DIRs give one side-by-side table (comparison.md).
+    A prediction is <pair>/disp.{pfm,png,npy} or <pair>.{pfm,png,npy} (PNG: KITTI
+    uint16, value/256). Only pairs present in every PRED_DIR are compared. Several
+    PRED_DIRs give one side-by-side table (comparison.md).
     """
     from . import batch
     from .data import datasets
@@ -216,6 +248,9 @@ def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
         click.echo(report.format_table(summary))
     failures = [(f"{name}/{pair}", msg) for name, rows in outcome["results"].items()
                 for pair, msg in ((r["pair"], r.get("error", "")) for r in rows if r["status"] == "failed")]
+    if not quiet:
+        for target in ([Path(out_dir)] if len(pred_dirs) == 1 else [Path(out_dir) / n for n in outcome["results"]]):
+            _say_where(target)
     report_file = outcome["comparison_path"] or Path(outcome["out_dir"]) / "summary.json"
     _finish(failures, outcome["n_rows"], report_file)
 

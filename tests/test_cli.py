@@ -59,7 +59,7 @@ def test_run_eval_writes_everything(tmp_path, pairs_root):
             assert (out / name / f).is_file(), (name, f)
         stored = json.loads((out / name / "result.json").read_text())
         assert stored["method"] == "sgbm"
-        assert stored["color_range"] == [0, stored["max_disparity"]]
+        assert stored["color_range"]["how"] == "1-99th percentile" and stored["color_range"]["max"] <= stored["max_disparity"]
         assert stored["metrics"]["epe"] < 1.0
         assert {"mse", "psnr", "ssim", "coverage"} <= set(stored["metrics"])
         assert stored["timings"]["wall"] > 0
@@ -397,12 +397,13 @@ def test_keyboard_interrupt_propagates_and_is_recorded(tmp_path, pairs_root, mon
 def test_eval_one_folder(tmp_path, pairs_root):
     out = tmp_path / "sgbm"
     assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
-    result = invoke("eval", out, "--gt", pairs_root)
+    rep = tmp_path / "rep"
+    result = invoke("eval", out, "--gt", pairs_root, "-o", rep)
     assert result.exit_code == 0, result.output
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((rep / "summary.json").read_text())
     assert summary["method"] == "sgbm"  # from run.json
     assert summary["counts"]["ok"] == 3 and summary["overall"]["means"]["epe"] < 1.0
-    assert (out / "metrics.csv").is_file() and (out / "summary.md").is_file()
+    assert (rep / "metrics.csv").is_file() and (rep / "summary.md").is_file()
 
 
 def test_eval_side_by_side(tmp_path, pairs_root):
@@ -421,23 +422,26 @@ def test_eval_side_by_side(tmp_path, pairs_root):
     assert not (filled / "a" / "error.png").exists()  # the prediction folders are only read
 
 
-def test_eval_missing_prediction_is_a_failed_pair(tmp_path, pairs_root):
+def test_eval_missing_prediction_is_listed_not_compared(tmp_path, pairs_root):
     out = tmp_path / "sgbm"
     assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
-    (out / "c" / "disp.pfm").unlink()
-    result = invoke("eval", out, "--gt", pairs_root)
-    assert_user_error(result, contains="1 of 3 pairs failed")
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["failures"][0]["pair"] == "c"
-    assert "no prediction" in summary["failures"][0]["error"]
+    for name in ("disp.pfm", "disp.png"):
+        (out / "c" / name).unlink()
+    rep = tmp_path / "rep"
+    result = invoke("eval", out, "--gt", pairs_root, "-o", rep)
+    assert result.exit_code == 0, result.output
+    summary = json.loads((rep / "summary.json").read_text())
+    assert summary["counts"]["ok"] == 2
+    assert summary["extra"]["not_compared"] == ["c"]
 
 
 def test_eval_needs_gt(tmp_path):
-    assert invoke("eval", tmp_path).exit_code == 2
+    assert invoke("eval", tmp_path, "-o", tmp_path / "r").exit_code == 2
 
 
 def test_eval_missing_prediction_folder(tmp_path, pairs_root):
-    assert_user_error(invoke("eval", tmp_path / "nope", "--gt", pairs_root), contains="prediction folder not found")
+    assert_user_error(invoke("eval", tmp_path / "nope", "--gt", pairs_root, "-o", tmp_path / "r"),
+                      contains="prediction folder not found")
 
 
 # ----------------------------------------------------------------------------- info, synth
@@ -564,3 +568,13 @@ def test_python_dash_m_d3cli_is_the_d3stereo_command():
     done = subprocess.run([sys.executable, "-m", "d3cli", "--help"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("Usage: d3stereo ") and "run" in done.stdout and "synth" in done.stdout
+
+
+def test_config_by_name_finds_the_repository_configs(tmp_path, monkeypatch):
+    from d3cli.cli import config_by_name
+
+    monkeypatch.chdir(tmp_path)
+    assert config_by_name("road").name == "road.yaml" and config_by_name("road").is_file()
+    assert config_by_name("no-such-config") == "no-such-config"  # left for the file-not-found error
+    (tmp_path / "road").write_text("")  # an existing file of that name wins
+    assert config_by_name("road") == "road"

@@ -17,7 +17,9 @@ from tqdm import tqdm
 
 from ..data import datasets, io
 from ..errors import D3Error, InputError, where_what_fix
-from ..evaluation import metrics, report
+from ..evaluation import metrics, pictures, report
+from ..evaluation.html import write_report_html
+from .fingerprint import package_versions
 from .lock import ensure_writable
 from .outputs import ERROR_MAP, RESULT_FILE, RUN_FILE
 
@@ -31,7 +33,32 @@ def pair_row(pair, status: str, *, time_s: float | None = None, error: str = "",
 
 
 def progress_bar(pairs: Sequence, enabled: bool, desc: str):
-    return tqdm(pairs, desc=desc, unit="pair", disable=not (enabled and sys.stderr.isatty()))
+    bar = tqdm(pairs, desc=desc, unit="pair", disable=not (enabled and sys.stderr.isatty()))
+    bar.lines = enabled and not sys.stderr.isatty()  # no terminal: one line per pair instead
+    return bar
+
+
+def progress_start(bar, pair) -> None:
+    """Show the pair being computed in the bar."""
+    if not bar.disable:
+        bar.set_postfix_str(pair.name, refresh=True)
+
+
+def progress_done(bar, row: dict) -> None:
+    """Without a terminal: one line per finished pair (name, seconds, EPE when known).
+
+    Written to stderr like the bar, so long jobs' logs show life.
+    """
+    if not getattr(bar, "lines", False):
+        return
+    bar.n_done = getattr(bar, "n_done", 0) + 1  # a disabled tqdm does not count
+    parts = [f"[{bar.n_done}/{bar.total}]", row["pair"], row["status"]]
+    if isinstance(row.get("time_s"), (int, float)):
+        parts.append(f"{row['time_s']:.2f} s")
+    if isinstance(row.get("epe"), (int, float)):
+        parts.append(f"EPE {row['epe']:.3f}")
+    sys.stderr.write("  ".join(parts) + "\n")
+    sys.stderr.flush()
 
 
 def failed_row(pair, message: str, wall: float):
@@ -50,10 +77,26 @@ def evaluate_pair(pair, left, right, disparity, pair_dir: Path) -> dict:
     gt, mask = datasets.load_ground_truth(pair, shape)
     if gt is not None:
         scores.update(metrics.disparity_errors(disparity, gt, mask=mask))
+        object_map = _object_map(pair, gt.shape)
+        scores.update(metrics.benchmark_metrics(disparity, gt, noc_mask=mask, object_map=object_map))
+        # Name the pixels behind the _all and _noc figures (a NaN _noc = no mask file).
+        scores["mask_all"] = f"{Path(pair.gt).name} > 0"
+        scores["mask_noc"] = f"{Path(pair.nocc).name}" if mask is not None else ""
         pair_dir.mkdir(parents=True, exist_ok=True)
-        io.write_image(pair_dir / ERROR_MAP, metrics.error_map(disparity, gt, mask=mask))
+        io.write_image(pair_dir / ERROR_MAP, pictures.error_picture(disparity, gt, noc_mask=mask))
     scores.update(metrics.photometric_scores(io.to_grey(left), io.to_grey(right), disparity))
     return scores
+
+
+def _object_map(pair, shape):
+    """KITTI 2015 ``obj_map.png`` beside the ground truth (0 = background), or None."""
+    for candidate in (Path(pair.gt).parent / "obj_map.png",
+                      Path(pair.gt).parent.parent / "obj_map" / Path(pair.gt).name):
+        if candidate.is_file():
+            obj = io.read_image(candidate)
+            obj = obj if obj.ndim == 2 else obj[..., 0]
+            return obj if obj.shape == tuple(shape) else None
+    return None
 
 
 def method_names(pred_dirs: Sequence[Path]) -> list[str]:
@@ -73,31 +116,59 @@ def method_names(pred_dirs: Sequence[Path]) -> list[str]:
     return names
 
 
+#: Prediction file suffixes that ``eval`` reads, in the order they are looked for.
+PREDICTION_SUFFIXES = (".pfm", ".png", ".npy")
+
+
+def find_prediction(pred_dir: str | os.PathLike, pair_name: str) -> Path | None:
+    """A pair's prediction in a folder: ``<pair>/disp.{pfm,png,npy}`` or flat ``<pair>.{pfm,png,npy}``."""
+    pred_dir = Path(pred_dir)
+    for suffix in PREDICTION_SUFFIXES:
+        for candidate in (pred_dir / pair_name / f"disp{suffix}", pred_dir / f"{pair_name}{suffix}"):
+            if candidate.is_file():
+                return candidate
+    return None
+
+
+def read_prediction(path: str | os.PathLike):
+    """Disparity (px, float, inf = no estimate) of a prediction file.
+
+    PFM: float values, non-finite = no estimate; PNG: KITTI uint16, value / 256,
+    0 = no estimate; NPY: float values, non-finite or <= 0 = no estimate.
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".png":
+        return io.read_disparity(path, scale=256.0, invalid="zero")
+    return io.read_disparity(path)
+
+
 def evaluate_predictions(
     pred_dir: str | os.PathLike,
     pairs: Iterable,
     *,
-    report_dir: str | os.PathLike | None = None,
+    report_dir: str | os.PathLike,
     progress: bool = True,
 ) -> list[dict]:
-    """Score ``pred_dir/<pair>/disp.pfm`` for each pair; rows for :mod:`d3cli.evaluation.report`.
+    """Score each pair's prediction in ``pred_dir`` (see :func:`find_prediction`).
 
-    Error maps go to ``report_dir/<pair>/error.png`` (default: beside the prediction).
-    A pair without a prediction, or whose prediction cannot be scored, becomes a
-    ``failed`` row naming the problem.
+    Error maps go to ``report_dir/<pair>/error.png``; nothing is written into
+    ``pred_dir``.  A pair without a prediction, or whose prediction cannot be scored,
+    becomes a ``failed`` row naming the problem.
     """
     pred_dir = Path(pred_dir)
-    report_dir = Path(report_dir) if report_dir is not None else pred_dir
+    report_dir = Path(report_dir)
     rows = []
-    for pair in progress_bar(list(pairs), progress, pred_dir.name):
+    bar = progress_bar(list(pairs), progress, pred_dir.name)
+    for pair in bar:
+        progress_start(bar, pair)
         t0 = time.perf_counter()
-        pred_path = pred_dir / pair.name / "disp.pfm"
+        pred_path = find_prediction(pred_dir, pair.name)
         try:
-            if not pred_path.is_file():
-                raise InputError(where_what_fix(str(pred_path), "no prediction for this pair",
-                                                "run `d3stereo run` on the pair or check --gt"))
+            if pred_path is None:
+                raise InputError(where_what_fix(str(pred_dir / pair.name), "no prediction for this pair",
+                                                "give <pair>/disp.{pfm,png,npy} or <pair>.{pfm,png,npy}"))
             left, right = _load_images(pair)
-            disparity = io.read_pfm(pred_path)
+            disparity = read_prediction(pred_path)
             scores = evaluate_pair(pair, left, right, disparity, report_dir / pair.name)
         except D3Error as exc:
             rows.append(failed_row(pair, str(exc), time.perf_counter() - t0)[0])
@@ -106,7 +177,8 @@ def evaluate_predictions(
             log.debug("%s: unexpected error", pair.name, exc_info=True)
             rows.append(failed_row(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)[0])
             continue
-        rows.append(pair_row(pair, "ok", time_s=_stored_time(pred_dir / pair.name), metrics=scores))
+        rows.append(pair_row(pair, "ok", time_s=_stored_time(pred_path.parent), metrics=scores))
+        progress_done(bar, rows[-1])
     return rows
 
 
@@ -122,44 +194,70 @@ def _stored_time(pair_dir: Path) -> float | None:
         return None
 
 
+def common_pairs(pred_dirs: Sequence[Path], pairs: Sequence) -> tuple[list, list[str]]:
+    """The pairs with a prediction in every folder, and the names of the others."""
+    kept, dropped = [], []
+    for pair in pairs:
+        (kept if all(find_prediction(f, pair.name) for f in pred_dirs) else dropped).append(pair)
+    return kept, [pair.name for pair in dropped]
+
+
 def evaluate_folders(
     pred_dirs: Sequence[str | os.PathLike],
     pairs: Sequence,
     *,
-    out_dir: str | os.PathLike | None = None,
+    out_dir: str | os.PathLike,
     progress: bool = True,
 ) -> dict:
     """Score one or more prediction folders against the same pairs and write the reports.
 
-    One folder: ``metrics.csv``, ``summary.json``, ``summary.md`` and the error maps
-    ``<pair>/error.png`` in ``out_dir`` (default: the prediction folder).  Several: each
-    folder's reports go to ``out_dir/<method>/`` (default: the prediction folder itself)
-    and the side-by-side table to ``out_dir/comparison.md`` (default: in the first
-    prediction folder).
+    Only the pairs that have a prediction in *every* folder are compared; the others are
+    logged as a warning and listed under ``not_compared``.  Everything is written under
+    ``out_dir`` (never into a prediction folder): one folder gives ``metrics.csv``,
+    ``summary.json``, ``summary.md``, ``<pair>/error.png`` in ``out_dir``; several give
+    each folder's reports in ``out_dir/<method>/`` and the side-by-side table
+    ``out_dir/comparison.md``.
 
     Returns
     -------
     dict
         ``results`` (method -> rows), ``summaries`` (method -> summary dict),
         ``comparison`` (Markdown text or None), ``comparison_path``, ``n_failed``,
-        ``n_rows``, ``out_dir``.
+        ``n_rows``, ``out_dir``, ``not_compared`` (pair names).
+
+    Raises
+    ------
+    InputError
+        A prediction folder does not exist, lies inside ``out_dir``'s tree the other way
+        round (``out_dir`` inside a prediction folder), or no pair has a prediction
+        everywhere.
     """
     pred_dirs = [Path(p) for p in pred_dirs]
+    out = Path(out_dir)
     for folder in pred_dirs:
         if not folder.is_dir():
             raise InputError(where_what_fix(str(folder), "prediction folder not found",
-                                            "give the -o folder of a `d3stereo run`"))
+                                            "give the -o folder of a `d3stereo run` or a folder of <pair>.png"))
+        if out.resolve() == folder.resolve() or folder.resolve() in out.resolve().parents:
+            raise InputError(where_what_fix(str(out), f"the report folder is inside the prediction folder {folder}",
+                                            "give -o a folder outside the predictions (they are only read)"))
+    compared, not_compared = common_pairs(pred_dirs, pairs)
+    if not compared:
+        raise InputError(where_what_fix(", ".join(map(str, pred_dirs)), "no pair has a prediction in every folder",
+                                        "check --gt and the prediction file names (<pair>/disp.pfm or <pair>.png)"))
+    if not_compared:
+        log.warning("not compared (no prediction in every folder): %s", ", ".join(not_compared))
     names = method_names(pred_dirs)
-    out = Path(out_dir) if out_dir is not None else pred_dirs[0]
     ensure_writable(out)
     results, summaries = {}, {}
     for folder, name in zip(pred_dirs, names):
-        if len(pred_dirs) == 1:
-            target = out
-        else:
-            target = ensure_writable(out / name) if out_dir is not None else folder
-        rows = evaluate_predictions(folder, pairs, report_dir=target, progress=progress)
-        report.write_summary(target, rows, method=name, extra={"predictions": str(folder)})
+        target = out if len(pred_dirs) == 1 else ensure_writable(out / name)
+        rows = evaluate_predictions(folder, compared, report_dir=target, progress=progress)
+        report.write_summary(target, rows, method=name,
+                             extra={"predictions": str(folder), "not_compared": not_compared})
+        write_report_html(target, rows, title=f"d3stereo eval: {name}",
+                          config={"predictions": str(folder), "not_compared": not_compared},
+                          versions=package_versions())
         results[name] = rows
         summaries[name] = report.summarize(rows)
     comparison = comparison_path = None
@@ -175,4 +273,5 @@ def evaluate_folders(
         "n_failed": sum(r["status"] == "failed" for rows in results.values() for r in rows),
         "n_rows": sum(len(rows) for rows in results.values()),
         "out_dir": out,
+        "not_compared": not_compared,
     }

@@ -5,9 +5,13 @@ Layout of an output folder ``OUT``::
     OUT/run.json                 resolved config, versions, backend, per-pair status
     OUT/<pair>/disp.pfm          float32 disparity, inf = invalid
     OUT/<pair>/disp.png          KITTI uint16 (disparity * 256, 0 = invalid)
-    OUT/<pair>/disp_color.png    colour coded over [0, max disparity]
-    OUT/<pair>/valid.png         255 where the method decided the disparity itself
-    OUT/<pair>/error.png         error map (only with --eval and ground truth)
+    OUT/<pair>/disp_color.png    TURBO over the 1st-99th percentile of the estimate (or
+                                 --color-range), colour bar stating the range
+    OUT/<pair>/valid.png         255 where the method decided the disparity itself (mask,
+                                 read back for point clouds)
+    OUT/<pair>/valid_overlay.png the left image, filled pixels red, no disparity blue
+    OUT/<pair>/error.png         KITTI log-colour error map with legend (--eval and gt)
+    OUT/<pair>/panel.png         left | disparity | error | validity, titled with metrics
     OUT/<pair>/cloud.ply         point cloud (only with --pointcloud)
     OUT/<pair>/result.json       timings, metrics, info; written LAST
     OUT/metrics.csv, summary.json, summary.md   (only with --eval)
@@ -25,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.io import atomic_write, colorize_disparity, write_image, write_kitti_png, write_pfm
+from ..data.io import atomic_write, read_image, write_image, write_kitti_png, write_pfm
+from ..evaluation import pictures
 from ..errors import OutputError, where_what_fix
 from ..evaluation.report import jsonable
 
@@ -35,6 +40,8 @@ log = logging.getLogger(__name__)
 OUTPUT_FILES = ("disp.pfm", "disp.png", "disp_color.png", "valid.png")
 RESULT_FILE = "result.json"
 ERROR_MAP = "error.png"
+PANEL_FILE = "panel.png"
+OVERLAY_FILE = "valid_overlay.png"
 CLOUD_FILE = "cloud.ply"  # only with --pointcloud
 RUN_FILE = "run.json"
 
@@ -89,7 +96,7 @@ def remove_pair_files(pair_dir: Path, *, remove_folder: bool = False) -> None:
     """
     if not pair_dir.is_dir():
         return
-    names = (*OUTPUT_FILES, RESULT_FILE, ERROR_MAP, CLOUD_FILE)
+    names = (*OUTPUT_FILES, RESULT_FILE, ERROR_MAP, CLOUD_FILE, PANEL_FILE, OVERLAY_FILE)
     leftovers = [p for p in pair_dir.iterdir() if p.name.startswith(".") and ".tmp-" in p.name]
     for path in [pair_dir / name for name in names] + leftovers:
         try:
@@ -103,7 +110,15 @@ def remove_pair_files(pair_dir: Path, *, remove_folder: bool = False) -> None:
             pass
 
 
-def write_disparity_outputs(folder: str | os.PathLike, disp: np.ndarray, valid: np.ndarray, *, vmax: float) -> dict:
+def write_disparity_outputs(
+    folder: str | os.PathLike,
+    disp: np.ndarray,
+    valid: np.ndarray,
+    *,
+    vmax: float | None = None,
+    left: np.ndarray | None = None,
+    color_range: tuple[float, float] | None = None,
+) -> dict:
     """Write the standard per-pair outputs, each atomically.
 
     Parameters
@@ -115,12 +130,18 @@ def write_disparity_outputs(folder: str | os.PathLike, disp: np.ndarray, valid: 
     valid : ndarray, bool, (H, W)
         Pixels the method decided itself.
     vmax : float, keyword-only
-        Top of the colour range of ``disp_color.png`` (usually the max disparity).
+        Unused (kept for callers of the old fixed [0, max disparity] range).
+    left : ndarray, optional
+        Left image; with it ``valid_overlay.png`` is written.
+    color_range : (float, float), optional
+        Fixed ``(vmin, vmax)`` of ``disp_color.png`` (``--color-range``); default the
+        1st-99th percentile of the finite estimate (:func:`pictures.robust_range`).
 
     Returns
     -------
-    dict of str to Path
-        ``{"disp.pfm": ..., "disp.png": ..., "disp_color.png": ..., "valid.png": ...}``.
+    dict
+        File name -> Path for every file written, and ``"color_range"``:
+        ``{"min": vmin, "max": vmax, "how": "1-99th percentile" | "fixed"}``.
     """
     folder = Path(folder)
     try:
@@ -139,9 +160,45 @@ def write_disparity_outputs(folder: str | os.PathLike, disp: np.ndarray, valid: 
         if (disp < 0).any():  # disparities are >= 0 by contract: a method bug, never written
             raise ValueError(f"{folder.name}: the method returned negative disparities (down to "
                              f"{float(np.nanmin(disp)):.3f}); please report this")
-    return {
+    if color_range is None:
+        vmin, vmax_ = pictures.robust_range(disp)
+        how = "%g-%gth percentile" % pictures.ROBUST_PERCENTILES
+    else:
+        vmin, vmax_ = (float(v) for v in color_range)
+        how = "fixed range"
+    written = {
         "disp.pfm": write_pfm(folder / "disp.pfm", disp),
         "disp.png": write_kitti_png(folder / "disp.png", disp),
-        "disp_color.png": write_image(folder / "disp_color.png", colorize_disparity(disp, 0.0, max(float(vmax), 1e-6))),
+        "disp_color.png": write_image(folder / "disp_color.png", pictures.disparity_picture(disp, vmin, vmax_, how=how)),
         "valid.png": write_image(folder / "valid.png", valid.astype(np.uint8) * 255),
     }
+    if left is not None:
+        written[OVERLAY_FILE] = write_image(folder / OVERLAY_FILE, pictures.validity_overlay(left, valid, disp))
+    written["color_range"] = {"min": vmin, "max": vmax_, "how": how}
+    return written
+
+
+def panel_title(name: str, scores: dict | None) -> str:
+    """``pair  EPE 1.23  D1 4.5%  bad2 7.8%  A90 2.1`` (the figures that exist)."""
+    parts = [name]
+    for key, label, unit in (("epe", "EPE", ""), ("d1_all", "D1", "%"), ("bad_2_noc", "bad2noc", "%"),
+                             ("a90_noc", "A90noc", ""), ("psnr", "PSNR", "dB")):
+        value = (scores or {}).get(key)
+        if isinstance(value, (int, float)) and np.isfinite(value):
+            parts.append(f"{label} {value:.2f}{unit}")
+    return "   ".join(parts)
+
+
+def write_panel(folder: str | os.PathLike, name: str, left: np.ndarray, scores: dict | None) -> Path:
+    """``panel.png``: left | disparity | error (when error.png exists) | validity, titled.
+
+    Built from the pictures already in ``folder`` so it shows exactly what they show.
+    """
+    folder = Path(folder)
+    tiles = [("left", np.asarray(left)), ("disparity", read_image(folder / "disp_color.png"))]
+    if (folder / ERROR_MAP).is_file():
+        tiles.append(("error (KITTI log colours)", read_image(folder / ERROR_MAP)))
+    overlay = folder / OVERLAY_FILE
+    tiles.append(("validity (red filled, blue none)", read_image(overlay) if overlay.is_file()
+                  else read_image(folder / "valid.png")))
+    return write_image(folder / PANEL_FILE, pictures.panel(panel_title(name, scores), tiles))

@@ -46,11 +46,12 @@ from ..errors import D3Error, OutputError
 from ..evaluation import diagnostics, report
 from ..road.pointcloud import camera_from, save_pair_cloud
 from . import resources
-from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar
+from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .executors import make_executor, select_shard
 from .fingerprint import package_versions, settings_fingerprint
 from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock, shard_lock_name
 from .methods import compute_pair
+from ..evaluation.html import write_report_html
 from .outputs import (
     CLOUD_FILE,
     RESULT_FILE,
@@ -60,6 +61,7 @@ from .outputs import (
     remove_pair_files,
     write_disparity_outputs,
     write_json,
+    write_panel,
 )
 
 log = logging.getLogger(__name__)
@@ -138,8 +140,10 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
         # An old result.json beside new, maybe half-written outputs would mark them complete;
         # an old error map would describe another estimate.
         remove_pair_files(pair_dir)
-        write_disparity_outputs(pair_dir, result.disparity, result.valid, vmax=dmax)
+        written = write_disparity_outputs(pair_dir, result.disparity, result.valid, left=left,
+                                          color_range=getattr(cfg.run, "color_range", None))
         scores = evaluate_pair(pair, left, right, result.disparity, pair_dir) if evaluate else None
+        write_panel(pair_dir, pair.name, left, scores)  # issue 13: panel.png
     except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
         remove_pair_files(pair_dir, remove_folder=True)
         raise
@@ -152,7 +156,7 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
         "inputs": {"left": pair.left, "right": pair.right, "gt": pair.gt},
         "shape": [height, width],
         "max_disparity": dmax,
-        "color_range": [0, dmax],
+        "color_range": written["color_range"],  # issue 13: robust range, stated
         "valid_share": float(result.valid.mean()) if result.valid.size else 0.0,
         "timings": {**result.timings, "wall": wall},
         "metrics": scores,
@@ -198,6 +202,7 @@ def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
         left, right = datasets.load_pair_images(pair)
         disparity = io.read_pfm(pair_dir / "disp.pfm")
         stored = {**stored, "metrics": evaluate_pair(pair, left, right, disparity, pair_dir)}
+        write_panel(pair_dir, pair.name, left, stored["metrics"])  # issue 13: panel with the error tile
         write_json(pair_dir / RESULT_FILE, stored)
     return stored
 
@@ -341,6 +346,8 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
                 for _pair, (row, record) in executor.imap(task, pairs):
                     batch.rows.append(row)
                     records.append(record)
+                    progress_start(bar, _pair)  # the bar names the pair last finished
+                    progress_done(bar, row)  # without a terminal: one line per pair
                     bar.update()
             finally:
                 bar.close()
@@ -373,6 +380,9 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
         report.write_summary(out, batch.rows, method=method, extra={"settings": fingerprint})
         batch.summary = report.summarize(batch.rows)
     _write_run_json(batch, records, **meta, interrupted=False)
+    # issue 13: the page people look at, after every batch.
+    write_report_html(out, batch.rows, title=f"d3stereo {method}: {out}",
+                                          config=cfg.to_dict(), versions=package_versions())
     return batch
 
 

@@ -11,7 +11,7 @@ Layouts (``layout:`` name in a manifest, then what is expected on disk):
     A folder of pair folders, the layout of ``shared/data``.  Each pair folder holds
     ``left.<ext>`` and ``right.<ext>`` (png, jpg, ppm, pgm, tif, bmp), optionally
     ``disp_gt.<pfm|png|pgm|npy>``, a non-occlusion mask (``mask0nocc.png``,
-    ``disp_gt_nocc.png``, ``nonocc.png`` or ``mask_nonocc.png``), ``calib.txt`` and a
+    ``disp_gt_nocc.png``, ``nonocc.png``, ``mask_nonocc.png`` or KITTI's ``disp_noc.png``), ``calib.txt`` and a
     ``SOURCE.txt`` whose machine-readable lines ``gt_scale: 256``, ``gt_invalid: 0``
     (``0``, ``inf``, ``auto`` or ``none``; the first word counts), optionally
     ``max_disparity: N``, ``family: NAME`` and ``image_size: WxH`` are used.
@@ -85,7 +85,8 @@ log = logging.getLogger(__name__)
 LAYOUTS = ("pair-folders", "pair", "middlebury2014", "kitti2012", "kitti2015", "udtiri-stereo", "stereo-road")
 MANIFEST_EXTENSIONS = (".yaml", ".yml")
 GT_NAMES = ("disp_gt.pfm", "disp_gt.png", "disp_gt.pgm", "disp_gt.npy", "disp_gt.tif", "disp_gt.tiff")
-NOCC_NAMES = ("mask0nocc.png", "disp_gt_nocc.png", "nonocc.png", "mask_nonocc.png")
+# disp_noc.png: KITTI-style non-occluded ground truth, used as the mask (value > 0 = non-occluded).
+NOCC_NAMES = ("mask0nocc.png", "disp_gt_nocc.png", "nonocc.png", "mask_nonocc.png", "disp_noc.png")
 # Family of pair folders whose name prefix is a road sequence without ground truth.
 ROAD_PREFIXES = ("karlsruhe", "sid", "stereo-road", "road")
 PAIR_KEYS = ("name", "left", "right", "gt", "gt_scale", "gt_invalid", "nocc", "calib", "max_disparity", "family",

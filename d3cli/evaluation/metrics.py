@@ -327,3 +327,105 @@ def _check_same_2d_shape(where: str, **arrays: np.ndarray | None) -> None:
         raise InputError(
             where_what_fix(where, described, "all arrays must have the same height x width")
         )
+
+
+#: Middlebury bad-x thresholds (px).
+BAD_THRESHOLDS = (0.5, 1, 2, 4)
+
+#: Middlebury error quantiles (fractions) reported as ``a50`` ... ``a99``.
+QUANTILES = (0.50, 0.90, 0.95, 0.99)
+
+#: KITTI D1 outlier rule: ``|err| > D1_PIXELS`` px **and** ``|err| > D1_RELATIVE * gt``.
+D1_PIXELS = 3.0
+D1_RELATIVE = 0.05
+
+
+def standard_errors(error: np.ndarray, gt: np.ndarray) -> dict:
+    """KITTI D1 and the Middlebury figures of one set of evaluated pixels.
+
+    Parameters
+    ----------
+    error : ndarray, float, (N,)
+        ``|d - gt|`` in pixels of the evaluated pixels (a missing estimate already
+        counted as ``|gt|``, see :func:`disparity_errors`).
+    gt : ndarray, float, (N,)
+        Ground-truth disparity of the same pixels (for D1's relative test).
+
+    Returns
+    -------
+    dict
+        ``d1`` (%, share with ``error > 3`` and ``error > 0.05 gt``), ``bad_<x>`` (%,
+        share with ``error > x`` for x in :data:`BAD_THRESHOLDS`), ``avgerr`` (px, mean),
+        ``rms`` (px, ``sqrt(mean(error^2))``), ``a<q>`` (px, the error quantile: the
+        smallest error e such that at least q of the pixels have an error <= e, i.e.
+        ``sorted(error)[ceil(q N) - 1]``) and ``n_px``.  NaN floats when ``N == 0``.
+    """
+    error = np.asarray(error, dtype=np.float64).ravel()
+    gt = np.asarray(gt, dtype=np.float64).ravel()
+    n = int(error.size)
+    keys = ["d1", *(f"bad_{t:g}" for t in BAD_THRESHOLDS), "avgerr", "rms",
+            *(f"a{round(q * 100)}" for q in QUANTILES)]
+    if n == 0:
+        return {**{k: math.nan for k in keys}, "n_px": 0}
+    result = {"d1": 100.0 * float(np.count_nonzero((error > D1_PIXELS) & (error > D1_RELATIVE * gt))) / n}
+    for t in BAD_THRESHOLDS:
+        result[f"bad_{t:g}"] = 100.0 * float(np.count_nonzero(error > t)) / n
+    result["avgerr"] = float(error.mean())
+    result["rms"] = float(math.sqrt(float(np.mean(error**2))))
+    for q in QUANTILES:
+        # inverted_cdf = Middlebury's "error threshold that q of the pixels stay under".
+        result[f"a{round(q * 100)}"] = float(np.quantile(error, q, method="inverted_cdf"))
+    result["n_px"] = n
+    return result
+
+
+def benchmark_metrics(
+    pred: np.ndarray,
+    gt: np.ndarray,
+    *,
+    noc_mask: np.ndarray | None = None,
+    object_map: np.ndarray | None = None,
+) -> dict:
+    """KITTI D1 and Middlebury bad-x / avgerr / rms / A-quantiles on *all* and *noc* pixels.
+
+    Parameters
+    ----------
+    pred : ndarray, float, (H, W)
+        Estimated disparity (px); non-finite = no estimate, scored as ``d = 0``.
+    gt : ndarray, float, (H, W)
+        Ground truth (px); finite values > 0 are evaluated ("all" = KITTI disp_occ).
+    noc_mask : ndarray, bool, (H, W), optional
+        Non-occluded pixels (KITTI disp_noc > 0, Middlebury mask0nocc == 255).  Without
+        it every ``*_noc`` figure is NaN (never silently the "all" figure).
+    object_map : ndarray, (H, W), optional
+        KITTI 2015 obj_map: 0 = background, > 0 = foreground (cars); adds ``d1_bg`` and
+        ``d1_fg`` on the "all" pixels.
+
+    Returns
+    -------
+    dict
+        For each figure of :func:`standard_errors` two keys ``<fig>_all`` and
+        ``<fig>_noc`` (e.g. ``d1_all``, ``bad_2_noc``, ``a90_all``), ``n_px_all``,
+        ``n_px_noc``, and ``d1_bg``/``d1_fg`` with an object map.
+    """
+    pred = np.asarray(pred, dtype=np.float64)
+    gt = np.asarray(gt, dtype=np.float64)
+    _check_same_2d_shape("benchmark_metrics", prediction=pred, ground_truth=gt,
+                         mask=noc_mask, object_map=object_map)
+    valid = _evaluable_ground_truth(gt, None)
+    error = np.abs(np.where(np.isfinite(pred), pred, 0.0) - np.where(valid, gt, 0.0))
+    masks = {"all": valid}
+    if noc_mask is not None:
+        masks["noc"] = valid & (np.asarray(noc_mask) != 0)
+    out = {}
+    for name in ("all", "noc"):
+        if name in masks:
+            figures = standard_errors(error[masks[name]], gt[masks[name]])
+        else:
+            figures = {k: (0 if k == "n_px" else math.nan) for k in standard_errors(error[:0], gt[:0])}
+        out.update({f"{k}_{name}": v for k, v in figures.items()})
+    if object_map is not None:
+        fg = np.asarray(object_map) > 0
+        out["d1_bg"] = standard_errors(error[valid & ~fg], gt[valid & ~fg])["d1"]
+        out["d1_fg"] = standard_errors(error[valid & fg], gt[valid & fg])["d1"]
+    return out

@@ -38,14 +38,26 @@ PHOTOMETRIC_COLUMNS = ["mse", "psnr", "ssim", "coverage"]
 #: Metric keys in display order (disparity errors, then photometric scores).
 METRIC_COLUMNS = [*DISPARITY_COLUMNS, *PHOTOMETRIC_COLUMNS]
 
+#: KITTI D1 and Middlebury figures (:func:`d3cli.evaluation.metrics.benchmark_metrics`),
+#: each on all ground-truth pixels (``_all``) and on the non-occluded ones (``_noc``).
+BENCHMARK_COLUMNS = [
+    f"{fig}_{mask}"
+    for fig in ("d1", "bad_0.5", "bad_1", "bad_2", "bad_4", "avgerr", "rms", "a50", "a90", "a95", "a99")
+    for mask in ("all", "noc")
+] + ["d1_bg", "d1_fg"]
+
+#: Columns naming the mask files behind the ``_all`` and ``_noc`` figures.
+MASK_COLUMNS = ["mask_all", "mask_noc"]
+
 #: Columns of ``metrics.csv``, in order; keys of a row outside this list follow them.
-CSV_COLUMNS = ["pair", "family", "status", *METRIC_COLUMNS, "n_px", "time_s", "error"]
+CSV_COLUMNS = ["pair", "family", "status", *METRIC_COLUMNS, "n_px", *BENCHMARK_COLUMNS,
+               *MASK_COLUMNS, "n_px_all", "n_px_noc", "time_s", "error"]
 
 #: Pair outcomes.
 STATUSES = ("ok", "failed", "skipped")
 
 #: Keys averaged by :func:`summarize`.
-MEAN_KEYS = [*METRIC_COLUMNS, "time_s"]
+MEAN_KEYS = [*METRIC_COLUMNS, *BENCHMARK_COLUMNS, "time_s"]
 
 #: Family label of rows whose ``family`` is empty.
 NO_FAMILY = "other"
@@ -169,10 +181,12 @@ def _parse_csv_row(row: dict) -> dict:
     for key in MEAN_KEYS:
         if key in parsed:
             parsed[key] = float(parsed[key]) if parsed[key] != "" else None
-    if "n_px" in parsed:
-        parsed["n_px"] = int(parsed["n_px"]) if parsed["n_px"] != "" else None
-    if "error" in parsed:
-        parsed["error"] = parsed["error"] or None
+    for key in ("n_px", "n_px_all", "n_px_noc"):
+        if key in parsed:
+            parsed[key] = int(parsed[key]) if parsed[key] != "" else None
+    for key in ("error", *MASK_COLUMNS):
+        if key in parsed:
+            parsed[key] = parsed[key] or None
     return parsed
 
 

@@ -9,7 +9,8 @@ from d3cli.data import io
 def test_write_disparity_outputs(tmp_path):
     disp = np.array([[1.25, np.inf, 30.0], [0.5, 7.0, np.inf]], np.float32)
     valid = np.isfinite(disp)
-    paths = write_disparity_outputs(tmp_path / "out" / "pair", disp, valid, vmax=32)
+    paths = write_disparity_outputs(tmp_path / "out" / "pair", disp, valid, color_range=(0, 32))
+    assert paths.pop("color_range") == {"min": 0.0, "max": 32.0, "how": "fixed range"}
     assert sorted(paths) == ["disp.pfm", "disp.png", "disp_color.png", "valid.png"]
     folder = tmp_path / "out" / "pair"
     assert sorted(p.name for p in folder.iterdir()) == sorted(paths)
@@ -17,7 +18,23 @@ def test_write_disparity_outputs(tmp_path):
     np.testing.assert_array_equal(io.read_kitti_png(folder / "disp.png"), disp)
     np.testing.assert_array_equal(io.read_image(folder / "valid.png"), valid.astype(np.uint8) * 255)
     colour = io.read_image(folder / "disp_color.png")
-    assert colour.shape == (2, 3, 3) and tuple(colour[0, 1]) == (0, 0, 0)
+    assert colour.shape[1:] == (3, 3) and colour.shape[0] > 2  # the colour bar below the map
+    assert tuple(colour[0, 1]) == (0, 0, 0)
+
+
+def test_robust_range_panel_and_overlay(tmp_path):
+    from d3cli.batch.outputs import write_panel
+
+    disp = np.full((30, 40), 10.0, np.float32)
+    disp[:, 20:] = 20.0
+    disp[0, 0] = 1000.0  # one outlier must not set the colour range
+    valid = np.ones_like(disp, bool)
+    left = np.zeros((30, 40, 3), np.uint8)
+    written = write_disparity_outputs(tmp_path, disp, valid, left=left)
+    assert written["color_range"]["max"] == 20.0 and written["color_range"]["min"] == 10.0
+    assert (tmp_path / "valid_overlay.png").is_file()
+    panel = io.read_image(write_panel(tmp_path, "pair-x", left, {"epe": 1.5}))
+    assert panel.shape[1] > 3 * 40
 
 
 def test_negative_disparities_are_never_written(tmp_path):
@@ -25,5 +42,5 @@ def test_negative_disparities_are_never_written(tmp_path):
 
     disp = np.array([[1.0, -0.5]], np.float32)
     with pytest.raises(ValueError, match="negative disparities"):
-        write_disparity_outputs(tmp_path / "p", disp, np.ones_like(disp, bool), vmax=4)
+        write_disparity_outputs(tmp_path / "p", disp, np.ones_like(disp, bool))
     assert not (tmp_path / "p" / "disp.pfm").exists()

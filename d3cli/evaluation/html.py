@@ -1,0 +1,155 @@
+"""``report.html``: one static, self-contained page of a batch (inline CSS/JS, no network).
+
+Contents: the summary table (click a header to sort), per-family means, a histogram of
+the per-pair error (inline SVG), every pair's panel as a thumbnail sorted by error
+(worst first) linking to the full images, the config and the versions.  Links are
+relative and point only to files that exist when the page is written.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+from ..data.io import atomic_write
+from .report import BENCHMARK_COLUMNS, METRIC_COLUMNS, jsonable, summarize
+
+REPORT_FILE = "report.html"
+
+#: Columns of the page's table (those with at least one value are shown).
+TABLE_COLUMNS = ["epe", "d1_all", "d1_noc", "bad_2_noc", "bad_4_noc", "a90_noc", "rms_noc",
+                 "pep_3", "density", "psnr", "ssim", "time_s"]
+
+#: Pictures linked from a pair's card when they exist, in this order.
+PAIR_PICTURES = ("panel.png", "disp_color.png", "error.png", "valid_overlay.png")
+
+_CSS = """
+body{font:14px/1.4 system-ui,sans-serif;margin:1.5em;color:#222}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}
+th{background:#eee;cursor:pointer}td:first-child,td:nth-child(2),td:nth-child(3){text-align:left}
+.cards{display:flex;flex-wrap:wrap;gap:10px}.card{width:420px}.card img{width:100%;border:1px solid #999}
+.failed{color:#b00}pre{background:#f6f6f6;padding:.5em;max-height:30em;overflow:auto}
+"""
+
+_JS = """
+document.querySelectorAll('table.sortable th').forEach(function(th,i){th.onclick=function(){
+var t=th.closest('table'),b=t.tBodies[0],r=Array.from(b.rows),d=th.dataset.d==='1'?-1:1;th.dataset.d=d===1?'1':'0';
+r.sort(function(x,y){var a=x.cells[i].dataset.v||x.cells[i].textContent,c=y.cells[i].dataset.v||y.cells[i].textContent;
+var p=parseFloat(a),q=parseFloat(c);if(!isNaN(p)&&!isNaN(q))return d*(p-q);if(isNaN(p)!==isNaN(q))return isNaN(p)?1:-1;return d*a.localeCompare(c);});
+r.forEach(function(e){b.appendChild(e);});};});
+"""
+
+
+def _num(value) -> float | None:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) else None
+
+
+def _fmt(value) -> str:
+    v = _num(value)
+    return "" if v is None else f"{v:.3f}" if abs(v) < 100 else f"{v:.1f}"
+
+
+def sort_key(row: Mapping) -> tuple:
+    """Worst first: by EPE, else D1, else negative PSNR; pairs without a figure last."""
+    for key, sign in (("epe", -1), ("d1_all", -1), ("psnr", 1)):
+        v = _num(row.get(key))
+        if v is not None:
+            return (0, sign * v)
+    return (1, 0.0)
+
+
+def histogram_svg(values: list[float], *, label: str, bins: int = 12, width: int = 480, height: int = 160) -> str:
+    """Inline SVG bar chart of ``values`` (``bins`` equal bins between min and max)."""
+    if not values:
+        return "<p>No per-pair errors to plot (no ground truth).</p>"
+    lo, hi = min(values), max(values)
+    hi = hi if hi > lo else lo + 1.0
+    counts = [0] * bins
+    for v in values:
+        counts[min(bins - 1, int((v - lo) / (hi - lo) * bins))] += 1
+    top = max(counts)
+    bar_w = (width - 40) / bins
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height + 30}" role="img">']
+    for i, c in enumerate(counts):
+        h = (height - 10) * c / top
+        x = 30 + i * bar_w
+        parts.append(f'<rect x="{x:.1f}" y="{height - h:.1f}" width="{bar_w - 2:.1f}" height="{h:.1f}" fill="#4575b4">'
+                     f'<title>{lo + i * (hi - lo) / bins:.3g}-{lo + (i + 1) * (hi - lo) / bins:.3g}: {c}</title></rect>')
+    parts.append(f'<text x="30" y="{height + 14}" font-size="11">{lo:.3g}</text>')
+    parts.append(f'<text x="{width - 10}" y="{height + 14}" font-size="11" text-anchor="end">{hi:.3g}</text>')
+    parts.append(f'<text x="{width / 2}" y="{height + 26}" font-size="11" text-anchor="middle">'
+                 f'{html.escape(label)} (pairs per bin, max {top})</text></svg>')
+    return "".join(parts)
+
+
+def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
+                config: Mapping | None = None, versions: Mapping | None = None) -> str:
+    """The page's text for the pair rows of a batch whose pair folders lie in ``out_dir``."""
+    out_dir = Path(out_dir)
+    rows = [dict(r) for r in rows]
+    summary = summarize(rows)
+    columns = [c for c in TABLE_COLUMNS if any(_num(r.get(c)) is not None for r in rows)]
+    e = html.escape
+    out = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{e(title)}</title>'
+           f"<style>{_CSS}</style></head><body><h1>{e(title)}</h1>"]
+    counts = summary["counts"]
+    out.append(f"<p>{len(rows)} pairs: " + ", ".join(f"{counts.get(s, 0)} {s}" for s in ("ok", "failed", "skipped"))
+               + ". Metric definitions: README section “Metrics (exact definitions)”; _all = all pixels with "
+                 "ground truth, _noc = non-occluded mask.</p>")
+    # Summary table
+    out.append('<h2>Pairs</h2><table class="sortable"><thead><tr><th>pair</th><th>family</th><th>status</th>'
+               + "".join(f"<th>{e(c)}</th>" for c in columns) + "</tr></thead><tbody>")
+    for r in rows:
+        cls = ' class="failed"' if r.get("status") == "failed" else ""
+        cells = "".join(f'<td data-v="{_num(r.get(c)) if _num(r.get(c)) is not None else ""}">{_fmt(r.get(c))}</td>'
+                        for c in columns)
+        link = f'<a href="#{e(r["pair"])}">{e(r["pair"])}</a>' if (out_dir / r["pair"]).is_dir() else e(r["pair"])
+        out.append(f"<tr{cls}><td>{link}</td><td>{e(str(r.get('family') or ''))}</td>"
+                   f"<td title=\"{e(str(r.get('error') or ''))}\">{e(str(r.get('status')))}</td>{cells}</tr>")
+    out.append("</tbody></table>")
+    # Family means
+    fam_cols = [c for c in columns if c in summary["overall"]["means"]]
+    out.append('<h2>Means per family</h2><table class="sortable"><thead><tr><th>family</th><th>ok</th>'
+               + "".join(f"<th>{e(c)}</th>" for c in fam_cols) + "</tr></thead><tbody>")
+    groups = [*summary["families"].items(), ("overall", summary["overall"])]
+    for name, group in groups:
+        out.append(f"<tr><td>{e(name)}</td><td>{group.get('ok', 0)}</td>"
+                   + "".join(f"<td>{_fmt(group['means'].get(c))}</td>" for c in fam_cols) + "</tr>")
+    out.append("</tbody></table>")
+    # Histogram
+    key = "epe" if any(_num(r.get("epe")) is not None for r in rows) else "psnr"
+    values = [_num(r.get(key)) for r in rows if _num(r.get(key)) is not None]
+    out.append(f"<h2>Histogram of per-pair {e(key)}</h2>" + histogram_svg(values, label=key))
+    # Thumbnails, worst first
+    out.append("<h2>Pairs by error (worst first)</h2><div class=\"cards\">")
+    for r in sorted(rows, key=sort_key):
+        folder = out_dir / r["pair"]
+        pics = [p for p in PAIR_PICTURES if (folder / p).is_file()]
+        figure = " ".join(f"{c} {_fmt(r.get(c))}" for c in ("epe", "d1_all", "a90_noc") if _num(r.get(c)) is not None)
+        out.append(f'<div class="card" id="{e(r["pair"])}"><b>{e(r["pair"])}</b> {e(figure)}<br>')
+        if pics:
+            thumb = f"{r['pair']}/{pics[0]}"
+            out.append(f'<a href="{e(thumb)}"><img loading="lazy" src="{e(thumb)}" alt="{e(r["pair"])}"></a><br>')
+            out.append(" ".join(f'<a href="{e(r["pair"])}/{p}">{p}</a>' for p in pics))
+        else:
+            out.append(f"<i>{e(str(r.get('error') or 'no pictures'))}</i>")
+        out.append("</div>")
+    out.append("</div>")
+    out.append("<h2>Config</h2><pre>" + e(json.dumps(jsonable(config or {}), indent=2, sort_keys=True)) + "</pre>")
+    out.append("<h2>Versions</h2><pre>" + e(json.dumps(jsonable(versions or {}), indent=2, sort_keys=True)) + "</pre>")
+    out.append(f"<script>{_JS}</script></body></html>\n")
+    return "\n".join(out)
+
+
+def write_report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
+                      config: Mapping | None = None, versions: Mapping | None = None) -> Path:
+    """Write ``out_dir/report.html`` atomically; returns its path."""
+    text = report_html(out_dir, rows, title=title, config=config, versions=versions)
+    return atomic_write(Path(out_dir) / REPORT_FILE, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))

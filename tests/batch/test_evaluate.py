@@ -1,0 +1,83 @@
+"""`eval` of other tools' outputs: formats, common pairs, prediction folders only read."""
+
+import json
+import logging
+import os
+
+import numpy as np
+import pytest
+
+from d3cli.batch import evaluate_folders
+from d3cli.batch.evaluate import find_prediction, read_prediction
+from d3cli.data import datasets, io
+from d3cli.errors import InputError
+
+
+def snapshot(folder):
+    """Bytes and mtimes of every file under a folder."""
+    return {
+        str(p.relative_to(folder)): (p.read_bytes(), os.stat(p).st_mtime_ns)
+        for p in sorted(folder.rglob("*")) if p.is_file()
+    }
+
+
+def gt_of(pair):
+    return io.read_disparity(pair.gt, scale=pair.gt_scale, invalid=pair.gt_invalid)
+
+
+def test_flat_kitti_pngs_scored_without_touching_them(tmp_path, pairs_root):
+    pairs = datasets.discover([pairs_root])
+    flat = tmp_path / "other_tool"
+    flat.mkdir()
+    for pair in pairs:
+        gt = gt_of(pair)
+        io.write_kitti_png(flat / f"{pair.name}.png", gt + 1.0)  # every pixel off by exactly 1 px
+    before = snapshot(flat)
+    outcome = evaluate_folders([flat], pairs, out_dir=tmp_path / "rep", progress=False)
+    assert snapshot(flat) == before  # byte-identical, same mtimes, no new file
+    rows = outcome["results"]["other_tool"]
+    assert [r["status"] for r in rows] == ["ok"] * 3
+    for row in rows:
+        assert row["avgerr_all"] == pytest.approx(1.0, abs=1 / 256)
+        assert row["bad_0.5_all"] == pytest.approx(100.0)
+        assert row["d1_all"] == 0.0
+    assert (tmp_path / "rep" / "a" / "error.png").is_file()
+
+
+def test_formats_are_equivalent(tmp_path, pairs_root):
+    (pair, *_) = datasets.discover([pairs_root])
+    gt = gt_of(pair).astype(np.float32)
+    (tmp_path / "x" / pair.name).mkdir(parents=True)
+    io.write_pfm(tmp_path / "x" / pair.name / "disp.pfm", gt)
+    np.save(tmp_path / f"{pair.name}.npy", gt)
+    assert find_prediction(tmp_path / "x", pair.name).name == "disp.pfm"
+    a = read_prediction(find_prediction(tmp_path / "x", pair.name))
+    b = read_prediction(find_prediction(tmp_path, pair.name))
+    np.testing.assert_array_equal(np.isfinite(a), np.isfinite(b))
+    np.testing.assert_allclose(a[np.isfinite(a)], b[np.isfinite(b)])
+
+
+def test_only_pairs_in_every_set_are_compared(tmp_path, pairs_root, caplog):
+    pairs = datasets.discover([pairs_root])
+    one, two = tmp_path / "one", tmp_path / "two"
+    for folder in (one, two):
+        folder.mkdir()
+        for pair in pairs:
+            io.write_kitti_png(folder / f"{pair.name}.png", gt_of(pair))
+    (two / "b.png").unlink()
+    with caplog.at_level(logging.WARNING):
+        outcome = evaluate_folders([one, two], pairs, out_dir=tmp_path / "rep", progress=False)
+    assert outcome["not_compared"] == ["b"]
+    assert "b" in caplog.text and "not compared" in caplog.text
+    assert [r["pair"] for r in outcome["results"]["one"]] == ["a", "c"]
+    assert json.loads((tmp_path / "rep" / "two" / "summary.json").read_text())["extra"]["not_compared"] == ["b"]
+    assert (tmp_path / "rep" / "comparison.md").is_file()
+
+
+def test_report_folder_inside_predictions_is_refused(tmp_path, pairs_root):
+    pairs = datasets.discover([pairs_root])
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    io.write_kitti_png(flat / "a.png", gt_of(pairs[0]))
+    with pytest.raises(InputError, match="inside the prediction folder"):
+        evaluate_folders([flat], pairs, out_dir=flat / "rep", progress=False)
