@@ -9,8 +9,10 @@ Layout of an output folder ``OUT``::
     OUT/<pair>/valid.png         255 where the method decided the disparity itself
     OUT/<pair>/error.png         error map (only with --eval and ground truth)
     OUT/<pair>/cloud.ply         point cloud (only with --pointcloud)
+    OUT/<pair>/height.pfm, height_color.png, defects.json, defects.png   (only with --road-report)
     OUT/<pair>/result.json       timings, metrics, info; written LAST
     OUT/metrics.csv, summary.json, summary.md   (only with --eval)
+    OUT/defects.csv              every defect of every pair (only with --road-report)
 
 Every file is written atomically, and ``result.json`` last: its presence means the pair
 is complete.
@@ -117,3 +119,8 @@ def write_disparity_outputs(folder: str | os.PathLike, disp: np.ndarray, valid: 
         "disp_color.png": write_image(folder / "disp_color.png", colorize_disparity(disp, 0.0, max(float(vmax), 1e-6))),
         "valid.png": write_image(folder / "valid.png", valid.astype(np.uint8) * 255),
     }
+
+# Road inspection outputs (only with --road-report): height.pfm, height_color.png,
+# defects.json, defects.png per pair and OUT/defects.csv; named where they are written.
+from ..road.report import (  # noqa: E402,F401
+    DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE)
