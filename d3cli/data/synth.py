@@ -1031,6 +1031,8 @@ def _describe_hole(hole: Pothole, rig: StereoRig) -> dict:
     return {
         "x": hole.x, "y": hole.y, "depth_m": hole.depth,
         "diameter_m": 2.0 * hole.semi_a,
+        "semi_axes_m": [hole.semi_a, hole.semi_b], "angle_rad": hole.angle,
+        "flat_fraction": hole.flat_fraction, "wobble": list(hole.wobble),
         "u": float(rig.f * p[0] / p[2] + rig.cx), "v": float(rig.f * p[1] / p[2] + rig.cy),
     }
 
