@@ -129,9 +129,12 @@ def main():
                    "OUT must be shared with the workers. Needs the 'distributed' extra.")
 @click.option("--shard", default=None, metavar="I/N",
               help="Run only shard I of N (every N-th pair by name); shards share OUT and write run-I-of-N.json.")
+@click.option("--road-report", is_flag=True,
+              help="Also write the road inspection outputs (height.pfm, height_color.png, defects.json, "
+                   "defects.png per pair, OUT/defects.csv); same as road.report: true.")
 @_verbosity
 def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
-        no_fill, pointcloud, workers, scheduler, shard, verbose, quiet):
+        no_fill, pointcloud, workers, scheduler, shard, road_report, verbose, quiet):
     """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
 
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
@@ -146,6 +149,9 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
         raise click.BadParameter(f"must be a positive number of pixels, got {max_disparity}",
                                  param_hint="--max-disparity")
     cfg, source = _resolve_config(config_path, overrides, method=method, backend=backend, no_fill=no_fill)
+    if road_report:
+        import dataclasses
+        cfg = dataclasses.replace(cfg, road=dataclasses.replace(cfg.road, report=True))
     method = cfg.run.method
     if method == "sgbm" and cfg.run.backend == "cuda":
         log.warning("--backend cuda: sgbm runs on OpenCV's CPU implementation")

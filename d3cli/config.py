@@ -186,6 +186,20 @@ class CameraConfig:
 
 
 @dataclass(frozen=True)
+class RoadConfig:
+    """Road inspection outputs (``--road-report``): height above the road plane, defects."""
+
+    report: bool = False  # write height.pfm, height_color.png, defects.json/.png per pair
+    min_depth_mm: float = 10.0  # a pothole is deeper than this below the surrounding surface
+    min_height_mm: float = 20.0  # a bump is higher than this above the surrounding surface
+    min_area_m2: float = 0.005  # smallest defect, area on the road plane
+    sigma_disparity: float = 0.25  # disparity noise assumed by the robust plane fit, pixels
+    ring_px: int = 12  # width of the surrounding ring that gives a defect's reference height
+    min_decided_share: float = 0.5  # below this decided share a defect is low confidence
+    colour_range_mm: float = 50.0  # height_color.png saturates at +- this
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole resolved configuration of one run."""
 
@@ -202,6 +216,7 @@ class Config:
     sgbm: SGBMConfig = field(default_factory=SGBMConfig)
     peers: PeersConfig = field(default_factory=PeersConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
+    road: RoadConfig = field(default_factory=RoadConfig)
 
     def to_dict(self) -> dict:
         """Plain nested dict (tuples as lists), e.g. for run.json."""
@@ -264,6 +279,13 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "peers.elas_preset": (lambda v: v in ("middlebury", "robotics"), "one of middlebury, robotics"),
     "peers.pandora_p1": (lambda v: v >= 0, "a number >= 0"),
     "peers.pandora_p2": (lambda v: v >= 0, "a number >= 0"),
+    "road.min_depth_mm": (lambda v: v > 0, "a number > 0 (mm)"),
+    "road.min_height_mm": (lambda v: v > 0, "a number > 0 (mm)"),
+    "road.min_area_m2": (lambda v: v >= 0, "a number >= 0 (m^2)"),
+    "road.sigma_disparity": (lambda v: v > 0, "a number > 0 (pixels)"),
+    "road.ring_px": (lambda v: 2 <= v <= 100, "an integer in [2, 100]"),
+    "road.min_decided_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
+    "road.colour_range_mm": (lambda v: v > 0, "a number > 0 (mm)"),
     "sgbm.block_size": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "sgbm.mode": (lambda v: v in ("sgbm", "hh", "3way", "hh4"), "one of sgbm, hh, 3way, hh4"),
     # 100 kills the process: OpenCV's 3-way SGBM divides by (100 - uniquenessRatio) (SIGFPE).

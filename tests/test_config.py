@@ -64,7 +64,7 @@ def test_unknown_section(tmp_path):
         load_config(path)
     assert str(exc.value) == (
         f"{path}:1: unknown section 'foo'; valid sections: run, pyramid, cost, features, aggregation, seeds, "
-        "diffusion, inheritance, pt, refine, sgbm, peers, camera"
+        "diffusion, inheritance, pt, refine, sgbm, peers, camera, road"
     )
 
 
@@ -187,7 +187,7 @@ def test_config_from_environment(tmp_path, monkeypatch):
          "{path}:4: cost.window must be an integer, got [5]; fix the value of cost.window (see configs/default.yaml)"),
         ("run:\n  method: sgbm\n\ncolour:\n  on: true\n",
          "{path}:4: unknown section 'colour'; valid sections: run, pyramid, cost, features, aggregation, seeds, diffusion, "
-         "inheritance, pt, refine, sgbm, peers, camera"),
+         "inheritance, pt, refine, sgbm, peers, camera, road"),
         ("seeds:\n  pkrn_min: 2.0\n  pkrn: 3\n",
          "{path}:3: unknown key 'seeds.pkrn'; valid keys of seeds: pkrn_min, epsilon, lr_tolerance, "
          "pkrn_exclusion, every_level"),
@@ -198,7 +198,7 @@ def test_config_from_environment(tmp_path, monkeypatch):
          "{path}:1: section pyramid must be a mapping of keys, got 4; valid keys: levels, ars"),
         ("This is a README, not a config file.\n",
          "{path}:1: the top level must be a mapping of sections, got str; valid sections: run, pyramid, cost, "
-         "features, aggregation, seeds, diffusion, inheritance, pt, refine, sgbm, peers, camera"),
+         "features, aggregation, seeds, diffusion, inheritance, pt, refine, sgbm, peers, camera, road"),
         ("run:\n\tmethod: sgbm\n",
          "{path}:2: not valid YAML (found character '\\t' that cannot start any token); fix the syntax"),
         ("run:\n  method: sgbm\n\x00\x01binary\n",

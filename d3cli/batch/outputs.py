@@ -13,8 +13,10 @@ Layout of an output folder ``OUT``::
     OUT/<pair>/error.png         KITTI log-colour error map with legend (--eval and gt)
     OUT/<pair>/panel.png         left | disparity | error | validity, titled with metrics
     OUT/<pair>/cloud.ply         point cloud (only with --pointcloud)
+    OUT/<pair>/height.pfm, height_color.png, defects.json, defects.png   (only with --road-report)
     OUT/<pair>/result.json       timings, metrics, info; written LAST
     OUT/metrics.csv, summary.json, summary.md   (only with --eval)
+    OUT/defects.csv              every defect of every pair (only with --road-report)
 
 Every file is written atomically, and ``result.json`` last: its presence means the pair
 is complete.
@@ -33,6 +35,7 @@ from ..data.io import atomic_write, read_image, write_image, write_kitti_png, wr
 from ..evaluation import pictures
 from ..errors import OutputError, where_what_fix
 from ..evaluation.report import jsonable
+from ..road.report import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE  # noqa: F401 - named here with the other outputs
 
 log = logging.getLogger(__name__)
 

@@ -45,6 +45,7 @@ from ..data import datasets, io
 from ..errors import D3Error, OutputError
 from ..evaluation import diagnostics, report
 from ..road.pointcloud import camera_from, save_pair_cloud
+from ..road.report import road_report, write_defects_csv
 from . import resources
 from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .executors import make_executor, select_shard
@@ -193,6 +194,22 @@ def _write_cloud(pair, pair_dir: Path, stored: dict, cfg) -> dict:
     valid = io.read_mask(pair_dir / "valid.png")
     n_points = save_pair_cloud(pair_dir / CLOUD_FILE, disparity, valid, left, camera)
     log.info("%s: cloud.ply with %d points", pair.name, n_points)
+    return stored
+
+
+def _write_road(pair, pair_dir: Path, stored: dict, cfg) -> dict:
+    """Road inspection outputs of a complete pair from its stored outputs; returns ``stored``."""
+    left, _ = datasets.load_pair_images(pair)
+    calib = io.read_calib(pair.calib) if pair.calib is not None else None
+    camera = camera_from(calib, cfg, left.shape[:2])
+    _, warnings = road_report(pair_dir, left, io.read_pfm(pair_dir / "disp.pfm"),
+                              io.read_mask(pair_dir / "valid.png"), camera, stored.get("info", {}), cfg.road)
+    new = [w for w in warnings if w not in stored.get("warnings", [])]
+    if new:
+        for text in new:
+            log.warning("%s: %s", pair.name, text)
+        stored = {**stored, "warnings": [*stored.get("warnings", []), *new]}
+        write_json(pair_dir / RESULT_FILE, stored)
     return stored
 
 
@@ -374,6 +391,8 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     batch.rows.sort(key=lambda r: order[r["pair"]])
     records.sort(key=lambda r: order[r["pair"]])
     batch.n_failed = sum(r["status"] == "failed" for r in batch.rows)
+    if cfg.road.report:
+        write_defects_csv(out, [out / p.name for p in pairs])
     if evaluate and shard is not None:
         log.info("--shard: summary files are left to `d3stereo eval %s --gt ...` once every shard is done", out)
     elif evaluate:
@@ -406,6 +425,8 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
                                max_disparity=max_disparity, fingerprint=fingerprint)
         if pointcloud and not (pair_dir / CLOUD_FILE).is_file():
             stored = _write_cloud(pair, pair_dir, stored, cfg)
+        if cfg.road.report:  # --road-report: all logic in d3cli.road.report
+            stored = _write_road(pair, pair_dir, stored, cfg)
     except D3Error as exc:
         if io.is_disk_full(exc):
             raise  # every later pair would fail the same way: the batch stops

@@ -25,6 +25,7 @@ Public API: :func:`render_pair`, :func:`generate_dataset`, :func:`self_test`.
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
@@ -195,6 +196,13 @@ class SynthPair:
     info : dict
         How the pair was made: seed, variant, material, potholes (world and left-image
         positions, depths), bump, lighting.
+    pothole_ids : ndarray, uint8, (H, W) or None
+        Pothole id (1..N, the order of ``defects_gt``) of the surface point each left
+        pixel sees where that pothole lowers the road by more than 1 mm, else 0.
+    defects_gt : list of dict
+        Per pothole: ``id``, ``depth_mm`` (below the surrounding surface), ``area_m2``
+        (horizontal area deeper than 10 mm), ``volume_l`` (fill volume up to the
+        surrounding surface), ``visible_px`` (pixels of the id mask), ``u``, ``v``.
     """
 
     left: np.ndarray
@@ -203,6 +211,8 @@ class SynthPair:
     nocc: np.ndarray
     calib: dict
     info: dict = field(default_factory=dict)
+    pothole_ids: np.ndarray | None = None
+    defects_gt: list = field(default_factory=list)
 
 
 # ------------------------------------------------------------- numba kernels
@@ -1027,7 +1037,8 @@ def render_pair(
     scale = lighting.mean_electrons / max(float(radiance[0].mean()), 1e-9)
     left_img, right_img = (_expose(r, scale, lighting, rng, noise, rig) for r in radiance)
 
-    disparity, nocc = _ground_truth(rig, field_, h_top)
+    disparity, nocc, points = _ground_truth(rig, field_, h_top)
+    pothole_ids, defects_gt = _pothole_truth(holes, rig, points)
     finite = disparity[np.isfinite(disparity)]
     calib = rig.calib()
     calib["ndisp"] = int(math.ceil(float(finite.max()))) + 8 if finite.size else width // 4
@@ -1046,7 +1057,7 @@ def render_pair(
         "texel_m": texel,
         "grid_spacing_m": spacing,
     }
-    return SynthPair(left_img, right_img, disparity, nocc, calib, info)
+    return SynthPair(left_img, right_img, disparity, nocc, calib, info, pothole_ids, defects_gt)
 
 
 def _describe_hole(hole: Pothole, rig: StereoRig) -> dict:
@@ -1055,12 +1066,52 @@ def _describe_hole(hole: Pothole, rig: StereoRig) -> dict:
     return {
         "x": hole.x, "y": hole.y, "depth_m": hole.depth,
         "diameter_m": 2.0 * hole.semi_a,
+        "semi_axes_m": [hole.semi_a, hole.semi_b], "angle_rad": hole.angle,
+        "flat_fraction": hole.flat_fraction, "wobble": list(hole.wobble),
         "u": float(rig.f * p[0] / p[2] + rig.cx), "v": float(rig.f * p[1] / p[2] + rig.cy),
     }
 
 
-def _ground_truth(rig: StereoRig, field_: _HeightField, h_top: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact left disparity (float32, inf invalid) and non-occlusion mask (bool)."""
+def _pothole_truth(holes, rig: StereoRig, points: np.ndarray) -> tuple[np.ndarray, list]:
+    """Pothole id mask (uint8 (H, W)) and the per-pothole ground truth of defects_gt.json.
+
+    Depth is the pothole's nominal depth below the surrounding surface (the floor relief
+    of a few mm is not counted); area and volume are integrated on a 2 mm world grid of
+    the hole's own depth profile (where potholes overlap, the deeper one owns a point, as
+    in the rendered surface).
+    """
+    h, w = points.shape[:2]
+    ids = np.zeros((h, w), np.uint8)
+    best = np.zeros((h, w))
+    xs, ys = points[..., 0], points[..., 1]
+    finite = np.isfinite(xs) & np.isfinite(ys)
+    xs, ys = np.where(finite, xs, 1e9), np.where(finite, ys, 1e9)
+    for k, hole in enumerate(holes, start=1):
+        sink = hole.depth * _pothole_weight(hole, xs, ys)
+        take = finite & (sink > 1e-3) & (sink > best)
+        ids[take] = k
+        best = np.where(take, sink, best)
+    spacing = 2e-3
+    truth = []
+    for k, hole in enumerate(holes, start=1):
+        reach = 1.25 * max(hole.semi_a, hole.semi_b)
+        gx, gy = np.meshgrid(np.arange(hole.x - reach, hole.x + reach, spacing),
+                             np.arange(hole.y - reach, hole.y + reach, spacing))
+        own = hole.depth * _pothole_weight(hole, gx, gy)
+        for other in holes:
+            if other is not hole:
+                own = np.where(other.depth * _pothole_weight(other, gx, gy) > own, 0.0, own)
+        desc = _describe_hole(hole, rig)
+        truth.append({"id": k, "depth_mm": 1e3 * hole.depth,
+                      "area_m2": float((own > 0.01).sum() * spacing ** 2),
+                      "volume_l": float(own.sum() * spacing ** 2 * 1e3),
+                      "visible_px": int((ids == k).sum()), "u": desc["u"], "v": desc["v"]})
+    return ids, truth
+
+
+def _ground_truth(rig: StereoRig, field_: _HeightField, h_top: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact left disparity (float32, inf invalid), non-occlusion mask (bool) and the
+    world points (float64 (H, W, 3)) the left pixels' centre rays hit."""
     rot = rig.rotation()
     left_c, right_c = rig.centres()
     hf = (field_.h, field_.lipschitz, field_.tile, field_.x0, field_.y0, field_.spacing, h_top)
@@ -1072,7 +1123,7 @@ def _ground_truth(rig: StereoRig, field_: _HeightField, h_top: float) -> tuple[n
     valid = np.isfinite(disparity) & (disparity > 0)
     visible = _visible_from(right_c, points, *hf, _OCCLUSION_TOL_M)
     nocc = valid & visible & (u_right >= 0.0) & (u_right <= rig.width - 1.0)
-    return np.where(valid, disparity, np.inf).astype(np.float32), nocc
+    return np.where(valid, disparity, np.inf).astype(np.float32), nocc, points
 
 
 def self_test(pair: SynthPair, *, border: int = 8) -> float:
@@ -1221,6 +1272,13 @@ def _write_pair(folder: Path, pair: SynthPair, *, dataset_seed: int, index: int)
     _write_png(folder / "right.png", pair.right)
     _write_pfm(folder / "disp_gt.pfm", pair.disparity)
     _write_png(folder / "mask0nocc.png", np.where(pair.nocc, 255, 0).astype(np.uint8))
+    if pair.pothole_ids is not None:
+        _write_png(folder / "potholes_gt.png", pair.pothole_ids)
+    gt_text = json.dumps({"definitions": "depth_mm: below the surrounding surface; area_m2: horizontal area "
+                                         "deeper than 10 mm; volume_l: fill volume up to the surrounding "
+                                         "surface; visible_px: pixels of potholes_gt.png with this id",
+                          "potholes": pair.defects_gt}, indent=2) + "\n"
+    _atomic_write(folder / "defects_gt.json", lambda tmp: tmp.write_text(gt_text, encoding="utf-8"))
     calib = pair.calib
     _write_text(folder / "calib.txt", [f"{key}: {_fmt(calib[key])}" for key in
                                        ("f", "baseline", "cx", "cy", "width", "height", "height_m",

@@ -153,6 +153,33 @@ def test_render_pair_rejects_bad_arguments(kwargs):
         synth.render_pair(**args)
 
 
+def test_pothole_ground_truth_matches_the_analytic_profile():
+    # One pothole: the profile is 1 on the floor (rho < flat) and a raised cosine out to
+    # rho = 1, where rho is the normalised radius divided by rim(theta) = 1 + a2 cos(2 theta
+    # + p2) + a3 cos(3 theta + p3).  Integrating over theta, int rim^2 = 2 pi (1 + (a2^2 +
+    # a3^2) / 2); the area deeper than t is pi a b rho_t^2 (1 + (a2^2 + a3^2) / 2) with
+    # w(rho_t) = t / D, and the volume D a b int rim^2 int_0^1 rho w(rho) d rho.
+    pair = synth.render_pair(seed=2, width=2 * W, height=2 * H, potholes=1, noise=False)
+    (hole,) = pair.info["potholes"]
+    (truth,) = pair.defects_gt
+    a, b = hole["semi_axes_m"]
+    depth, flat = hole["depth_m"], hole["flat_fraction"]
+    a2, _, a3, _ = hole["wobble"]
+    rim2 = 2 * math.pi * (1 + (a2 ** 2 + a3 ** 2) / 2)
+    rho_t = flat + (1 - flat) * math.acos(2 * 0.01 / depth - 1) / math.pi
+    rho = np.linspace(0, 1, 20001)
+    w = np.where(rho < flat, 1.0, 0.5 * (1 + np.cos(np.pi * np.clip((rho - flat) / (1 - flat), 0, 1))))
+    volume = depth * a * b * rim2 * float(np.sum(rho * w) * (rho[1] - rho[0]))
+    assert truth["id"] == 1 and truth["depth_mm"] == pytest.approx(1e3 * depth)
+    assert truth["area_m2"] == pytest.approx(a * b * rim2 / 2 * rho_t ** 2, rel=0.02)
+    assert truth["volume_l"] == pytest.approx(1e3 * volume, rel=0.02)
+    # The id mask: the pixels seeing the pothole, around its centre, counted in visible_px.
+    ids = pair.pothole_ids
+    assert ids.dtype == np.uint8 and set(np.unique(ids)) == {0, 1}
+    assert truth["visible_px"] == int((ids == 1).sum()) > 0
+    assert ids[int(round(hole["v"])), int(round(hole["u"]))] == 1
+
+
 def test_generate_dataset_writes_consistent_pair_folders(tmp_path):
     folders = synth.generate_dataset(tmp_path / "out", n=3, seed=4, width=W, height=H)
     names = [f.name for f in folders]
@@ -161,7 +188,8 @@ def test_generate_dataset_writes_consistent_pair_folders(tmp_path):
 
     for folder in folders:
         files = sorted(p.name for p in folder.iterdir())
-        assert files == ["SOURCE.txt", "calib.txt", "disp_gt.pfm", "left.png", "mask0nocc.png", "right.png"]
+        assert files == ["SOURCE.txt", "calib.txt", "defects_gt.json", "disp_gt.pfm", "left.png", "mask0nocc.png",
+                         "potholes_gt.png", "right.png"]
         left = cv2.imread(str(folder / "left.png"), cv2.IMREAD_UNCHANGED)
         right = cv2.imread(str(folder / "right.png"), cv2.IMREAD_UNCHANGED)
         mask = cv2.imread(str(folder / "mask0nocc.png"), cv2.IMREAD_UNCHANGED)

@@ -1,0 +1,235 @@
+"""Potholes (below the road) and bumps (above it) from a height map, measured in 3-D.
+
+Definitions (what the numbers in defects.json mean):
+
+* ``height`` h: signed distance of the reconstructed point from the robust road plane
+  (:mod:`d3cli.road.plane`), metres, + up.
+* A candidate region is a connected set of pixels whose median-filtered height is below
+  ``-min_depth`` (pothole) or above ``+min_height`` (bump).
+* **Depth** is measured against the *surrounding surface*, not the global plane alone:
+  the reference is the median height of a ring of road pixels around the region
+  (``ring_px`` wide), so a gently cambered or sloping road does not add to or take from a
+  pothole.  ``depth = reference - h`` (bumps: ``h - reference``).
+* ``area_m2``: the area of the road plane covered by the region's pixels (each pixel's
+  footprint on the plane, :func:`d3cli.road.plane.plane_footprint`), i.e. the opening of
+  the pothole in square metres, independent of the image scale and of the viewing angle.
+* ``max_depth_mm``: 98th percentile of the median-filtered depth over the region
+  (robust to single-pixel spikes; ~2 % below the true maximum of a paraboloid, equal on a
+  flat-floored pothole).  Regions joined by a shallow saddle are split by a watershed
+  when each deepest point stands ``min_depth`` above the saddle.  A region must also be
+  deeper than ``noise_k`` times the height noise expected at its distance.
+* ``volume_l``: sum over the region grown by the ring of ``footprint * max(depth, 0)``,
+  litres (1 l = 1e-3 m^3): the material needed to fill it up to the surrounding surface.
+* ``decided_share``: share of the region's pixels whose disparity the method decided
+  itself (valid.png), not filled; below ``min_decided_share`` the defect is flagged
+  ``low_confidence``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .plane import RoadPlane, plane_footprint
+from .pointcloud import Camera
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Defect:
+    """One pothole or bump; see the module docstring for the definitions."""
+
+    id: int
+    kind: str  # "pothole" | "bump"
+    centroid_px: tuple[float, float]  # [u, v]
+    bbox_px: tuple[int, int, int, int]  # [u0, v0, u1, v1], inclusive
+    centroid_m: tuple[float, float, float]  # [x, y, z], left camera frame
+    area_m2: float
+    max_depth_mm: float  # bumps: max height above the surrounding surface
+    mean_depth_mm: float
+    volume_l: float
+    decided_share: float
+    low_confidence: bool
+
+    def to_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+
+
+def _median_filled(height: np.ndarray, size: int) -> np.ndarray:
+    """Median filter of a float map with inf holes (holes stay inf)."""
+    finite = np.isfinite(height)
+    if not finite.any():
+        return height.copy()
+    fill = float(np.median(height[finite]))
+    med = cv2.medianBlur(np.where(finite, height, fill).astype(np.float32), size)
+    return np.where(finite, med, np.inf).astype(np.float32)
+
+
+def find_defects(
+    height: np.ndarray,
+    decided: np.ndarray,
+    camera: Camera,
+    plane: RoadPlane,
+    *,
+    min_depth_mm: float = 10.0,
+    min_height_mm: float = 20.0,
+    min_area_m2: float = 0.005,
+    ring_px: int = 12,
+    median_px: int = 5,
+    min_decided_share: float = 0.5,
+    noise_k: float = 3.0,
+    return_regions: bool = False,
+):
+    """Potholes and bumps of one height map.
+
+    Parameters
+    ----------
+    height : ndarray, float32, (H, W)
+        :func:`d3cli.road.plane.height_map`, metres, inf where no estimate.
+    decided : ndarray, bool, (H, W)
+        Pixels the method decided itself (valid.png).
+    camera : Camera
+    plane : RoadPlane
+    min_depth_mm, min_height_mm, min_area_m2 : float, keyword-only
+        Thresholds of a pothole (depth below the surrounding surface), a bump (height
+        above it) and of both (area on the road plane).
+    ring_px : int, keyword-only
+        Width of the ring of surrounding road that gives the reference height, pixels.
+    median_px : int, keyword-only
+        Odd median filter size against disparity noise before thresholding (3 or 5).
+    min_decided_share : float, keyword-only
+        Below this share of decided pixels a defect is ``low_confidence``.
+
+    noise_k : float, keyword-only
+        A defect's peak depth must exceed ``noise_k`` times the height noise expected at
+        its distance (:func:`disparity_noise`).
+    return_regions : bool, keyword-only
+        Also return each defect's pixel mask (bool (H, W)), same order.
+
+    Returns
+    -------
+    list of Defect
+        Potholes first (deepest first), then bumps; ids 1..N in that order.
+    """
+    shape = height.shape
+    finite = np.isfinite(height)
+    smooth = _median_filled(height, median_px)
+    footprint = plane_footprint(shape, camera, plane)
+    v_all, u_all = np.mgrid[0:shape[0], 0:shape[1]]
+    kernel_ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
+    kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    found: list = []
+    sigma_d = disparity_noise(smooth, camera, plane)
+    # Saddle depth that splits a region: half the threshold, but not less than the height
+    # noise at the median distance (noisy floors would otherwise split into pieces).
+    z_med = float(np.median(_points(smooth, *np.nonzero(finite)[::-1], camera, plane)[:, 2])) if finite.any() else 0.0
+    split_noise = noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
+    for kind, sign, thr_mm in (("pothole", -1.0, min_depth_mm), ("bump", 1.0, min_height_mm)):
+        with np.errstate(invalid="ignore"):
+            cand = finite & (sign * smooth > thr_mm * 1e-3)
+        other = finite & (np.abs(smooth) > min(min_depth_mm, min_height_mm) * 1e-3)
+        n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
+        for comp in _split(labels, n, sign * smooth, prominence=max(0.5 * thr_mm * 1e-3, split_noise)):
+            if footprint[comp].sum() < 0.25 * min_area_m2:
+                continue  # cannot pass the area test even with its rim
+            grown = cv2.dilate(comp.astype(np.uint8), kernel_gap).astype(bool)
+            ring = cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & ~grown & finite & ~other
+            if ring.sum() < 10:
+                ring = cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & ~grown & finite
+            if ring.sum() < 10:
+                continue
+            ref = float(np.median(height[ring]))
+            with np.errstate(invalid="ignore"):
+                depth_s = sign * (smooth - ref)
+                depth = sign * (height - ref)
+            region = comp & (depth_s > thr_mm * 1e-3)
+            area = float(footprint[region].sum())
+            if area < min_area_m2 or not region.any():
+                continue
+            peak = float(np.percentile(depth_s[region], 98))
+            # Significance: the peak must stand above the height noise at that distance
+            # (sigma_h = c Z / (f B) sigma_d, sigma_d measured on this map), not only above
+            # the fixed threshold: far, noisy road otherwise yields false potholes.
+            z_region = float(np.median(_points(height, u_all[region], v_all[region], camera, plane)[:, 2]))
+            sigma_h = plane.offset * z_region / (camera.f * camera.baseline) * sigma_d
+            if peak < noise_k * sigma_h:
+                continue
+            zone = cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & finite
+            vol = float((footprint[zone] * np.clip(depth_s[zone], 0, None)).sum())
+            w = footprint[region]
+            vs, us = v_all[region], u_all[region]
+            # 3-D centroid from the measured points of the region (footprint weighted).
+            pts = _points(height, us, vs, camera, plane)
+            found.append((kind, region, dict(
+                centroid_px=(float(np.average(us, weights=w)), float(np.average(vs, weights=w))),
+                bbox_px=(int(us.min()), int(vs.min()), int(us.max()), int(vs.max())),
+                centroid_m=tuple(float(x) for x in np.average(pts, axis=0, weights=w)),
+                area_m2=area,
+                max_depth_mm=peak * 1e3,
+                mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
+                volume_l=vol * 1e3,
+                decided_share=float(decided[region].mean()),
+            )))
+    found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
+    defects = [Defect(id=i + 1, kind=kind, low_confidence=d["decided_share"] < min_decided_share, **d)
+               for i, (kind, _, d) in enumerate(found)]
+    return (defects, [r for _, r, _ in found]) if return_regions else defects
+
+
+def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane) -> float:
+    """Robust disparity noise (pixels) of a (median-filtered) height map.
+
+    A disparity error dd moves a road point by ``dh = c Z / (f B) dd`` along the normal,
+    so ``h f B / (c Z)`` is the residual in disparity pixels; its 1.4826 MAD over the map
+    (potholes are a minority) is the noise.  Real road relief counts in as noise.
+    """
+    finite = np.isfinite(height)
+    if finite.sum() < 10:
+        return 0.0
+    v, u = np.nonzero(finite)
+    z = _points(height, u, v, camera, plane)[:, 2]
+    resid = height[finite] * camera.f * camera.baseline / (plane.offset * np.maximum(z, 1e-6))
+    return float(1.4826 * np.median(np.abs(resid - np.median(resid))))
+
+
+def _split(labels: np.ndarray, n: int, depth: np.ndarray, *, prominence: float):
+    """Masks of the components of ``labels``, each split at saddles between deepest points
+    that stand ``prominence`` (metres) above the saddle (watershed on the depth), so two
+    potholes joined by a shallow dip are measured apart."""
+    from skimage.morphology import h_maxima
+    from skimage.segmentation import watershed
+
+    for lab in range(1, n):
+        comp = labels == lab
+        v, u = np.nonzero(comp)
+        box = (slice(v.min(), v.max() + 1), slice(u.min(), u.max() + 1))
+        sub_comp = comp[box]
+        sub_depth = np.where(sub_comp & np.isfinite(depth[box]), depth[box], 0.0)
+        peaks = h_maxima(sub_depth, prominence) & sub_comp
+        markers, k = _label(peaks)
+        if k <= 1:
+            yield comp
+            continue
+        parts = watershed(-sub_depth, markers, mask=sub_comp)
+        for i in range(1, k + 1):
+            mask = np.zeros_like(comp)
+            mask[box] = parts == i
+            if mask.any():
+                yield mask
+
+
+def _label(mask: np.ndarray):
+    n, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    return labels, n - 1
+
+
+def _points(height, us, vs, camera: Camera, plane: RoadPlane) -> np.ndarray:
+    """3-D points of pixels from their height: the ray meets ``n . P + c = h``."""
+    n = np.asarray(plane.normal)
+    r = np.stack([(us - camera.cx) / camera.f, (vs - camera.cy) / camera.f, np.ones(len(us))], axis=1)
+    z = (height[vs, us].astype(np.float64) - plane.offset) / (r @ n)
+    return r * z[:, None]

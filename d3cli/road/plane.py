@@ -1,0 +1,150 @@
+"""Robust 3-D plane of the road surface and the signed height above it.
+
+The plane is ``n . P + c = 0`` in the left camera frame (x right, y down, z forward,
+metres) with ``|n| = 1`` and the sign chosen so that ``c > 0``: the camera centre lies
+on the positive side, so ``h(P) = n . P + c`` is the height above the road, + up.
+
+The fit must not be bent by potholes and bumps: RANSAC on a random subset of the
+decided points (3-point hypotheses, tolerance growing with the depth error of stereo,
+``dZ = Z^2 / (f B) * sigma_d``), then iteratively re-weighted least squares (Tukey
+biweight) on all decided points.  A depression of a few percent of the road is then an
+outlier and leaves the plane where the surrounding surface is.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from .pointcloud import Camera, disparity_to_points
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RoadPlane:
+    """``n . P + c = 0``; ``normal`` (3,) unit, ``offset`` c > 0 (camera height, metres)."""
+
+    normal: tuple[float, float, float]
+    offset: float
+    inlier_share: float
+
+    def height(self, points: np.ndarray) -> np.ndarray:
+        """Signed height (metres, + toward the camera side) of (N, 3) points."""
+        return np.asarray(points, np.float64) @ np.asarray(self.normal) + self.offset
+
+    def to_info(self) -> dict:
+        """JSON-ready summary."""
+        return {"normal": [float(v) for v in self.normal], "offset_m": float(self.offset),
+                "inlier_share": float(self.inlier_share)}
+
+
+def _plane_from(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """Weighted total-least-squares plane of (N, 3) points -> (unit normal, c)."""
+    w = np.ones(len(points)) if weights is None else weights
+    centre = (points * w[:, None]).sum(0) / w.sum()
+    d = (points - centre) * np.sqrt(w)[:, None]
+    _, _, vt = np.linalg.svd(d.T @ d)
+    n = vt[-1]
+    c = -float(n @ centre)
+    if c < 0:
+        n, c = -n, -c
+    return n, c
+
+
+def fit_road_plane(
+    points: np.ndarray,
+    camera: Camera,
+    *,
+    sigma_disparity: float = 0.5,
+    min_tolerance_m: float = 0.01,
+    iterations: int = 300,
+    sample: int = 20000,
+    irls_rounds: int = 8,
+    seed: int = 0,
+) -> RoadPlane | None:
+    """Robust plane of the road points.
+
+    Parameters
+    ----------
+    points : ndarray, float, (N, 3)
+        Decided 3-D points, metres, left camera frame.
+    camera : Camera
+        For the stereo depth error ``Z^2 / (f B) * sigma_disparity`` in the tolerance.
+    sigma_disparity : float, keyword-only
+        Disparity noise assumed for the tolerance, pixels.
+    min_tolerance_m : float, keyword-only
+        Smallest inlier tolerance, metres.
+    iterations, sample, irls_rounds, seed : keyword-only
+        RANSAC hypotheses, points drawn for RANSAC, IRLS rounds, random seed.
+
+    Returns
+    -------
+    RoadPlane or None
+        None with fewer than 3 points or no non-degenerate hypothesis.
+    """
+    pts = np.asarray(points, np.float64)
+    if len(pts) < 3:
+        return None
+    rng = np.random.default_rng(seed)
+    sub = pts[rng.choice(len(pts), size=min(sample, len(pts)), replace=False)]
+
+    def tolerance(p):
+        return np.maximum(min_tolerance_m, p[:, 2] ** 2 / (camera.f * camera.baseline) * sigma_disparity * 2.0)
+
+    tol_sub = tolerance(sub)
+    best, best_score = None, -1.0
+    for _ in range(iterations):
+        a, b, c3 = sub[rng.choice(len(sub), 3, replace=False)]
+        n = np.cross(b - a, c3 - a)
+        norm = np.linalg.norm(n)
+        if norm < 1e-12:
+            continue
+        n = n / norm
+        c = -float(n @ a)
+        score = float((np.abs(sub @ n + c) < tol_sub).sum())
+        if score > best_score:
+            best, best_score = (n, c), score
+    if best is None:
+        return None
+    n, c = best
+    inl = np.abs(sub @ n + c) < tol_sub
+    n, c = _plane_from(sub[inl])
+    tol = tolerance(pts)
+    for _ in range(irls_rounds):
+        r = (pts @ n + c) / tol
+        # Tukey biweight: points beyond 2 tolerances (potholes, kerbs) get weight 0.
+        w = np.where(np.abs(r) < 2.0, (1 - (r / 2.0) ** 2) ** 2, 0.0)
+        if w.sum() < 3:
+            break
+        n, c = _plane_from(pts, w)
+    share = float((np.abs(pts @ n + c) < tol).mean())
+    return RoadPlane(normal=tuple(float(v) for v in n), offset=float(c), inlier_share=share)
+
+
+def height_map(disparity: np.ndarray, valid: np.ndarray, camera: Camera, plane: RoadPlane) -> np.ndarray:
+    """Signed height above ``plane`` per pixel, float32 (H, W) metres, inf where no estimate."""
+    points, index = disparity_to_points(disparity, valid, camera)
+    out = np.full(np.shape(disparity), np.inf, np.float32)
+    out[index[:, 0], index[:, 1]] = plane.height(points)
+    return out
+
+
+def plane_footprint(shape: tuple[int, int], camera: Camera, plane: RoadPlane) -> np.ndarray:
+    """Area (m^2) of the road plane seen by each pixel, float64 (H, W); 0 where the ray misses it.
+
+    A pixel's ray ``r = ((u - cx)/f, (v - cy)/f, 1)`` meets the plane at depth
+    ``Z = -c / (n . r)``; its footprint there is ``Z^2 / (f^2 |n . r|)`` (solid angle
+    ``1 / (f^2 |r|^3)`` times the squared range over the incidence cosine).
+    """
+    h, w = shape
+    u = (np.arange(w) - camera.cx) / camera.f
+    v = (np.arange(h) - camera.cy) / camera.f
+    n = np.asarray(plane.normal)
+    nr = n[0] * u[None, :] + n[1] * v[:, None] + n[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = -plane.offset / nr
+        area = z ** 2 / (camera.f ** 2 * np.abs(nr))
+    return np.where((z > 0) & np.isfinite(area), area, 0.0)

@@ -1,0 +1,181 @@
+"""Road inspection outputs of one pair (``--road-report``) and the batch's defects.csv.
+
+Per pair: ``height.pfm`` (signed height above the road plane, metres, + up, inf where no
+estimate), ``height_color.png`` (diverging colour map in mm with a colour bar),
+``defects.json`` (plane, definitions, potholes and bumps, :mod:`d3cli.road.defects`) and
+``defects.png`` (the left image with each defect outlined and labelled).
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import json
+import logging
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..data.io import atomic_write, write_image, write_pfm
+from .defects import find_defects
+from .plane import fit_road_plane, height_map
+from .pointcloud import Camera, disparity_to_points
+
+log = logging.getLogger(__name__)
+
+HEIGHT_FILE = "height.pfm"
+HEIGHT_COLOR_FILE = "height_color.png"
+DEFECTS_JSON = "defects.json"
+DEFECTS_PNG = "defects.png"
+DEFECTS_CSV = "defects.csv"
+CSV_FIELDS = ("pair", "id", "kind", "u", "v", "x_m", "y_m", "z_m", "area_m2", "max_depth_mm",
+              "mean_depth_mm", "volume_l", "decided_share", "low_confidence")
+
+
+def _write_json(path: Path, data: dict) -> None:
+    text = json.dumps(data, indent=2) + "\n"
+    atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+
+
+def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
+    """RGB uint8 (H, W + bar, 3): blue below the plane, white on it, red above; grey = no estimate.
+
+    The colour saturates at +-``range_mm``; a labelled colour bar is appended on the right.
+    """
+    h, w = height.shape
+    finite = np.isfinite(height)
+    t = np.clip(np.where(finite, height * 1e3, 0.0) / range_mm, -1.0, 1.0)
+
+    def ramp(x):  # x in [-1, 1] -> RGB float: blue - white - red
+        r = np.where(x < 0, 1 + x, 1.0)
+        b = np.where(x > 0, 1 - x, 1.0)
+        g = 1 - np.abs(x)
+        return np.stack([r, g, b], axis=-1)
+
+    img = (ramp(t) * 255).astype(np.uint8)
+    img[~finite] = 96
+    bar_w = max(60, w // 12)
+    bar = np.full((h, bar_w, 3), 255, np.uint8)
+    top, bottom = int(0.05 * h), int(0.95 * h)
+    ys = np.arange(top, bottom)
+    vals = 1 - 2 * (ys - top) / max(bottom - top - 1, 1)  # + at the top
+    bar[top:bottom, 4:bar_w // 3] = (ramp(vals)[:, None, :] * 255).astype(np.uint8)
+    scale = max(0.3, h / 1200)
+    for frac, label in ((0.0, f"+{range_mm:g}"), (0.5, "0 mm"), (1.0, f"-{range_mm:g}")):
+        y = int(top + frac * (bottom - top - 1))
+        cv2.putText(bar, label, (bar_w // 3 + 3, min(max(y + 5, 12), h - 2)), cv2.FONT_HERSHEY_SIMPLEX,
+                    scale, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.concatenate([img, bar], axis=1)
+
+
+def defects_overlay(left: np.ndarray, defects, labels_shape, regions) -> np.ndarray:
+    """RGB uint8: the left image with each defect's outline (pothole red, bump yellow) and label."""
+    img = np.asarray(left)
+    if img.dtype != np.uint8:
+        img = np.clip(img / (257.0 if img.max(initial=0) > 255 else 1.0), 0, 255).astype(np.uint8)
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    out = np.ascontiguousarray(img[:, :, :3]).copy()
+    thick = max(1, out.shape[0] // 360)
+    scale = max(0.4, out.shape[0] / 1400)
+    for d, mask in zip(defects, regions):
+        colour = (255, 0, 0) if d.kind == "pothole" else (255, 220, 0)
+        contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        cv2.drawContours(out, contours, -1, colour, thick)
+        sign = "-" if d.kind == "pothole" else "+"
+        text = f"#{d.id} {sign}{d.max_depth_mm:.0f}mm" + ("?" if d.low_confidence else "")
+        org = (int(d.bbox_px[0]), max(int(d.bbox_px[1]) - 4, 12))
+        cv2.putText(out, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), thick + 2, cv2.LINE_AA)
+        cv2.putText(out, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, colour, thick, cv2.LINE_AA)
+    return out
+
+
+def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided: np.ndarray,
+                camera: Camera | None, info: dict, road_cfg) -> tuple[list[dict], list[str]]:
+    """Write the road outputs of one pair into ``pair_dir``.
+
+    Parameters
+    ----------
+    pair_dir : Path
+    left : ndarray, (H, W[, 3])
+        Left image, for defects.png.
+    disparity : ndarray, float32, (H, W)
+        disp.pfm (filled pixels included; inf = no estimate).
+    decided : ndarray, bool, (H, W)
+        valid.png.
+    camera : Camera or None
+        None: a warning and no road outputs.
+    info : dict
+        The pair's result info; ``info['pt']['fallback']`` True (not road-like): height
+        outputs but no defects, and a warning.
+    road_cfg : RoadConfig
+
+    Returns
+    -------
+    defects : list of dict
+        The defects as written to defects.json.
+    warnings : list of str
+    """
+    warnings: list[str] = []
+    if camera is None:
+        return [], ["no road report: focal length or baseline unknown; add calib.txt to the pair "
+                    "or set camera.f and camera.baseline"]
+    finite = np.isfinite(disparity)
+    points, _ = disparity_to_points(disparity, finite, camera)
+    plane = fit_road_plane(points, camera, sigma_disparity=road_cfg.sigma_disparity)
+    if plane is None:
+        return [], ["no road report: too few points for a road plane"]
+    height = height_map(disparity, finite, camera, plane)
+    write_pfm(pair_dir / HEIGHT_FILE, height)
+    write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
+    pt = (info or {}).get("pt")
+    fallback = bool(pt and pt.get("fallback"))
+    decided_share = float(decided.mean()) if decided.size else 0.0
+    if fallback:
+        warnings.append("no defects: the scene is not road-like (perspective transformation fell back)")
+        defects, regions = [], []
+    else:
+        defects, regions = find_defects(
+            height, decided, camera, plane, min_depth_mm=road_cfg.min_depth_mm,
+            min_height_mm=road_cfg.min_height_mm, min_area_m2=road_cfg.min_area_m2,
+            ring_px=road_cfg.ring_px, min_decided_share=road_cfg.min_decided_share, return_regions=True)
+        if decided_share < road_cfg.min_decided_share:
+            warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
+            defects = [d.__class__(**{**d.__dict__, "low_confidence": True}) for d in defects]
+    items = [d.to_dict() for d in defects]
+    _write_json(pair_dir / DEFECTS_JSON, {
+        "plane": plane.to_info(), "decided_share": decided_share, "road_like": not fallback,
+        "definitions": "depth: below the median height of the surrounding road ring, mm; area_m2: "
+                       "area of the road plane covered by the region; volume_l: fill volume up to the "
+                       "surrounding surface", "defects": items, "warnings": warnings})
+    write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, height.shape, regions))
+    log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
+    return items, warnings
+
+
+def write_defects_csv(out: Path, pair_dirs) -> Path | None:
+    """``OUT/defects.csv``: every defect of every pair folder with a defects.json; None if none has one."""
+    rows = []
+    seen = False
+    for pair_dir in pair_dirs:
+        path = Path(pair_dir) / DEFECTS_JSON
+        if not path.is_file():
+            continue
+        seen = True
+        for d in json.loads(path.read_text(encoding="utf-8")).get("defects", []):
+            rows.append({"pair": Path(pair_dir).name, "id": d["id"], "kind": d["kind"],
+                         "u": round(d["centroid_px"][0], 1), "v": round(d["centroid_px"][1], 1),
+                         "x_m": round(d["centroid_m"][0], 4), "y_m": round(d["centroid_m"][1], 4),
+                         "z_m": round(d["centroid_m"][2], 4), "area_m2": round(d["area_m2"], 5),
+                         "max_depth_mm": round(d["max_depth_mm"], 1), "mean_depth_mm": round(d["mean_depth_mm"], 1),
+                         "volume_l": round(d["volume_l"], 3), "decided_share": round(d["decided_share"], 3),
+                         "low_confidence": d["low_confidence"]})
+    if not seen:
+        return None
+    buf = _io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    text = buf.getvalue()
+    return atomic_write(Path(out) / DEFECTS_CSV, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))

@@ -1,0 +1,113 @@
+"""Road plane, height and potholes on an analytic scene (tests/road/scene.py)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from d3cli.road.defects import find_defects
+from d3cli.road.plane import fit_road_plane, height_map, plane_footprint
+from d3cli.road.pointcloud import disparity_to_points
+
+from .scene import paraboloid_truth, pothole_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    disp, cam, rot = pothole_scene(pitch_deg=45.0, roll_deg=8.0, depth=0.08, radius=0.3)
+    valid = np.isfinite(disp)
+    points, _ = disparity_to_points(disp, valid, cam)
+    plane = fit_road_plane(points, cam, sigma_disparity=0.05)
+    return disp, cam, rot, valid, plane
+
+
+def test_plane_ignores_the_pothole(scene):
+    _, _, rot, _, plane = scene
+    up_in_camera = rot.T @ np.array([0.0, 0.0, 1.0])  # world up in the camera frame
+    # n . P + c > 0 at the camera: the normal points up (towards the camera side).
+    assert np.degrees(np.arccos(np.clip(np.dot(plane.normal, up_in_camera), -1, 1))) < 0.1
+    assert plane.offset == pytest.approx(1.5, abs=5e-4)
+    # A least-squares plane through all points (pothole included) sits measurably lower.
+    disp, cam, _, valid, _ = scene
+    pts, _ = disparity_to_points(disp, valid, cam)
+    centre = pts.mean(0)
+    naive_offset = -float(np.dot(plane.normal, centre))
+    assert abs(naive_offset - 1.5) > 1.5e-3
+
+
+def test_height_map_is_zero_on_the_road_and_minus_depth_at_the_bottom(scene):
+    disp, cam, _, valid, plane = scene
+    h = height_map(disp, valid, cam, plane)
+    assert np.isfinite(h).all()
+    assert np.median(h) == pytest.approx(0.0, abs=1e-3)
+    assert h.min() == pytest.approx(-0.08, abs=2e-3)
+
+
+def test_pothole_depth_area_volume_within_a_few_percent(scene):
+    disp, cam, rot, valid, plane = scene
+    h = height_map(disp, valid, cam, plane)
+    defects = find_defects(h, valid, cam, plane, min_depth_mm=10.0, min_area_m2=0.005)
+    assert [d.kind for d in defects] == ["pothole"]
+    d = defects[0]
+    truth = paraboloid_truth(0.08, 0.3, 0.01)
+    assert d.max_depth_mm == pytest.approx(truth["max_depth_mm"], rel=0.03)
+    assert d.area_m2 == pytest.approx(truth["area_m2"], rel=0.04)
+    assert d.volume_l == pytest.approx(truth["volume_l"], rel=0.05)
+    # Mean depth over the part deeper than t of a paraboloid: (D + t) / 2.
+    assert d.mean_depth_mm == pytest.approx((80 + 10) / 2, rel=0.05)
+    # Its centre lies near the hole's centre, 1.5 m forward and 0.1 m right of the camera
+    # (points on the bottom, ~45 mm down, lie ~that far further along the 45-degree rays).
+    world = rot @ np.asarray(d.centroid_m) + np.array([0.0, 0.0, 1.5])
+    assert world[:2] == pytest.approx([0.1, 1.5], abs=0.05)
+    assert d.decided_share == 1.0 and not d.low_confidence
+
+
+def test_footprint_sums_to_the_plane_area_seen():
+    # Camera looking straight down from 2 m: every pixel covers (Z / f)^2.
+    disp, cam, _ = pothole_scene(width=64, height=48, f=100.0, cam_height=2.0, pitch_deg=90.0, roll_deg=0.0,
+                                 depth=0.0001, radius=0.01)
+    pts, _ = disparity_to_points(disp, np.isfinite(disp), cam)
+    plane = fit_road_plane(pts, cam, sigma_disparity=0.05)
+    area = plane_footprint(disp.shape, cam, plane)
+    assert area.sum() == pytest.approx(64 * 48 * (2.0 / 100.0) ** 2, rel=1e-3)
+
+
+def test_bump_is_a_second_kind_and_thresholds_hold(scene):
+    disp, cam, rot = pothole_scene(depth=0.05, radius=0.25, bump=(-0.35, 1.9, 0.25, 0.04))
+    valid = np.isfinite(disp)
+    pts, _ = disparity_to_points(disp, valid, cam)
+    plane = fit_road_plane(pts, cam, sigma_disparity=0.05)
+    h = height_map(disp, valid, cam, plane)
+    defects = find_defects(h, valid, cam, plane, min_depth_mm=10.0, min_height_mm=20.0, min_area_m2=0.005)
+    assert [d.kind for d in defects] == ["pothole", "bump"]
+    assert defects[1].max_depth_mm == pytest.approx(40.0, rel=0.05)
+    assert [d.id for d in defects] == [1, 2]
+    # Deeper threshold than the hole: nothing; a larger minimum area than the hole: nothing.
+    assert [d.kind for d in find_defects(h, valid, cam, plane, min_depth_mm=60.0)] == ["bump"]
+    assert find_defects(h, valid, cam, plane, min_area_m2=1.0) == []
+
+
+def test_few_decided_pixels_mark_defects_low_confidence(scene):
+    disp, cam, _, valid, plane = scene
+    h = height_map(disp, valid, cam, plane)
+    decided = np.zeros_like(valid)
+    decided[::3] = True  # a third of the rows decided
+    (d,) = find_defects(h, decided, cam, plane, min_decided_share=0.5)
+    assert d.decided_share == pytest.approx(1 / 3, abs=0.03)
+    assert d.low_confidence
+
+
+def test_noisy_disparity_keeps_the_measurements_close(scene):
+    disp, cam, _, valid, _ = scene
+    rng = np.random.default_rng(1)
+    noisy = disp + rng.normal(0, 0.1, disp.shape).astype(np.float32)
+    pts, _ = disparity_to_points(noisy, valid, cam)
+    plane = fit_road_plane(pts, cam, sigma_disparity=0.1)
+    h = height_map(noisy, valid, cam, plane)
+    defects = find_defects(h, valid, cam, plane)
+    pits = [d for d in defects if d.kind == "pothole"]
+    assert len(pits) == 1
+    truth = paraboloid_truth(0.08, 0.3, 0.01)
+    assert pits[0].max_depth_mm == pytest.approx(80, rel=0.1)
+    assert pits[0].area_m2 == pytest.approx(truth["area_m2"], rel=0.1)
+    assert math.isfinite(pits[0].volume_l)
