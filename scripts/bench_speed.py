@@ -1,24 +1,34 @@
-"""Wall time and peak memory of d3stereo beside OpenCV SGBM on the same pair.
+"""d3stereo against OpenCV SGBM: time ratio in one process, peak memory per fresh process.
 
-Every method runs in a fresh Python process, so its peak resident memory is its own:
+For every case (a stereo pair + a config):
 
-* ``cold``: the first call in the process (kernels loaded from numba's cache, or compiled
-  when there is none), measured from before ``D3Stereo(cfg)``;
-* ``warm``: the median of ``--repeats`` further calls on the same pair;
-* ``peak MB``: the process's peak resident set size minus its size just before the
-  first call (``ru_maxrss`` after, ``/proc/self/statm`` before), i.e. what the method
-  allocated at most;
-* ``x SGBM``: warm time and peak memory divided by SGBM's from the same run.
+* **time**: one process loads the pair, runs d3stereo and SGBM once each as a warm-up
+  (kernels loaded from numba's cache or compiled; the machine's caches warmed), then
+  ``--reps`` times d3stereo and SGBM *alternately*; the medians and their ratio are
+  reported. Alternating in one process keeps the ratio meaningful on a shared, noisy
+  machine, where absolute seconds drift between runs. The median of every step of
+  ``result.timings`` (pyramid, cost per level, seeds, diffusion, finish, ...) is printed.
+* **memory**: one fresh process per method does a single call and reads its peak
+  resident set size, ``VmHWM`` of ``/proc/self/status`` (``ru_maxrss`` would carry the
+  parent's peak across ``exec``); this is the whole process, interpreter and libraries
+  included, as a user sees it.
+
+SGBM is ``d3cli.batch.compute_pair("sgbm", ...)`` with the case's config and the same
+disparity range: OpenCV StereoSGBM, 3-way, block ``sgbm.block_size`` (5 by default,
+forced to 5 on every case with ``--sgbm-block 5``, as in issue 10's table).
+
+Cases (``--cases``, default all that exist)::
+
+    road          1280x720 synthetic road pair (d3cli.data.synth.render_pair), configs/road.yaml
+    road-full     the same pair, default config (PT off: full range)
+    middlebury    middlebury2014-adirondack-Q, configs/middlebury.yaml
+    kitti         kitti2015-000000_10, configs/kitti.yaml
+    road-1440     2560x1440 synthetic road pair, configs/road.yaml
 
 Usage::
 
-    python scripts/bench_speed.py                          # synthetic 1280x720 road pair
-    python scripts/bench_speed.py --size 2560x1440 --max-disparity 256
-    python scripts/bench_speed.py --pair ../shared/data/middlebury2014-teddy-Q
-    python scripts/bench_speed.py --methods sgbm d3stereo d3stereo+pt --backend cuda
-    python scripts/bench_speed.py -c configs/road.yaml --methods sgbm pt-sgm d3stereo d3stereo+pt
-
-Method names: ``sgbm``, ``pt-sgm``, ``d3stereo``, ``d3stereo+pt`` (``pt.enabled=true``).
+    PYTHONPATH=. python scripts/bench_speed.py --data ../shared/data --markdown
+    PYTHONPATH=. python scripts/bench_speed.py --cases road road-full --reps 7
 """
 
 from __future__ import annotations
@@ -26,135 +36,179 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-METHODS = ("sgbm", "pt-sgm", "d3stereo", "d3stereo+pt")
+ROOT = Path(__file__).resolve().parent.parent
+CASES = {
+    "road": {"synth": [1280, 720], "config": "configs/road.yaml"},
+    "road-full": {"synth": [1280, 720], "config": None},
+    "middlebury": {"pair": "middlebury2014-adirondack-Q", "config": "configs/middlebury.yaml"},
+    "kitti": {"pair": "kitti2015-000000_10", "config": "configs/kitti.yaml"},
+    "road-1440": {"synth": [2560, 1440], "config": "configs/road.yaml"},
+}
+DEFAULT_CASES = ("road", "road-full", "middlebury", "kitti")
 
 
-def _rss_mb() -> float:
-    """Current resident set size of this process, MB."""
-    with open("/proc/self/statm") as fh:
-        pages = int(fh.read().split()[1])
-    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+def _vmhwm_mb() -> float:
+    """Peak resident set size of this process (VmHWM), MB."""
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
 
 
-def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
-
-
-def _load_pair(spec: dict):
+def _load(spec: dict):
+    """Left, right, max disparity and a display name of the case's pair."""
     import numpy as np
 
-    if spec["pair"]:
+    if spec.get("pair"):
         from d3cli.data.datasets import discover, load_pair_images, resolve_max_disparity
 
-        pair = discover([spec["pair"]])[0]
+        pair = discover([str(Path(spec["data"]) / spec["pair"])])[0]
         left, right = load_pair_images(pair)
-        dmax = spec["max_disparity"] or resolve_max_disparity(pair, left.shape[1])
-        return left, right, dmax, pair.name
-    cache = Path(spec["cache"])
+        return left, right, resolve_max_disparity(pair, left.shape[1]), pair.name
+    width, height = spec["synth"]
+    cache = Path(tempfile.gettempdir()) / f"d3stereo-bench-{width}x{height}-{spec['seed']}"
     if not (cache / "left.npy").exists():
         from d3cli.data.synth import render_pair
 
-        width, height = spec["size"]
         synth = render_pair(seed=spec["seed"], width=width, height=height)
+        gt = np.where(np.isfinite(synth.disparity), synth.disparity, 0)
         cache.mkdir(parents=True, exist_ok=True)
         np.save(cache / "left.npy", synth.left)
         np.save(cache / "right.npy", synth.right)
-        np.save(cache / "dmax.npy", np.array(int(np.ceil(np.nanmax(np.where(np.isfinite(synth.disparity), synth.disparity, 0))))))
-    left = np.load(cache / "left.npy")
-    right = np.load(cache / "right.npy")
-    dmax = spec["max_disparity"] or int(np.load(cache / "dmax.npy")) + 8
-    return left, right, dmax, f"synth-road-{left.shape[1]}x{left.shape[0]}"
+        np.save(cache / "dmax.npy", np.array(int(np.ceil(np.nanmax(gt)))))
+    dmax = int(np.load(cache / "dmax.npy")) + 8  # a little headroom above the true maximum
+    return np.load(cache / "left.npy"), np.load(cache / "right.npy"), dmax, f"synth road {width}x{height}"
 
 
-def _child(spec: dict) -> dict:
-    """Time and measure one method in this (fresh) process."""
+def _config(spec: dict):
     from d3cli import load_config
+
+    overrides = [f"run.backend={spec['backend']}"]
+    if spec.get("sgbm_block"):
+        overrides.append(f"sgbm.block_size={spec['sgbm_block']}")
+    overrides += spec.get("overrides", [])
+    cfg_path = spec["config"] and str(ROOT / spec["config"])
+    return load_config(cfg_path, overrides)
+
+
+def _child_time(spec: dict) -> dict:
+    """Warm-up, then d3stereo and SGBM alternately; medians of time and of every step."""
     from d3cli.batch import compute_pair
 
-    left, right, dmax, name = _load_pair(spec)
-    method = spec["method"]
-    overrides = [f"run.backend={spec['backend']}"]
-    if method == "d3stereo+pt":
-        overrides.append("pt.enabled=true")
-    cfg = load_config(spec["config"], overrides)
-    base_method = "d3stereo" if method.startswith("d3stereo") else method
-    rss0 = _rss_mb()
+    left, right, dmax, name = _load(spec)
+    cfg = _config(spec)
     t0 = time.perf_counter()
-    result = compute_pair(base_method, cfg, left, right, max_disparity=dmax)
+    compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
     cold = time.perf_counter() - t0
-    warm = []
-    for _ in range(spec["repeats"]):
+    compute_pair("sgbm", cfg, left, right, max_disparity=dmax)
+    d3, sg, steps = [], [], {}
+    for _ in range(spec["reps"]):
         t0 = time.perf_counter()
-        compute_pair(base_method, cfg, left, right, max_disparity=dmax)
-        warm.append(time.perf_counter() - t0)
-    warm.sort()
+        res = compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
+        d3.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        compute_pair("sgbm", cfg, left, right, max_disparity=dmax)
+        sg.append(time.perf_counter() - t0)
+        for key, value in res.timings.items():
+            steps.setdefault(key, []).append(value)
     return {
-        "pair": name,
-        "size": f"{left.shape[1]}x{left.shape[0]}",
-        "max_disparity": dmax,
-        "method": method,
-        "backend": result.info.get("backend", "opencv"),
-        "cold_s": cold,
-        "warm_s": warm[len(warm) // 2] if warm else cold,
-        "peak_mb": max(0.0, _peak_rss_mb() - rss0),
-        "steps": {k: round(v, 4) for k, v in result.timings.items()},
+        "pair": name, "size": f"{left.shape[1]}x{left.shape[0]}", "max_disparity": dmax,
+        "backend": res.info.get("backend", "?"), "pt": res.info.get("pt", {}).get("applied")
+        if isinstance(res.info.get("pt"), dict) else None,
+        "cold_s": cold, "d3_s": statistics.median(d3), "sgbm_s": statistics.median(sg),
+        "steps": {k: statistics.median(v) for k, v in steps.items()},
     }
+
+
+def _child_memory(spec: dict) -> dict:
+    """One call of one method in this fresh process; its VmHWM."""
+    from d3cli.batch import compute_pair
+
+    left, right, dmax, _ = _load(spec)
+    cfg = _config(spec)
+    compute_pair(spec["method"], cfg, left, right, max_disparity=dmax)
+    return {"vmhwm_mb": _vmhwm_mb()}
+
+
+def _spawn(spec: dict) -> dict | None:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    proc = subprocess.run([sys.executable, __file__, "--child", json.dumps(spec)],
+                          capture_output=True, text=True, check=False, env=env)
+    if proc.returncode != 0:
+        print(f"{spec['case']} {spec['mode']}: failed\n{proc.stderr[-2000:]}", file=sys.stderr)
+        return None
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--pair", help="a pair folder (any layout d3stereo reads); default: a synthetic road pair")
-    parser.add_argument("--size", default="1280x720", help="WxH of the synthetic pair (default 1280x720)")
-    parser.add_argument("--seed", type=int, default=3, help="seed of the synthetic pair")
-    parser.add_argument("--max-disparity", type=int, default=None)
-    parser.add_argument("--methods", nargs="+", default=["sgbm", "d3stereo", "d3stereo+pt"], choices=METHODS)
-    parser.add_argument("-c", "--config", default=None, help="YAML config for every method (e.g. configs/road.yaml)")
+    parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"),
+                        help="folder holding the real pairs (default ../shared/data)")
+    parser.add_argument("--cases", nargs="+", default=None, choices=sorted(CASES),
+                        help=f"cases to run (default: {' '.join(DEFAULT_CASES)})")
+    parser.add_argument("--reps", type=int, default=5, help="alternating repetitions after the warm-up")
+    parser.add_argument("--seed", type=int, default=3, help="seed of the synthetic road pairs")
     parser.add_argument("--backend", default="cpu", choices=("cpu", "cuda", "auto"))
-    parser.add_argument("--repeats", type=int, default=3, help="warm calls per method (median reported)")
+    parser.add_argument("--sgbm-block", type=int, default=5,
+                        help="SGBM block size for the reference (default 5, issue 10's baseline; 0: the config's)")
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        help="config override for every case, e.g. --set pyramid.band=false")
+    parser.add_argument("--no-memory", action="store_true", help="skip the fresh-process memory runs")
+    parser.add_argument("--markdown", action="store_true", help="print a markdown table")
     parser.add_argument("--json", dest="json_out", help="also write the rows to this JSON file")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
-        print(json.dumps(_child(json.loads(args.child))))
+        spec = json.loads(args.child)
+        out = _child_time(spec) if spec["mode"] == "time" else _child_memory(spec)
+        print(json.dumps(out))
         return 0
 
-    width, height = (int(x) for x in args.size.lower().split("x"))
-    cache = Path(tempfile.gettempdir()) / f"d3stereo-bench-{width}x{height}-{args.seed}"
     rows = []
-    for method in args.methods:
-        spec = {
-            "pair": args.pair, "size": [width, height], "seed": args.seed, "cache": str(cache),
-            "max_disparity": args.max_disparity, "method": method, "backend": args.backend, "repeats": args.repeats,
-            "config": args.config,
-        }
-        proc = subprocess.run(
-            [sys.executable, __file__, "--child", json.dumps(spec)], capture_output=True, text=True, check=False
-        )
-        if proc.returncode != 0:
-            print(f"{method}: failed\n{proc.stderr[-2000:]}", file=sys.stderr)
+    for case in args.cases or DEFAULT_CASES:
+        spec = dict(CASES[case], case=case, data=args.data, seed=args.seed, reps=args.reps,
+                    backend=args.backend, sgbm_block=args.sgbm_block or None, overrides=args.overrides)
+        if spec.get("pair") and not (Path(args.data) / spec["pair"]).is_dir():
+            print(f"{case}: {Path(args.data) / spec['pair']} not found, skipped", file=sys.stderr)
             continue
-        rows.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+        row = _spawn(dict(spec, mode="time"))
+        if row is None:
+            continue
+        row.update(case=case, config=spec["config"] or "defaults")
+        for method in ("d3stereo", "sgbm"):
+            mem = None if args.no_memory else _spawn(dict(spec, mode="memory", method=method))
+            row[f"{method}_mb"] = mem["vmhwm_mb"] if mem else float("nan")
+        rows.append(row)
+        print(f"{case}: d3stereo {row['d3_s']:.3f} s, SGBM {row['sgbm_s']:.3f} s, "
+              f"ratio {row['d3_s'] / row['sgbm_s']:.2f}; " +
+              ", ".join(f"{k} {v:.3f}" for k, v in row["steps"].items()), file=sys.stderr, flush=True)
     if not rows:
         return 1
-    ref = next((r for r in rows if r["method"] == "sgbm"), None)
-    print(f"pair {rows[0]['pair']} ({rows[0]['size']}, max disparity {rows[0]['max_disparity']}), "
-          f"{os.cpu_count()} CPUs, backend {args.backend}, config {args.config or 'defaults'}")
-    print(f"{'method':<13} {'backend':>8} {'cold s':>8} {'warm s':>8} {'x SGBM':>7} {'peak MB':>8} {'x SGBM':>7}")
+    print(f"{os.cpu_count()} CPUs, backend {args.backend}, {args.reps} alternating reps after a warm-up, "
+          f"SGBM block {args.sgbm_block or 'from config'}" + (f", overrides {args.overrides}" if args.overrides else ""))
+    if args.markdown:
+        print("\n| case | pair | config | range | d3stereo s | SGBM s | ratio | peak MB d3stereo / SGBM | first call s |")
+        print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        t_ratio = r["warm_s"] / ref["warm_s"] if ref else float("nan")
-        m_ratio = r["peak_mb"] / ref["peak_mb"] if ref and ref["peak_mb"] > 0 else float("nan")
-        print(f"{r['method']:<13} {r['backend']:>8} {r['cold_s']:8.3f} {r['warm_s']:8.3f} {t_ratio:7.1f} "
-              f"{r['peak_mb']:8.0f} {m_ratio:7.1f}")
+        ratio = r["d3_s"] / r["sgbm_s"]
+        mem = f"{r['d3stereo_mb']:.0f} / {r['sgbm_mb']:.0f}"
+        if args.markdown:
+            print(f"| {r['case']} | {r['pair']} ({r['size']}) | {r['config']} | {r['max_disparity']} | "
+                  f"{r['d3_s']:.3f} | {r['sgbm_s']:.3f} | {ratio:.2f}x | {mem} | {r['cold_s']:.2f} |")
+        else:
+            print(f"{r['case']:<11} {r['d3_s']:7.3f} s  SGBM {r['sgbm_s']:6.3f} s  {ratio:5.2f}x  MB {mem}")
+    print("\nper-step medians (s):")
     for r in rows:
-        if r["steps"]:
-            print(f"  {r['method']}: " + ", ".join(f"{k} {v:.3f}" for k, v in r["steps"].items()))
+        print(f"  {r['case']}: " + ", ".join(f"{k} {v:.3f}" for k, v in r["steps"].items()))
     if args.json_out:
         Path(args.json_out).write_text(json.dumps(rows, indent=2))
     return 0

@@ -117,56 +117,85 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance):
     ii_r = integral_image(right, 1)
     ii_rr = integral_image(right, 2)
     cost = np.empty((h, w, n_disp), np.float32)
-    for v in prange(h):
-        v0 = max(0, v - r)
-        v1 = min(h - 1, v + r)
-        # acc[u, d]: column sum over the window rows of L(y, u) R(y, u - d); the rows are
-        # added in the same order as a per-cell loop would, with d innermost (vectorised)
+    # The rows are cut into blocks, one prange task each; inside a block acc is a running
+    # sum along the rows (add the row entering the window, subtract the one leaving it), so
+    # the work per output row no longer grows with the window (issue 10 item 2; before,
+    # every output row re-summed all ``window`` rows).  float64 keeps the add/subtract
+    # drift far below the 1e-5 cost tolerance (values <= 255^2 * window^2).
+    block = 32
+    n_blocks = (h + block - 1) // block
+    for b in prange(n_blocks):
+        vb0 = b * block
+        vb1 = min(h, vb0 + block)
+        # acc[u, d]: column sum over the window rows of L(y, u) R(y, u - d)
         acc = np.zeros((w, n_disp), np.float64)
-        for y in range(v0, v1 + 1):
-            for u in range(w):
-                lv = np.float64(left[y, u])
-                for d in range(min(n_disp, u + 1)):
-                    acc[u, d] += lv * np.float64(right[y, u - d])
-        # prefix[u + 1, d]: running sum of acc over the columns <= u
         prefix = np.zeros((w + 1, n_disp), np.float64)
-        for u in range(w):
-            for d in range(n_disp):
-                prefix[u + 1, d] = prefix[u, d] + acc[u, d]
-        # Window sums of an unclipped window (columns c - r .. c + r), once per column
-        # instead of once per cell; the same box sums, so the same values.
         win_l = np.zeros(w, np.float64)
         win_ll = np.zeros(w, np.float64)
         win_r = np.zeros(w, np.float64)
         win_rr = np.zeros(w, np.float64)
-        for c in range(r, w - r):
-            win_l[c] = _box_sum(ii_l, v0, c - r, v1, c + r)
-            win_ll[c] = _box_sum(ii_ll, v0, c - r, v1, c + r)
-            win_r[c] = _box_sum(ii_r, v0, c - r, v1, c + r)
-            win_rr[c] = _box_sum(ii_rr, v0, c - r, v1, c + r)
-        n_full = (v1 - v0 + 1) * (2 * r + 1)
-        for u in range(w):
-            # d < d_fast: neither window is clipped (a branch-free loop that vectorises)
-            d_fast = min(n_disp, u - r + 1) if u + r <= w - 1 else 0
-            sl_u = win_l[u]
-            sll_u = win_ll[u]
-            for d in range(d_fast):
-                slr = prefix[u + r + 1, d] - prefix[u - r, d]
-                cost[v, u, d] = _ncc_cost(n_full, sl_u, sll_u, win_r[u - d], win_rr[u - d], slr, min_variance)
-            for d in range(max(d_fast, 0), n_disp):
-                if u - d < 0:
-                    cost[v, u, d] = 1.0
-                    continue
-                c0 = max(u - r, d)
-                c1 = min(u + r, w - 1)
-                n = (v1 - v0 + 1) * (c1 - c0 + 1)
-                sl = _box_sum(ii_l, v0, c0, v1, c1)
-                sll = _box_sum(ii_ll, v0, c0, v1, c1)
-                sr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d)
-                srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
-                slr = prefix[c1 + 1, d] - prefix[c0, d]
-                cost[v, u, d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+        for y in range(max(0, vb0 - r), min(h - 1, vb0 + r) + 1):
+            _add_row_products(acc, left, right, y, 1.0)
+        for v in range(vb0, vb1):
+            if v > vb0:
+                if v + r <= h - 1:
+                    _add_row_products(acc, left, right, v + r, 1.0)
+                if v - r - 1 >= 0:
+                    _add_row_products(acc, left, right, v - r - 1, -1.0)
+            _ncc_row(cost, v, acc, prefix, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii_r, ii_rr,
+                     h, w, n_disp, r, min_variance)
     return cost
+
+
+@njit(cache=True)
+def _add_row_products(acc, left, right, y, sign):
+    """acc[u, d] += sign * L(y, u) R(y, u - d) for every u, d with u - d >= 0."""
+    w, n_disp = acc.shape
+    for u in range(w):
+        lv = sign * np.float64(left[y, u])
+        for d in range(min(n_disp, u + 1)):
+            acc[u, d] += lv * np.float64(right[y, u - d])
+
+
+@njit(cache=True)
+def _ncc_row(cost, v, acc, prefix, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii_r, ii_rr,
+             h, w, n_disp, r, min_variance):
+    """Costs of row v from the window-row column sums ``acc`` (buffers reused per row)."""
+    v0 = max(0, v - r)
+    v1 = min(h - 1, v + r)
+    # prefix[u + 1, d]: running sum of acc over the columns <= u
+    for u in range(w):
+        for d in range(n_disp):
+            prefix[u + 1, d] = prefix[u, d] + acc[u, d]
+    # Window sums of an unclipped window (columns c - r .. c + r), once per column
+    # instead of once per cell; the same box sums, so the same values.
+    for c in range(r, w - r):
+        win_l[c] = _box_sum(ii_l, v0, c - r, v1, c + r)
+        win_ll[c] = _box_sum(ii_ll, v0, c - r, v1, c + r)
+        win_r[c] = _box_sum(ii_r, v0, c - r, v1, c + r)
+        win_rr[c] = _box_sum(ii_rr, v0, c - r, v1, c + r)
+    n_full = (v1 - v0 + 1) * (2 * r + 1)
+    for u in range(w):
+        # d < d_fast: neither window is clipped (a branch-free loop that vectorises)
+        d_fast = min(n_disp, u - r + 1) if u + r <= w - 1 else 0
+        sl_u = win_l[u]
+        sll_u = win_ll[u]
+        for d in range(d_fast):
+            slr = prefix[u + r + 1, d] - prefix[u - r, d]
+            cost[v, u, d] = _ncc_cost(n_full, sl_u, sll_u, win_r[u - d], win_rr[u - d], slr, min_variance)
+        for d in range(max(d_fast, 0), n_disp):
+            if u - d < 0:
+                cost[v, u, d] = 1.0
+                continue
+            c0 = max(u - r, d)
+            c1 = min(u + r, w - 1)
+            n = (v1 - v0 + 1) * (c1 - c0 + 1)
+            sl = _box_sum(ii_l, v0, c0, v1, c1)
+            sll = _box_sum(ii_ll, v0, c0, v1, c1)
+            sr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d)
+            srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
+            slr = prefix[c1 + 1, d] - prefix[c0, d]
+            cost[v, u, d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
 
 
 @njit(parallel=True, cache=True)

@@ -37,6 +37,18 @@ def test_ncc_cost_volume_matches_reference(shape, window):
         np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
 
 
+@pytest.mark.parametrize("window", [3, 9, 25])
+def test_ncc_cost_volume_running_row_sums_match_reference_across_row_blocks(window):
+    # 75 rows: the kernel's running row sums restart every 32 rows and add/subtract the
+    # rows entering/leaving the window in between; every row must still equal the
+    # float64 per-window reference (issue 10 item 2), windows taller than a block included.
+    rng = np.random.default_rng(window)
+    left, right = random_images(rng, (75, 40))
+    got = cpu.ncc_cost_volume(left, right, 12, window, 1e-2)
+    want = ref.ref_ncc_cost_volume(left, right, 12, window, 1e-2)
+    np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
+
+
 def test_ncc_cost_volume_with_flat_regions_matches_reference():
     rng = np.random.default_rng(3)
     left, right = random_images(rng, (13, 11))
