@@ -394,7 +394,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     if cfg.road.report:
         write_defects_csv(out, [out / p.name for p in pairs])
     if evaluate and shard is not None:
-        log.info("--shard: summary files are left to `d3stereo eval %s --gt ...` once every shard is done", out)
+        log.info("--shard: summary files are left to `d3stereo eval %s --gt ... -o REPORT` once every shard is done", out)
     elif evaluate:
         report.write_summary(out, batch.rows, method=method, extra={"settings": fingerprint})
         batch.summary = report.summarize(batch.rows)

@@ -113,9 +113,10 @@ def test_shards_fill_one_out_and_eval_covers_all(tmp_path, pair_root, serial_sgb
     names = {i: [p["pair"] for p in json.loads((out / f"run-{i}-of-2.json").read_text())["pairs"]] for i in (1, 2)}
     assert names == {1: ["a", "c"], 2: ["b", "d"]}
     assert not (out / "run.json").exists()
-    result = invoke("eval", out, "--gt", pair_root, "-q")
-    assert result.exit_code == 0
-    summary = json.loads((out / "summary.json").read_text())
+    report = out.parent / (out.name + "-report")  # eval writes only under its own -o
+    result = invoke("eval", out, "--gt", pair_root, "-o", report, "-q")
+    assert result.exit_code == 0, result.output
+    summary = json.loads((report / "summary.json").read_text())
     assert summary["overall"]["pairs"] == summary["overall"]["ok"] == summary["overall"]["with_gt"] == len(PAIRS)
     assert summary["overall"]["means"]["pep_1"] == 0.0  # integer shifts: every pair exact to 1 px
 
