@@ -172,6 +172,18 @@ def test_dask_d3stereo_is_byte_identical(tmp_path, pair_root, local_cluster):
     assert json.loads((out / "run.json").read_text())["execution"]["mode"] == "dask"
 
 
+def test_scheduler_without_workers_is_a_clear_error(tmp_path):
+    from d3cli.batch.executors import DaskExecutor
+
+    cluster = distributed.LocalCluster(n_workers=0, processes=True, host="127.0.0.1", dashboard_address=None)
+    try:
+        with pytest.raises(ConfigError, match="no worker joined within 1 s; start workers with `dask worker"):
+            with DaskExecutor(cluster.scheduler_address, tmp_path, worker_timeout=1):
+                pass
+    finally:
+        cluster.close()
+
+
 def test_unreachable_scheduler_is_one_error_line(tmp_path, pair_root):
     import socket
 
@@ -191,20 +203,33 @@ def test_unreachable_scheduler_is_one_error_line(tmp_path, pair_root):
 BIG = "abcdefgh"
 
 
-@pytest.fixture
-def big_pairs(tmp_path, make_pair_folder):
+@pytest.fixture(scope="module")
+def big_pairs(tmp_path_factory):
     """Eight 720x1280 pairs: about 0.1 s of SGBM each, so a batch is still running after its first pair."""
-    root = tmp_path / "big"
+    from tests.helpers import textured_pair, write_png
+
+    root = tmp_path_factory.mktemp("big")
     for i, name in enumerate(BIG):
-        make_pair_folder(root, name, shift=3 + i, size=(720, 1280), seed=i, gt=False)
+        folder = root / name
+        folder.mkdir()
+        left, right, _ = textured_pair(3 + i, (720, 1280), seed=i)
+        write_png(folder / "left.png", left)
+        write_png(folder / "right.png", right)
     return root
 
 
-def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, big_pairs):
+@pytest.fixture(scope="module")
+def big_serial(big_pairs, tmp_path_factory):
+    """The serial SGBM outputs of :func:`big_pairs`, the reference of every parallel run."""
+    out = tmp_path_factory.mktemp("big-serial")
+    assert invoke("run", big_pairs, "-o", out, "--method", "sgbm", "-q").exit_code == 0
+    return out
+
+
+def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, big_pairs, big_serial):
     """`dask scheduler` + two `dask worker --no-nanny` on 127.0.0.1, `python -m d3cli run --scheduler`;
     one worker is SIGKILLed after the first pair finishes: exit 0, every map as serial."""
-    serial = tmp_path / "serial"
-    assert invoke("run", big_pairs, "-o", serial, "--method", "sgbm", "-q").exit_code == 0
+    serial = big_serial
     env = env_with_package()
     sched_file = tmp_path / "scheduler.json"
     procs = []
@@ -252,9 +277,8 @@ def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, bi
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
-def test_ctrl_c_or_sigterm_with_workers_exits_130_and_rerun_resumes(tmp_path, big_pairs, signum):
-    serial, out = tmp_path / "serial", tmp_path / "pool"
-    assert invoke("run", big_pairs, "-o", serial, "--method", "sgbm", "-q").exit_code == 0
+def test_ctrl_c_or_sigterm_with_workers_exits_130_and_rerun_resumes(tmp_path, big_pairs, big_serial, signum):
+    serial, out = big_serial, tmp_path / "pool"
     cmd = [sys.executable, "-m", "d3cli", "run", str(big_pairs), "-o", str(out), "--method", "sgbm", "-q",
            "--workers", "2"]
     proc = subprocess.Popen(cmd, env=env_with_package(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
