@@ -78,7 +78,7 @@ def defects_overlay(left: np.ndarray, defects, labels_shape, regions) -> np.ndar
         img = np.repeat(img[:, :, None], 3, axis=2)
     out = np.ascontiguousarray(img[:, :, :3]).copy()
     thick = max(1, out.shape[0] // 360)
-    scale = max(0.4, out.shape[0] / 1400)
+    scale = max(0.5, out.shape[0] / 900)
     for d, mask in zip(defects, regions):
         colour = (255, 0, 0) if d.kind == "pothole" else (255, 220, 0)
         contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
