@@ -129,12 +129,15 @@ def main():
                    "OUT must be shared with the workers. Needs the 'distributed' extra.")
 @click.option("--shard", default=None, metavar="I/N",
               help="Run only shard I of N (every N-th pair by name); shards share OUT and write run-I-of-N.json.")
+@click.option("--color-range", default=None, metavar="MIN:MAX",
+              help="Fixed disparity range (pixels) of disp_color.png for every pair [default: run.color_range, "
+                   "else each pair's 1st-99th percentile].")
 @click.option("--road-report", is_flag=True,
               help="Also write the road inspection outputs (height.pfm, height_color.png, defects.json, "
                    "defects.png per pair, OUT/defects.csv); same as road.report: true.")
 @_verbosity
 def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
-        no_fill, pointcloud, workers, scheduler, shard, road_report, verbose, quiet):
+        no_fill, pointcloud, workers, scheduler, shard, color_range, road_report, verbose, quiet):
     """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
 
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
@@ -149,9 +152,10 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
         raise click.BadParameter(f"must be a positive number of pixels, got {max_disparity}",
                                  param_hint="--max-disparity")
     cfg, source = _resolve_config(config_path, overrides, method=method, backend=backend, no_fill=no_fill)
+    if color_range is not None:
+        cfg = replace(cfg, run=replace(cfg.run, color_range=_color_range(color_range)))
     if road_report:
-        import dataclasses
-        cfg = dataclasses.replace(cfg, road=dataclasses.replace(cfg.road, report=True))
+        cfg = replace(cfg, road=replace(cfg.road, report=True))
     method = cfg.run.method
     if method == "sgbm" and cfg.run.backend == "cuda":
         log.warning("--backend cuda: sgbm runs on OpenCV's CPU implementation")
@@ -199,6 +203,18 @@ def config_by_name(config_path):
         if candidate.is_file():
             return candidate
     return config_path
+
+
+def _color_range(text: str) -> tuple[float, float]:
+    """``MIN:MAX`` -> (min, max), 0 <= min < max, else a usage error naming the option."""
+    try:
+        low, high = (float(part) for part in text.split(":"))
+    except ValueError:
+        raise click.BadParameter(f"expected MIN:MAX in pixels (e.g. 0:64), got {text!r}",
+                                 param_hint="--color-range") from None
+    if not 0 <= low < high:
+        raise click.BadParameter(f"needs 0 <= MIN < MAX, got {text!r}", param_hint="--color-range")
+    return low, high
 
 
 def _resolve_config(config_path, overrides, *, method, backend, no_fill) -> tuple[Config, str]:

@@ -49,6 +49,7 @@ class RunConfig:
     backend: str = "auto"
     max_disparity: int | None = None  # None: from the dataset layout, else width // 4
     max_memory_gb: float | None = None  # refuse pairs whose estimated peak exceeds this; None: 75 % of RAM
+    color_range: tuple[float, ...] = ()  # [min, max] px of disp_color.png for a whole batch; []: per-pair percentiles
 
 
 @dataclass(frozen=True)
@@ -242,6 +243,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "run.backend": (lambda v: v in BACKENDS, "one of " + ", ".join(BACKENDS)),
     "run.max_disparity": (lambda v: v is None or v > 0, "a positive integer or null"),
     "run.max_memory_gb": (lambda v: v is None or v > 0, "a positive number (GB) or null"),
+    "run.color_range": (lambda v: len(v) == 0 or (len(v) == 2 and 0 <= v[0] < v[1]),
+                        "[] or [min, max] with 0 <= min < max (pixels)"),
     "pyramid.levels": (lambda v: 1 <= v <= 8, "an integer in [1, 8]"),
     "cost.window": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "cost.level_windows": (

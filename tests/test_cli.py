@@ -578,3 +578,18 @@ def test_config_by_name_finds_the_repository_configs(tmp_path, monkeypatch):
     assert config_by_name("no-such-config") == "no-such-config"  # left for the file-not-found error
     (tmp_path / "road").write_text("")  # an existing file of that name wins
     assert config_by_name("road") == "road"
+
+
+def test_color_range_option_fixes_the_range_for_the_batch_and_recomputes(tmp_path, pairs_root):
+    import json
+
+    out = tmp_path / "out"
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm", "-q").exit_code == 0
+    first = json.loads((out / "a" / "result.json").read_text())["color_range"]
+    assert first["how"].endswith("percentile")
+    result = invoke("run", pairs_root, "-o", out, "--method", "sgbm", "-q", "--color-range", "0:40")
+    assert result.exit_code == 0, result.output
+    stored = json.loads((out / "a" / "result.json").read_text())
+    assert stored["color_range"] == {"min": 0.0, "max": 40.0, "how": "fixed range"}
+    bad = invoke("run", pairs_root, "-o", out, "--method", "sgbm", "--color-range", "40:10")
+    assert bad.exit_code == 2 and "--color-range" in bad.output and "0 <= MIN < MAX" in bad.output

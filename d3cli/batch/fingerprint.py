@@ -26,7 +26,10 @@ def settings_fingerprint(cfg: Config, method: str, max_disparity: int | None) ->
         sections = {name: sections[name] for name in _BASELINE_SECTIONS[method]}
     else:
         del sections["sgbm"], sections["peers"]  # d3stereo reads neither
-    blob = json.dumps([method, sections, max_disparity], sort_keys=True)
+    key = [method, sections, max_disparity]
+    if cfg.run.color_range:  # a run setting that changes an output (disp_color.png)
+        key.append(list(cfg.run.color_range))
+    blob = json.dumps(key, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 

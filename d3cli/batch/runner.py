@@ -142,7 +142,7 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
         # an old error map would describe another estimate.
         remove_pair_files(pair_dir)
         written = write_disparity_outputs(pair_dir, result.disparity, result.valid, left=left,
-                                          color_range=getattr(cfg.run, "color_range", None))
+                                          color_range=tuple(cfg.run.color_range) or None)
         scores = evaluate_pair(pair, left, right, result.disparity, pair_dir) if evaluate else None
         write_panel(pair_dir, pair.name, left, scores)  # issue 13: panel.png
     except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
