@@ -25,6 +25,8 @@ log = logging.getLogger("d3cli")
 
 #: Exit code after Ctrl-C (128 + SIGINT, as a shell reports it).
 INTERRUPTED_EXIT = 130
+#: Exit status after SIGTERM: 128 + 15, as a shell reports a process killed by it.
+TERMINATED_EXIT = 143
 #: Environment variable naming a config file used when -c is not given.
 CONFIG_ENV = "D3STEREO_CONFIG"
 #: Config file picked up from the working folder when neither -c nor the variable is set.
@@ -45,7 +47,7 @@ class _Group(click.Group):
 
             message = str(exc) if isinstance(exc, BatchInterrupted) else "Interrupted"
             click.echo(message, err=True)
-            ctx.exit(INTERRUPTED_EXIT)
+            ctx.exit(TERMINATED_EXIT if getattr(exc, "terminated", False) else INTERRUPTED_EXIT)
 
 
 class _StderrHandler(logging.StreamHandler):

@@ -68,6 +68,29 @@ from .outputs import (
 log = logging.getLogger(__name__)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, ``timeout``, a job scheduler's preemption) during a batch.
+
+    A KeyboardInterrupt, so every path that stops cleanly on Ctrl-C stops the same way.
+    """
+
+
+def _interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C/SIGTERM behind ``exc``, if any.
+
+    A signal that arrives while numba runs a compiled kernel surfaces as ``SystemError:
+    ... returned a result with an exception set`` with the KeyboardInterrupt as its
+    context: that is an interrupt of the batch, not a failure of the pair.
+    """
+    seen = 0
+    while exc is not None and seen < 8:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+        seen += 1
+    return None
+
+
 class BatchInterrupted(KeyboardInterrupt):
     """Ctrl-C ended a batch; finished pairs are complete, the pair in progress left nothing.
 
@@ -83,9 +106,11 @@ class BatchInterrupted(KeyboardInterrupt):
         ``run.json`` recording the interruption.
     """
 
-    def __init__(self, n_done: int, n_total: int, run_json: Path):
-        super().__init__(f"Interrupted: {n_done} of {n_total} pairs done; rerun the same command to resume")
+    def __init__(self, n_done: int, n_total: int, run_json: Path, *, terminated: bool = False):
+        what = "Terminated (SIGTERM)" if terminated else "Interrupted"
+        super().__init__(f"{what}: {n_done} of {n_total} pairs done; rerun the same command to resume")
         self.n_done, self.n_total, self.run_json = n_done, n_total, run_json
+        self.terminated = terminated  # the shell's exit status is 143 then, 130 for Ctrl-C
 
     def __str__(self) -> str:
         return self.args[0]
@@ -314,7 +339,7 @@ def run_batch(
 
 
 def _raise_interrupt(signum, frame):
-    raise KeyboardInterrupt
+    raise Terminated
 
 
 def _sigterm_as_interrupt():
@@ -368,12 +393,13 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
                     bar.update()
             finally:
                 bar.close()
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         current = executor.current
+        terminated = isinstance(exc, Terminated)
         _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
-                        stop_reason="interrupted (Ctrl-C / SIGINT / SIGTERM)")
+                        stop_reason="terminated (SIGTERM)" if terminated else "interrupted (Ctrl-C / SIGINT)")
         n_done = sum(r["status"] in ("ok", "skipped") for r in records)
-        raise BatchInterrupted(n_done, len(pairs), batch.run_json) from None
+        raise BatchInterrupted(n_done, len(pairs), batch.run_json, terminated=terminated) from None
     except OutputError as exc:
         current = executor.current
         if not io.is_disk_full(exc) or current is None:
@@ -432,6 +458,9 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
             raise  # every later pair would fail the same way: the batch stops
         return failed_row(pair, str(exc), time.perf_counter() - t0)
     except Exception as exc:  # noqa: BLE001 - one broken pair must not end the batch
+        interrupt = _interrupt_behind(exc)
+        if interrupt is not None:
+            raise interrupt from None  # Ctrl-C inside a numba kernel: stop the batch
         log.debug("%s: unexpected error", pair.name, exc_info=True)
         return failed_row(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
     wall = stored.get("timings", {}).get("wall")

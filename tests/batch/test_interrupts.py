@@ -1,0 +1,64 @@
+"""Ctrl-C inside a compiled kernel and SIGTERM stop the batch (issue 12, items 8 and 9)."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from click.testing import CliRunner
+
+import d3cli.batch.runner
+from d3cli.batch import LOCK_FILE
+from d3cli.cli import main
+
+
+def test_ctrl_c_inside_a_numba_kernel_stops_the_batch_and_fails_no_pair(tmp_path, pairs_root, monkeypatch):
+    real = d3cli.batch.runner.compute_pair
+
+    def kernel_interrupted(method, cfg, left, right, *, max_disparity):
+        if (tmp_path / "second").exists():
+            # what numba raises when SIGINT arrives inside a compiled function
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt:
+                raise SystemError("<numba function> returned a result with an exception set")
+        (tmp_path / "second").touch()
+        return real(method, cfg, left, right, max_disparity=max_disparity)
+
+    monkeypatch.setattr(d3cli.batch.runner, "compute_pair", kernel_interrupted)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["run", str(pairs_root), "-o", str(out), "--method", "sgbm"])
+    assert result.exit_code == 130, result.output
+    assert "Interrupted: 1 of 3 pairs done" in result.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["interrupted"] is True and run["n_failed"] == 0
+    assert [p["status"] for p in run["pairs"]] == ["ok"]
+
+
+def test_sigterm_stops_a_serial_batch_with_143_run_json_and_no_lock(tmp_path, make_pair_folder):
+    root = tmp_path / "pairs"
+    for i in range(30):  # enough pairs that the signal lands while the batch runs
+        make_pair_folder(root, f"p{i:02d}", shift=4 + i % 5, size=(240, 400), seed=i)
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(os.getcwd()), os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.Popen([sys.executable, "-m", "d3cli", "run", str(root), "-o", str(out), "--method", "sgbm"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 90
+        while not list(out.glob("*/result.json")):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline
+            time.sleep(0.005)
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 143, stderr
+    assert stderr.strip().splitlines()[-1].startswith("Terminated (SIGTERM): ")
+    run = json.loads((out / "run.json").read_text())
+    assert run["interrupted"] is True and run["stop_reason"] == "terminated (SIGTERM)"
+    assert not (out / LOCK_FILE).exists()
