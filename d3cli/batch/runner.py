@@ -197,45 +197,47 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
     return stored
 
 
-def _write_cloud(pair, pair_dir: Path, stored: dict, cfg) -> dict:
-    """Write ``cloud.ply`` of a complete pair from its stored outputs; returns ``stored``.
+def _stored_map(pair, pair_dir: Path, cfg):
+    """(left image, camera or None, disparity, valid) of a complete pair, from its files.
 
-    Reads disp.pfm and valid.png back, so a rerun with ``--pointcloud`` adds clouds to
-    pairs computed earlier without computing them again.  Without a camera the pair gets
-    a warning in result.json instead.
+    Clouds and road outputs are made from what was written (disp.pfm, valid.png), so a
+    rerun adds them to pairs computed earlier without computing them again.
     """
     left, _ = datasets.load_pair_images(pair)
     calib = io.read_calib(pair.calib) if pair.calib is not None else None
     camera = camera_from(calib, cfg, left.shape[:2])
-    if camera is None:
-        text = ("no cloud.ply: focal length or baseline unknown; add calib.txt to the pair "
-                "or set camera.f and camera.baseline")
-        if text not in stored.get("warnings", []):
-            log.warning("%s: %s", pair.name, text)
-            stored = {**stored, "warnings": [*stored.get("warnings", []), text]}
-            write_json(pair_dir / RESULT_FILE, stored)
+    return left, camera, io.read_pfm(pair_dir / "disp.pfm"), io.read_mask(pair_dir / "valid.png")
+
+
+def _with_warnings(pair, pair_dir: Path, stored: dict, texts) -> dict:
+    """``stored`` with the warnings of ``texts`` it does not hold yet (logged, result.json rewritten)."""
+    new = [text for text in texts if text not in stored.get("warnings", [])]
+    if not new:
         return stored
-    disparity = io.read_pfm(pair_dir / "disp.pfm")
-    valid = io.read_mask(pair_dir / "valid.png")
-    n_points = save_pair_cloud(pair_dir / CLOUD_FILE, disparity, valid, left, camera)
-    log.info("%s: cloud.ply with %d points", pair.name, n_points)
+    for text in new:
+        log.warning("%s: %s", pair.name, text)
+    stored = {**stored, "warnings": [*stored.get("warnings", []), *new]}
+    write_json(pair_dir / RESULT_FILE, stored)
     return stored
 
 
-def _write_road(pair, pair_dir: Path, stored: dict, cfg) -> dict:
-    """Road inspection outputs of a complete pair from its stored outputs; returns ``stored``."""
-    left, _ = datasets.load_pair_images(pair)
-    calib = io.read_calib(pair.calib) if pair.calib is not None else None
-    camera = camera_from(calib, cfg, left.shape[:2])
-    _, warnings = road_report(pair_dir, left, io.read_pfm(pair_dir / "disp.pfm"),
-                              io.read_mask(pair_dir / "valid.png"), camera, stored.get("info", {}), cfg.road)
-    new = [w for w in warnings if w not in stored.get("warnings", [])]
-    if new:
-        for text in new:
-            log.warning("%s: %s", pair.name, text)
-        stored = {**stored, "warnings": [*stored.get("warnings", []), *new]}
-        write_json(pair_dir / RESULT_FILE, stored)
-    return stored
+def _write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -> dict:
+    """``cloud.ply`` (when asked and missing) and the road outputs (``road.report``) of a
+    complete pair, from one read of its files; returns ``stored`` with any new warnings."""
+    want_cloud = pointcloud and not (pair_dir / CLOUD_FILE).is_file()
+    if not (want_cloud or cfg.road.report):
+        return stored
+    left, camera, disparity, valid = _stored_map(pair, pair_dir, cfg)
+    warnings = []
+    if want_cloud and camera is None:
+        warnings.append("no cloud.ply: focal length or baseline unknown; add calib.txt to the pair "
+                        "or set camera.f and camera.baseline")
+    elif want_cloud:
+        n_points = save_pair_cloud(pair_dir / CLOUD_FILE, disparity, valid, left, camera)
+        log.info("%s: cloud.ply with %d points", pair.name, n_points)
+    if cfg.road.report:  # all the logic in d3cli.road.report
+        warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road)[1]
+    return _with_warnings(pair, pair_dir, stored, warnings)
 
 
 def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
@@ -449,10 +451,7 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
         else:
             stored = _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
                                max_disparity=max_disparity, fingerprint=fingerprint)
-        if pointcloud and not (pair_dir / CLOUD_FILE).is_file():
-            stored = _write_cloud(pair, pair_dir, stored, cfg)
-        if cfg.road.report:  # --road-report: all logic in d3cli.road.report
-            stored = _write_road(pair, pair_dir, stored, cfg)
+        stored = _write_extras(pair, pair_dir, stored, cfg, pointcloud=pointcloud)
     except D3Error as exc:
         if io.is_disk_full(exc):
             raise  # every later pair would fail the same way: the batch stops
