@@ -35,7 +35,7 @@ from ..data.io import atomic_write, read_image, write_image, write_kitti_png, wr
 from ..evaluation import pictures
 from ..errors import OutputError, where_what_fix
 from ..evaluation.report import jsonable
-from ..road.report import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE  # noqa: F401 - named here with the other outputs
+from ..road.report import DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +47,9 @@ PANEL_FILE = "panel.png"
 OVERLAY_FILE = "valid_overlay.png"
 CLOUD_FILE = "cloud.ply"  # only with --pointcloud
 RUN_FILE = "run.json"
+#: Road inspection outputs of a pair (--road-report), made from its disparity map: stale
+#: once the map is computed again.
+ROAD_FILES = (HEIGHT_FILE, HEIGHT_COLOR_FILE, DEFECTS_JSON, DEFECTS_PNG)
 
 
 def check_output_folder(out: Path, pairs) -> None:
@@ -99,7 +102,7 @@ def remove_pair_files(pair_dir: Path, *, remove_folder: bool = False) -> None:
     """
     if not pair_dir.is_dir():
         return
-    names = (*OUTPUT_FILES, RESULT_FILE, ERROR_MAP, CLOUD_FILE, PANEL_FILE, OVERLAY_FILE)
+    names = (*OUTPUT_FILES, RESULT_FILE, ERROR_MAP, CLOUD_FILE, PANEL_FILE, OVERLAY_FILE, *ROAD_FILES)
     leftovers = [p for p in pair_dir.iterdir() if p.name.startswith(".") and ".tmp-" in p.name]
     for path in [pair_dir / name for name in names] + leftovers:
         try:

@@ -44,3 +44,12 @@ def test_negative_disparities_are_never_written(tmp_path):
     with pytest.raises(ValueError, match="negative disparities"):
         write_disparity_outputs(tmp_path / "p", disp, np.ones_like(disp, bool))
     assert not (tmp_path / "p" / "disp.pfm").exists()
+
+
+def test_recomputing_a_pair_removes_its_road_outputs_but_not_the_users_files(tmp_path):
+    from d3cli.batch.outputs import ROAD_FILES, remove_pair_files
+
+    for name in (*ROAD_FILES, "disp.pfm", "notes.txt"):
+        (tmp_path / name).write_text("x")
+    remove_pair_files(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
