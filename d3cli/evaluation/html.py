@@ -15,7 +15,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from ..data.io import atomic_write
-from .report import BENCHMARK_COLUMNS, METRIC_COLUMNS, jsonable, summarize
+from .report import jsonable, summarize
 
 REPORT_FILE = "report.html"
 

@@ -1,7 +1,6 @@
 """report.html: valid HTML, every pair named, no broken local link, sorted thumbnails."""
 
 from html.parser import HTMLParser
-from pathlib import Path
 from urllib.parse import unquote
 
 import numpy as np

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from d3cli.data.io import colorize_disparity
 from d3cli.evaluation import pictures
 
 
@@ -29,7 +30,7 @@ def test_disparity_picture_has_a_bar_and_turbo_ends():
     disp = np.tile(np.linspace(0, 50, 200, dtype=np.float32), (40, 1))
     pic = pictures.disparity_picture(disp, 0.0, 50.0, how="fixed range")
     assert pic.shape[0] > 40 and pic.shape[1] == 200
-    np.testing.assert_array_equal(pic[:40], pictures.turbo(disp, 0.0, 50.0))
+    np.testing.assert_array_equal(pic[:40], colorize_disparity(disp, 0.0, 50.0))
 
 
 def test_overlay_marks_filled_pixels_red():
