@@ -58,6 +58,9 @@ class PyramidConfig:
 
     levels: int = 4  # k: number of scales; level 1 is full resolution
     ars: bool = True  # alternating inheritance/diffusion; False: linear hierarchy (DFM)
+    band: bool = True  # levels below the coarsest search a band around the coarser level's map (issue 10)
+    band_margin: int = 4  # the band: 2 d_coarse +- this many disparities, hull over a tile and its neighbours
+    band_tile: int = 16  # tile size (pixels of the level); a tile searches the hull over itself and its 8 neighbours
 
 
 @dataclass(frozen=True)
@@ -246,6 +249,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "run.color_range": (lambda v: len(v) == 0 or (len(v) == 2 and 0 <= v[0] < v[1]),
                         "[] or [min, max] with 0 <= min < max (pixels)"),
     "pyramid.levels": (lambda v: 1 <= v <= 8, "an integer in [1, 8]"),
+    "pyramid.band_margin": (lambda v: 2 <= v <= 64, "an integer in [2, 64]"),
+    "pyramid.band_tile": (lambda v: 4 <= v <= 256, "an integer in [4, 256]"),
     "cost.window": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "cost.level_windows": (
         lambda v: all(w >= 1 and w % 2 == 1 and w <= 31 for w in v),

@@ -60,6 +60,7 @@ def _drop_stale_cache() -> None:
 _drop_stale_cache()
 
 from .pixel import UNDECIDED, build_ops  # noqa: E402
+from .volume import Volume, dense_index  # noqa: E402
 
 ops = build_ops(njit(cache=True))
 _ncc_cost = ops.ncc_cost
@@ -68,8 +69,29 @@ _box_sum = ops.box_sum
 _rbf_weight = ops.rbf_weight
 _seed_at = ops.seed_at
 _diffuse_at = ops.diffuse_at
-_inherit_at = ops.inherit_at
+_inherit_patch = ops.inherit_patch
+_inherit_pixel = ops.inherit_pixel
 _subpixel_at = ops.subpixel_at
+
+#: Rows per parallel task of the NCC driver (one running window sum per task).
+NCC_BLOCK_ROWS = 32
+
+
+# ----------------------------------------------------------------------------- volumes
+def _unpack(cost):
+    """``(flat cost, index, n_disp, dense shape or None)`` of a Volume or an (H, W, D) array."""
+    if isinstance(cost, Volume):
+        return cost.cost, cost.index, int(cost.n_disp), None
+    cost = np.ascontiguousarray(cost)
+    h, w, n_disp = cost.shape
+    return cost.reshape(-1), dense_index(h, w, n_disp), n_disp, cost.shape
+
+
+def _pack(flat, index, n_disp, dense_shape):
+    """The result in the caller's kind: a Volume, or an (H, W, D) array."""
+    if dense_shape is not None:
+        return flat.reshape(dense_shape)
+    return Volume(flat, index, n_disp)
 
 
 @njit(cache=True)
@@ -86,8 +108,87 @@ def integral_image(img, power):
     return ii
 
 
-@njit(parallel=True, cache=True)
-def ncc_cost_volume(left, right, max_disparity, window, min_variance):
+# ----------------------------------------------------------------------------- band search (issue 10)
+@njit(cache=True)
+def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
+    """Stored and visible indexes of a finer level's banded volume (host side, any backend).
+
+    The rules are those of :mod:`d3cli.method.band` (its docstring explains them; its
+    tests hold a NumPy reference): per tile ``[2 min dc - margin, 2 max dc + margin]``
+    over the decided coarse pixels under it (the full range when none is); visible per
+    pixel the hull of that over its tile and the eight around it; stored per pixel the
+    hull of the visible bands of the tiles within ``halo``.
+
+    Returns
+    -------
+    store, visible : ndarray, int32, (h, w, 3)
+    n_cells : int
+    """
+    ch, cw = coarse.shape
+    nty = (h + tile - 1) // tile
+    ntx = (w + tile - 1) // tile
+    t_min = np.full((nty, ntx), np.iinfo(np.int64).max, np.int64)
+    t_max = np.full((nty, ntx), -1, np.int64)
+    for v in range(h):
+        cv = min(v // 2, ch - 1)
+        ty = v // tile
+        for u in range(w):
+            dc = coarse[cv, min(u // 2, cw - 1)]
+            if dc >= 0:
+                tx = u // tile
+                if dc < t_min[ty, tx]:
+                    t_min[ty, tx] = dc
+                if dc > t_max[ty, tx]:
+                    t_max[ty, tx] = dc
+    own_lo = np.zeros((nty, ntx), np.int64)
+    own_hi = np.full((nty, ntx), n_disp, np.int64)
+    for ty in range(nty):
+        for tx in range(ntx):
+            if t_max[ty, tx] >= 0:
+                lo = min(max(2 * t_min[ty, tx] - margin, 0), n_disp - 1)
+                hi = min(max(2 * t_max[ty, tx] + margin + 1, 1), n_disp)
+                own_lo[ty, tx] = lo
+                own_hi[ty, tx] = max(hi, lo + 1)
+    # each tile's band: the hull over itself and the eight tiles around it
+    t_lo = own_lo.copy()
+    t_hi = own_hi.copy()
+    for ty in range(nty):
+        for tx in range(ntx):
+            for yy in range(max(ty - 1, 0), min(ty + 1, nty - 1) + 1):
+                for xx in range(max(tx - 1, 0), min(tx + 1, ntx - 1) + 1):
+                    t_lo[ty, tx] = min(t_lo[ty, tx], own_lo[yy, xx])
+                    t_hi[ty, tx] = max(t_hi[ty, tx], own_hi[yy, xx])
+    store = np.empty((h, w, 3), np.int32)
+    visible = np.empty((h, w, 3), np.int32)
+    base = 0
+    for v in range(h):
+        ty0 = min(max((v - halo) // tile, 0), nty - 1)
+        ty1 = min(max((v + halo) // tile, 0), nty - 1)
+        ty = v // tile
+        for u in range(w):
+            tx0 = min(max((u - halo) // tile, 0), ntx - 1)
+            tx1 = min(max((u + halo) // tile, 0), ntx - 1)
+            tx = u // tile
+            lo = t_lo[ty, tx]
+            hi = t_hi[ty, tx]
+            s_lo = lo
+            s_hi = hi
+            for yy in range(ty0, ty1 + 1):
+                for xx in range(tx0, tx1 + 1):
+                    s_lo = min(s_lo, t_lo[yy, xx])
+                    s_hi = max(s_hi, t_hi[yy, xx])
+            store[v, u, 0] = base - s_lo
+            store[v, u, 1] = s_lo
+            store[v, u, 2] = s_hi
+            visible[v, u, 0] = base - s_lo
+            visible[v, u, 1] = lo
+            visible[v, u, 2] = hi
+            base += s_hi - s_lo
+    return store, visible, base
+
+
+# ----------------------------------------------------------------------------- matching cost (step 2)
+def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None):
     """NCC cost volume ``(1 - NCC) / 2`` with box sums (DESIGN step 2).
 
     The window is clipped to the part where both the left window around (u, v) and the
@@ -99,74 +200,118 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance):
     left, right : ndarray, float32, (H, W)
         Grey images, 0-255 scale.
     max_disparity : int
-        Largest disparity; the volume has ``max_disparity + 1`` slices.
+        Largest disparity of the level (``n_disp = max_disparity + 1``).
     window : int
         Odd window size.
     min_variance : float
         Grey-level variance at or below which a window is flat.
+    index : ndarray, int32, (H, W, 3), optional
+        Bands to compute (:mod:`d3cli.kernels.volume`); default the full range.
 
     Returns
     -------
     ndarray, float32, (H, W, max_disparity + 1)
+        Without ``index``; with it a :class:`Volume` of those bands.  A cell holds the
+        same value whatever band it is computed in.
     """
     h, w = left.shape
-    n_disp = max_disparity + 1
+    n_disp = int(max_disparity) + 1
+    dense = index is None
+    if dense:
+        index = dense_index(h, w, n_disp)
+    n_cells = int(index[-1, -1, 0]) + int(index[-1, -1, 2])
+    flat = _ncc_banded(left, right, index, n_disp, n_cells, int(window), float(min_variance))
+    return _pack(flat, index, n_disp, (h, w, n_disp) if dense else None)
+
+
+@njit(parallel=True, cache=True)
+def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
+    h, w = left.shape
     r = window // 2
     ii_l = integral_image(left, 1)
     ii_ll = integral_image(left, 2)
     ii_r = integral_image(right, 1)
     ii_rr = integral_image(right, 2)
-    cost = np.empty((h, w, n_disp), np.float32)
+    cost = np.empty(n_cells, np.float32)
     # The rows are cut into blocks, one prange task each; inside a block acc is a running
-    # sum along the rows (add the row entering the window, subtract the one leaving it), so
-    # the work per output row no longer grows with the window (issue 10 item 2; before,
-    # every output row re-summed all ``window`` rows).  float64 keeps the add/subtract
-    # drift far below the 1e-5 cost tolerance (values <= 255^2 * window^2).
-    block = 32
+    # sum along the rows (add the row entering the window, subtract the one leaving it),
+    # and along a row the window sum over columns slides too, so the work per cell does
+    # not grow with the window (issue 10 item 2).  acc holds, per column, only the
+    # disparities some pixel within the window radius needs (the hull of their bands).
+    # float64 keeps the add/subtract drift far below the 1e-5 cost tolerance (values
+    # <= 255^2 * window^2; float32 sums drift by more than that: measured, see tests).
+    block = NCC_BLOCK_ROWS
     n_blocks = (h + block - 1) // block
     for b in prange(n_blocks):
         vb0 = b * block
         vb1 = min(h, vb0 + block)
+        col_lo = np.empty(w, np.int64)
+        col_hi = np.empty(w, np.int64)
+        for u in range(w):
+            lo = n_disp
+            hi = 0
+            for v in range(vb0, vb1):
+                if index[v, u, 2] > index[v, u, 1]:
+                    lo = min(lo, index[v, u, 1])
+                    hi = max(hi, index[v, u, 2])
+            col_lo[u] = lo
+            col_hi[u] = hi
+        acc_lo = np.empty(w, np.int64)
+        acc_hi = np.empty(w, np.int64)
+        for u in range(w):
+            lo = n_disp
+            hi = 0
+            for c in range(max(0, u - r), min(w - 1, u + r) + 1):
+                lo = min(lo, col_lo[c])
+                hi = max(hi, col_hi[c])
+            acc_lo[u] = lo
+            acc_hi[u] = min(hi, u + 1)  # d > u: the right pixel is outside the image
         # acc[u, d]: column sum over the window rows of L(y, u) R(y, u - d)
         acc = np.zeros((w, n_disp), np.float64)
-        prefix = np.zeros((w + 1, n_disp), np.float64)
+        win = np.zeros(n_disp, np.float64)
         win_l = np.zeros(w, np.float64)
         win_ll = np.zeros(w, np.float64)
         win_r = np.zeros(w, np.float64)
         win_rr = np.zeros(w, np.float64)
         for y in range(max(0, vb0 - r), min(h - 1, vb0 + r) + 1):
-            _add_row_products(acc, left, right, y, 1.0)
+            _add_row_products(acc, acc_lo, acc_hi, left, right, y, 1.0)
         for v in range(vb0, vb1):
             if v > vb0:
                 if v + r <= h - 1:
-                    _add_row_products(acc, left, right, v + r, 1.0)
+                    _add_row_products(acc, acc_lo, acc_hi, left, right, v + r, 1.0)
                 if v - r - 1 >= 0:
-                    _add_row_products(acc, left, right, v - r - 1, -1.0)
-            _ncc_row(cost, v, acc, prefix, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii_r, ii_rr,
-                     h, w, n_disp, r, min_variance)
+                    _add_row_products(acc, acc_lo, acc_hi, left, right, v - r - 1, -1.0)
+            _ncc_row(cost, index, v, acc, win, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii_r, ii_rr,
+                     h, w, r, min_variance)
     return cost
 
 
 @njit(cache=True)
-def _add_row_products(acc, left, right, y, sign):
-    """acc[u, d] += sign * L(y, u) R(y, u - d) for every u, d with u - d >= 0."""
-    w, n_disp = acc.shape
+def _add_row_products(acc, acc_lo, acc_hi, left, right, y, sign):
+    """acc[u, d] += sign * L(y, u) R(y, u - d) for every u and acc_lo[u] <= d < acc_hi[u]."""
+    w = acc.shape[0]
     for u in range(w):
         lv = sign * np.float64(left[y, u])
-        for d in range(min(n_disp, u + 1)):
-            acc[u, d] += lv * np.float64(right[y, u - d])
+        lo = acc_lo[u]
+        n = acc_hi[u] - lo
+        if n <= 0:
+            continue
+        row = acc[u, lo:lo + n]
+        for i in range(n):
+            row[i] += lv * np.float64(right[y, u - lo - i])
 
 
 @njit(cache=True)
-def _ncc_row(cost, v, acc, prefix, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii_r, ii_rr,
-             h, w, n_disp, r, min_variance):
-    """Costs of row v from the window-row column sums ``acc`` (buffers reused per row)."""
+def _ncc_row(cost, index, v, acc, win, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii_r, ii_rr,
+             h, w, r, min_variance):
+    """Costs of the bands of row v from the window-row column sums ``acc``.
+
+    ``win[d]`` is the window sum of ``acc`` over the columns u - r .. u + r; it slides
+    from column to column while the band stays the same and the window is not clipped,
+    and is summed afresh otherwise.
+    """
     v0 = max(0, v - r)
     v1 = min(h - 1, v + r)
-    # prefix[u + 1, d]: running sum of acc over the columns <= u
-    for u in range(w):
-        for d in range(n_disp):
-            prefix[u + 1, d] = prefix[u, d] + acc[u, d]
     # Window sums of an unclipped window (columns c - r .. c + r), once per column
     # instead of once per cell; the same box sums, so the same values.
     for c in range(r, w - r):
@@ -175,17 +320,45 @@ def _ncc_row(cost, v, acc, prefix, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii
         win_r[c] = _box_sum(ii_r, v0, c - r, v1, c + r)
         win_rr[c] = _box_sum(ii_rr, v0, c - r, v1, c + r)
     n_full = (v1 - v0 + 1) * (2 * r + 1)
+    run_lo = 0
+    run_hi = -1  # no running window sum yet
     for u in range(w):
-        # d < d_fast: neither window is clipped (a branch-free loop that vectorises)
-        d_fast = min(n_disp, u - r + 1) if u + r <= w - 1 else 0
-        sl_u = win_l[u]
-        sll_u = win_ll[u]
-        for d in range(d_fast):
-            slr = prefix[u + r + 1, d] - prefix[u - r, d]
-            cost[v, u, d] = _ncc_cost(n_full, sl_u, sll_u, win_r[u - d], win_rr[u - d], slr, min_variance)
-        for d in range(max(d_fast, 0), n_disp):
+        off = index[v, u, 0]
+        lo = index[v, u, 1]
+        hi = index[v, u, 2]
+        # d < d_fast: neither window is clipped
+        d_fast = min(hi, u - r + 1) if u + r <= w - 1 else lo
+        if d_fast < lo:
+            d_fast = lo
+        if d_fast > lo:
+            # slices: indices from range(n) are known >= 0, so the loops vectorise
+            n = d_fast - lo
+            run = win[lo:d_fast]
+            if run_lo == lo and run_hi == d_fast and u > r:
+                enter = acc[u + r, lo:d_fast]
+                leave = acc[u - r - 1, lo:d_fast]
+                for i in range(n):  # slide by one column
+                    run[i] += enter[i] - leave[i]
+            else:
+                for i in range(n):
+                    run[i] = 0.0
+                for c in range(u - r, u + r + 1):
+                    col = acc[c, lo:d_fast]
+                    for i in range(n):
+                        run[i] += col[i]
+            run_lo = lo
+            run_hi = d_fast
+            sl_u = win_l[u]
+            sll_u = win_ll[u]
+            out = cost[off + lo:off + d_fast]
+            for i in range(n):
+                x = u - lo - i
+                out[i] = _ncc_cost(n_full, sl_u, sll_u, win_r[x], win_rr[x], run[i], min_variance)
+        else:
+            run_hi = -1
+        for d in range(d_fast, hi):
             if u - d < 0:
-                cost[v, u, d] = 1.0
+                cost[off + d] = 1.0
                 continue
             c0 = max(u - r, d)
             c1 = min(u + r, w - 1)
@@ -194,12 +367,13 @@ def _ncc_row(cost, v, acc, prefix, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii
             sll = _box_sum(ii_ll, v0, c0, v1, c1)
             sr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d)
             srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
-            slr = prefix[c1 + 1, d] - prefix[c0, d]
-            cost[v, u, d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+            slr = 0.0
+            for c in range(c0, c1 + 1):
+                slr += acc[c, d]
+            cost[off + d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
 
 
-@njit(parallel=True, cache=True)
-def cosine_cost_volume(fl, fr, nl, nr, max_disparity):
+def cosine_cost_volume(fl, fr, nl, nr, max_disparity, index=None):
     """Deep-feature cost volume ``(1 - cos) / 2`` of one level (DESIGN step 2, features).
 
     Parameters
@@ -209,38 +383,60 @@ def cosine_cost_volume(fl, fr, nl, nr, max_disparity):
     nl, nr : ndarray, float32, (H, W)
         Their squared norms: 1, or 0 for a zero feature vector (cost 1).
     max_disparity : int
-        The volume has ``max_disparity + 1`` slices.
+        The level's range is ``max_disparity + 1`` disparities.
+    index : ndarray, int32, (H, W, 3), optional
+        Bands to compute; default the full range.
 
     Returns
     -------
-    ndarray, float32, (H, W, max_disparity + 1)
+    ndarray, float32, (H, W, max_disparity + 1), or a :class:`Volume` with ``index``
         1 where u - d < 0 or a feature vector is zero.
     """
     h, w = nl.shape
-    n_disp = max_disparity + 1
-    cost = np.empty((h, w, n_disp), np.float32)
-    for v in prange(h):
-        for u in range(w):
-            for d in range(n_disp):
-                cost[v, u, d] = _cosine_cost(fl, fr, nl, nr, v, u, d)
-    return cost
+    n_disp = int(max_disparity) + 1
+    dense = index is None
+    if dense:
+        index = dense_index(h, w, n_disp)
+    n_cells = int(index[-1, -1, 0]) + int(index[-1, -1, 2])
+    flat = _cosine_banded(fl, fr, nl, nr, index, n_cells)
+    return _pack(flat, index, n_disp, (h, w, n_disp) if dense else None)
 
 
 @njit(parallel=True, cache=True)
+def _cosine_banded(fl, fr, nl, nr, index, n_cells):
+    h, w = nl.shape
+    cost = np.empty(n_cells, np.float32)
+    for v in prange(h):
+        for u in range(w):
+            off = index[v, u, 0]
+            for d in range(index[v, u, 1], index[v, u, 2]):
+                cost[off + d] = _cosine_cost(fl, fr, nl, nr, v, u, d)
+    return cost
+
+
 def invalidate_out_of_view(cost):
     """Set every cell whose right pixel u - d is outside the image back to 1, in place.
 
     Aggregation averages such cells with valid neighbours and pulls them below 1; reset
     after it, they keep their meaning: no match, never a winner (DESIGN step 2).
+    Returns ``cost`` (a Volume or an (H, W, D) array).
     """
-    h, w, n_disp = cost.shape
-    for v in prange(h):
-        for u in range(min(w, n_disp - 1)):
-            for d in range(u + 1, n_disp):
-                cost[v, u, d] = 1.0
+    flat, index, _, _ = _unpack(cost)
+    _invalidate(flat, index)
     return cost
 
 
+@njit(parallel=True, cache=True)
+def _invalidate(cost, index):
+    h, w, _ = index.shape
+    for v in prange(h):
+        for u in range(w):
+            off = index[v, u, 0]
+            for d in range(max(index[v, u, 1], u + 1), index[v, u, 2]):
+                cost[off + d] = 1.0
+
+
+# ----------------------------------------------------------------------------- aggregation (step 3)
 @njit(parallel=True, cache=True)
 def rbf_weights(img, sigma_space, sigma_color):
     """Normalised 3x3 bilateral weights per pixel (paper eq. 3), computed once per level.
@@ -270,42 +466,113 @@ def rbf_weights(img, sigma_space, sigma_color):
 
 
 @njit(parallel=True, cache=True)
-def _rbf_pass(src, dst, weights):
-    """One 3x3 pass of eq. 2 from ``src`` into ``dst``.
+def _uniform_bands(index):
+    """uint8 (H, W): 1 where the 3x3 neighbours (clamped at the border) share the band."""
+    h, w, _ = index.shape
+    out = np.zeros((h, w), np.uint8)
+    for v in prange(h):
+        for u in range(w):
+            lo = index[v, u, 1]
+            hi = index[v, u, 2]
+            same = 1
+            for y in range(max(v - 1, 0), min(v + 1, h - 1) + 1):
+                for x in range(max(u - 1, 0), min(u + 1, w - 1) + 1):
+                    if index[y, x, 1] != lo or index[y, x, 2] != hi:
+                        same = 0
+            out[v, u] = same
+    return out
 
-    The nine terms are added in slot order k = 0..8 in one loop over the disparities
-    (vectorised; one write per cell).  Neighbours outside the image have weight 0 and
-    read a clamped, in-image cell: adding +0.0 leaves the (non-negative) sum unchanged,
-    so the result is the same as skipping them.
+
+@njit(parallel=True, cache=True)
+def _rbf_pass(src, dst, index, uniform, weights, max_band):
+    """One 3x3 pass of eq. 2 from ``src`` into ``dst`` (flat volumes of one index).
+
+    The nine terms are added in slot order k = 0..8 in float32 (one write per cell).
+    Neighbours outside the image have weight 0 and read a clamped, in-image cell: adding
+    +0.0 leaves the (non-negative) sum unchanged, so the result is the same as skipping
+    them.  Where all nine share the pixel's band (``uniform``) their cells sit at fixed
+    distances (a pixel of band size B follows its left neighbour by B cells) and one
+    vectorised loop does it.  Elsewhere, where a neighbour's band lacks a disparity of
+    the pixel's band, the pixel's own cell stands in: the bands are built
+    (:mod:`d3cli.method.band`) so that this never happens for a cell the later steps
+    read, it only keeps the halo cells finite.
     """
-    h, w, n_disp = src.shape
+    h, w, _ = index.shape
     for v in prange(h):
         ym = max(v - 1, 0)
         yp = min(v + 1, h - 1)
+        acc = np.empty(max_band, np.float32)
         for u in range(w):
-            xm = max(u - 1, 0)
-            xp = min(u + 1, w - 1)
-            w0 = weights[v, u, 0]
-            w1 = weights[v, u, 1]
-            w2 = weights[v, u, 2]
-            w3 = weights[v, u, 3]
-            w4 = weights[v, u, 4]
-            w5 = weights[v, u, 5]
-            w6 = weights[v, u, 6]
-            w7 = weights[v, u, 7]
-            w8 = weights[v, u, 8]
-            for d in range(n_disp):
-                acc = np.float32(0.0)
-                acc += w0 * src[ym, xm, d]
-                acc += w1 * src[ym, u, d]
-                acc += w2 * src[ym, xp, d]
-                acc += w3 * src[v, xm, d]
-                acc += w4 * src[v, u, d]
-                acc += w5 * src[v, xp, d]
-                acc += w6 * src[yp, xm, d]
-                acc += w7 * src[yp, u, d]
-                acc += w8 * src[yp, xp, d]
-                dst[v, u, d] = acc
+            off = index[v, u, 0]
+            lo = index[v, u, 1]
+            hi = index[v, u, 2]
+            if hi <= lo:
+                continue
+            if uniform[v, u]:
+                band = hi - lo
+                dl = -band if u > 0 else 0
+                dr = band if u < w - 1 else 0
+                o1 = index[ym, u, 0]
+                o7 = index[yp, u, 0]
+                o0 = o1 + dl
+                o2 = o1 + dr
+                o3 = off + dl
+                o5 = off + dr
+                o6 = o7 + dl
+                o8 = o7 + dr
+                w0 = weights[v, u, 0]
+                w1 = weights[v, u, 1]
+                w2 = weights[v, u, 2]
+                w3 = weights[v, u, 3]
+                w4 = weights[v, u, 4]
+                w5 = weights[v, u, 5]
+                w6 = weights[v, u, 6]
+                w7 = weights[v, u, 7]
+                w8 = weights[v, u, 8]
+                # slices: indices from range(n) are known >= 0, so numba adds no
+                # negative-index wraparound and the loop vectorises (4.5x, measured)
+                s0 = src[o0 + lo:o0 + hi]
+                s1 = src[o1 + lo:o1 + hi]
+                s2 = src[o2 + lo:o2 + hi]
+                s3 = src[o3 + lo:o3 + hi]
+                s4 = src[off + lo:off + hi]
+                s5 = src[o5 + lo:o5 + hi]
+                s6 = src[o6 + lo:o6 + hi]
+                s7 = src[o7 + lo:o7 + hi]
+                s8 = src[o8 + lo:o8 + hi]
+                out = dst[off + lo:off + hi]
+                for i in range(band):
+                    a = np.float32(0.0)
+                    a += w0 * s0[i]
+                    a += w1 * s1[i]
+                    a += w2 * s2[i]
+                    a += w3 * s3[i]
+                    a += w4 * s4[i]
+                    a += w5 * s5[i]
+                    a += w6 * s6[i]
+                    a += w7 * s7[i]
+                    a += w8 * s8[i]
+                    out[i] = a
+                continue
+            for i in range(hi - lo):
+                acc[i] = 0.0
+            for k in range(9):
+                y = min(max(v + k // 3 - 1, 0), h - 1)
+                x = min(max(u + k % 3 - 1, 0), w - 1)
+                wk = weights[v, u, k]
+                q_off = index[y, x, 0]
+                a0 = max(lo, index[y, x, 1])
+                a1 = min(hi, index[y, x, 2])
+                if a1 < a0:
+                    a1 = a0
+                for d in range(lo, a0):
+                    acc[d - lo] += wk * src[off + d]
+                for d in range(a0, a1):
+                    acc[d - lo] += wk * src[q_off + d]
+                for d in range(max(a1, lo), hi):
+                    acc[d - lo] += wk * src[off + d]
+            for d in range(lo, hi):
+                dst[off + d] = acc[d - lo]
 
 
 def rbf_filter(cost, weights, t_max, overwrite_input=False):
@@ -313,7 +580,7 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
 
     Parameters
     ----------
-    cost : ndarray, float32, (H, W, D)
+    cost : Volume or ndarray, float32, (H, W, D)
     weights : ndarray, float32, (H, W, 9)
         From :func:`rbf_weights`.
     t_max : int
@@ -324,37 +591,53 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
 
     Returns
     -------
-    ndarray, float32, (H, W, D)
-        A new array, or ``cost`` itself with ``overwrite_input`` and an even ``t_max``.
+    Volume or ndarray, float32, (H, W, D)
+        The same kind as ``cost``; a new array, or ``cost``'s own with
+        ``overwrite_input`` and an even ``t_max``.
     """
+    flat, index, n_disp, dense_shape = _unpack(cost)
     if t_max == 0:
-        return cost if overwrite_input else cost.copy()
+        return _pack(flat if overwrite_input else flat.copy(), index, n_disp, dense_shape)
+    max_band = max(1, int((index[:, :, 2] - index[:, :, 1]).max()))
+    uniform = _uniform_bands(index)
     # The first pass reads ``cost`` directly, so no copy of the input volume is made.
-    src = np.empty_like(cost)
-    _rbf_pass(cost, src, weights)
-    if t_max == 1:
-        return src
-    dst = cost if overwrite_input else np.empty_like(cost)
-    for _ in range(t_max - 1):
-        _rbf_pass(src, dst, weights)
-        src, dst = dst, src
-    return src
+    src = np.empty_like(flat)
+    _rbf_pass(flat, src, index, uniform, weights, max_band)
+    if t_max > 1:
+        dst = flat if overwrite_input else np.empty_like(flat)
+        for _ in range(t_max - 1):
+            _rbf_pass(src, dst, index, uniform, weights, max_band)
+            src, dst = dst, src
+    return _pack(src, index, n_disp, dense_shape)
 
 
-@njit(parallel=True, cache=True)
 def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
     """One pass of a plain (2 radius + 1)^2 bilateral filter over every disparity slice.
 
     The ablation counterpart of RBF (paper Fig. 4): same kernel as eq. 3, larger support.
+    A neighbour whose band lacks the disparity contributes the pixel's own cell (as in
+    :func:`rbf_filter`; never for a cell the later steps read).
     """
-    h, w, n_disp = cost.shape
+    flat, index, n_disp, dense_shape = _unpack(cost)
+    max_band = max(1, int((index[:, :, 2] - index[:, :, 1]).max()))
+    out = _bilateral(flat, index, img, int(radius), float(sigma_space), float(sigma_color), max_band)
+    return _pack(out, index, n_disp, dense_shape)
+
+
+@njit(parallel=True, cache=True)
+def _bilateral(cost, index, img, radius, sigma_space, sigma_color, max_band):
+    h, w, _ = index.shape
     inv_ss2 = 1.0 / (sigma_space * sigma_space)
     inv_sc2 = 1.0 / (sigma_color * sigma_color)
     out = np.empty_like(cost)
     for v in prange(h):
-        acc = np.empty(n_disp, np.float64)
+        acc = np.empty(max_band, np.float64)
         for u in range(w):
-            acc[:] = 0.0
+            off = index[v, u, 0]
+            lo = index[v, u, 1]
+            hi = index[v, u, 2]
+            for i in range(hi - lo):
+                acc[i] = 0.0
             total = 0.0
             for dy in range(-radius, radius + 1):
                 y = v + dy
@@ -366,30 +649,55 @@ def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
                         continue
                     wk = _rbf_weight(dy, dx, np.float64(img[v, u]), np.float64(img[y, x]), inv_ss2, inv_sc2)
                     total += wk
-                    for d in range(n_disp):
-                        acc[d] += wk * cost[y, x, d]
-            for d in range(n_disp):
-                out[v, u, d] = acc[d] / total
+                    q_off = index[y, x, 0]
+                    q_lo = index[y, x, 1]
+                    q_hi = index[y, x, 2]
+                    for d in range(lo, hi):
+                        if q_lo <= d < q_hi:
+                            acc[d - lo] += wk * cost[q_off + d]
+                        else:
+                            acc[d - lo] += wk * cost[off + d]
+            for d in range(lo, hi):
+                out[off + d] = acc[d - lo] / total
     return out
 
 
+# ----------------------------------------------------------------------------- seeds (step 4)
+def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None):
+    """Sparse seed map (DESIGN step 4); int32 (H, W), -1 undecided.
+
+    ``skip`` (int32 (H, W), optional): pixels decided there (>= 0) are not examined and
+    stay -1 (the pipeline merges fresh seeds only where inheritance left a hole).
+    """
+    flat, index, n_disp, _ = _unpack(cost)
+    has_skip = skip is not None
+    if not has_skip:
+        skip = np.empty((1, 1), np.int32)
+    return _seeds(flat, index, n_disp, float(pkrn_min), float(epsilon), int(lr_tolerance), int(exclusion),
+                  skip, has_skip)
+
+
 @njit(parallel=True, cache=True)
-def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion):
-    """Sparse seed map at the coarsest level (DESIGN step 4); int32 (H, W), -1 undecided."""
-    h, w, _ = cost.shape
+def _seeds(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip, has_skip):
+    h, w, _ = index.shape
     out = np.empty((h, w), np.int32)
     for v in prange(h):
         for u in range(w):
-            out[v, u] = _seed_at(cost, v, u, pkrn_min, epsilon, lr_tolerance, exclusion)
+            if has_skip and skip[v, u] >= 0:
+                out[v, u] = UNDECIDED
+            else:
+                out[v, u] = _seed_at(cost, index, n_disp, v, u, pkrn_min, epsilon, lr_tolerance, exclusion)
     return out
 
 
+# ----------------------------------------------------------------------------- diffusion (step 5)
 @njit(parallel=True, cache=True)
-def _evaluate_frontier(cost, disp, min_cost, max_gap, active, n_active, new_values, tau, kappa_d, adversarial):
+def _evaluate_frontier(cost, index, disp, min_cost, max_gap, active, n_active, new_values, tau, kappa_d,
+                       adversarial):
     w = disp.shape[1]
     for i in prange(n_active):
         p = active[i]
-        new_values[i] = _diffuse_at(cost, disp, min_cost, max_gap, p // w, p % w, tau, kappa_d, adversarial)
+        new_values[i] = _diffuse_at(cost, index, disp, min_cost, max_gap, p // w, p % w, tau, kappa_d, adversarial)
 
 
 @njit(cache=True)
@@ -416,17 +724,16 @@ def _build_frontier(changed, n_changed, stamp, sweep, active, h, w, kappa_d):
     return n_active
 
 
-@njit(cache=True)
 def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweeps):
     """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 5-6).
 
     Parameters
     ----------
-    cost : ndarray, float32, (H, W, D)
+    cost : Volume or ndarray, float32, (H, W, D)
     disp0 : ndarray, int32, (H, W)
         Sparse decisive map D_i^S (-1 undecided); not modified.
     min_cost : ndarray, float32, (H, W)
-        Least cost of each pixel over all disparities (:func:`min_cost`).
+        Least cost of each pixel over its band (:func:`min_cost`).
     max_gap : float
         Accepted states cost at most min_cost + max_gap; < 0: off.
     tau, kappa_d : int
@@ -442,6 +749,13 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     sweeps : int
         Sweeps run (the last one changed nothing unless the safeguard stopped it).
     """
+    flat, index, _, _ = _unpack(cost)
+    return _diffuse(flat, index, disp0, min_cost, float(max_gap), int(tau), int(kappa_d), bool(adversarial),
+                    int(max_sweeps))
+
+
+@njit(cache=True)
+def _diffuse(cost, index, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweeps):
     h, w = disp0.shape
     disp = disp0.copy()
     flat = disp.reshape(h * w)  # a view: writes go to disp
@@ -458,7 +772,8 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     while n_changed > 0 and sweeps < max_sweeps:
         sweeps += 1
         n_active = _build_frontier(changed, n_changed, stamp, sweeps, active, h, w, kappa_d)
-        _evaluate_frontier(cost, disp, min_cost, max_gap, active, n_active, new_values, tau, kappa_d, adversarial)
+        _evaluate_frontier(cost, index, disp, min_cost, max_gap, active, n_active, new_values, tau, kappa_d,
+                           adversarial)
         # Jacobi: every frontier pixel read the previous map; apply all changes after.
         n_changed = 0
         for i in range(n_active):
@@ -472,28 +787,41 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     return disp, sweeps
 
 
-@njit(parallel=True, cache=True)
 def min_cost(cost):
-    """Least cost of every pixel over all disparities; float32 (H, W)."""
-    h, w, n_disp = cost.shape
+    """Least cost of every pixel over its band; float32 (H, W) (1 for an empty band)."""
+    flat, index, _, _ = _unpack(cost)
+    return _min_cost(flat, index)
+
+
+@njit(parallel=True, cache=True)
+def _min_cost(cost, index):
+    h, w, _ = index.shape
     out = np.empty((h, w), np.float32)
     for v in prange(h):
         for u in range(w):
-            best = cost[v, u, 0]
-            for d in range(1, n_disp):
-                if cost[v, u, d] < best:
-                    best = cost[v, u, d]
+            off = index[v, u, 0]
+            best = np.float32(1.0)
+            lo = index[v, u, 1]
+            hi = index[v, u, 2]
+            if hi > lo:
+                best = cost[off + lo]
+                for d in range(lo + 1, hi):
+                    if cost[off + d] < best:
+                        best = cost[off + d]
             out[v, u] = best
     return out
 
 
-@njit(parallel=True, cache=True)
+# ----------------------------------------------------------------------------- inheritance (step 7)
 def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
     """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
 
+    The patch tests (eq. 7-8) run once per coarse pixel and serve the four fine pixels
+    of its 2x2 patch; the pixel test (eq. 9) per fine pixel.
+
     Parameters
     ----------
-    cost : ndarray, float32, (H, W, D)
+    cost : Volume or ndarray, float32, (H, W, D)
         Cost volume of the finer level i.
     coarse : ndarray, int32, (>= H // 2, >= W // 2)
         Disparity map of level i + 1 (-1 undecided).
@@ -503,22 +831,47 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
     ndarray, int32, (H, W)
         Sparse map D_i^S.
     """
-    h, w, _ = cost.shape
-    out = np.empty((h, w), np.int32)
-    for v in prange(h):
-        for u in range(w):
-            out[v, u] = _inherit_at(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon)
-    return out
+    flat, index, _, _ = _unpack(cost)
+    return _inherit(flat, index, coarse, bool(prc), float(dfm_pkrn_min), float(epsilon))
 
 
 @njit(parallel=True, cache=True)
+def _inherit(cost, index, coarse, prc, dfm_pkrn_min, epsilon):
+    h, w, _ = index.shape
+    out = np.empty((h, w), np.int32)
+    for pv in prange((h + 1) // 2):
+        for pu in range((w + 1) // 2):
+            d, least_l, least_r = _inherit_patch(cost, index, coarse, pv, pu, prc)
+            for b in range(2):
+                v = 2 * pv + b
+                if v >= h:
+                    continue
+                for a in range(2):
+                    u = 2 * pu + a
+                    if u >= w:
+                        continue
+                    if d < 0:
+                        out[v, u] = UNDECIDED
+                    else:
+                        out[v, u] = _inherit_pixel(cost, index, v, u, d, least_l, least_r, prc, dfm_pkrn_min,
+                                                   epsilon)
+    return out
+
+
+# ----------------------------------------------------------------------------- sub-pixel (step 8)
 def subpixel(cost, disp):
     """Parabola sub-pixel refinement (DESIGN step 8); float32 (H, W), inf where undecided."""
+    flat, index, _, _ = _unpack(cost)
+    return _subpixel(flat, index, disp)
+
+
+@njit(parallel=True, cache=True)
+def _subpixel(cost, index, disp):
     h, w = disp.shape
     out = np.empty((h, w), np.float32)
     for v in prange(h):
         for u in range(w):
-            out[v, u] = _subpixel_at(cost, disp, v, u)
+            out[v, u] = _subpixel_at(cost, index, disp, v, u)
     return out
 
 

@@ -24,6 +24,7 @@ import numpy as np
 from numba import cuda
 
 from .pixel import UNDECIDED, build_ops
+from .volume import Volume, dense_index
 
 #: Threads per block (x, y) of the image-shaped grids; x runs along columns (or
 #: column x disparity cells), y along rows.  Tests make it small to get several partly
@@ -114,6 +115,35 @@ def _zeros(n, dtype):
     return out
 
 
+def _unpack(cost):
+    """``(flat device cost, device index, n_disp, dense shape or None)`` of a Volume or an
+    (H, W, D) array (host or device), as ``cpu._unpack``."""
+    if isinstance(cost, Volume):
+        return _dev(cost.cost), _dev(cost.index), int(cost.n_disp), None
+    d_cost = _dev(cost)
+    h, w, n_disp = d_cost.shape
+    return d_cost.reshape(h * w * n_disp), cuda.to_device(dense_index(h, w, n_disp)), n_disp, (h, w, n_disp)
+
+
+def _pack(flat, index, n_disp, dense_shape):
+    """The result in the caller's kind: a Volume of device arrays, or an (H, W, D) device array."""
+    if dense_shape is not None:
+        return flat.reshape(*dense_shape)
+    return Volume(flat, index, n_disp)
+
+
+def _index_and_cells(index, h, w, n_disp):
+    """The device index (the full range when ``index`` is None) and its number of cells,
+    read from the host index before the upload (a device index costs one tiny download)."""
+    if index is None:
+        index = dense_index(h, w, n_disp)
+    if _is_device(index):
+        last = index[index.shape[0] - 1:, index.shape[1] - 1:, :].copy_to_host()
+    else:
+        last = np.asarray(index)[-1:, -1:, :]
+    return _dev(index), int(last[0, 0, 0]) + int(last[0, 0, 2])
+
+
 # ----------------------------------------------------------------------------- NCC cost (step 2)
 @cuda.jit
 def _row_prefix(img, power, rows):
@@ -184,104 +214,108 @@ def _cross_prefix(left, right, r, v_start, n_rows, prefix):
 
 
 @cuda.jit
-def _ncc_band(ii_l, ii_ll, ii_r, ii_rr, prefix, r, v_start, n_rows, min_variance, cost):
-    """Cost of every cell of a band of rows; one thread per (u * D + d, row of the band)."""
-    x, b = cuda.grid(2)
-    h = cost.shape[0]
-    w = cost.shape[1]
-    n_disp = cost.shape[2]
-    if x >= w * n_disp or b >= n_rows:
+def _ncc_band(ii_l, ii_ll, ii_r, ii_rr, prefix, index, r, v_start, n_rows, min_variance, cost):
+    """Costs of the bands of a band of rows; one thread per (column, row of the band)."""
+    u, b = cuda.grid(2)
+    h = index.shape[0]
+    w = index.shape[1]
+    if u >= w or b >= n_rows:
         return
-    u = x // n_disp
-    d = x % n_disp
     v = v_start + b
-    if u - d < 0:
-        cost[v, u, d] = 1.0
-        return
+    off = index[v, u, 0]
     v0 = max(0, v - r)
     v1 = min(h - 1, v + r)
-    c0 = max(u - r, d)
-    c1 = min(u + r, w - 1)
-    n = (v1 - v0 + 1) * (c1 - c0 + 1)
-    sl = _box_sum(ii_l, v0, c0, v1, c1)
-    sll = _box_sum(ii_ll, v0, c0, v1, c1)
-    sr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d)
-    srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
-    slr = prefix[b, c1 + 1, d] - prefix[b, c0, d]
-    cost[v, u, d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+    for d in range(index[v, u, 1], index[v, u, 2]):
+        if u - d < 0:
+            cost[off + d] = 1.0
+            continue
+        c0 = max(u - r, d)
+        c1 = min(u + r, w - 1)
+        n = (v1 - v0 + 1) * (c1 - c0 + 1)
+        sl = _box_sum(ii_l, v0, c0, v1, c1)
+        sll = _box_sum(ii_ll, v0, c0, v1, c1)
+        sr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d)
+        srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
+        slr = prefix[b, c1 + 1, d] - prefix[b, c0, d]
+        cost[off + d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
 
 
-def ncc_cost_volume(left, right, max_disparity, window, min_variance):
+def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None):
     """NCC cost volume ``(1 - NCC) / 2`` with box sums (DESIGN step 2), on the device.
 
     Integral images give the window sums of L, L^2, R and R^2; the cross term L*R comes
-    from per-row prefix sums of window-column sums, as on the CPU.  Rows are processed
-    in bands so that the float64 scratch stays under :data:`NCC_SCRATCH_BYTES`.
+    from per-row prefix sums of window-column sums.  Rows are processed in bands so that
+    the float64 scratch stays under :data:`NCC_SCRATCH_BYTES`.  The prefix sums cover
+    every disparity of the level (one thread per disparity and row; cheap on a GPU),
+    the costs only the cells of ``index``.
 
     Parameters
     ----------
     left, right : float32 (H, W), device or host
         Grey images, 0-255 scale.
     max_disparity : int
-        Largest disparity; the volume has ``max_disparity + 1`` slices.
+        Largest disparity of the level (``n_disp = max_disparity + 1``).
     window : int
         Odd window size.
     min_variance : float
         Grey-level variance at or below which a window is flat (cost 1).
+    index : int32 (H, W, 3), host (uploaded here, once) or device, optional
+        Bands to compute (:mod:`d3cli.kernels.volume`); default the full range.
 
     Returns
     -------
-    device array, float32, (H, W, max_disparity + 1)
+    device array, float32, (H, W, max_disparity + 1); with ``index`` a Volume
         1 where u - d < 0 or a window is flat.
     """
     d_left = _dev(left)
     d_right = _dev(right)
     h, w = d_left.shape
     n_disp = int(max_disparity) + 1
+    dense = index is None
+    d_index, n_cells = _index_and_cells(index, h, w, n_disp)
     r = int(window) // 2
     ii_l = _integral_image(d_left, 1)
     ii_ll = _integral_image(d_left, 2)
     ii_r = _integral_image(d_right, 1)
     ii_rr = _integral_image(d_right, 2)
-    cost = cuda.device_array((h, w, n_disp), np.float32)
+    cost = cuda.device_array(n_cells, np.float32)
     band = max(1, min(h, int(NCC_SCRATCH_BYTES) // ((w + 1) * n_disp * 8)))
     prefix = cuda.device_array((band, w + 1, n_disp), np.float64)
     for v_start in range(0, h, band):
         n_rows = min(band, h - v_start)
         blocks, threads = _grid_2d(n_disp, n_rows)
         _cross_prefix[blocks, threads](d_left, d_right, r, v_start, n_rows, prefix)
-        blocks, threads = _grid_2d(w * n_disp, n_rows)
-        _ncc_band[blocks, threads](ii_l, ii_ll, ii_r, ii_rr, prefix, r, v_start, n_rows, _f64(min_variance), cost)
-    return cost
+        blocks, threads = _grid_2d(w, n_rows)
+        _ncc_band[blocks, threads](ii_l, ii_ll, ii_r, ii_rr, prefix, d_index, r, v_start, n_rows,
+                                   _f64(min_variance), cost)
+    return _pack(cost, d_index, n_disp, (h, w, n_disp) if dense else None)
 
 
 @cuda.jit
-def _invalidate(cost):
-    x, v = cuda.grid(2)
-    n_disp = cost.shape[2]
-    if v < cost.shape[0] and x < cost.shape[1] * n_disp:
-        u = x // n_disp
-        d = x % n_disp
-        if d > u:
-            cost[v, u, d] = 1.0
+def _invalidate(cost, index):
+    u, v = cuda.grid(2)
+    if v < index.shape[0] and u < index.shape[1]:
+        off = index[v, u, 0]
+        for d in range(max(index[v, u, 1], u + 1), index[v, u, 2]):
+            cost[off + d] = 1.0
 
 
 def invalidate_out_of_view(cost):
     """Set every cell whose right pixel u - d is outside the image back to 1, in place.
 
-    A host ``cost`` is updated in place as well; the device array is returned.
+    A host ``cost`` is updated in place as well; returns the device array (or Volume).
 
     Returns
     -------
-    device array, float32, (H, W, D)
+    device array, float32, (H, W, D), or a Volume
     """
-    d_cost = _dev(cost)
-    h, w, n_disp = d_cost.shape
-    blocks, threads = _grid_2d(w * n_disp, h)
-    _invalidate[blocks, threads](d_cost)
-    if not _is_device(cost):
-        d_cost.copy_to_host(cost)
-    return d_cost
+    flat, index, n_disp, dense_shape = _unpack(cost)
+    h, w = index.shape[0], index.shape[1]
+    blocks, threads = _grid_2d(w, h)
+    _invalidate[blocks, threads](flat, index)
+    if dense_shape is not None and not _is_device(cost):
+        flat.reshape(*dense_shape).copy_to_host(cost)
+    return _pack(flat, index, n_disp, dense_shape)
 
 
 # ----------------------------------------------------------------------------- aggregation (step 3)
@@ -329,21 +363,27 @@ def rbf_weights(img, sigma_space, sigma_color):
 
 
 @cuda.jit
-def _rbf_pass(src, dst, weights):
-    """One pass of eq. 2; one thread per (u * D + d, v), float32 accumulation as on the CPU."""
-    x, v = cuda.grid(2)
-    n_disp = src.shape[2]
-    if v >= src.shape[0] or x >= src.shape[1] * n_disp:
+def _rbf_pass(src, dst, index, weights):
+    """One pass of eq. 2; one thread per pixel, float32 accumulation in slot order as on
+    the CPU; a neighbour whose band lacks the disparity contributes the pixel's own cell
+    (``cpu._rbf_pass``)."""
+    u, v = cuda.grid(2)
+    h = index.shape[0]
+    w = index.shape[1]
+    if v >= h or u >= w:
         return
-    u = x // n_disp
-    d = x % n_disp
-    acc = numba.float32(0.0)
-    for k in range(9):
-        wk = weights[v, u, k]
-        if wk == 0.0:
-            continue
-        acc += wk * src[v + k // 3 - 1, u + k % 3 - 1, d]
-    dst[v, u, d] = acc
+    off = index[v, u, 0]
+    for d in range(index[v, u, 1], index[v, u, 2]):
+        acc = numba.float32(0.0)
+        for k in range(9):
+            y = min(max(v + k // 3 - 1, 0), h - 1)
+            x = min(max(u + k % 3 - 1, 0), w - 1)
+            wk = weights[v, u, k]
+            if index[y, x, 1] <= d and d < index[y, x, 2]:
+                acc += wk * src[index[y, x, 0] + d]
+            else:
+                acc += wk * src[off + d]
+        dst[off + d] = acc
 
 
 def rbf_filter(cost, weights, t_max, overwrite_input=False):
@@ -351,7 +391,7 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
 
     Parameters
     ----------
-    cost : float32 (H, W, D), device or host
+    cost : Volume or float32 (H, W, D), device or host
     weights : float32 (H, W, 9), device or host
         From :func:`rbf_weights`.
     t_max : int
@@ -361,101 +401,112 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
 
     Returns
     -------
-    device array, float32, (H, W, D)
-        A new array, or ``cost`` itself with ``overwrite_input`` and an even ``t_max``.
+    device array, float32, (H, W, D), or a Volume (the kind of ``cost``)
     """
-    d_cost = _dev(cost)
+    flat, index, n_disp, dense_shape = _unpack(cost)
     d_weights = _dev(weights)
     if t_max == 0:
-        return d_cost if overwrite_input else _copy(d_cost)
-    h, w, n_disp = d_cost.shape
-    blocks, threads = _grid_2d(w * n_disp, h)
-    src = cuda.device_array(d_cost.shape, d_cost.dtype)
-    _rbf_pass[blocks, threads](d_cost, src, d_weights)
-    if t_max == 1:
-        return src
-    dst = d_cost if overwrite_input else cuda.device_array(d_cost.shape, d_cost.dtype)
-    for _ in range(t_max - 1):
-        _rbf_pass[blocks, threads](src, dst, d_weights)
-        src, dst = dst, src
-    return src
+        return _pack(flat if overwrite_input else _copy(flat), index, n_disp, dense_shape)
+    h, w = index.shape[0], index.shape[1]
+    blocks, threads = _grid_2d(w, h)
+    src = cuda.device_array(flat.shape, flat.dtype)
+    _rbf_pass[blocks, threads](flat, src, index, d_weights)
+    if t_max > 1:
+        dst = flat if overwrite_input else cuda.device_array(flat.shape, flat.dtype)
+        for _ in range(t_max - 1):
+            _rbf_pass[blocks, threads](src, dst, index, d_weights)
+            src, dst = dst, src
+    return _pack(src, index, n_disp, dense_shape)
 
 
 @cuda.jit
-def _bilateral_kernel(cost, img, radius, inv_ss2, inv_sc2, out):
-    x, v = cuda.grid(2)
-    h = cost.shape[0]
-    w = cost.shape[1]
-    n_disp = cost.shape[2]
-    if v >= h or x >= w * n_disp:
+def _bilateral_kernel(cost, index, img, radius, inv_ss2, inv_sc2, out):
+    u, v = cuda.grid(2)
+    h = index.shape[0]
+    w = index.shape[1]
+    if v >= h or u >= w:
         return
-    u = x // n_disp
-    d = x % n_disp
+    off = index[v, u, 0]
     i_p = numba.float64(img[v, u])
-    acc = 0.0
-    total = 0.0
-    for dy in range(-radius, radius + 1):
-        y = v + dy
-        if y < 0 or y >= h:
-            continue
-        for dx in range(-radius, radius + 1):
-            xx = u + dx
-            if xx < 0 or xx >= w:
+    for d in range(index[v, u, 1], index[v, u, 2]):
+        acc = 0.0
+        total = 0.0
+        for dy in range(-radius, radius + 1):
+            y = v + dy
+            if y < 0 or y >= h:
                 continue
-            wk = _rbf_weight(dy, dx, i_p, numba.float64(img[y, xx]), inv_ss2, inv_sc2)
-            total += wk
-            acc += wk * numba.float64(cost[y, xx, d])
-    out[v, u, d] = acc / total
+            for dx in range(-radius, radius + 1):
+                xx = u + dx
+                if xx < 0 or xx >= w:
+                    continue
+                wk = _rbf_weight(dy, dx, i_p, numba.float64(img[y, xx]), inv_ss2, inv_sc2)
+                total += wk
+                if index[y, xx, 1] <= d and d < index[y, xx, 2]:
+                    acc += wk * numba.float64(cost[index[y, xx, 0] + d])
+                else:
+                    acc += wk * numba.float64(cost[off + d])
+        out[off + d] = acc / total
 
 
 def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
     """One pass of a plain (2 radius + 1)^2 bilateral filter over every disparity slice.
 
     The ablation counterpart of RBF (paper Fig. 4): same kernel as eq. 3, larger
-    support.  Returns a new float32 (H, W, D) device array.
+    support.  Returns a new device array (or Volume) of the kind of ``cost``.
     """
-    d_cost = _dev(cost)
+    flat, index, n_disp, dense_shape = _unpack(cost)
     d_img = _dev(img)
-    h, w, n_disp = d_cost.shape
-    out = cuda.device_array(d_cost.shape, d_cost.dtype)
+    h, w = index.shape[0], index.shape[1]
+    out = cuda.device_array(flat.shape, flat.dtype)
     inv_ss2 = 1.0 / (sigma_space * sigma_space)
     inv_sc2 = 1.0 / (sigma_color * sigma_color)
-    blocks, threads = _grid_2d(w * n_disp, h)
-    _bilateral_kernel[blocks, threads](d_cost, d_img, int(radius), _f64(inv_ss2), _f64(inv_sc2), out)
-    return out
+    blocks, threads = _grid_2d(w, h)
+    _bilateral_kernel[blocks, threads](flat, index, d_img, int(radius), _f64(inv_ss2), _f64(inv_sc2), out)
+    return _pack(out, index, n_disp, dense_shape)
 
 
 # ----------------------------------------------------------------------------- seeds (step 4)
 @cuda.jit
-def _seeds_kernel(cost, pkrn_min, epsilon, lr_tolerance, exclusion, out):
+def _seeds_kernel(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip, has_skip, out):
     u, v = cuda.grid(2)
-    if v < cost.shape[0] and u < cost.shape[1]:
-        out[v, u] = _seed_at(cost, v, u, pkrn_min, epsilon, lr_tolerance, exclusion)
+    if v < index.shape[0] and u < index.shape[1]:
+        if has_skip and skip[v, u] >= 0:
+            out[v, u] = UNDECIDED
+        else:
+            out[v, u] = _seed_at(cost, index, n_disp, v, u, pkrn_min, epsilon, lr_tolerance, exclusion)
 
 
-def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion):
-    """Sparse seed map at the coarsest level (DESIGN step 4); int32 (H, W), -1 undecided."""
-    d_cost = _dev(cost)
+def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None):
+    """Sparse seed map (DESIGN step 4); int32 (H, W), -1 undecided; ``skip`` as on the CPU."""
+    flat, index, n_disp, _ = _unpack(cost)
+    has_skip = skip is not None
+    d_skip = _dev(skip) if has_skip else _zeros(1, np.int32).reshape(1, 1)
     return _per_pixel(
-        _seeds_kernel, d_cost.shape, np.int32, d_cost, _f64(pkrn_min), _f64(epsilon), int(lr_tolerance), int(exclusion)
+        _seeds_kernel, index.shape, np.int32, flat, index, n_disp, _f64(pkrn_min), _f64(epsilon),
+        int(lr_tolerance), int(exclusion), d_skip, has_skip,
     )
 
 
 @cuda.jit
-def _min_cost_kernel(cost, out):
+def _min_cost_kernel(cost, index, out):
     u, v = cuda.grid(2)
-    if v < cost.shape[0] and u < cost.shape[1]:
-        best = cost[v, u, 0]
-        for d in range(1, cost.shape[2]):
-            if cost[v, u, d] < best:
-                best = cost[v, u, d]
+    if v < index.shape[0] and u < index.shape[1]:
+        off = index[v, u, 0]
+        lo = index[v, u, 1]
+        hi = index[v, u, 2]
+        best = numba.float32(1.0)
+        if hi > lo:
+            best = cost[off + lo]
+            for d in range(lo + 1, hi):
+                if cost[off + d] < best:
+                    best = cost[off + d]
         out[v, u] = best
 
 
 def min_cost(cost):
-    """Least cost of every pixel over all disparities; float32 (H, W) device array."""
-    d_cost = _dev(cost)
-    return _per_pixel(_min_cost_kernel, d_cost.shape, np.float32, d_cost)
+    """Least cost of every pixel over its band; float32 (H, W) device array (1 if empty)."""
+    flat, index, _, _ = _unpack(cost)
+    return _per_pixel(_min_cost_kernel, index.shape, np.float32, flat, index)
 
 
 # ----------------------------------------------------------------------------- diffusion (step 5)
@@ -511,13 +562,14 @@ def _build_frontier(changed, n_changed, stamp, sweep, active, counters, h, w, ka
 
 
 @cuda.jit
-def _evaluate_frontier(cost, disp, min_cost, max_gap, active, counters, new_values, tau, kappa_d, adversarial):
+def _evaluate_frontier(cost, index, disp, min_cost, max_gap, active, counters, new_values, tau, kappa_d,
+                       adversarial):
     """New state of every frontier pixel, reading the previous map only (Jacobi)."""
     i = cuda.grid(1)
     if i < counters[_N_ACTIVE]:
         p = active[i]
         w = disp.shape[1]
-        new_values[i] = _diffuse_at(cost, disp, min_cost, max_gap, p // w, p % w, tau, kappa_d, adversarial)
+        new_values[i] = _diffuse_at(cost, index, disp, min_cost, max_gap, p // w, p % w, tau, kappa_d, adversarial)
 
 
 @cuda.jit
@@ -545,7 +597,7 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
 
     Parameters
     ----------
-    cost : float32 (H, W, D), device or host
+    cost : Volume or float32 (H, W, D), device or host
     disp0 : int32 (H, W), device or host
         Sparse decisive map D_i^S (-1 undecided); not modified.
     min_cost : float32 (H, W), device or host
@@ -565,7 +617,7 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     sweeps : int
         Sweeps run (the last one changed nothing unless the safeguard stopped it).
     """
-    d_cost = _dev(cost)
+    d_cost, d_index, _, _ = _unpack(cost)
     disp = _copy(disp0) if _is_device(disp0) else _dev(disp0)  # a new map either way
     d_min = _dev(min_cost)
     h, w = disp.shape
@@ -595,7 +647,7 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
         if bound > 0:
             blocks, threads = _grid_1d(bound)
             _evaluate_frontier[blocks, threads](
-                d_cost, disp, d_min, max_gap, active, counters, new_values, tau, kappa_d, adversarial
+                d_cost, d_index, disp, d_min, max_gap, active, counters, new_values, tau, kappa_d, adversarial
             )
             _apply_changes[blocks, threads](disp, active, new_values, changed, counters)
         n_changed = int(counters.copy_to_host()[_N_CHANGED])
@@ -604,10 +656,10 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
 
 # ----------------------------------------------------------------------------- inheritance (step 7)
 @cuda.jit
-def _inherit_kernel(cost, coarse, prc, dfm_pkrn_min, epsilon, out):
+def _inherit_kernel(cost, index, coarse, prc, dfm_pkrn_min, epsilon, out):
     u, v = cuda.grid(2)
-    if v < cost.shape[0] and u < cost.shape[1]:
-        out[v, u] = _inherit_at(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon)
+    if v < index.shape[0] and u < index.shape[1]:
+        out[v, u] = _inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon)
 
 
 def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
@@ -615,8 +667,9 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
 
     Parameters
     ----------
-    cost : float32 (H, W, D), device or host
-        Cost volume of the finer level i.
+    cost : Volume or float32 (H, W, D), device or host
+        Cost volume of the finer level i (the patch tests run per pixel here; the CPU
+        shares them between the four pixels of a patch: the same values).
     coarse : int32 (>= H // 2, >= W // 2), device or host
         Disparity map of level i + 1 (-1 undecided).
 
@@ -625,24 +678,26 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
     device array, int32, (H, W)
         Sparse map D_i^S.
     """
-    d_cost = _dev(cost)
+    flat, index, _, _ = _unpack(cost)
     return _per_pixel(
-        _inherit_kernel, d_cost.shape, np.int32, d_cost, _dev(coarse), bool(prc), _f64(dfm_pkrn_min), _f64(epsilon)
+        _inherit_kernel, index.shape, np.int32, flat, index, _dev(coarse), bool(prc), _f64(dfm_pkrn_min),
+        _f64(epsilon),
     )
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)
 @cuda.jit
-def _subpixel_kernel(cost, disp, out):
+def _subpixel_kernel(cost, index, disp, out):
     u, v = cuda.grid(2)
     if v < disp.shape[0] and u < disp.shape[1]:
-        out[v, u] = _subpixel_at(cost, disp, v, u)
+        out[v, u] = _subpixel_at(cost, index, disp, v, u)
 
 
 def subpixel(cost, disp):
     """Parabola sub-pixel refinement (DESIGN step 8); float32 (H, W), inf where undecided."""
     d_disp = _dev(disp)
-    return _per_pixel(_subpixel_kernel, d_disp.shape, np.float32, _dev(cost), d_disp)
+    flat, index, _, _ = _unpack(cost)
+    return _per_pixel(_subpixel_kernel, d_disp.shape, np.float32, flat, index, d_disp)
 
 
 # ----------------------------------------------------------------------------- perspective transformation (step 6)
@@ -699,27 +754,26 @@ def pt_restore(disp, a0, b1, b2, delta):
 
 # ----------------------------------------------------------------------------- feature cost
 @cuda.jit
-def _cosine_kernel(fl, fr, nl, nr, cost):
-    x, v = cuda.grid(2)  # x runs over (column, disparity) cells of row v
-    n_disp = cost.shape[2]
-    if v < cost.shape[0] and x < cost.shape[1] * n_disp:
-        u = x // n_disp
-        d = x - u * n_disp
-        cost[v, u, d] = _cosine_cost(fl, fr, nl, nr, v, u, d)
+def _cosine_kernel(fl, fr, nl, nr, index, cost):
+    u, v = cuda.grid(2)
+    if v < index.shape[0] and u < index.shape[1]:
+        off = index[v, u, 0]
+        for d in range(index[v, u, 1], index[v, u, 2]):
+            cost[off + d] = _cosine_cost(fl, fr, nl, nr, v, u, d)
 
 
-def cosine_cost_volume(fl, fr, nl, nr, max_disparity):
-    """Deep-feature cost volume ``(1 - cos) / 2`` (see the CPU driver); a device array.
-
-    One thread per (pixel, disparity) cell.
-    """
+def cosine_cost_volume(fl, fr, nl, nr, max_disparity, index=None):
+    """Deep-feature cost volume ``(1 - cos) / 2`` (see the CPU driver); a device array,
+    or a Volume with ``index``.  One thread per pixel."""
     d_fl, d_fr, d_nl, d_nr = _dev(fl), _dev(fr), _dev(nl), _dev(nr)
     h, w = d_nl.shape
     n_disp = int(max_disparity) + 1
-    cost = cuda.device_array((h, w, n_disp), np.float32)
-    blocks, threads = _grid_2d(w * n_disp, h)
-    _cosine_kernel[blocks, threads](d_fl, d_fr, d_nl, d_nr, cost)
-    return cost
+    dense = index is None
+    d_index, n_cells = _index_and_cells(index, h, w, n_disp)
+    cost = cuda.device_array(n_cells, np.float32)
+    blocks, threads = _grid_2d(w, h)
+    _cosine_kernel[blocks, threads](d_fl, d_fr, d_nl, d_nr, d_index, cost)
+    return _pack(cost, d_index, n_disp, (h, w, n_disp) if dense else None)
 
 
 # ----------------------------------------------------------------------------- array handling

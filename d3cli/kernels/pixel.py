@@ -12,15 +12,21 @@ the image belong to the drivers.
 
 Conventions (DESIGN.md section 1)
 ---------------------------------
-* ``cost`` is a float32 volume of shape (H, W, D), disparity innermost; cost is
-  ``(1 - NCC) / 2`` in [0, 1], lower is better.  Cells whose right pixel ``u - d`` is
-  outside the image, or whose window is flat, hold 1.0 and never win.
+* A cost volume is a pair ``(cost, index)``: ``cost`` a flat float32 array, ``index``
+  an int32 (H, W, 3) array ``[off, lo, hi]`` per pixel; the pixel (u, v) holds the
+  disparities ``lo <= d < hi`` (its *band*) at ``cost[off + d]``.  The full-range volume
+  is the band ``[0, D)`` everywhere with ``off = (v W + u) D``: exactly the (H, W, D)
+  array, disparity innermost (:mod:`d3cli.kernels.volume`).  Fine pyramid levels store
+  only a band around what the coarser level decided (issue 10; :mod:`d3cli.method.band`).
+  Cost is ``(1 - NCC) / 2`` in [0, 1], lower is better.  Cells whose right pixel
+  ``u - d`` is outside the image, or whose window is flat, hold 1.0 and never win.
 * Disparity maps are int32 with ``-1`` for undecided pixels (never 0, a legal disparity).
 * :func:`cost_or_inf` returns ``inf`` for a cell that does not exist (pixel outside the
-  image or disparity outside [0, D-1]).  A comparison ``c < cost_or_inf(...)`` against a
+  image or disparity outside the pixel's band).  A comparison ``c < cost_or_inf(...)`` against a
   missing cell is therefore always true: missing neighbours never veto a decision.
 * The right-view cost is the left volume re-indexed (never a second volume):
-  ``C_R(x, v, d) = C_L(x + d, v, d)`` (:func:`right_cost_or_inf`).
+  ``C_R(x, v, d) = C_L(x + d, v, d)`` (:func:`right_cost_or_inf`); a cell outside the
+  band of the left pixel x + d does not exist.
 * Ties in an arg-min go to the smaller disparity, so every backend agrees exactly.
 """
 
@@ -45,7 +51,8 @@ def build_ops(jit):
     -------
     types.SimpleNamespace
         ``ncc_cost, cosine_cost, box_sum, cost_or_inf, right_cost_or_inf, rbf_weight, seed_at,
-        diffuse_at, inherit_at, subpixel_at, pt_shift, bilinear_at, pt_restore_at``.
+        diffuse_at, inherit_patch, inherit_pixel, inherit_at, subpixel_at, pt_shift,
+        bilinear_at, pt_restore_at`` and the helpers they use.
     """
 
     @jit
@@ -98,16 +105,19 @@ def build_ops(jit):
         return ii[r1 + 1, c1 + 1] - ii[r0, c1 + 1] - ii[r1 + 1, c0] + ii[r0, c0]
 
     @jit
-    def cost_or_inf(cost, v, u, d):
-        """``cost[v, u, d]``, or inf where that cell does not exist."""
-        if d < 0 or d >= cost.shape[2] or u < 0 or u >= cost.shape[1] or v < 0 or v >= cost.shape[0]:
+    def cost_or_inf(cost, index, v, u, d):
+        """Cost of cell (u, v, d), or inf where that cell does not exist (pixel outside the
+        image, disparity outside the pixel's band)."""
+        if v < 0 or v >= index.shape[0] or u < 0 or u >= index.shape[1]:
             return INF
-        return cost[v, u, d]
+        if d < index[v, u, 1] or d >= index[v, u, 2]:
+            return INF
+        return cost[index[v, u, 0] + d]
 
     @jit
-    def right_cost_or_inf(cost, v, x, d):
+    def right_cost_or_inf(cost, index, v, x, d):
         """Right-view cost ``C_R(x, v, d) = C_L(x + d, v, d)``, inf where it does not exist."""
-        return cost_or_inf(cost, v, x + d, d)
+        return cost_or_inf(cost, index, v, x + d, d)
 
     @jit
     def rbf_weight(dy, dx, i_p, i_q, inv_sigma_space2, inv_sigma_color2):
@@ -116,29 +126,35 @@ def build_ops(jit):
         return math.exp(-(dy * dy + dx * dx) * inv_sigma_space2 - di * di * inv_sigma_color2)
 
     @jit
-    def seed_at(cost, v, u, pkrn_min, epsilon, lr_tolerance, exclusion):
+    def seed_at(cost, index, n_disp, v, u, pkrn_min, epsilon, lr_tolerance, exclusion):
         """Decisive seed at (u, v) of the coarsest level, or UNDECIDED (DESIGN step 4).
 
         Winner-take-all ``d1`` (smallest disparity on ties) is kept when
         (a) PKRN = (c2 + eps) / (c1 + eps) >= pkrn_min, where c2 is the least cost at any
         disparity farther than ``exclusion`` from d1 (``exclusion = 0``: the naive peak
         ratio), and (b) the right view's WTA at (u - d1, v) is within ``lr_tolerance``.
-        A cost of 1 (invalid or flat) never yields a seed.
+        A cost of 1 (invalid or flat) never yields a seed.  Only the pixel's band is
+        searched; the right view looks at every disparity below ``n_disp`` (the level's
+        range) whose cell exists.
         """
-        n_disp = cost.shape[2]
-        d1 = 0
-        c1 = cost[v, u, 0]
-        for d in range(1, n_disp):
-            c = cost[v, u, d]
+        off = index[v, u, 0]
+        lo = index[v, u, 1]
+        hi = index[v, u, 2]
+        if hi <= lo:
+            return UNDECIDED
+        d1 = lo
+        c1 = cost[off + lo]
+        for d in range(lo + 1, hi):
+            c = cost[off + d]
             if c < c1:
                 c1 = c
                 d1 = d
         if c1 >= 1.0:
             return UNDECIDED
         c2 = INF
-        for d in range(n_disp):
+        for d in range(lo, hi):
             if abs(d - d1) > exclusion:
-                c = cost[v, u, d]
+                c = cost[off + d]
                 if c < c2:
                     c2 = c
         if c2 == INF:
@@ -148,13 +164,13 @@ def build_ops(jit):
         x = u - d1
         if x < 0:
             return UNDECIDED  # the match lies outside the right image
-        width = cost.shape[1]
+        width = index.shape[1]
         dr = 0
         cr = INF
         for d in range(n_disp):
             if x + d >= width:
                 break
-            c = cost[v, x + d, d]
+            c = cost_or_inf(cost, index, v, x + d, d)
             if c < cr:
                 cr = c
                 dr = d
@@ -163,7 +179,7 @@ def build_ops(jit):
         return d1
 
     @jit
-    def accept_state(cost, v, u, s, c):
+    def accept_state(cost, index, v, u, s, c):
         """Hypotheses (2) and (3) of the diffusion for candidate ``s`` of cost ``c``.
 
         (2) local minimum of the cost curve: C(p, s) < C(p, s - 1), C(p, s + 1);
@@ -173,14 +189,14 @@ def build_ops(jit):
         """
         if c >= 1.0:
             return False
-        if not (c < cost_or_inf(cost, v, u, s - 1) and c < cost_or_inf(cost, v, u, s + 1)):
+        if not (c < cost_or_inf(cost, index, v, u, s - 1) and c < cost_or_inf(cost, index, v, u, s + 1)):
             return False
-        if not (c < cost_or_inf(cost, v, u - 1, s - 1) and c < cost_or_inf(cost, v, u + 1, s + 1)):
+        if not (c < cost_or_inf(cost, index, v, u - 1, s - 1) and c < cost_or_inf(cost, index, v, u + 1, s + 1)):
             return False
         return True
 
     @jit
-    def diffuse_at(cost, disp, min_cost, max_gap, v, u, tau, kappa_d, adversarial):
+    def diffuse_at(cost, index, disp, min_cost, max_gap, v, u, tau, kappa_d, adversarial):
         """New state of pixel (u, v) in one Jacobi diffusion sweep (paper eq. 5-6).
 
         The candidates are ``D(q) + r`` for every decided neighbour q within radius
@@ -199,7 +215,9 @@ def build_ops(jit):
         """
         height = disp.shape[0]
         width = disp.shape[1]
-        n_disp = cost.shape[2]
+        off = index[v, u, 0]
+        lo = index[v, u, 1]
+        hi = index[v, u, 2]
         cur = disp[v, u]
         best_s = UNDECIDED
         best_c = INF
@@ -216,26 +234,26 @@ def build_ops(jit):
                     continue
                 for r in range(-tau, tau + 1):
                     s = q + r
-                    if s < 0 or s >= n_disp:
-                        continue
-                    c = cost[v, u, s]
+                    if s < lo or s >= hi:
+                        continue  # outside the band: the cell does not exist
+                    c = cost[off + s]
                     if c < best_c or (c == best_c and s < best_s):
                         best_c = c
                         best_s = s
         if best_s == UNDECIDED or best_s == cur:
             return cur
-        if not accept_state(cost, v, u, best_s, best_c):
+        if not accept_state(cost, index, v, u, best_s, best_c):
             return cur
         if max_gap >= 0.0 and best_c > min_cost[v, u] + max_gap:
             return cur
         if cur < 0:
             return best_s
-        if adversarial and best_c < cost[v, u, cur]:
+        if adversarial and best_c < cost_or_inf(cost, index, v, u, cur):
             return best_s
         return cur
 
     @jit
-    def best_of_three(cost, v, x, d, right_view):
+    def best_of_three(cost, index, v, x, d, right_view):
         """Least cost among disparities d-1, d, d+1 at (x, v) (smaller disparity on ties).
 
         ``right_view`` selects the right-view cost C_R(x, v, .) instead of C_L.
@@ -245,23 +263,23 @@ def build_ops(jit):
         best_c = INF
         for s in range(d - 1, d + 2):
             if right_view:
-                c = right_cost_or_inf(cost, v, x, s)
+                c = right_cost_or_inf(cost, index, v, x, s)
             else:
-                c = cost_or_inf(cost, v, x, s)
+                c = cost_or_inf(cost, index, v, x, s)
             if c < best_c:
                 best_c = c
                 best_d = s
         return best_d, best_c
 
     @jit
-    def outside_cost(cost, v, x, d, right_view):
+    def outside_cost(cost, index, v, x, d, right_view):
         """Least cost at the 'outside' disparities d - 2 and d + 2 (the G sets of eq. 8)."""
         if right_view:
-            return min(right_cost_or_inf(cost, v, x, d - 2), right_cost_or_inf(cost, v, x, d + 2))
-        return min(cost_or_inf(cost, v, x, d - 2), cost_or_inf(cost, v, x, d + 2))
+            return min(right_cost_or_inf(cost, index, v, x, d - 2), right_cost_or_inf(cost, index, v, x, d + 2))
+        return min(cost_or_inf(cost, index, v, x, d - 2), cost_or_inf(cost, index, v, x, d + 2))
 
     @jit
-    def patch_reliable(cost, y0, x0, d, right_view):
+    def patch_reliable(cost, index, y0, x0, d, right_view):
         """Patch reliability constraint (PRC, paper eq. 7-8) in one view.
 
         The 2x2 patch at rows y0, y0+1 and columns x0, x0+1 of the chosen view (the left
@@ -275,31 +293,31 @@ def build_ops(jit):
         least_out = INF
         for b in range(2):
             for a in range(2):
-                c_in = best_of_three(cost, y0 + b, x0 + a, d, right_view)[1]
+                c_in = best_of_three(cost, index, y0 + b, x0 + a, d, right_view)[1]
                 sum_in += c_in
-                least_out = min(least_out, outside_cost(cost, y0 + b, x0 + a, d, right_view))
+                least_out = min(least_out, outside_cost(cost, index, y0 + b, x0 + a, d, right_view))
         if sum_in * 0.25 < least_out:
             return least_out
         return -1.0
 
     @jit
-    def pixel_decisive(cost, v, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon):
+    def pixel_decisive(cost, index, v, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon):
         """Best in-patch disparity of one pixel if it passes the pixel test, else -1.
 
         With ``prc``: local minimum C(d*) < C(d* +- 1) and below the patch's least outside
         cost (eq. 9).  Without (DFM-style ablation): PKRN of the best against the second
         best in-patch cost >= dfm_pkrn_min.
         """
-        best_d, best_c = best_of_three(cost, v, x, d, right_view)
+        best_d, best_c = best_of_three(cost, index, v, x, d, right_view)
         if best_d < 0 or best_c >= 1.0:
             return UNDECIDED
         if prc:
             if right_view:
-                lo = right_cost_or_inf(cost, v, x, best_d - 1)
-                hi = right_cost_or_inf(cost, v, x, best_d + 1)
+                lo = right_cost_or_inf(cost, index, v, x, best_d - 1)
+                hi = right_cost_or_inf(cost, index, v, x, best_d + 1)
             else:
-                lo = cost_or_inf(cost, v, x, best_d - 1)
-                hi = cost_or_inf(cost, v, x, best_d + 1)
+                lo = cost_or_inf(cost, index, v, x, best_d - 1)
+                hi = cost_or_inf(cost, index, v, x, best_d + 1)
             if best_c < lo and best_c < hi and best_c < least_out:
                 return best_d
             return UNDECIDED
@@ -307,16 +325,58 @@ def build_ops(jit):
         for s in range(d - 1, d + 2):
             if s != best_d:
                 if right_view:
-                    c = right_cost_or_inf(cost, v, x, s)
+                    c = right_cost_or_inf(cost, index, v, x, s)
                 else:
-                    c = cost_or_inf(cost, v, x, s)
+                    c = cost_or_inf(cost, index, v, x, s)
                 second = min(second, c)
         if second + epsilon >= dfm_pkrn_min * (best_c + epsilon):
             return best_d
         return UNDECIDED
 
     @jit
-    def inherit_at(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon):
+    def inherit_patch(cost, index, coarse, pv, pu, prc):
+        """Patch part of inheritance (eq. 7-8) for the coarse pixel (pu, pv).
+
+        Returns ``(d, least_out_l, least_out_r)``: ``d = 2 dc`` the doubled coarse
+        disparity and the least outside costs of the left and the right patch, or
+        ``d = -1`` when the coarse pixel is undecided or (with ``prc``) a patch is
+        unreliable.  The four fine pixels of the patch share it (:func:`inherit_pixel`).
+        """
+        if pv >= coarse.shape[0] or pu >= coarse.shape[1]:
+            return UNDECIDED, INF, INF
+        dc = coarse[pv, pu]
+        if dc < 0:
+            return UNDECIDED, INF, INF
+        d = 2 * dc
+        y0 = 2 * pv
+        u0 = 2 * pu
+        x0 = u0 - d
+        least_out_l = INF
+        least_out_r = INF
+        if prc:
+            least_out_l = patch_reliable(cost, index, y0, u0, d, False)
+            if least_out_l < 0.0:
+                return UNDECIDED, INF, INF
+            least_out_r = patch_reliable(cost, index, y0, x0, d, True)
+            if least_out_r < 0.0:
+                return UNDECIDED, INF, INF
+        return d, least_out_l, least_out_r
+
+    @jit
+    def inherit_pixel(cost, index, v, u, d, least_out_l, least_out_r, prc, dfm_pkrn_min, epsilon):
+        """Pixel part of inheritance (eq. 9) for fine pixel (u, v) of a patch that passed
+        :func:`inherit_patch` with ``(d, least_out_l, least_out_r)``; bidirectional as in
+        LRDC: the matched right pixel must pass its own test with the same disparity."""
+        dl = pixel_decisive(cost, index, v, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon)
+        if dl < 0:
+            return UNDECIDED
+        dr = pixel_decisive(cost, index, v, u - dl, d, True, prc, least_out_r, dfm_pkrn_min, epsilon)
+        if dr != dl:
+            return UNDECIDED
+        return dl
+
+    @jit
+    def inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon):
         """Inherited disparity of fine pixel (u, v) from the coarser map, or UNDECIDED.
 
         Paper Algorithm 2, eq. 7-9.  The coarse pixel (u//2, v//2) with disparity dc maps
@@ -325,39 +385,17 @@ def build_ops(jit):
         {2dc - 1, 2dc, 2dc + 1} and the pixels just beside the partner patch the outside
         disparities {2dc - 2, 2dc + 2}.  With ``prc`` the patch must pass the patch
         reliability constraint in both views and the pixel the local-minimum constraint
-        (:func:`pixel_decisive`); without, the DFM-style PKRN test.  Bidirectional as in
-        LRDC: the matched right pixel must pass its own test with the same disparity.
+        (:func:`pixel_decisive`); without, the DFM-style PKRN test.  The drivers evaluate
+        :func:`inherit_patch` once per patch and :func:`inherit_pixel` per pixel; this is
+        the two composed for one pixel.
         """
-        pv = v // 2
-        pu = u // 2
-        if pv >= coarse.shape[0] or pu >= coarse.shape[1]:
+        d, least_out_l, least_out_r = inherit_patch(cost, index, coarse, v // 2, u // 2, prc)
+        if d < 0:
             return UNDECIDED
-        dc = coarse[pv, pu]
-        if dc < 0:
-            return UNDECIDED
-        d = 2 * dc
-        y0 = 2 * pv
-        u0 = 2 * pu
-        x0 = u0 - d
-        least_out_l = INF
-        least_out_r = INF
-        if prc:
-            least_out_l = patch_reliable(cost, y0, u0, d, False)
-            if least_out_l < 0.0:
-                return UNDECIDED
-            least_out_r = patch_reliable(cost, y0, x0, d, True)
-            if least_out_r < 0.0:
-                return UNDECIDED
-        dl = pixel_decisive(cost, v, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon)
-        if dl < 0:
-            return UNDECIDED
-        dr = pixel_decisive(cost, v, u - dl, d, True, prc, least_out_r, dfm_pkrn_min, epsilon)
-        if dr != dl:
-            return UNDECIDED
-        return dl
+        return inherit_pixel(cost, index, v, u, d, least_out_l, least_out_r, prc, dfm_pkrn_min, epsilon)
 
     @jit
-    def subpixel_at(cost, disp, v, u):
+    def subpixel_at(cost, index, disp, v, u):
         """Sub-pixel disparity by a parabola through C(d-1), C(d), C(d+1) (DESIGN step 8).
 
         The offset is clamped to [-0.5, 0.5]; at the ends of the range or on a flat or
@@ -366,11 +404,11 @@ def build_ops(jit):
         d = disp[v, u]
         if d < 0:
             return INF
-        if d - 1 < 0 or d + 1 >= cost.shape[2]:
-            return float(d)
-        c0 = cost[v, u, d - 1]
-        c1 = cost[v, u, d]
-        c2 = cost[v, u, d + 1]
+        c0 = cost_or_inf(cost, index, v, u, d - 1)
+        c1 = cost_or_inf(cost, index, v, u, d)
+        c2 = cost_or_inf(cost, index, v, u, d + 1)
+        if c0 == INF or c1 == INF or c2 == INF:
+            return float(d)  # an end of the range or of the band
         denom = c0 + c2 - 2.0 * c1
         if denom <= 0.0:
             return float(d)
@@ -432,6 +470,8 @@ def build_ops(jit):
         outside_cost=outside_cost,
         patch_reliable=patch_reliable,
         pixel_decisive=pixel_decisive,
+        inherit_patch=inherit_patch,
+        inherit_pixel=inherit_pixel,
         inherit_at=inherit_at,
         subpixel_at=subpixel_at,
         pt_shift=pt_shift,

@@ -10,10 +10,11 @@ configuration into the scalars the kernels take; the kernels live in
 from __future__ import annotations
 
 from ..config import Config
+from ..kernels.volume import Volume, dense_index
 from .pyramid import level_max_disparity
 
 
-def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: float, backend):
+def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: float, backend, index=None):
     """NCC cost volume ``C(p, d) = (1 - NCC) / 2`` of one level (DESIGN step 2).
 
     Parameters
@@ -28,13 +29,15 @@ def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: f
         Variance (grey levels^2) at or below which a window counts as flat (cost 1).
     backend : module
         Kernel backend from :func:`d3cli.kernels.get_backend`.
+    index : int32 (H, W, 3) backend array, optional
+        The bands to compute (:mod:`d3cli.kernels.volume`); default the full range.
 
     Returns
     -------
-    ndarray, float32, (H, W, max_disparity + 1)
+    ndarray, float32, (H, W, max_disparity + 1), or a Volume with ``index``
         Lower is better; 1 where u - d < 0 or a window is flat.
     """
-    return backend.ncc_cost_volume(left, right, int(max_disparity), int(window), float(min_variance))
+    return backend.ncc_cost_volume(left, right, int(max_disparity), int(window), float(min_variance), index=index)
 
 
 def aggregate(
@@ -53,7 +56,7 @@ def aggregate(
 
     Parameters
     ----------
-    cost : ndarray, float32, (H, W, D)
+    cost : Volume or ndarray, float32, (H, W, D)
     image : float32 (H, W) array of the backend (``backend.to_device``)
         Left grey image of the level; guides the bilateral weights.
     rbf : bool
@@ -67,8 +70,8 @@ def aggregate(
 
     Returns
     -------
-    ndarray, float32, (H, W, D)
-        Cells with u - d < 0 stay exactly 1.
+    Volume or ndarray, float32, (H, W, D)
+        The kind of ``cost``; cells with u - d < 0 stay exactly 1.
     """
     if rbf:
         if t_max == 0:
@@ -84,7 +87,7 @@ def aggregate(
     return backend.invalidate_out_of_view(out)
 
 
-def feature_cost_volume(features, *, max_disparity: int, backend):
+def feature_cost_volume(features, *, max_disparity: int, backend, index=None):
     """Deep-feature cost volume ``(1 - cos) / 2`` of one level (paper section III-A).
 
     Parameters
@@ -94,17 +97,26 @@ def feature_cost_volume(features, *, max_disparity: int, backend):
     max_disparity : int
         Largest disparity of the level (the volume has max_disparity + 1 slices).
     backend : module
+    index : int32 (H, W, 3) backend array, optional
+        The bands to compute; default the full range.
 
     Returns
     -------
-    ndarray, float32, (H, W, max_disparity + 1)
+    ndarray, float32, (H, W, max_disparity + 1), or a Volume with ``index``
         1 where u - d < 0 or a feature vector is zero.
     """
     return backend.cosine_cost_volume(features.left, features.right, features.left_norm, features.right_norm,
-                                      int(max_disparity))
+                                      int(max_disparity), index=index)
 
 
-def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, backend, features=None):
+def aggregation_halo(cfg: Config) -> int:
+    """How far (pixels) aggregation mixes costs: RBF passes, or the bilateral radius."""
+    agg = cfg.aggregation
+    return int(agg.t_max) if agg.rbf else int(agg.kappa_a)
+
+
+def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, backend, features=None,
+               bands=None) -> Volume:
     """Aggregated cost volume of one level (steps 2-3).
 
     Parameters
@@ -120,25 +132,38 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
     backend : module
     features : LevelFeatures, optional
         The level's deep features (``cost.kind: features``): the cosine cost replaces NCC.
+    bands : (store, visible) int32 (H, W, 3) host arrays, optional
+        From :func:`d3cli.method.band.band_indexes`: the cells to compute and aggregate,
+        and the band each pixel shows afterwards.  Default: the full range.
 
     Returns
     -------
-    ndarray, float32, (H, W, D)
+    Volume
+        The aggregated volume with the visible bands (backend arrays).
     """
+    level_dmax = level_max_disparity(max_disparity, level)
+    # The cost drivers take the host store index (uploaded once); the result carries it.
+    if bands is None:
+        h, w = left.shape
+        store = dense_index(h, w, level_dmax + 1)
+        visible = None
+    else:
+        store = bands[0]
+        visible = backend.to_device(bands[1])
     if features is not None:
-        cost = feature_cost_volume(features, max_disparity=level_max_disparity(max_disparity, level),
-                                   backend=backend)
+        cost = feature_cost_volume(features, max_disparity=level_dmax, backend=backend, index=store)
     else:
         cost = cost_volume(
             left,
             right,
-            max_disparity=level_max_disparity(max_disparity, level),
+            max_disparity=level_dmax,
             window=cfg.level_window(level),
             min_variance=cfg.cost.min_variance,
             backend=backend,
+            index=store,
         )
     agg = cfg.aggregation
-    return aggregate(
+    cost = aggregate(
         cost,
         left,
         rbf=agg.rbf,
@@ -149,3 +174,4 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
         backend=backend,
         overwrite_input=True,  # the raw NCC volume is not needed afterwards
     )
+    return cost if visible is None else Volume(cost.cost, visible, cost.n_disp)

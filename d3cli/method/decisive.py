@@ -14,13 +14,13 @@ from __future__ import annotations
 import numpy as np
 
 
-def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, exclusion: int, backend):
+def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, exclusion: int, backend, skip=None):
     """Sparse decisive disparity map D_k^S (paper section III-B, DESIGN step 4).
 
     Parameters
     ----------
-    cost : ndarray, float32, (H, W, D)
-        Aggregated cost volume of the coarsest level.
+    cost : Volume or ndarray, float32, (H, W, D)
+        Aggregated cost volume of the level.
     pkrn_min : float
         Keep the WTA disparity when (c2 + eps) / (c1 + eps) >= pkrn_min.
     epsilon : float
@@ -30,13 +30,17 @@ def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, 
     exclusion : int
         0: naive PKRN (c2 over every other disparity); r > 0 ignores |d - d*| <= r.
     backend : module
+    skip : int32 (H, W) backend array, optional
+        Pixels decided here (>= 0) are not examined and stay -1: below the coarsest
+        level fresh seeds only fill what inheritance left undecided.
 
     Returns
     -------
     ndarray, int32, (H, W)
         Seed disparities, -1 where undecided.
     """
-    return backend.decisive_seeds(cost, float(pkrn_min), float(epsilon), int(lr_tolerance), int(exclusion))
+    return backend.decisive_seeds(cost, float(pkrn_min), float(epsilon), int(lr_tolerance), int(exclusion),
+                                  skip=skip)
 
 
 def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, adversarial: bool, max_sweeps: int, backend):

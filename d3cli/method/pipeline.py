@@ -12,11 +12,12 @@ from ..config import Config
 from ..data.io import to_grey
 from ..errors import InputError
 from ..kernels import get_backend
-from .cost import level_cost
+from .band import band_indexes
+from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid
 from .perspective import RoadModel, fit_road_model, restored_validity, shift_map
-from .pyramid import build_pyramid, usable_levels
+from .pyramid import build_pyramid, level_max_disparity, usable_levels
 from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity
 
 log = logging.getLogger(__name__)
@@ -76,7 +77,7 @@ class _Match:
     """What :meth:`D3Stereo._match` leaves for the next step (backend arrays)."""
 
     disparity: object  # int32 (H, W), -1 undecided
-    cost: object  # float32 (H, W, D), aggregated
+    cost: object  # Volume, aggregated (the visible bands)
     level_maps: list
     per_level: list
 
@@ -237,12 +238,17 @@ class D3Stereo:
             shape = tuple(pyr_l[level].shape)
             stats: dict = {"level": level + 1, "shape": list(shape)}
             t0 = time.perf_counter()
+            bands = None
+            if disp is not None and cfg.pyramid.band:
+                bands = band_indexes(backend.to_host(disp), shape, n_disp=level_max_disparity(dmax, level) + 1,
+                                     margin=cfg.pyramid.band_margin, tile=cfg.pyramid.band_tile,
+                                     halo=aggregation_halo(cfg))
+                stats["band_cells"] = bands[2]
             cost = level_cost(pyr_l[level], pyr_r[level], level=level, max_disparity=dmax, cfg=cfg, backend=backend,
-                              features=None if features is None else features[level])
+                              features=None if features is None else features[level], bands=bands)
             t1 = time.perf_counter()
-            seeds = None
-            if level == levels - 1 or cfg.seeds.every_level:
-                seeds = decisive_seeds(
+            if level == levels - 1:
+                disp = decisive_seeds(
                     cost,
                     pkrn_min=cfg.seeds.pkrn_min,
                     epsilon=cfg.seeds.epsilon,
@@ -250,8 +256,6 @@ class D3Stereo:
                     exclusion=cfg.seeds.pkrn_exclusion,
                     backend=backend,
                 )
-            if level == levels - 1:
-                disp = seeds
                 stats["seeds"] = backend.count_decided(disp)
             else:
                 disp = inherit(
@@ -263,8 +267,17 @@ class D3Stereo:
                     backend=backend,
                 )
                 stats["inherited"] = backend.count_decided(disp)
-                if seeds is not None:
+                if cfg.seeds.every_level:
                     # inherited disparities win; fresh seeds cover what inheritance left
+                    seeds = decisive_seeds(
+                        cost,
+                        pkrn_min=cfg.seeds.pkrn_min,
+                        epsilon=cfg.seeds.epsilon,
+                        lr_tolerance=cfg.seeds.lr_tolerance,
+                        exclusion=cfg.seeds.pkrn_exclusion,
+                        backend=backend,
+                        skip=disp,
+                    )
                     disp = backend.merge_sparse(disp, seeds)
                     stats["seeds"] = backend.count_decided(seeds)
             t2 = time.perf_counter()

@@ -319,12 +319,16 @@ class TransferSpy:
 
 def test_a_level_stays_on_the_device(gpu, monkeypatch):
     """Cost, aggregation, seeds, diffusion, inheritance and sub-pixel on device arrays:
-    no upload at all, and only counters (<= 2 numbers) come back to the host."""
+    one upload (the band index, built on the host), and only counters (<= 2 numbers)
+    come back to the host."""
+    from d3cli.kernels.volume import dense_index
+
     rng = np.random.default_rng(40)
     left, right = random_images(rng, (H, W))
     d_left, d_right = gpu.to_device(left), gpu.to_device(right)
+    index = dense_index(H, W, 6)
     spy = TransferSpy(gpu, monkeypatch)
-    cost = gpu.ncc_cost_volume(d_left, d_right, 5, 3, 1e-2)
+    cost = gpu.ncc_cost_volume(d_left, d_right, 5, 3, 1e-2, index=index)
     cost = gpu.invalidate_out_of_view(gpu.rbf_filter(cost, gpu.rbf_weights(d_left, 1.5, 12.0), 2))
     seeds = gpu.decisive_seeds(cost, 1.05, 1e-3, 1, 0)
     disp, sweeps = gpu.diffuse(cost, seeds, gpu.min_cost(cost), 0.1, 1, 1, True, 100000)
@@ -332,7 +336,7 @@ def test_a_level_stays_on_the_device(gpu, monkeypatch):
     merged = gpu.merge_sparse(fine, seeds)
     n_decided = gpu.count_decided(merged)
     sub = gpu.subpixel(cost, merged)
-    assert spy.uploads == []
+    assert spy.uploads == [(H, W, 3)]
     assert sweeps >= 2 and all(n <= 2 for n in spy.downloads) and len(spy.downloads) == sweeps + 2
     assert n_decided == int((gpu.to_host(merged) >= 0).sum()) > 0
     assert np.isfinite(gpu.to_host(sub)).sum() == n_decided
@@ -351,9 +355,13 @@ def test_pipeline_on_cuda_equals_cpu(gpu, monkeypatch):
         results[backend] = matcher.compute(left, right, max_disparity=6)
     want, got = results["cpu"], results["cuda"]
     n_levels = len(want.levels)
-    # one upload of the pair (its pyramid); big downloads: the level maps and the result
-    assert sorted(spy.uploads) == sorted([level.shape for level in want.levels] * 2)
-    assert len([n for n in spy.downloads if n > 2]) <= n_levels + 2
+    # one upload of the pair (its pyramid), and per level its band index (stored cells;
+    # below the coarsest also the visible bands), built on the host from the coarser map;
+    # big downloads: those coarser maps, the level maps and the result
+    images = [level.shape for level in want.levels] * 2
+    indexes = [level.shape + (3,) for level in want.levels] + [level.shape + (3,) for level in want.levels[:-1]]
+    assert sorted(spy.uploads) == sorted(images + indexes)
+    assert len([n for n in spy.downloads if n > 2]) <= 2 * n_levels + 1
     assert got.info["backend"] == "cuda"
     assert len(got.levels) == len(want.levels) >= 2
     for level_got, level_want in zip(got.levels, want.levels):
@@ -382,3 +390,42 @@ def test_cosine_cost_volume_matches_cpu(gpu, max_disparity):
     want = cpu.cosine_cost_volume(fl, fr, nl, nr, max_disparity)
     got = host(gpu, gpu.cosine_cost_volume(fl, fr, nl, nr, max_disparity))
     np.testing.assert_allclose(got, want, atol=COST_ATOL)
+
+
+# ----------------------------------------------------------------------------- band search
+@pytest.mark.parametrize("rbf", [True, False])
+def test_banded_level_matches_cpu(gpu, rbf):
+    """A level with ragged bands (issue 10 item 3): every stored cell after the cost and
+    the aggregation, and every decision on the visible bands, as on the CPU."""
+    from d3cli import load_config
+    from d3cli.kernels.volume import Volume
+    from d3cli.method.band import band_indexes
+    from d3cli.method.cost import aggregation_halo, level_cost
+
+    cfg = load_config(overrides=[f"aggregation.rbf={str(rbf).lower()}", "aggregation.kappa_a=2",
+                                 "aggregation.t_max=3", "cost.window=3"])
+    rng = np.random.default_rng(50)
+    left, right = random_images(rng, (H, W))
+    coarse = sparse_map(rng, ((H + 1) // 2, (W + 1) // 2), 5, share=0.5)
+    bands = band_indexes(coarse, (H, W), n_disp=10, margin=2, tile=4, halo=aggregation_halo(cfg))
+    want = level_cost(left, right, level=0, max_disparity=9, cfg=cfg, backend=cpu, bands=bands)
+    got = level_cost(gpu.to_device(left), gpu.to_device(right), level=0, max_disparity=9, cfg=cfg, backend=gpu,
+                     bands=bands)
+    assert isinstance(got, Volume) and got.cost.size == bands[2]
+    np.testing.assert_allclose(host(gpu, got.cost), want.cost, rtol=0, atol=COST_ATOL)
+    seeds_want = cpu.decisive_seeds(want, 1.05, 1e-3, 1, 0)
+    np.testing.assert_array_equal(host(gpu, gpu.decisive_seeds(got, 1.05, 1e-3, 1, 0)), seeds_want)
+    skip = sparse_map(rng, (H, W), 10, share=0.5)
+    np.testing.assert_array_equal(host(gpu, gpu.decisive_seeds(got, 1.05, 1e-3, 1, 0, skip=gpu.to_device(skip))),
+                                  cpu.decisive_seeds(want, 1.05, 1e-3, 1, 0, skip=skip))
+    least = cpu.min_cost(want)
+    np.testing.assert_array_equal(host(gpu, gpu.min_cost(got)), least)
+    start = sparse_map(rng, (H, W), 10, share=0.2)
+    disp_want, sweeps_want = cpu.diffuse(want, start, least, 0.1, 1, 1, True, 1000)
+    disp_got, sweeps_got = gpu.diffuse(got, start, gpu.min_cost(got), 0.1, 1, 1, True, 1000)
+    np.testing.assert_array_equal(host(gpu, disp_got), disp_want)
+    assert sweeps_got == sweeps_want
+    np.testing.assert_array_equal(host(gpu, gpu.inherit(got, coarse, True, 1.05, 1e-3)),
+                                  cpu.inherit(want, coarse, True, 1.05, 1e-3))
+    np.testing.assert_allclose(host(gpu, gpu.subpixel(got, disp_want)), cpu.subpixel(want, disp_want),
+                               rtol=0, atol=COST_ATOL)

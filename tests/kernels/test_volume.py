@@ -1,0 +1,141 @@
+"""Banded cost volumes: the index helpers, and every driver on bands against the same
+driver on the full-range volume whose missing cells hold +inf.
+
+A cell outside a pixel's band "does not exist" (``cost_or_inf`` gives inf), so every
+decision on a banded volume must equal the decision on the full-range volume with those
+cells set to +inf: inf never wins a minimum, never vetoes a local-minimum test, and the
+parabola of the sub-pixel step is skipped next to it.  The full-range drivers are checked
+against the references of tests/reference.py in test_cpu.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from tests.volumes import DIFFUSION_SETTINGS, random_volume, sparse_map
+
+from d3cli.kernels import cpu
+from d3cli.kernels.volume import Volume, banded_index, dense_index, is_dense, to_dense
+
+
+def random_bands(rng, h, w, n_disp):
+    """Bands [lo, hi) per pixel: random, some full, some a single disparity."""
+    lo = rng.integers(0, n_disp, (h, w))
+    hi = np.minimum(n_disp, lo + rng.integers(1, n_disp + 1, (h, w)))
+    full = rng.random((h, w)) < 0.2
+    lo[full], hi[full] = 0, n_disp
+    return lo, hi
+
+
+def banded(dense_cost, lo, hi):
+    """The Volume holding the cells of ``dense_cost`` inside the bands."""
+    index, n_cells = banded_index(lo, hi)
+    flat = np.full(n_cells, np.nan, np.float32)
+    h, w, n_disp = dense_cost.shape
+    for v in range(h):
+        for u in range(w):
+            off = index[v, u, 0]
+            flat[off + lo[v, u]:off + hi[v, u]] = dense_cost[v, u, lo[v, u]:hi[v, u]]
+    return Volume(flat, index, n_disp)
+
+
+def test_dense_index_is_the_hwd_layout():
+    index = dense_index(3, 4, 5)
+    assert index.dtype == np.int32 and index.shape == (3, 4, 3)
+    cube = np.arange(60, dtype=np.float32).reshape(3, 4, 5)
+    np.testing.assert_array_equal(to_dense(cube.ravel(), index, 5), cube)
+    assert is_dense(index, 5) and not is_dense(index, 6)
+
+
+def test_banded_index_packs_bands_and_to_dense_restores_them():
+    rng = np.random.default_rng(0)
+    cube = rng.random((5, 7, 6)).astype(np.float32)
+    lo, hi = random_bands(rng, 5, 7, 6)
+    vol = banded(cube, lo, hi)
+    assert vol.cost.size == int((hi - lo).sum()) and not np.isnan(vol.cost).any()
+    back = to_dense(vol.cost, vol.index, 6)
+    inside = (np.arange(6) >= lo[..., None]) & (np.arange(6) < hi[..., None])
+    np.testing.assert_array_equal(back[inside], cube[inside])
+    assert np.isnan(back[~inside]).all()
+
+
+def test_an_oversized_volume_is_refused():
+    with pytest.raises(MemoryError):
+        dense_index(50000, 50000, 2)
+
+
+@pytest.fixture(params=[0, 1, 2])
+def case(request):
+    rng = np.random.default_rng(100 + request.param)
+    h, w, n_disp = [(9, 11, 6), (13, 8, 9), (1, 12, 5)][request.param]
+    cube = random_volume(rng, h, w, n_disp)
+    lo, hi = random_bands(rng, h, w, n_disp)
+    vol = banded(cube, lo, hi)
+    inside = (np.arange(n_disp) >= lo[..., None]) & (np.arange(n_disp) < hi[..., None])
+    with_inf = np.where(inside, cube, np.float32(np.inf)).astype(np.float32)
+    return rng, vol, with_inf
+
+
+def test_banded_min_cost_equals_the_full_range_with_inf(case):
+    _, vol, with_inf = case
+    np.testing.assert_array_equal(cpu.min_cost(vol), cpu.min_cost(with_inf))
+
+
+@pytest.mark.parametrize("exclusion", [0, 1])
+def test_banded_seeds_equal_the_full_range_with_inf(case, exclusion):
+    _, vol, with_inf = case
+    got = cpu.decisive_seeds(vol, 1.05, 1e-3, 1, exclusion)
+    np.testing.assert_array_equal(got, cpu.decisive_seeds(with_inf, 1.05, 1e-3, 1, exclusion))
+
+
+def test_seeds_skip_the_pixels_already_decided(case):
+    rng, vol, _ = case
+    full = cpu.decisive_seeds(vol, 1.05, 1e-3, 1, 0)
+    skip = sparse_map(rng, vol.shape, vol.n_disp, share=0.5)
+    got = cpu.decisive_seeds(vol, 1.05, 1e-3, 1, 0, skip=skip)
+    np.testing.assert_array_equal(got, np.where(skip >= 0, -1, full))
+
+
+@pytest.mark.parametrize("settings", DIFFUSION_SETTINGS)
+def test_banded_diffusion_equals_the_full_range_with_inf(case, settings):
+    rng, vol, with_inf = case
+    disp = sparse_map(rng, vol.shape, vol.n_disp, share=0.2)
+    disp[disp >= 0] = np.clip(disp[disp >= 0], 0, vol.n_disp - 1)
+    got, sweeps = cpu.diffuse(vol, disp, cpu.min_cost(vol), max_sweeps=1000, **settings)
+    want, want_sweeps = cpu.diffuse(with_inf, disp, cpu.min_cost(with_inf), max_sweeps=1000, **settings)
+    np.testing.assert_array_equal(got, want)
+    assert sweeps == want_sweeps
+
+
+@pytest.mark.parametrize("prc", [True, False])
+def test_banded_inheritance_equals_the_full_range_with_inf(case, prc):
+    rng, vol, with_inf = case
+    h, w = vol.shape
+    coarse = sparse_map(rng, ((h + 1) // 2, (w + 1) // 2), (vol.n_disp + 1) // 2, share=0.8)
+    got = cpu.inherit(vol, coarse, prc, 1.05, 1e-3)
+    np.testing.assert_array_equal(got, cpu.inherit(with_inf, coarse, prc, 1.05, 1e-3))
+
+
+def test_banded_subpixel_equals_the_full_range_with_inf(case):
+    rng, vol, with_inf = case
+    disp = sparse_map(rng, vol.shape, vol.n_disp, share=0.9)
+    lo, hi = vol.index[:, :, 1], vol.index[:, :, 2]
+    disp = np.where(disp >= 0, np.clip(disp, lo, hi - 1), -1).astype(np.int32)  # decided inside the band
+    got = cpu.subpixel(vol, disp)
+    np.testing.assert_array_equal(got, cpu.subpixel(with_inf, disp))
+    # next to a band end the integer disparity is kept, as at the ends of the range
+    at_end = (disp >= 0) & ((disp == lo) | (disp == hi - 1))
+    np.testing.assert_array_equal(got[at_end], disp[at_end].astype(np.float32))
+
+
+def test_banded_invalidation_sets_only_out_of_view_cells(case):
+    _, vol, _ = case
+    flat = vol.cost.copy()
+    cpu.invalidate_out_of_view(Volume(flat, vol.index, vol.n_disp))
+    before = to_dense(vol.cost, vol.index, vol.n_disp)
+    after = to_dense(flat, vol.index, vol.n_disp)
+    u = np.arange(vol.shape[1])[None, :, None]
+    d = np.arange(vol.n_disp)[None, None, :]
+    exists = ~np.isnan(before)
+    np.testing.assert_array_equal(after[exists & (d > u)], 1.0)
+    np.testing.assert_array_equal(after[exists & (d <= u)], before[exists & (d <= u)])
