@@ -59,8 +59,8 @@ class PyramidConfig:
     levels: int = 4  # k: number of scales; level 1 is full resolution
     ars: bool = True  # alternating inheritance/diffusion; False: linear hierarchy (DFM)
     band: bool = True  # levels below the coarsest search a band around the coarser level's map (issue 10)
-    band_margin: int = 4  # the band: 2 d_coarse +- this many disparities, hull over a tile and its neighbours
-    band_tile: int = 16  # tile size (pixels of the level); a tile searches the hull over itself and its 8 neighbours
+    band_margin: int = 2  # the band: 2 d_coarse +- this many disparities, hull over a tile and its neighbours
+    band_tile: int = 32  # tile size (pixels of the level); a tile searches the hull over itself and its 8 neighbours
 
 
 @dataclass(frozen=True)

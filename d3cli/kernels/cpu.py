@@ -109,7 +109,7 @@ def integral_image(img, power):
 
 
 # ----------------------------------------------------------------------------- band search (issue 10)
-@njit(cache=True)
+@njit(parallel=True, cache=True)
 def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
     """Stored and visible indexes of a finer level's banded volume (host side, any backend).
 
@@ -127,26 +127,23 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
     ch, cw = coarse.shape
     nty = (h + tile - 1) // tile
     ntx = (w + tile - 1) // tile
-    t_min = np.full((nty, ntx), np.iinfo(np.int64).max, np.int64)
-    t_max = np.full((nty, ntx), -1, np.int64)
-    for v in range(h):
-        cv = min(v // 2, ch - 1)
-        ty = v // tile
-        for u in range(w):
-            dc = coarse[cv, min(u // 2, cw - 1)]
-            if dc >= 0:
-                tx = u // tile
-                if dc < t_min[ty, tx]:
-                    t_min[ty, tx] = dc
-                if dc > t_max[ty, tx]:
-                    t_max[ty, tx] = dc
     own_lo = np.zeros((nty, ntx), np.int64)
     own_hi = np.full((nty, ntx), n_disp, np.int64)
-    for ty in range(nty):
+    for ty in prange(nty):  # one tile row per task: no two tasks touch a tile
+        t_min = np.full(ntx, np.iinfo(np.int64).max, np.int64)
+        t_max = np.full(ntx, -1, np.int64)
+        for v in range(ty * tile, min(h, ty * tile + tile)):
+            cv = min(v // 2, ch - 1)
+            for u in range(w):
+                dc = np.int64(coarse[cv, min(u // 2, cw - 1)])
+                if dc >= 0:
+                    tx = u // tile
+                    t_min[tx] = min(t_min[tx], dc)
+                    t_max[tx] = max(t_max[tx], dc)
         for tx in range(ntx):
-            if t_max[ty, tx] >= 0:
-                lo = min(max(2 * t_min[ty, tx] - margin, 0), n_disp - 1)
-                hi = min(max(2 * t_max[ty, tx] + margin + 1, 1), n_disp)
+            if t_max[tx] >= 0:
+                lo = min(max(2 * t_min[tx] - margin, 0), n_disp - 1)
+                hi = min(max(2 * t_max[tx] + margin + 1, 1), n_disp)
                 own_lo[ty, tx] = lo
                 own_hi[ty, tx] = max(hi, lo + 1)
     # each tile's band: the hull over itself and the eight tiles around it
@@ -160,31 +157,38 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
                     t_hi[ty, tx] = max(t_hi[ty, tx], own_hi[yy, xx])
     store = np.empty((h, w, 3), np.int32)
     visible = np.empty((h, w, 3), np.int32)
-    base = 0
-    for v in range(h):
+    row_cells = np.zeros(h + 1, np.int64)
+    for v in prange(h):  # bands per pixel, cells per row
         ty0 = min(max((v - halo) // tile, 0), nty - 1)
         ty1 = min(max((v + halo) // tile, 0), nty - 1)
         ty = v // tile
+        total = 0
         for u in range(w):
             tx0 = min(max((u - halo) // tile, 0), ntx - 1)
             tx1 = min(max((u + halo) // tile, 0), ntx - 1)
             tx = u // tile
-            lo = t_lo[ty, tx]
-            hi = t_hi[ty, tx]
-            s_lo = lo
-            s_hi = hi
+            s_lo = t_lo[ty, tx]
+            s_hi = t_hi[ty, tx]
             for yy in range(ty0, ty1 + 1):
                 for xx in range(tx0, tx1 + 1):
                     s_lo = min(s_lo, t_lo[yy, xx])
                     s_hi = max(s_hi, t_hi[yy, xx])
-            store[v, u, 0] = base - s_lo
             store[v, u, 1] = s_lo
             store[v, u, 2] = s_hi
-            visible[v, u, 0] = base - s_lo
-            visible[v, u, 1] = lo
-            visible[v, u, 2] = hi
-            base += s_hi - s_lo
-    return store, visible, base
+            visible[v, u, 1] = t_lo[ty, tx]
+            visible[v, u, 2] = t_hi[ty, tx]
+            total += s_hi - s_lo
+        row_cells[v + 1] = total
+    for v in range(h):
+        row_cells[v + 1] += row_cells[v]
+    for v in prange(h):  # offsets: the cells are packed pixel after pixel
+        base = row_cells[v]
+        for u in range(w):
+            lo = store[v, u, 1]
+            store[v, u, 0] = base - lo
+            visible[v, u, 0] = base - lo
+            base += store[v, u, 2] - lo
+    return store, visible, row_cells[h]
 
 
 # ----------------------------------------------------------------------------- matching cost (step 2)
@@ -447,21 +451,52 @@ def rbf_weights(img, sigma_space, sigma_color):
     h, w = img.shape
     inv_ss2 = 1.0 / (sigma_space * sigma_space)
     inv_sc2 = 1.0 / (sigma_color * sigma_color)
+    # K(p, q) = K(q, p): the kernel towards the four "forward" neighbours (slots 5..8:
+    # right, below-left, below, below-right) is computed once and read back from the
+    # neighbour for the mirrored slot (8 - k): half the exp calls, the same values.
+    # Per block of rows, so that the float64 scratch stays small (rows of the block and
+    # the one above it).
+    centre = _rbf_weight(0, 0, 0.0, 0.0, inv_ss2, inv_sc2)
     weights = np.zeros((h, w, 9), np.float32)
-    for v in prange(h):
-        for u in range(w):
-            total = 0.0
-            for k in range(9):
-                dy = k // 3 - 1
-                dx = k % 3 - 1
-                y = v + dy
-                x = u + dx
-                if 0 <= y < h and 0 <= x < w:
-                    wk = _rbf_weight(dy, dx, np.float64(img[v, u]), np.float64(img[y, x]), inv_ss2, inv_sc2)
-                    weights[v, u, k] = wk
-                    total += wk
-            for k in range(9):
-                weights[v, u, k] = weights[v, u, k] / total
+    block = 32
+    n_blocks = (h + block - 1) // block
+    for b in prange(n_blocks):
+        vb0 = b * block
+        vb1 = min(h, vb0 + block)
+        y0 = max(vb0 - 1, 0)
+        fwd = np.zeros((vb1 - y0, w, 4), np.float64)
+        for v in range(y0, vb1):
+            for u in range(w):
+                for j in range(4):
+                    k = 5 + j
+                    dy = k // 3 - 1
+                    dx = k % 3 - 1
+                    y = v + dy
+                    x = u + dx
+                    if 0 <= y < h and 0 <= x < w:
+                        fwd[v - y0, u, j] = _rbf_weight(dy, dx, np.float64(img[v, u]), np.float64(img[y, x]),
+                                                        inv_ss2, inv_sc2)
+        raw = np.empty(9, np.float64)
+        for v in range(vb0, vb1):
+            for u in range(w):
+                for k in range(9):
+                    dy = k // 3 - 1
+                    dx = k % 3 - 1
+                    y = v + dy
+                    x = u + dx
+                    if k == 4:
+                        raw[k] = centre
+                    elif not (0 <= y < h and 0 <= x < w):
+                        raw[k] = 0.0
+                    elif k > 4:
+                        raw[k] = fwd[v - y0, u, k - 5]
+                    else:
+                        raw[k] = fwd[y - y0, x, 3 - k]  # the neighbour's slot 8 - k, seen from it
+                total = 0.0
+                for k in range(9):
+                    total += raw[k]
+                for k in range(9):
+                    weights[v, u, k] = np.float32(raw[k]) / total
     return weights
 
 
@@ -483,100 +518,162 @@ def _uniform_bands(index):
     return out
 
 
-@njit(parallel=True, cache=True)
-def _rbf_pass(src, dst, index, uniform, weights, max_band):
-    """One 3x3 pass of eq. 2 from ``src`` into ``dst`` (flat volumes of one index).
+@njit(cache=True)
+def _rbf_row(out, v, above, sh_a, here, sh_h, below, sh_b, index, uniform, weights, acc):
+    """New values of row v (into ``out``, indexed from the row's first cell) from the old
+    rows v - 1, v, v + 1 (clamped at the image border).
 
-    The nine terms are added in slot order k = 0..8 in float32 (one write per cell).
-    Neighbours outside the image have weight 0 and read a clamped, in-image cell: adding
-    +0.0 leaves the (non-negative) sum unchanged, so the result is the same as skipping
-    them.  Where all nine share the pixel's band (``uniform``) their cells sit at fixed
-    distances (a pixel of band size B follows its left neighbour by B cells) and one
-    vectorised loop does it.  Elsewhere, where a neighbour's band lacks a disparity of
-    the pixel's band, the pixel's own cell stands in: the bands are built
-    (:mod:`d3cli.method.band`) so that this never happens for a cell the later steps
-    read, it only keeps the halo cells finite.
+    Each source row is an array and a shift: cell (y, x, d) is ``src[index[y, x, 0] + d -
+    shift]``.  The nine terms are added in slot order k = 0..8 in float32.  Neighbours
+    outside the image have weight 0 and read a clamped, in-image cell: adding +0.0 leaves
+    the (non-negative) sum unchanged, so the result is the same as skipping them.  Where
+    all nine share the pixel's band (``uniform``) their cells sit at fixed distances (a
+    pixel of band size B follows its left neighbour by B cells) and one vectorised loop
+    does it.  Elsewhere, where a neighbour's band lacks a disparity of the pixel's band,
+    the pixel's own cell stands in: the bands are built (:mod:`d3cli.method.band`) so
+    that this never happens for a cell the later steps read, it only keeps the halo
+    cells finite.
     """
     h, w, _ = index.shape
-    for v in prange(h):
-        ym = max(v - 1, 0)
-        yp = min(v + 1, h - 1)
+    ym = max(v - 1, 0)
+    yp = min(v + 1, h - 1)
+    out_shift = index[v, 0, 0] + index[v, 0, 1]  # the row's first cell
+    for u in range(w):
+        off = index[v, u, 0]
+        lo = index[v, u, 1]
+        hi = index[v, u, 2]
+        if hi <= lo:
+            continue
+        band = hi - lo
+        o4 = off - sh_h
+        res = out[off - out_shift + lo:off - out_shift + hi]
+        w0 = weights[v, u, 0]
+        w1 = weights[v, u, 1]
+        w2 = weights[v, u, 2]
+        w3 = weights[v, u, 3]
+        w4 = weights[v, u, 4]
+        w5 = weights[v, u, 5]
+        w6 = weights[v, u, 6]
+        w7 = weights[v, u, 7]
+        w8 = weights[v, u, 8]
+        if uniform[v, u]:
+            dl = -band if u > 0 else 0
+            dr = band if u < w - 1 else 0
+            o1 = index[ym, u, 0] - sh_a
+            o7 = index[yp, u, 0] - sh_b
+            # slices: indices from range(n) are known >= 0, so numba adds no
+            # negative-index wraparound and the loop vectorises (4.5x, measured)
+            s0 = above[o1 + dl + lo:o1 + dl + hi]
+            s1 = above[o1 + lo:o1 + hi]
+            s2 = above[o1 + dr + lo:o1 + dr + hi]
+            s3 = here[o4 + dl + lo:o4 + dl + hi]
+            s4 = here[o4 + lo:o4 + hi]
+            s5 = here[o4 + dr + lo:o4 + dr + hi]
+            s6 = below[o7 + dl + lo:o7 + dl + hi]
+            s7 = below[o7 + lo:o7 + hi]
+            s8 = below[o7 + dr + lo:o7 + dr + hi]
+            for i in range(band):
+                a = np.float32(0.0)
+                a += w0 * s0[i]
+                a += w1 * s1[i]
+                a += w2 * s2[i]
+                a += w3 * s3[i]
+                a += w4 * s4[i]
+                a += w5 * s5[i]
+                a += w6 * s6[i]
+                a += w7 * s7[i]
+                a += w8 * s8[i]
+                res[i] = a
+            continue
+        own = here[o4 + lo:o4 + hi]
+        for i in range(band):
+            acc[i] = 0.0
+        for k in range(9):
+            y = min(max(v + k // 3 - 1, 0), h - 1)
+            x = min(max(u + k % 3 - 1, 0), w - 1)
+            wk = weights[v, u, k]
+            if k < 3:
+                src = above
+                q_off = index[y, x, 0] - sh_a
+            elif k < 6:
+                src = here
+                q_off = index[y, x, 0] - sh_h
+            else:
+                src = below
+                q_off = index[y, x, 0] - sh_b
+            a0 = max(lo, index[y, x, 1])
+            a1 = max(min(hi, index[y, x, 2]), a0)
+            for d in range(lo, a0):
+                acc[d - lo] += wk * own[d - lo]
+            for d in range(a0, a1):
+                acc[d - lo] += wk * src[q_off + d]
+            for d in range(a1, hi):
+                acc[d - lo] += wk * own[d - lo]
+        for i in range(band):
+            res[i] = acc[i]
+
+
+@njit(parallel=True, cache=True)
+def _rbf_pass(cost, index, uniform, weights, row_start, strip, max_band, max_row):
+    """One 3x3 pass of eq. 2, in place, streamed over rows (issue 10 item 4).
+
+    The rows are cut into strips, one task each.  A row's new values wait in a row
+    buffer until the next row has been computed from the old ones, and the old rows just
+    outside a strip (owned by the neighbouring tasks) are copied before any task starts.
+    No second volume, and the three rows a row reads stay in cache.  The result equals a
+    pass from one volume into another.
+    """
+    h = index.shape[0]
+    n_strips = (h + strip - 1) // strip
+    edges = np.empty((n_strips, 2, max_row), np.float32)
+    for s in prange(n_strips):
+        s0 = s * strip
+        s1 = min(h, s0 + strip)
+        if s0 > 0:
+            n = row_start[s0] - row_start[s0 - 1]
+            edges[s, 0, :n] = cost[row_start[s0 - 1]:row_start[s0]]
+        if s1 < h:
+            n = row_start[s1 + 1] - row_start[s1]
+            edges[s, 1, :n] = cost[row_start[s1]:row_start[s1 + 1]]
+    for s in prange(n_strips):
+        s0 = s * strip
+        s1 = min(h, s0 + strip)
+        new = np.empty((2, max_row), np.float32)
         acc = np.empty(max_band, np.float32)
-        for u in range(w):
-            off = index[v, u, 0]
-            lo = index[v, u, 1]
-            hi = index[v, u, 2]
-            if hi <= lo:
-                continue
-            if uniform[v, u]:
-                band = hi - lo
-                dl = -band if u > 0 else 0
-                dr = band if u < w - 1 else 0
-                o1 = index[ym, u, 0]
-                o7 = index[yp, u, 0]
-                o0 = o1 + dl
-                o2 = o1 + dr
-                o3 = off + dl
-                o5 = off + dr
-                o6 = o7 + dl
-                o8 = o7 + dr
-                w0 = weights[v, u, 0]
-                w1 = weights[v, u, 1]
-                w2 = weights[v, u, 2]
-                w3 = weights[v, u, 3]
-                w4 = weights[v, u, 4]
-                w5 = weights[v, u, 5]
-                w6 = weights[v, u, 6]
-                w7 = weights[v, u, 7]
-                w8 = weights[v, u, 8]
-                # slices: indices from range(n) are known >= 0, so numba adds no
-                # negative-index wraparound and the loop vectorises (4.5x, measured)
-                s0 = src[o0 + lo:o0 + hi]
-                s1 = src[o1 + lo:o1 + hi]
-                s2 = src[o2 + lo:o2 + hi]
-                s3 = src[o3 + lo:o3 + hi]
-                s4 = src[off + lo:off + hi]
-                s5 = src[o5 + lo:o5 + hi]
-                s6 = src[o6 + lo:o6 + hi]
-                s7 = src[o7 + lo:o7 + hi]
-                s8 = src[o8 + lo:o8 + hi]
-                out = dst[off + lo:off + hi]
-                for i in range(band):
-                    a = np.float32(0.0)
-                    a += w0 * s0[i]
-                    a += w1 * s1[i]
-                    a += w2 * s2[i]
-                    a += w3 * s3[i]
-                    a += w4 * s4[i]
-                    a += w5 * s5[i]
-                    a += w6 * s6[i]
-                    a += w7 * s7[i]
-                    a += w8 * s8[i]
-                    out[i] = a
-                continue
-            for i in range(hi - lo):
-                acc[i] = 0.0
-            for k in range(9):
-                y = min(max(v + k // 3 - 1, 0), h - 1)
-                x = min(max(u + k % 3 - 1, 0), w - 1)
-                wk = weights[v, u, k]
-                q_off = index[y, x, 0]
-                a0 = max(lo, index[y, x, 1])
-                a1 = min(hi, index[y, x, 2])
-                if a1 < a0:
-                    a1 = a0
-                for d in range(lo, a0):
-                    acc[d - lo] += wk * src[off + d]
-                for d in range(a0, a1):
-                    acc[d - lo] += wk * src[q_off + d]
-                for d in range(max(a1, lo), hi):
-                    acc[d - lo] += wk * src[off + d]
-            for d in range(lo, hi):
-                dst[off + d] = acc[d - lo]
+        for v in range(s0, s1):
+            ym = max(v - 1, 0)
+            yp = min(v + 1, h - 1)
+            # row v - 1 still holds its old values: its new ones are written only now,
+            # after row v has read them
+            if v == s0 and ym < v:
+                above = edges[s, 0]
+                sh_a = row_start[ym]
+            else:
+                above = cost
+                sh_a = 0
+            if yp == v or yp < s1:
+                below = cost
+                sh_b = 0
+            else:
+                below = edges[s, 1]
+                sh_b = row_start[yp]
+            _rbf_row(new[v % 2], v, above, sh_a, cost, 0, below, sh_b, index, uniform, weights, acc)
+            if v > s0:
+                n = row_start[v] - row_start[v - 1]
+                cost[row_start[v - 1]:row_start[v]] = new[(v - 1) % 2, :n]
+        n = row_start[s1] - row_start[s1 - 1]
+        cost[row_start[s1 - 1]:row_start[s1]] = new[(s1 - 1) % 2, :n]
+
+
+#: Rows per task of the in-place RBF pass.
+RBF_STRIP_ROWS = 32
 
 
 def rbf_filter(cost, weights, t_max, overwrite_input=False):
     """Recursive bilateral filtering: ``t_max`` passes of the 3x3 kernel (paper eq. 2).
+
+    Every pass runs in place, row by row (:func:`_rbf_pass`), so the filter needs one
+    volume and a few row buffers.
 
     Parameters
     ----------
@@ -585,30 +682,27 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
         From :func:`rbf_weights`.
     t_max : int
     overwrite_input : bool
-        Use ``cost`` as one of the two ping-pong buffers: two volumes at the peak instead
-        of three (the pipeline no longer needs the raw NCC volume).  The result is the
-        same; ``cost`` then holds garbage or the result itself.
+        Filter ``cost`` itself (the pipeline no longer needs the raw NCC volume): one
+        volume at the peak instead of two.  The result is the same.
 
     Returns
     -------
     Volume or ndarray, float32, (H, W, D)
-        The same kind as ``cost``; a new array, or ``cost``'s own with
-        ``overwrite_input`` and an even ``t_max``.
+        The same kind as ``cost``; ``cost``'s own array with ``overwrite_input``.
     """
     flat, index, n_disp, dense_shape = _unpack(cost)
-    if t_max == 0:
-        return _pack(flat if overwrite_input else flat.copy(), index, n_disp, dense_shape)
-    max_band = max(1, int((index[:, :, 2] - index[:, :, 1]).max()))
+    work = flat if overwrite_input else flat.copy()
+    if t_max == 0 or work.size == 0:
+        return _pack(work, index, n_disp, dense_shape)
+    sizes = (index[:, :, 2] - index[:, :, 1]).astype(np.int64)
+    max_band = max(1, int(sizes.max()))
+    row_start = np.zeros(index.shape[0] + 1, np.int64)
+    np.cumsum(sizes.sum(axis=1), out=row_start[1:])
+    max_row = max(1, int(np.diff(row_start).max()))
     uniform = _uniform_bands(index)
-    # The first pass reads ``cost`` directly, so no copy of the input volume is made.
-    src = np.empty_like(flat)
-    _rbf_pass(flat, src, index, uniform, weights, max_band)
-    if t_max > 1:
-        dst = flat if overwrite_input else np.empty_like(flat)
-        for _ in range(t_max - 1):
-            _rbf_pass(src, dst, index, uniform, weights, max_band)
-            src, dst = dst, src
-    return _pack(src, index, n_disp, dense_shape)
+    for _ in range(t_max):
+        _rbf_pass(work, index, uniform, weights, row_start, RBF_STRIP_ROWS, max_band, max_row)
+    return _pack(work, index, n_disp, dense_shape)
 
 
 def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
@@ -701,6 +795,28 @@ def _evaluate_frontier(cost, index, disp, min_cost, max_gap, active, n_active, n
 
 
 @njit(cache=True)
+def _evaluate_frontier_serial(cost, index, disp, min_cost, max_gap, active, n_active, new_values, tau, kappa_d,
+                              adversarial):
+    w = disp.shape[1]
+    for i in range(n_active):
+        p = active[i]
+        new_values[i] = _diffuse_at(cost, index, disp, min_cost, max_gap, p // w, p % w, tau, kappa_d, adversarial)
+
+
+#: Frontiers smaller than this are evaluated in the calling thread: waking the worker
+#: threads costs more than the work (late sweeps touch a few hundred pixels).
+SERIAL_FRONTIER = 4096
+
+
+@njit(parallel=True, cache=True)
+def _evaluate_all(cost, index, disp, min_cost, max_gap, new_values, tau, kappa_d, adversarial):
+    h, w = disp.shape
+    for v in prange(h):
+        for u in range(w):
+            new_values[v * w + u] = _diffuse_at(cost, index, disp, min_cost, max_gap, v, u, tau, kappa_d, adversarial)
+
+
+@njit(cache=True)
 def _build_frontier(changed, n_changed, stamp, sweep, active, h, w, kappa_d):
     """Pixels within ``kappa_d`` of a changed pixel (the pixel itself excluded), deduplicated."""
     n_active = 0
@@ -759,21 +875,39 @@ def _diffuse(cost, index, disp0, min_cost, max_gap, tau, kappa_d, adversarial, m
     h, w = disp0.shape
     disp = disp0.copy()
     flat = disp.reshape(h * w)  # a view: writes go to disp
-    changed = np.empty(h * w, np.int64)
+    # pixel lists in int32: 12 bytes a pixel less than int64 (a 1280x720 level: 11 MB)
+    changed = np.empty(h * w, np.int32)
     n_changed = 0
     for p in range(h * w):
         if flat[p] != UNDECIDED:
             changed[n_changed] = p
             n_changed += 1
-    stamp = np.zeros(h * w, np.int64)
-    active = np.empty(h * w, np.int64)
+    stamp = np.zeros(h * w, np.int32)
+    active = np.empty(h * w, np.int32)
     new_values = np.empty(h * w, np.int32)
     sweeps = 0
+    if n_changed > 0 and max_sweeps > 0:
+        # The first frontier is nearly the whole image: evaluate every pixel in parallel
+        # instead of listing it serially.  The same result: a pixel without a decided
+        # neighbour has no candidate and keeps its state.
+        sweeps = 1
+        _evaluate_all(cost, index, disp, min_cost, max_gap, new_values, tau, kappa_d, adversarial)
+        n_changed = 0
+        for p in range(h * w):
+            if new_values[p] != flat[p]:
+                changed[n_changed] = p
+                n_changed += 1
+        for i in range(n_changed):
+            flat[changed[i]] = new_values[changed[i]]
     while n_changed > 0 and sweeps < max_sweeps:
         sweeps += 1
         n_active = _build_frontier(changed, n_changed, stamp, sweeps, active, h, w, kappa_d)
-        _evaluate_frontier(cost, index, disp, min_cost, max_gap, active, n_active, new_values, tau, kappa_d,
-                           adversarial)
+        if n_active < SERIAL_FRONTIER:
+            _evaluate_frontier_serial(cost, index, disp, min_cost, max_gap, active, n_active, new_values, tau,
+                                      kappa_d, adversarial)
+        else:
+            _evaluate_frontier(cost, index, disp, min_cost, max_gap, active, n_active, new_values, tau, kappa_d,
+                               adversarial)
         # Jacobi: every frontier pixel read the previous map; apply all changes after.
         n_changed = 0
         for i in range(n_active):
