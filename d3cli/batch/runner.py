@@ -507,7 +507,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
                              extra={"settings": settings, "computed": batch.n_computed,
                                     "skipped_complete": batch.n_skipped})
         batch.summary = report.summarize(batch.rows)
-    if not evaluate:
+    if not evaluate or shard is not None:
         # issue 12 item 7: the summary of an earlier --eval run (maybe another method) would
         # describe maps this run may have replaced; only d3stereo's own files are removed.
         for name in remove_stale_summaries(out):
