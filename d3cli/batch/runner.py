@@ -590,6 +590,8 @@ def _write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, 
         "stopped_at": stopped_at,
         "stop_reason": stop_reason,
         "n_failed": len(failed),
+        "n_computed": sum(r["status"] == "ok" for r in records),
+        "n_skipped": sum(r["status"] == "skipped" for r in records),  # complete from an earlier run
         # Seconds spent compiling numba kernels up front; not part of any pair's wall time.
         "compile_s": compile_s,
         "execution": execution or {"mode": "serial", "workers": 1},

@@ -8,6 +8,7 @@ pair again; an unchanged rerun skips it.  CLI runs use ``--method sgbm`` on tiny
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -224,3 +225,51 @@ def test_cloud_keeps_only_points_within_the_depth_range(tmp_path, one_pair):
     assert points[:, 2].min() >= 8.0 and points[:, 2].max() <= 8.5
     assert stored(out)["cloud"]["depth_range_m"] == [8.0, 8.5]
     assert stored(out)["cloud"]["points"] == points.shape[0]
+
+
+# ----------------------------------------------------------------------------- every key
+def _changed(value):
+    if isinstance(value, bool):
+        return not value
+    if isinstance(value, int):
+        return value + 1
+    if isinstance(value, float):
+        return value * 2 + 1
+    if isinstance(value, str):
+        return value + "-other"
+    if isinstance(value, tuple):
+        return (*value, value[-1] if value else 1)
+    return 1.0  # None
+
+
+def _every_key():
+    from d3cli.config import Config
+
+    cfg = Config()
+    for section in dataclasses.fields(cfg):
+        sec = getattr(cfg, section.name)
+        for key in dataclasses.fields(sec):
+            yield section.name, key.name
+
+
+#: Keys that cannot change a map (see d3cli/batch/fingerprint.py); method and max_disparity
+#: are hashed as resolved (arguments of settings_fingerprint).
+NOT_IN_MAP = {("run", "backend"), ("run", "max_memory_gb"), ("run", "method"), ("run", "max_disparity")}
+
+
+@pytest.mark.parametrize("section, key", list(_every_key()))
+def test_every_config_key_the_method_reads_changes_the_fingerprint(section, key):
+    from d3cli.batch import settings_fingerprint
+    from d3cli.config import Config
+
+    cfg = Config()
+    sec = getattr(cfg, section)
+    other = dataclasses.replace(cfg, **{section: dataclasses.replace(sec, **{key: _changed(getattr(sec, key))})})
+    for method in ("d3stereo", "pt-sgm", "sgbm", "elas"):
+        reads = {"sgbm": section == "sgbm", "elas": section == "peers"}.get(
+            method, section not in ("run", "camera", "road"))
+        reads = reads or (section, key) == ("run", "color_range")  # disp_color.png of every method
+        same = settings_fingerprint(cfg, method, None) == settings_fingerprint(other, method, None)
+        assert same != reads, (method, section, key)
+        if (section, key) in NOT_IN_MAP:
+            assert same

@@ -108,6 +108,7 @@ def test_run_without_eval_removes_the_summary_of_an_earlier_eval_run(tmp_path, p
     assert result.exit_code == 0, result.output
     assert json.loads((out / "summary.json").read_text())["method"] == "sgbm"
     assert [p["status"] for p in run_json(out)["pairs"]] == ["skipped"] * 3
+    assert (run_json(out)["n_computed"], run_json(out)["n_skipped"]) == (0, 3)
     assert "sgbm: 3 ok (0 computed, 3 skipped as complete), 0 failed of 3 pairs" in result.output
     assert "3 ok, 0 failed, 0 skipped" not in result.output  # the old line contradicting run.json
     assert "[1/3]  a  skipped" in result.output  # the per-pair lines say it too (no terminal)
