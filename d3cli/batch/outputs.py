@@ -35,7 +35,8 @@ from ..data.io import atomic_write, read_image, write_image, write_kitti_png, wr
 from ..evaluation import pictures
 from ..errors import OutputError, where_what_fix
 from ..evaluation.report import jsonable
-from ..road.report import DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE
+from ..road.report import CSV_FIELDS as DEFECTS_CSV_FIELDS
+from ..road.report import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE
 
 log = logging.getLogger(__name__)
 
@@ -217,6 +218,8 @@ def is_our_summary(path: Path) -> bool:
         return head.startswith("pair,family,status")
     if path.name == "summary.md":
         return head.startswith("# Evaluation:")
+    if path.name == DEFECTS_CSV:
+        return head.startswith(",".join(DEFECTS_CSV_FIELDS) + "\n")
     if path.name == "summary.json":
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
@@ -226,6 +229,18 @@ def is_our_summary(path: Path) -> bool:
     return False
 
 
+def remove_ours(path: Path) -> bool:
+    """Remove ``path`` when it is a report file d3stereo wrote (:func:`is_our_summary`)."""
+    if not (path.is_file() and is_our_summary(path)):
+        return False
+    try:
+        path.unlink()
+    except OSError as exc:
+        log.warning("%s: could not remove the report of an earlier run (%s)", path, exc)
+        return False
+    return True
+
+
 def remove_stale_summaries(out: Path) -> list[str]:
     """Remove the ``--eval`` summary files of an earlier run from ``out``; returns their names.
 
@@ -233,17 +248,7 @@ def remove_stale_summaries(out: Path) -> list[str]:
     another run (another method, other maps).  Only files recognised as written by
     d3stereo (:func:`is_our_summary`) are removed.
     """
-    removed = []
-    for name in SUMMARY_FILES:
-        path = out / name
-        if path.is_file() and is_our_summary(path):
-            try:
-                path.unlink()
-            except OSError as exc:
-                log.warning("%s: could not remove the summary of an earlier run (%s)", path, exc)
-                continue
-            removed.append(name)
-    return removed
+    return [name for name in SUMMARY_FILES if remove_ours(out / name)]
 
 
 def panel_title(name: str, scores: dict | None) -> str:

@@ -45,7 +45,7 @@ from ..data import datasets, io
 from ..errors import D3Error, InputError, OutputError
 from ..evaluation import diagnostics, report
 from ..road.pointcloud import camera_from, save_pair_cloud
-from ..road.report import road_report, write_defects_csv
+from ..road.report import DEFECTS_CSV, road_report, write_defects_csv
 from . import resources
 from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .executors import make_executor, select_shard
@@ -61,6 +61,8 @@ from .outputs import (
     check_output_folder,
     clipped_warning,
     read_result,
+    is_our_summary,
+    remove_ours,
     remove_pair_files,
     remove_stale_summaries,
     write_disparity_outputs,
@@ -498,8 +500,11 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     batch.n_failed = sum(r["status"] == "failed" for r in batch.rows)
     batch.n_computed = sum(r["status"] == "ok" for r in records)
     batch.n_skipped = sum(r["status"] == "skipped" for r in records)
-    if cfg.road.report:
-        write_defects_csv(out, [out / p.name for p in pairs])
+    if cfg.road.report or (shard is None and is_our_summary(out / DEFECTS_CSV)):
+        # Without --road-report too: pairs computed again lost their defects.json, so an
+        # earlier defects.csv would list defects of maps that are gone.
+        if write_defects_csv(out, [out / p.name for p in pairs]) is None and remove_ours(out / DEFECTS_CSV):
+            log.info("%s: removed (no pair of this run has road outputs now)", out / DEFECTS_CSV)
     if evaluate and shard is not None:
         log.info("--shard: summary files are left to `d3stereo eval %s --gt ... -o REPORT` once every shard is done", out)
     elif evaluate:

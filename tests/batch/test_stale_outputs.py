@@ -159,3 +159,25 @@ def test_no_clipping_warning_below_256(tmp_path, pairs_root):
     out = tmp_path / "out"
     assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
     assert not any("disp.png" in w for w in stored(out, "a")["warnings"])
+
+
+def test_defects_csv_follows_the_pairs_road_outputs(tmp_path):
+    data = tmp_path / "synth"
+    assert invoke("synth", data, "--n", "1", "--seed", "2", "--width", "320", "--height", "192", "-q").exit_code == 0
+    out = tmp_path / "out"
+    assert invoke("run", data, "-o", out, "--method", "sgbm", "--road-report", "-q").exit_code == 0
+    assert (out / "defects.csv").read_text().startswith("pair,id,kind")
+    # Same maps, no --road-report: the pair's road outputs stay, and so does defects.csv.
+    assert invoke("run", data, "-o", out, "--method", "sgbm", "-q").exit_code == 0
+    assert (out / "defects.csv").is_file()
+    # Another method: the map and its road outputs are replaced; defects.csv described them.
+    assert invoke("run", data, "-o", out, "--method", "pt-sgm", "-q").exit_code == 0
+    assert not list(out.glob("*/defects.json")) and not (out / "defects.csv").exists()
+
+
+def test_a_defects_csv_of_the_user_is_never_touched(tmp_path, pairs_root):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "defects.csv").write_text("my,own\n")
+    assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
+    assert (out / "defects.csv").read_text() == "my,own\n"
