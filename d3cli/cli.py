@@ -185,7 +185,6 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
             table = report.format_table(result.summary).splitlines()
             counts = "\n".join([counts, *table[1:]])  # the table's first line is its counts line
         click.echo(counts)
-    if not quiet:
         _say_where(Path(out_dir), evaluate)
     _finish(result.failures, result.n_pairs, result.run_json)
 

@@ -668,13 +668,15 @@ def load_config(path: str | os.PathLike | None = None, overrides: typing.Iterabl
         Unknown sections/keys, wrong types, out-of-range values, bad YAML.
     """
     cfg = Config()
+    overrides = list(overrides)
     if path is not None:
         data, lines = read_yaml_lines(path)
         cfg = _apply(cfg, data, os.fspath(path), lines)
     for text in overrides:
         section, key, value = parse_override(text)
         cfg = _apply(cfg, {section: {key: value}}, f"--set {text}")
-    _check_depth_range(cfg, os.fspath(path) if path is not None and not overrides else "config")
+    where = " and ".join(filter(None, [os.fspath(path) if path is not None else "", "--set" if overrides else ""]))
+    _check_depth_range(cfg, where or "defaults")
     return cfg
 
 
