@@ -119,6 +119,9 @@ def main():
 @click.option("--eval/--no-eval", "evaluate", default=False,
               help="Score each pair (ground truth where present, photometric always).")
 @click.option("--overwrite", is_flag=True, help="Compute pairs again even when their outputs are complete.")
+@click.option("--break-lock", is_flag=True,
+              help="Take over OUT's lock when its record names a run on another host or a live pid that "
+                   "is not writing (check first); a lock held by a running d3stereo is never broken.")
 @click.option("--no-fill", is_flag=True, help="Leave undecided pixels invalid (inf) instead of filling them.")
 @click.option("--pointcloud", is_flag=True,
               help="Also write OUT/<pair>/cloud.ply (x, y, z metres in the left camera frame, colour from the "
@@ -139,7 +142,7 @@ def main():
                    "defects.png per pair, OUT/defects.csv); same as road.report: true.")
 @_verbosity
 def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
-        no_fill, pointcloud, workers, scheduler, shard, color_range, road_report, verbose, quiet):
+        break_lock, no_fill, pointcloud, workers, scheduler, shard, color_range, road_report, verbose, quiet):
     """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
 
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
@@ -173,10 +176,15 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     result = batch.run_batch(pairs, out_dir, cfg=cfg, method=method, evaluate=evaluate,
                              overwrite=overwrite, max_disparity=override, progress=not quiet,
                              config_source=source, pointcloud=pointcloud, workers=n_workers,
-                             scheduler=scheduler, shard=shard_of)
-    if result.summary is not None and not quiet:
-        click.echo(report.format_table(result.summary))
+                             scheduler=scheduler, shard=shard_of, break_lock=break_lock)
     if not quiet:
+        # The counts as run.json has them: "skipped" = kept complete from an earlier run
+        # (an ok result in the table), never a pair left out.
+        counts = f"{method}: {result.counts_line()}"
+        if result.summary is not None:
+            table = report.format_table(result.summary).splitlines()
+            counts = "\n".join([counts, *table[1:]])  # the table's first line is its counts line
+        click.echo(counts)
         _say_where(Path(out_dir), evaluate)
     _finish(result.failures, result.n_pairs, result.run_json)
 

@@ -187,6 +187,10 @@ class CameraConfig:
     baseline: float | None = None  # metres
     cx: float | None = None  # principal point, pixels; None: image centre
     cy: float | None = None
+    # Depth range of cloud.ply points, metres (issue 12 item 4: near-zero disparities gave
+    # points at 1e33 m).  100 m: KITTI's useful range is about 80 m; road scenes are closer.
+    min_depth_m: float = 0.0
+    max_depth_m: float = 100.0
 
 
 @dataclass(frozen=True)
@@ -284,6 +288,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "refine.smooth_sigma": (lambda v: v > 0, "a number > 0 (pixels)"),
     "camera.f": (lambda v: v is None or v > 0, "a positive number (pixels) or null"),
     "camera.baseline": (lambda v: v is None or v > 0, "a positive number (metres) or null"),
+    "camera.min_depth_m": (lambda v: v >= 0, "a number >= 0 (metres)"),
+    "camera.max_depth_m": (lambda v: v > 0, "a number > 0 (metres)"),
     "peers.elas_preset": (lambda v: v in ("middlebury", "robotics"), "one of middlebury, robotics"),
     "peers.pandora_p1": (lambda v: v >= 0, "a number >= 0"),
     "peers.pandora_p2": (lambda v: v >= 0, "a number >= 0"),
@@ -667,15 +673,30 @@ def load_config(path: str | os.PathLike | None = None, overrides: typing.Iterabl
         Unknown sections/keys, wrong types, out-of-range values, bad YAML.
     """
     cfg = Config()
+    overrides = list(overrides)
     if path is not None:
         data, lines = read_yaml_lines(path)
         cfg = _apply(cfg, data, os.fspath(path), lines)
     for text in overrides:
         section, key, value = parse_override(text)
         cfg = _apply(cfg, {section: {key: value}}, f"--set {text}")
+    where = " and ".join(filter(None, [os.fspath(path) if path is not None else "", "--set" if overrides else ""]))
+    _check_depth_range(cfg, where or "defaults")
     return cfg
+
+
+def _check_depth_range(cfg: Config, where: str) -> None:
+    """camera.min_depth_m < camera.max_depth_m, checked once all values are in (file and --set)."""
+    cam = cfg.camera
+    if cam.min_depth_m >= cam.max_depth_m:
+        raise ConfigError(
+            f"{where}: camera.min_depth_m ({cam.min_depth_m:g}) must be smaller than camera.max_depth_m "
+            f"({cam.max_depth_m:g}); fix the depth range of the point clouds"
+        )
 
 
 def config_from_dict(data: Mapping | None, where: str = "<dict>") -> Config:
     """Build a validated :class:`Config` from a nested mapping (e.g. run.json)."""
-    return _apply(Config(), data or {}, where)
+    cfg = _apply(Config(), data or {}, where)
+    _check_depth_range(cfg, where)
+    return cfg

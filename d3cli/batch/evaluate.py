@@ -19,7 +19,7 @@ from ..data import datasets, io
 from ..errors import D3Error, InputError, where_what_fix
 from ..evaluation import metrics, pictures, report
 from ..evaluation.html import write_report_html
-from .fingerprint import package_versions
+from .fingerprint import object_map_path, package_versions
 from .lock import ensure_writable
 from .outputs import ERROR_MAP, RESULT_FILE, RUN_FILE
 
@@ -90,13 +90,12 @@ def evaluate_pair(pair, left, right, disparity, pair_dir: Path) -> dict:
 
 def _object_map(pair, shape):
     """KITTI 2015 ``obj_map.png`` beside the ground truth (0 = background), or None."""
-    for candidate in (Path(pair.gt).parent / "obj_map.png",
-                      Path(pair.gt).parent.parent / "obj_map" / Path(pair.gt).name):
-        if candidate.is_file():
-            obj = io.read_image(candidate)
-            obj = obj if obj.ndim == 2 else obj[..., 0]
-            return obj if obj.shape == tuple(shape) else None
-    return None
+    candidate = object_map_path(pair.gt)  # the file the resume fingerprint covers
+    if candidate is None:
+        return None
+    obj = io.read_image(candidate)
+    obj = obj if obj.ndim == 2 else obj[..., 0]
+    return obj if obj.shape == tuple(shape) else None
 
 
 def method_names(pred_dirs: Sequence[Path]) -> list[str]:

@@ -1,36 +1,137 @@
-"""What a pair's result depends on: the settings fingerprint and the package versions.
+"""What a pair's stored outputs depend on, as short hashes: resume decisions, versions.
 
-A pair whose stored ``result.json`` carries another fingerprint is computed again.
+A rerun skips a pair only when the :func:`pair_fingerprint` stored in its
+``result.json`` equals the one of this run; anything else computes it again.  It covers
+
+* the settings (:func:`settings_fingerprint`): the method, every config key the method
+  can read, the ``--max-disparity`` override, ``run.color_range`` (disp_color.png) and
+  the package versions (d3stereo and the libraries that shape results);
+* the pair (:func:`input_identity`): name, size and modification time (ns) of each of its
+  files (left, right, ground truth, non-occlusion mask, calibration, KITTI ``obj_map``),
+  and the dataset values read from SOURCE.txt or a manifest (``gt_scale``,
+  ``gt_invalid``, ``max_disparity``, ``bit_depth``).  The resolved disparity range is a
+  function of these (the override, the manifest value, or the ground truth and the
+  image width), so it is covered without reading the ground truth to skip a pair.
+
+``cloud.ply`` has its own :func:`cloud_fingerprint` (camera section, calibration file),
+so a changed ``camera.f`` or calib.txt recomputes the cloud but not the map.
+
+Config keys left out, and why:
+
+* ``run.backend``: CPU and CUDA kernels give the same result (tests/kernels);
+* ``run.method`` and ``run.max_disparity``: hashed as resolved (``--method``,
+  ``--max-disparity``);
+* ``run.max_memory_gb``: only decides whether a pair is refused before it is computed;
+* ``camera``: read only for clouds and road outputs (:func:`cloud_fingerprint`);
+* ``road``: road outputs are written again on every run with ``--road-report``;
+* for ``sgbm``, ``elas`` and ``pandora-sgm`` everything but their own section: they
+  are handed only that section (:func:`d3cli.batch.methods.compute_pair`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
+import os
+from pathlib import Path
 
 from .. import __version__
 from ..config import Config
 
-#: Config sections that shape each baseline's result; d3stereo uses all but run and sgbm.
-_BASELINE_SECTIONS = {"sgbm": ("sgbm",), "pt-sgm": ("sgbm", "pt"), "elas": ("peers",), "pandora-sgm": ("peers",)}
+#: Config sections that are all a baseline receives (d3cli.batch.methods.compute_pair).
+_BASELINE_SECTIONS = {"sgbm": ("sgbm",), "elas": ("peers",), "pandora-sgm": ("peers",)}
+
+#: Sections d3stereo and pt-sgm (handed the whole config) never read for the map.
+_NOT_READ_BY_MAP = ("run", "camera", "road")
+
+#: Pair fields that are file paths (their identity is hashed, not their spelling).
+_FILE_FIELDS = ("left", "right", "gt", "nocc", "calib")
+
+
+def _digest(key) -> str:
+    blob = json.dumps(key, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
 def settings_fingerprint(cfg: Config, method: str, max_disparity: int | None) -> str:
-    """Short hash of what determines a pair's result: method, its config sections, range.
+    """Short hash of the settings a pair's outputs depend on (the same for every pair).
 
-    The backend is left out on purpose: CPU and CUDA give the same result.
+    Parameters
+    ----------
+    cfg : Config
+        Resolved configuration.
+    method : str
+        ``--method`` as resolved.
+    max_disparity : int or None
+        ``--max-disparity`` override (None: each pair's own range).
+
+    Returns
+    -------
+    str
+        16 hex digits.  See the module docstring for the keys left out.
     """
     sections = cfg.to_dict()
-    del sections["run"]  # method and max_disparity are hashed as resolved; backend does not matter
     if method in _BASELINE_SECTIONS:
         sections = {name: sections[name] for name in _BASELINE_SECTIONS[method]}
     else:
-        del sections["sgbm"], sections["peers"]  # d3stereo reads neither
-    key = [method, sections, max_disparity]
+        sections = {name: value for name, value in sections.items() if name not in _NOT_READ_BY_MAP}
+    key = [method, sections, max_disparity, package_versions()]
     if cfg.run.color_range:  # a run setting that changes an output (disp_color.png)
         key.append(list(cfg.run.color_range))
-    blob = json.dumps(key, sort_keys=True)
-    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+    return _digest(key)
+
+
+def file_identity(path) -> list | None:
+    """``[file name, size in bytes, modification time in ns]`` of ``path``; None without one.
+
+    A file that cannot be read gives ``[name, None, None]``: the pair then fails when it
+    is loaded, and a fingerprint is still defined.
+    """
+    if path is None:
+        return None
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except OSError:
+        return [path.name, None, None]
+    return [path.name, st.st_size, st.st_mtime_ns]
+
+
+def object_map_path(gt) -> Path | None:
+    """KITTI 2015 ``obj_map.png`` of a ground truth (beside it, or ``../obj_map/<name>``), or None."""
+    if gt is None:
+        return None
+    gt = Path(gt)
+    for candidate in (gt.parent / "obj_map.png", gt.parent.parent / "obj_map" / gt.name):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def input_identity(pair) -> dict:
+    """Everything of a pair (a :class:`d3cli.data.datasets.Pair`) its outputs depend on.
+
+    File fields become :func:`file_identity` (so an absolute and a relative spelling of
+    the same file agree); other fields (``gt_scale``, ``gt_invalid``, ``max_disparity``,
+    ``bit_depth``, ...) are taken as they are.
+    """
+    out = {}
+    for f in dataclasses.fields(pair):
+        value = getattr(pair, f.name)
+        out[f.name] = file_identity(value) if f.name in _FILE_FIELDS else value
+    out["obj_map"] = file_identity(object_map_path(pair.gt))
+    return out
+
+
+def pair_fingerprint(settings: str, pair) -> str:
+    """Short hash of :func:`settings_fingerprint` ``settings`` and the pair's :func:`input_identity`."""
+    return _digest([settings, input_identity(pair)])
+
+
+def cloud_fingerprint(cfg: Config, pair) -> str:
+    """Short hash of what ``cloud.ply`` depends on besides the map: camera section, calibration."""
+    return _digest([cfg.to_dict()["camera"], file_identity(pair.calib), __version__])
 
 
 def package_versions() -> dict:

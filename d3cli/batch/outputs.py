@@ -35,7 +35,8 @@ from ..data.io import atomic_write, read_image, write_image, write_kitti_png, wr
 from ..evaluation import pictures
 from ..errors import OutputError, where_what_fix
 from ..evaluation.report import jsonable
-from ..road.report import DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE
+from ..road.report import CSV_FIELDS as DEFECTS_CSV_FIELDS
+from ..road.report import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +48,10 @@ PANEL_FILE = "panel.png"
 OVERLAY_FILE = "valid_overlay.png"
 CLOUD_FILE = "cloud.ply"  # only with --pointcloud
 RUN_FILE = "run.json"
+#: Largest disparity disp.png can hold: KITTI's uint16 stores round(d * 256) <= 65535.
+KITTI_PNG_MAX_DISPARITY = 65535 / 256.0
+#: Batch-level report files of ``--eval`` (d3cli.evaluation.report.write_summary).
+SUMMARY_FILES = ("metrics.csv", "summary.json", "summary.md")
 #: Road inspection outputs of a pair (--road-report), made from its disparity map: stale
 #: once the map is computed again.
 ROAD_FILES = (HEIGHT_FILE, HEIGHT_COLOR_FILE, DEFECTS_JSON, DEFECTS_PNG)
@@ -181,7 +186,69 @@ def write_disparity_outputs(
     if left is not None:
         written[OVERLAY_FILE] = write_image(folder / OVERLAY_FILE, pictures.validity_overlay(left, valid, disp))
     written["color_range"] = {"min": vmin, "max": vmax_, "how": how}
+    written["png_clipped"] = kitti_clipped(disp)
     return written
+
+
+def kitti_clipped(disp: np.ndarray) -> int:
+    """Number of finite disparities that disp.png cannot hold (>= 65535.5 / 256 px: clipped).
+
+    KITTI's format stores ``round(d * 256)`` in uint16, so it ends at 255.996 px; such
+    pixels are written as 255.996 in disp.png, exactly in disp.pfm (the reference).
+    """
+    with np.errstate(invalid="ignore"):
+        return int(np.count_nonzero(np.isfinite(disp) & (disp * 256.0 >= 65535.5)))
+
+
+def clipped_warning(n_clipped: int) -> str:
+    """The result.json warning for :func:`kitti_clipped` pixels."""
+    return (f"disp.png: {n_clipped} pixels have a disparity >= 256 px and are clipped to "
+            f"{KITTI_PNG_MAX_DISPARITY:.3f} px (KITTI uint16 format); disp.pfm holds the exact values")
+
+
+def is_our_summary(path: Path) -> bool:
+    """True when ``path`` is a summary file as :func:`d3cli.evaluation.report.write_summary`
+    writes it (so a later run may remove it; never a file of the user's)."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            head = fh.read(4096)
+    except (OSError, UnicodeDecodeError):
+        return False
+    if path.name == "metrics.csv":
+        return head.startswith("pair,family,status")
+    if path.name == "summary.md":
+        return head.startswith("# Evaluation:")
+    if path.name == DEFECTS_CSV:
+        return head.startswith(",".join(DEFECTS_CSV_FIELDS) + "\n")
+    if path.name == "summary.json":
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return False
+        return isinstance(data, dict) and {"method", "counts", "overall", "extra"} <= set(data)
+    return False
+
+
+def remove_ours(path: Path) -> bool:
+    """Remove ``path`` when it is a report file d3stereo wrote (:func:`is_our_summary`)."""
+    if not (path.is_file() and is_our_summary(path)):
+        return False
+    try:
+        path.unlink()
+    except OSError as exc:
+        log.warning("%s: could not remove the report of an earlier run (%s)", path, exc)
+        return False
+    return True
+
+
+def remove_stale_summaries(out: Path) -> list[str]:
+    """Remove the ``--eval`` summary files of an earlier run from ``out``; returns their names.
+
+    A run without ``--eval`` does not write them, so left in place they would describe
+    another run (another method, other maps).  Only files recognised as written by
+    d3stereo (:func:`is_our_summary`) are removed.
+    """
+    return [name for name in SUMMARY_FILES if remove_ours(out / name)]
 
 
 def panel_title(name: str, scores: dict | None) -> str:

@@ -42,24 +42,29 @@ from typing import Sequence
 from .. import __version__
 from ..config import Config
 from ..data import datasets, io
-from ..errors import D3Error, OutputError
+from ..errors import D3Error, InputError, OutputError
 from ..evaluation import diagnostics, report
 from ..road.pointcloud import camera_from, save_pair_cloud
-from ..road.report import road_report, write_defects_csv
+from ..road.report import DEFECTS_CSV, road_report, write_defects_csv
 from . import resources
 from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .executors import make_executor, select_shard
-from .fingerprint import package_versions, settings_fingerprint
+from .fingerprint import cloud_fingerprint, package_versions, pair_fingerprint, settings_fingerprint
 from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock, shard_lock_name
 from .methods import compute_pair
 from ..evaluation.html import write_report_html
 from .outputs import (
     CLOUD_FILE,
+    ERROR_MAP,
     RESULT_FILE,
     RUN_FILE,
     check_output_folder,
+    clipped_warning,
     read_result,
+    is_our_summary,
+    remove_ours,
     remove_pair_files,
+    remove_stale_summaries,
     write_disparity_outputs,
     write_json,
     write_panel,
@@ -133,6 +138,9 @@ class BatchResult:
         Path of ``run.json``.
     summary : dict or None
         :func:`d3cli.evaluation.report.summarize` of the rows when evaluating, else None.
+    n_computed, n_skipped : int
+        Pairs computed by this run, and pairs kept as complete from an earlier run
+        (``ok`` and ``skipped`` in run.json); in the rows and the summary both are ``ok``.
     """
 
     out_dir: Path
@@ -140,6 +148,13 @@ class BatchResult:
     n_failed: int = 0
     run_json: Path | None = None
     summary: dict | None = None
+    n_computed: int = 0
+    n_skipped: int = 0
+
+    def counts_line(self) -> str:
+        """``N ok (C computed, S skipped as complete), F failed of T pairs``: run.json's counts."""
+        return (f"{self.n_computed + self.n_skipped} ok ({self.n_computed} computed, {self.n_skipped} skipped "
+                f"as complete), {self.n_failed} failed of {self.n_pairs} pairs")
 
     @property
     def n_pairs(self) -> int:
@@ -151,34 +166,43 @@ class BatchResult:
         return [(r["pair"], r.get("error", "")) for r in self.rows if r["status"] == "failed"]
 
 
-def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fingerprint) -> dict:
-    """Compute, write and (optionally) score one pair; returns the stored result dict."""
+def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, settings, fingerprint) -> dict:
+    """Compute, write and (optionally) score one pair; returns the stored result dict.
+
+    A ground truth that cannot be scored (unreadable, another size) fails the pair's
+    evaluation only: its maps are written and kept, ``evaluation_error`` says why.
+    """
     t0 = time.perf_counter()
     left, right = datasets.load_pair_images(pair)
     height, width = left.shape[:2]
-    dmax = datasets.resolve_max_disparity(pair, width, override=max_disparity)
+    dmax, range_note = _resolve_range(pair, width, max_disparity)
     resources.check_memory((height, width), dmax, cfg, method=method, where=pair.name)
     result = compute_pair(method, cfg, left, right, max_disparity=dmax)
+    if range_note:
+        result.warnings.insert(0, range_note)
     result.warnings.extend(diagnostics.suspicious_result(result, dmax))
-    for text in result.warnings:
-        log.warning("%s: %s", pair.name, text)
     try:
         # An old result.json beside new, maybe half-written outputs would mark them complete;
         # an old error map would describe another estimate.
         remove_pair_files(pair_dir)
         written = write_disparity_outputs(pair_dir, result.disparity, result.valid, left=left,
                                           color_range=tuple(cfg.run.color_range) or None)
-        scores = evaluate_pair(pair, left, right, result.disparity, pair_dir) if evaluate else None
+        if written["png_clipped"]:  # issue 12 item 18: said once per pair, kept in result.json
+            result.warnings.append(clipped_warning(written["png_clipped"]))
+        scores, eval_error = _score(pair, left, right, result.disparity, pair_dir) if evaluate else (None, None)
         write_panel(pair_dir, pair.name, left, scores)  # issue 13: panel.png
     except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
         remove_pair_files(pair_dir, remove_folder=True)
         raise
+    for text in result.warnings:
+        log.warning("%s: %s", pair.name, text)
     wall = time.perf_counter() - t0
     stored = {
         "pair": pair.name,
         "family": pair.family,
         "method": method,
-        "settings": fingerprint,
+        "settings": settings,
+        "fingerprint": fingerprint,  # settings + input files: a rerun skips the pair only when equal
         "inputs": {"left": pair.left, "right": pair.right, "gt": pair.gt},
         "shape": [height, width],
         "max_disparity": dmax,
@@ -186,6 +210,7 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
         "valid_share": float(result.valid.mean()) if result.valid.size else 0.0,
         "timings": {**result.timings, "wall": wall},
         "metrics": scores,
+        "evaluation_error": eval_error,
         "info": result.info,
         "warnings": list(result.warnings),
     }
@@ -195,6 +220,42 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, fin
         remove_pair_files(pair_dir, remove_folder=True)
         raise
     return stored
+
+
+def _resolve_range(pair, width: int, override: int | None) -> tuple[int, str | None]:
+    """The pair's disparity range, and a note when its ground truth could not give it.
+
+    A ground truth that cannot be read must not stop the map (its evaluation fails
+    later): the range then falls back to ``width // 4``, said in the note.
+    """
+    try:
+        return datasets.resolve_max_disparity(pair, width, override=override), None
+    except InputError as exc:
+        if override is not None or pair.max_disparity is not None or pair.gt is None:
+            raise
+        dmax = datasets.resolve_max_disparity(dataclasses.replace(pair, gt=None), width)
+        return dmax, (f"disparity range {dmax} px (image width / 4): the ground truth gives none ({exc}); "
+                      f"set max_disparity in a manifest or pass --max-disparity")
+
+
+def _score(pair, left, right, disparity, pair_dir: Path) -> tuple[dict | None, str | None]:
+    """(metrics, None), or (None, why) when the pair's ground truth cannot be scored.
+
+    Ctrl-C and a full disk still end the batch.
+    """
+    try:
+        return evaluate_pair(pair, left, right, disparity, pair_dir), None
+    except D3Error as exc:
+        if io.is_disk_full(exc):
+            raise
+        message = str(exc)
+    except Exception as exc:  # noqa: BLE001 - a broken ground truth fails the evaluation only
+        interrupt = _interrupt_behind(exc)
+        if interrupt is not None:
+            raise interrupt from None
+        message = f"{type(exc).__name__}: {exc}"
+    (pair_dir / ERROR_MAP).unlink(missing_ok=True)  # never an error map without its metrics
+    return None, message
 
 
 def _stored_map(pair, pair_dir: Path, cfg):
@@ -209,10 +270,11 @@ def _stored_map(pair, pair_dir: Path, cfg):
     return left, camera, io.read_pfm(pair_dir / "disp.pfm"), io.read_mask(pair_dir / "valid.png")
 
 
-def _with_warnings(pair, pair_dir: Path, stored: dict, texts) -> dict:
-    """``stored`` with the warnings of ``texts`` it does not hold yet (logged, result.json rewritten)."""
+def _with_warnings(pair, pair_dir: Path, stored: dict, texts, *, changed: bool = False) -> dict:
+    """``stored`` with the warnings of ``texts`` it does not hold yet (logged); result.json
+    rewritten when there are any or ``changed``."""
     new = [text for text in texts if text not in stored.get("warnings", [])]
-    if not new:
+    if not (new or changed):
         return stored
     for text in new:
         log.warning("%s: %s", pair.name, text)
@@ -222,22 +284,33 @@ def _with_warnings(pair, pair_dir: Path, stored: dict, texts) -> dict:
 
 
 def _write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -> dict:
-    """``cloud.ply`` (when asked and missing) and the road outputs (``road.report``) of a
-    complete pair, from one read of its files; returns ``stored`` with any new warnings."""
-    want_cloud = pointcloud and not (pair_dir / CLOUD_FILE).is_file()
+    """``cloud.ply`` (when asked and missing or made with another camera) and the road outputs
+    (``road.report``) of a complete pair, from one read of its files; returns ``stored``
+    with any new warnings."""
+    cloud_path = pair_dir / CLOUD_FILE
+    cloud_fp = cloud_fingerprint(cfg, pair)
+    cloud_done = cloud_path.is_file() and (stored.get("cloud") or {}).get("fingerprint") == cloud_fp
+    want_cloud = pointcloud and not cloud_done
     if not (want_cloud or cfg.road.report):
         return stored
     left, camera, disparity, valid = _stored_map(pair, pair_dir, cfg)
     warnings = []
+    if want_cloud:
+        cloud_path.unlink(missing_ok=True)  # made with another camera: never left beside the new settings
+        stored = {**stored, "cloud": None}
     if want_cloud and camera is None:
         warnings.append("no cloud.ply: focal length or baseline unknown; add calib.txt to the pair "
                         "or set camera.f and camera.baseline")
     elif want_cloud:
-        n_points = save_pair_cloud(pair_dir / CLOUD_FILE, disparity, valid, left, camera)
+        depth_range = (cfg.camera.min_depth_m, cfg.camera.max_depth_m)
+        n_points = save_pair_cloud(cloud_path, disparity, valid, left, camera, depth_range=depth_range)
         log.info("%s: cloud.ply with %d points", pair.name, n_points)
+        stored = {**stored, "cloud": {"fingerprint": cloud_fp, "points": n_points,
+                                      "depth_range_m": list(depth_range),
+                                      "camera": dataclasses.asdict(camera)}}
     if cfg.road.report:  # all the logic in d3cli.road.report
         warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road)[1]
-    return _with_warnings(pair, pair_dir, stored, warnings)
+    return _with_warnings(pair, pair_dir, stored, warnings, changed=want_cloud)
 
 
 def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
@@ -245,7 +318,8 @@ def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
     if evaluate and not stored.get("metrics"):
         left, right = datasets.load_pair_images(pair)
         disparity = io.read_pfm(pair_dir / "disp.pfm")
-        stored = {**stored, "metrics": evaluate_pair(pair, left, right, disparity, pair_dir)}
+        scores, eval_error = _score(pair, left, right, disparity, pair_dir)
+        stored = {**stored, "metrics": scores, "evaluation_error": eval_error}
         write_panel(pair_dir, pair.name, left, stored["metrics"])  # issue 13: panel with the error tile
         write_json(pair_dir / RESULT_FILE, stored)
     return stored
@@ -266,6 +340,7 @@ def run_batch(
     workers: int = 1,
     scheduler: str | None = None,
     shard: tuple[int, int] | None = None,
+    break_lock: bool = False,
 ) -> BatchResult:
     """Run ``method`` on every pair, writing ``out_dir/<pair>/...`` and ``out_dir/run.json``.
 
@@ -302,6 +377,9 @@ def run_batch(
         ``(I, N)``: run only shard I of N (:func:`d3cli.batch.executors.select_shard`),
         writing ``run-I-of-N.json`` under its own lock, so N runs share one OUT; the
         summary files are left to ``d3stereo eval`` over OUT.
+    break_lock : bool, keyword-only
+        Take over the folder's lock even when its record names another host or a live
+        pid, as long as no running d3stereo holds it (:func:`d3cli.batch.lock.acquire_lock`).
 
     Returns
     -------
@@ -327,7 +405,7 @@ def run_batch(
         # Workers may run in another folder, on another machine: only absolute paths mean the same there.
         out = out.resolve()
         pairs = [_absolute(p) for p in pairs]
-    lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard))
+    lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
     previous = _sigterm_as_interrupt()
     try:
         executor = make_executor(workers, scheduler, out)
@@ -369,7 +447,7 @@ def _pair_task(pair, *, out: Path, **kwargs):
 def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, max_disparity, progress,
                   config_source, pointcloud, executor, shard=None) -> BatchResult:
     """The body of :func:`run_batch`, run while holding the output folder's (or shard's) lock."""
-    fingerprint = settings_fingerprint(cfg, method, max_disparity)
+    settings = settings_fingerprint(cfg, method, max_disparity)
     run_name = RUN_FILE if shard is None else "run-{}-of-{}.json".format(*shard)
     batch = BatchResult(out_dir=out, run_json=out / run_name)
     records = []
@@ -377,7 +455,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     meta = dict(cfg=cfg, method=method, max_disparity=max_disparity, started=started,
                 config_source=config_source, n_total=len(pairs), shard=shard)
     task = functools.partial(_pair_task, out=out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
-                             max_disparity=max_disparity, fingerprint=fingerprint, pointcloud=pointcloud)
+                             max_disparity=max_disparity, settings=settings, pointcloud=pointcloud)
     order = {pair.name: i for i, pair in enumerate(pairs)}
     try:
         with executor:
@@ -391,7 +469,8 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
                     batch.rows.append(row)
                     records.append(record)
                     progress_start(bar, _pair)  # the bar names the pair last finished
-                    progress_done(bar, row)  # without a terminal: one line per pair
+                    # Without a terminal: one line per pair, saying "skipped" as run.json does.
+                    progress_done(bar, {**row, "status": record["status"]})
                     bar.update()
             finally:
                 bar.close()
@@ -419,13 +498,25 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     batch.rows.sort(key=lambda r: order[r["pair"]])
     records.sort(key=lambda r: order[r["pair"]])
     batch.n_failed = sum(r["status"] == "failed" for r in batch.rows)
-    if cfg.road.report:
-        write_defects_csv(out, [out / p.name for p in pairs])
+    batch.n_computed = sum(r["status"] == "ok" for r in records)
+    batch.n_skipped = sum(r["status"] == "skipped" for r in records)
+    if cfg.road.report or (shard is None and is_our_summary(out / DEFECTS_CSV)):
+        # Without --road-report too: pairs computed again lost their defects.json, so an
+        # earlier defects.csv would list defects of maps that are gone.
+        if write_defects_csv(out, [out / p.name for p in pairs]) is None and remove_ours(out / DEFECTS_CSV):
+            log.info("%s: removed (no pair of this run has road outputs now)", out / DEFECTS_CSV)
     if evaluate and shard is not None:
         log.info("--shard: summary files are left to `d3stereo eval %s --gt ... -o REPORT` once every shard is done", out)
     elif evaluate:
-        report.write_summary(out, batch.rows, method=method, extra={"settings": fingerprint})
+        report.write_summary(out, batch.rows, method=method,
+                             extra={"settings": settings, "computed": batch.n_computed,
+                                    "skipped_complete": batch.n_skipped})
         batch.summary = report.summarize(batch.rows)
+    if not evaluate or shard is not None:
+        # issue 12 item 7: the summary of an earlier --eval run (maybe another method) would
+        # describe maps this run may have replaced; only d3stereo's own files are removed.
+        for name in remove_stale_summaries(out):
+            log.info("%s: removed the summary of an earlier --eval run (rerun with --eval to score)", out / name)
     _write_run_json(batch, records, **meta, interrupted=False)
     # issue 13: the page people look at, after every batch.
     write_report_html(out, batch.rows, title=f"d3stereo {method}: {out}",
@@ -433,7 +524,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     return batch
 
 
-def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, fingerprint,
+def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, settings,
                 pointcloud=False):
     """One pair of a batch -> (report row, run.json record).
 
@@ -443,14 +534,15 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
     t0 = time.perf_counter()
     reused = False
     try:
+        fingerprint = pair_fingerprint(settings, pair)  # settings and the pair's input files
         stored = None if overwrite else read_result(pair_dir)
-        if stored is not None and stored.get("settings") == fingerprint:
+        if stored is not None and stored.get("fingerprint") == fingerprint:
             log.info("%s: complete, skipped (use --overwrite to compute it again)", pair.name)
             stored = _reuse_pair(pair, pair_dir, stored, evaluate=evaluate)
             reused = True
         else:
             stored = _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
-                               max_disparity=max_disparity, fingerprint=fingerprint)
+                               max_disparity=max_disparity, settings=settings, fingerprint=fingerprint)
         stored = _write_extras(pair, pair_dir, stored, cfg, pointcloud=pointcloud)
     except D3Error as exc:
         if io.is_disk_full(exc):
@@ -463,6 +555,12 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
         log.debug("%s: unexpected error", pair.name, exc_info=True)
         return failed_row(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
     wall = stored.get("timings", {}).get("wall")
+    if evaluate and stored.get("evaluation_error"):
+        # issue 12 item 6: the maps are complete and kept; only the evaluation failed.
+        message = f"{pair.name}: evaluation failed, maps kept: {stored['evaluation_error']}"
+        row, record = failed_row(pair, message, wall or 0.0)
+        record["stage"] = "evaluation"
+        return row, record
     row = pair_row(pair, "ok", time_s=wall, metrics=stored.get("metrics"))
     if stored.get("warnings"):
         row["warnings"] = list(stored["warnings"])
@@ -497,6 +595,8 @@ def _write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, 
         "stopped_at": stopped_at,
         "stop_reason": stop_reason,
         "n_failed": len(failed),
+        "n_computed": sum(r["status"] == "ok" for r in records),
+        "n_skipped": sum(r["status"] == "skipped" for r in records),  # complete from an earlier run
         # Seconds spent compiling numba kernels up front; not part of any pair's wall time.
         "compile_s": compile_s,
         "execution": execution or {"mode": "serial", "workers": 1},

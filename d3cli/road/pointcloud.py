@@ -94,7 +94,12 @@ def camera_from(calib: dict | None, cfg, shape: tuple[int, int]) -> Camera | Non
 
 
 def disparity_to_points(
-    disparity: np.ndarray, valid: np.ndarray, camera: Camera, *, doffs: float | None = None
+    disparity: np.ndarray,
+    valid: np.ndarray,
+    camera: Camera,
+    *,
+    doffs: float | None = None,
+    depth_range: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Back-project valid pixels of a left-view disparity map to 3-D points.
 
@@ -107,6 +112,9 @@ def disparity_to_points(
     camera : Camera
     doffs : float, optional, keyword-only
         Overrides ``camera.doffs``.
+    depth_range : (float, float), optional, keyword-only
+        ``(min, max)`` depth Z in metres; points outside ``min <= Z <= max`` are dropped
+        (near-zero disparities give points at absurd depths, e.g. 1e33 m); None keeps all.
 
     Returns
     -------
@@ -125,6 +133,10 @@ def disparity_to_points(
         keep = valid & np.isfinite(disp) & (disp + off > 0)
     v, u = np.nonzero(keep)
     z = camera.f * camera.baseline / (disp[v, u] + off)
+    if depth_range is not None:
+        near, far = (float(x) for x in depth_range)
+        inside = (z >= near) & (z <= far)
+        v, u, z = v[inside], u[inside], z[inside]
     x = (u - camera.cx) * z / camera.f
     y = (v - camera.cy) * z / camera.f
     return np.stack([x, y, z], axis=1).astype(np.float32), np.stack([v, u], axis=1)
@@ -198,8 +210,13 @@ def read_ply(path) -> tuple[np.ndarray, np.ndarray | None]:
     return pts, cols
 
 
-def save_pair_cloud(path, disparity: np.ndarray, valid: np.ndarray, left: np.ndarray, camera: Camera) -> int:
-    """Back-project, colour from the left image and write ``path``; returns the point count."""
-    points, index = disparity_to_points(disparity, valid, camera)
+def save_pair_cloud(path, disparity: np.ndarray, valid: np.ndarray, left: np.ndarray, camera: Camera, *,
+                    depth_range: tuple[float, float] | None = None) -> int:
+    """Back-project, colour from the left image and write ``path``; returns the point count.
+
+    ``depth_range``: ``(min, max)`` metres of the points kept (``camera.min_depth_m``,
+    ``camera.max_depth_m`` in a batch); see :func:`disparity_to_points`.
+    """
+    points, index = disparity_to_points(disparity, valid, camera, depth_range=depth_range)
     write_ply(path, points, point_colours(left, index))
     return int(points.shape[0])

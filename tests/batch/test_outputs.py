@@ -11,6 +11,7 @@ def test_write_disparity_outputs(tmp_path):
     valid = np.isfinite(disp)
     paths = write_disparity_outputs(tmp_path / "out" / "pair", disp, valid, color_range=(0, 32))
     assert paths.pop("color_range") == {"min": 0.0, "max": 32.0, "how": "fixed range"}
+    assert paths.pop("png_clipped") == 0
     assert sorted(paths) == ["disp.pfm", "disp.png", "disp_color.png", "valid.png"]
     folder = tmp_path / "out" / "pair"
     assert sorted(p.name for p in folder.iterdir()) == sorted(paths)
@@ -53,3 +54,13 @@ def test_recomputing_a_pair_removes_its_road_outputs_but_not_the_users_files(tmp
         (tmp_path / name).write_text("x")
     remove_pair_files(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_png_clipped_counts_what_disp_png_cannot_hold(tmp_path):
+    from d3cli.batch.outputs import kitti_clipped
+
+    disp = np.array([[255.99, 255.996, 255.9995, 256.0, 300.0, np.inf]], np.float32)
+    # round(d * 256) > 65535 from 65535.5 / 256 = 255.99805 px on
+    assert kitti_clipped(disp) == 3
+    written = write_disparity_outputs(tmp_path / "p", disp, np.isfinite(disp))
+    assert written["png_clipped"] == 3

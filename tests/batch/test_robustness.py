@@ -241,56 +241,91 @@ def test_other_write_errors_fail_only_that_pair(tmp_path, four_pairs, monkeypatc
 
 
 # ----------------------------------------------------------------------------- lock
-def test_live_lock_refuses_stale_lock_is_taken_over(tmp_path, four_pairs):
+BREAK_HINT = ("if no d3stereo run is writing there (e.g. it was killed on another machine), "
+              "rerun with --break-lock; else wait for it or use another -o folder")
+
+
+def test_live_pid_record_refuses_break_lock_takes_over_dead_pid_is_stale(tmp_path, four_pairs):
     out = tmp_path / "out"
     out.mkdir()
     sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
+        # A record naming a live pid of this host whose process holds no flock (e.g. a
+        # d3stereo before flock, or a pid reused by a process that started at the same time).
         (out / LOCK_FILE).write_text(json.dumps({"pid": sleeper.pid, "host": socket.gethostname()}))
         result = invoke("run", four_pairs, "-o", out, "--method", "sgbm")
         assert result.exit_code == 1
         assert error_lines(result.output) == [
-            f"Error: {out}: another d3stereo run (pid {sleeper.pid}) is writing here; "
-            "wait for it or use another -o folder"]
+            f"Error: {out}: the folder is locked by a d3stereo run (pid {sleeper.pid}) that may still be "
+            f"running; {BREAK_HINT}"]
         assert not (out / "a").exists()
         assert (out / LOCK_FILE).is_file()  # not ours to remove
+        broken = invoke("run", four_pairs, "-o", out, "--method", "sgbm", "--break-lock")
+        assert broken.exit_code == 0, broken.output
+        assert f"--break-lock: taking over the lock of pid {sleeper.pid}" in broken.output
+        assert not (out / LOCK_FILE).exists()
     finally:
         sleeper.kill()
         sleeper.wait()
+    (out / LOCK_FILE).write_text(json.dumps({"pid": sleeper.pid, "host": socket.gethostname()}))
     result = invoke("run", four_pairs, "-o", out, "--method", "sgbm")  # its pid is gone now
     assert result.exit_code == 0, result.output
     assert "stale lock" in result.output and f"pid {sleeper.pid}" in result.output
     assert not (out / LOCK_FILE).exists()
 
 
-def test_lock_of_another_host_is_respected(tmp_path):
+def test_reused_pid_is_stale(tmp_path):
+    """The record's pid runs, but it is another process (started at another time)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / LOCK_FILE).write_text(json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
+                                             "pid_start": "1"}))  # we did not start at tick 1
+    lock = acquire_lock(out)
+    assert json.loads(lock.path.read_text())["pid_start"] not in (None, "1")
+    release_lock(lock)
+    assert not (out / LOCK_FILE).exists()
+
+
+def test_lock_of_another_host_is_respected_unless_broken(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / LOCK_FILE).write_text(json.dumps({"pid": 1, "host": "elsewhere.example"}))
-    with pytest.raises(OutputError, match=r"another d3stereo run \(pid 1 on elsewhere.example\) is writing here"):
+    with pytest.raises(OutputError, match=r"locked by a d3stereo run \(pid 1 on elsewhere.example\) that may still "
+                                          r"be running; .*rerun with --break-lock"):
         acquire_lock(out)
+    lock = acquire_lock(out, break_lock=True)
+    assert json.loads(lock.path.read_text())["host"] == socket.gethostname()
+    release_lock(lock)
 
 
-def test_unreadable_old_lock_is_stale_fresh_one_is_not(tmp_path):
+def test_held_lock_is_never_broken(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    lock = out / LOCK_FILE
-    lock.write_text("")  # a run that died between creating and writing it ...
-    with pytest.raises(OutputError, match=r"pid unknown"):
-        acquire_lock(out)  # ... or one that is writing it right now
-    old = time.time() - 60
-    os.utime(lock, (old, old))
-    path = acquire_lock(out)
-    assert json.loads(path.read_text())["pid"] == os.getpid()
-    release_lock(path)
-    assert not lock.exists()
+    lock = acquire_lock(out)
+    try:
+        for force in (False, True):
+            with pytest.raises(OutputError, match=rf"another d3stereo run \(pid {os.getpid()}\) is writing here"):
+                acquire_lock(out, break_lock=force)
+    finally:
+        release_lock(lock)
+    assert not (out / LOCK_FILE).exists()
+
+
+def test_unreadable_lock_nobody_holds_is_taken_over(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / LOCK_FILE).write_text("")  # a run killed between creating and writing it
+    lock = acquire_lock(out)
+    assert json.loads(lock.path.read_text())["pid"] == os.getpid()
+    release_lock(lock)
+    assert not (out / LOCK_FILE).exists()
 
 
 def test_release_leaves_a_lock_taken_over_by_another_run(tmp_path):
-    path = acquire_lock(tmp_path)
-    path.write_text(json.dumps({"pid": os.getpid() + 1, "host": socket.gethostname()}))
-    release_lock(path)
-    assert path.exists()
+    lock = acquire_lock(tmp_path)
+    lock.path.write_text(json.dumps({"pid": os.getpid() + 1, "host": socket.gethostname()}))
+    release_lock(lock)
+    assert lock.path.exists()
 
 
 # ----------------------------------------------------------------------------- bad inputs
@@ -317,8 +352,9 @@ def test_pair_and_gt_size_mismatches_in_one_batch(tmp_path, four_pairs):
     errors = {f["pair"]: f["error"] for f in run_json(out)["failed"]}
     assert "48x96" in errors["b"] and "48x90" in errors["b"]
     assert "disp_gt.pfm" in errors["c"] or "ground truth" in errors["c"]
-    assert not (out / "c").exists()  # its maps were written before the failing evaluation: removed
-    for name in "ad":
+    assert errors["c"].startswith("c: evaluation failed, maps kept: ")
+    assert not (out / "b").exists()
+    for name in "acd":  # c: a bad ground truth fails the evaluation, not the maps (issue 12 item 6)
         assert_complete(out / name)
 
 

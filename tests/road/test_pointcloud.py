@@ -87,3 +87,46 @@ def test_cloud_of_a_synthetic_flat_road_is_a_plane_at_the_camera_height(tmp_path
     assert distance == pytest.approx(left_height, abs=0.005)
     assert abs(normal[1]) == pytest.approx(math.cos(pitch), abs=0.02)  # the road tilts by the pitch
     assert colours[0].tolist() == [pair.left[np.nonzero(valid)][0]] * 3
+
+
+def test_depth_range_drops_points_outside_it():
+    """Z = f B / d: 100 * 0.2 / d; d = 0.001 px would be 20 km away."""
+    cam = Camera(f=100.0, baseline=0.2, cx=0.0, cy=0.0)
+    disp = np.array([[0.001, 0.1, 1.0, 4.0, 40.0]])
+    valid = np.ones_like(disp, dtype=bool)
+    points, index = disparity_to_points(disp, valid, cam, depth_range=(1.0, 100.0))
+    np.testing.assert_allclose(points[:, 2], [20.0, 5.0], rtol=1e-6)  # 20000 m, 200 m and 0.5 m dropped
+    np.testing.assert_array_equal(index, [[0, 2], [0, 3]])
+    every, _ = disparity_to_points(disp, valid, cam)  # no range: all of them
+    assert every.shape[0] == 5
+
+
+def test_saved_cloud_has_no_point_beyond_the_configured_depth(tmp_path):
+    cfg = load_config(None, ["camera.f=100", "camera.baseline=0.2", "camera.max_depth_m=10"])
+    assert (cfg.camera.min_depth_m, cfg.camera.max_depth_m) == (0.0, 10.0)
+    rng = np.random.default_rng(1)
+    disp = rng.uniform(0.0, 8.0, (30, 40))  # depths from 2.5 m to infinity
+    cam = camera_from(None, cfg, disp.shape)
+    n = save_pair_cloud(tmp_path / "cloud.ply", disp, np.ones(disp.shape, bool), np.zeros((30, 40), np.uint8), cam,
+                        depth_range=(cfg.camera.min_depth_m, cfg.camera.max_depth_m))
+    points, _ = read_ply(tmp_path / "cloud.ply")
+    assert n == points.shape[0] == int((100 * 0.2 / disp <= 10.0).sum())
+    assert points[:, 2].max() <= 10.0
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["camera.max_depth_m=0"], "camera.max_depth_m must be a number > 0"),
+    (["camera.min_depth_m=-1"], "camera.min_depth_m must be a number >= 0"),
+    (["camera.min_depth_m=50", "camera.max_depth_m=20"], "camera.min_depth_m (50) must be smaller than "
+                                                          "camera.max_depth_m (20)"),
+])
+def test_depth_range_is_checked(overrides, message):
+    from d3cli.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        load_config(None, overrides)
+
+
+def test_depth_range_overrides_apply_in_any_order():
+    cfg = load_config(None, ["camera.min_depth_m=150", "camera.max_depth_m=200"])
+    assert (cfg.camera.min_depth_m, cfg.camera.max_depth_m) == (150.0, 200.0)
