@@ -17,7 +17,9 @@ Definitions (what the numbers in defects.json mean):
   (robust to single-pixel spikes; ~2 % below the true maximum of a paraboloid, equal on a
   flat-floored pothole).  Regions joined by a shallow saddle are split by a watershed
   when each deepest point stands ``min_depth`` above the saddle.  A region must also be
-  deeper than ``noise_k`` times the height noise expected at its distance.
+  deeper than ``noise_k`` times the height noise expected at its distance, and its mean
+  depth must exceed ``mean_noise_k`` standard errors of a mean of spatially correlated
+  stereo noise (``noise_cell_px`` pixels per independent error).
 * ``volume_l``: sum over the region grown by the ring of ``footprint * max(depth, 0)``,
   litres (1 l = 1e-3 m^3): the material needed to fill it up to the surrounding surface.
 * ``decided_share``: share of the region's pixels whose disparity the method decided
