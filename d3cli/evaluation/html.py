@@ -4,6 +4,10 @@ Contents: the summary table (click a header to sort), per-family means, a histog
 the per-pair error (inline SVG), every pair's panel as a thumbnail sorted by error
 (worst first) linking to the full images, the config and the versions.  Links are
 relative and point only to files that exist when the page is written.
+
+After ``--road-report`` (a pair folder holds ``defects.json``, :mod:`d3cli.road.report`)
+the page has a "Road inspection" section, read from those files: the batch totals, then
+per pair (deepest pothole first) a ``defects.png`` thumbnail and a table of its defects.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ import json
 import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from urllib.parse import quote
 
 from ..data.io import atomic_write
 from .report import jsonable, summarize
@@ -31,6 +36,7 @@ body{font:14px/1.4 system-ui,sans-serif;margin:1.5em;color:#222}
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}
 th{background:#eee;cursor:pointer}td:first-child,td:nth-child(2),td:nth-child(3){text-align:left}
 .cards{display:flex;flex-wrap:wrap;gap:10px}.card{width:420px}.card img{width:100%;border:1px solid #999}
+.card.road{width:640px}.card.road table{font-size:12px}.low{color:#b60}
 .failed{color:#b00}pre{background:#f6f6f6;padding:.5em;max-height:30em;overflow:auto}
 """
 
@@ -127,6 +133,7 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     key = "epe" if any(_num(r.get("epe")) is not None for r in rows) else "psnr"
     values = [_num(r.get(key)) for r in rows if _num(r.get(key)) is not None]
     out.append(f"<h2>Histogram of per-pair {e(key)}</h2>" + histogram_svg(values, label=key))
+    out.extend(road_section(out_dir, rows))
     # Thumbnails, worst first
     out.append("<h2>Pairs by error (worst first)</h2><div class=\"cards\">")
     for r in sorted(rows, key=sort_key):
@@ -146,6 +153,119 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     out.append("<h2>Versions</h2><pre>" + e(json.dumps(jsonable(versions or {}), indent=2, sort_keys=True)) + "</pre>")
     out.append(f"<script>{_JS}</script></body></html>\n")
     return "\n".join(out)
+
+
+#: Per-pair road files (d3cli.road.report writes them; read here, not imported: the
+#: evaluation room does not depend on the road room).
+ROAD_JSON, ROAD_PICTURES = "defects.json", ("defects.png", "height_color.png")
+
+
+def _road_reports(out_dir: Path, rows: list[dict]) -> list[tuple[str, dict | None, str]]:
+    """(pair, defects.json contents or None, why none) for the pairs of ``rows``."""
+    found = []
+    for r in rows:
+        path = out_dir / r["pair"] / ROAD_JSON
+        if not path.is_file():
+            found.append((r["pair"], None, "failed" if r.get("status") == "failed" else "no road report"))
+            continue
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            data["defects"] = list(data.get("defects") or [])
+        except (OSError, ValueError, TypeError, AttributeError) as exc:
+            found.append((r["pair"], None, f"unreadable {ROAD_JSON}: {exc}"))
+            continue
+        found.append((r["pair"], data, ""))
+    return found
+
+
+def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
+    """HTML of the "Road inspection" section; [] when no pair has a ``defects.json``.
+
+    Batch totals (potholes, bumps, low-confidence ones, summed area and fill volume of the
+    potholes, the deepest), then one card per pair with defects, deepest pothole first:
+    ``defects.png`` as a thumbnail (links to it and to ``height_color.png``) and a sortable
+    table of id, kind, depth (bumps: height), mean depth, area, volume, decided share and
+    confidence;
+    pairs without defects and pairs without a road report are listed by name.
+    """
+    out_dir = Path(out_dir)
+    reports = _road_reports(out_dir, [dict(r) for r in rows])
+    if not any(data is not None for _, data, _ in reports):
+        return []
+    e = html.escape
+    done = [(pair, data) for pair, data, _ in reports if data is not None]
+    every = [(pair, d) for pair, data in done for d in data["defects"]]
+    pits = [(pair, d) for pair, d in every if d.get("kind") == "pothole"]
+    bumps = [(pair, d) for pair, d in every if d.get("kind") == "bump"]
+    low = sum(bool(d.get("low_confidence")) for _, d in every)
+
+    def total(items, key):
+        return sum(_num(d.get(key)) or 0.0 for _, d in items)
+
+    parts = ['<h2 id="road">Road inspection</h2>',
+             "<p>Depth: below the surrounding road surface (the median height of a ring of road "
+             "around the defect); area: of the road plane covered; volume: to fill it up to the "
+             "surrounding surface; decided: share of the defect's pixels the method decided itself "
+             "(not filled); low confidence = few decided pixels. Definitions: README section "
+             "“Road inspection outputs”.</p>",
+             '<table><thead><tr><th>pairs with a road report</th><th>with defects</th><th>potholes</th>'
+             "<th>bumps</th><th>low confidence</th><th>pothole area m²</th><th>pothole volume l</th>"
+             "<th>deepest pothole</th></tr></thead><tbody>"]
+    deepest = max(pits, key=lambda pd: _num(pd[1].get("max_depth_mm")) or 0.0, default=None)
+    deep_txt = (f'<a href="#road-{e(deepest[0])}">{e(deepest[0])}</a> #{e(str(deepest[1].get("id")))} '
+                f'{_num(deepest[1].get("max_depth_mm")) or 0.0:.0f} mm') if deepest else "–"
+    parts.append(f"<tr><td>{len(done)} of {len(reports)}</td><td>{sum(bool(d['defects']) for _, d in done)}</td>"
+                 f"<td>{len(pits)}</td><td>{len(bumps)}</td><td>{low}</td><td>{total(pits, 'area_m2'):.3f}</td>"
+                 f"<td>{total(pits, 'volume_l'):.2f}</td><td>{deep_txt}</td></tr></tbody></table>")
+    if (out_dir / "defects.csv").is_file():
+        parts.append('<p>Every defect of the batch: <a href="defects.csv">defects.csv</a>.</p>')
+
+    def deepest_of(data):
+        return max((_num(d.get("max_depth_mm")) or 0.0 for d in data["defects"] if d.get("kind") == "pothole"),
+                   default=0.0)
+
+    with_defects = sorted(((p, d) for p, d in done if d["defects"]),
+                          key=lambda pd: (-deepest_of(pd[1]), -len(pd[1]["defects"])))
+    parts.append('<div class="cards">')
+    cols = ("id", "kind", "depth mm (bump: height)", "mean mm", "area m²", "volume l", "decided", "confidence")
+    for pair, data in with_defects:
+        folder = out_dir / pair
+        n_pits = sum(d.get("kind") == "pothole" for d in data["defects"])
+        parts.append(f'<div class="card road" id="road-{e(pair)}"><b>{e(pair)}</b>: {n_pits} pothole(s), '
+                     f"{len(data['defects']) - n_pits} bump(s)<br>")
+        pics = [p for p in ROAD_PICTURES if (folder / p).is_file()]
+        if pics:
+            href = quote(f"{pair}/{pics[0]}")
+            parts.append(f'<a href="{e(href)}"><img loading="lazy" src="{e(href)}" alt="defects of {e(pair)}"></a><br>'
+                         + " ".join(f'<a href="{e(quote(f"{pair}/{p}"))}">{p}</a>' for p in pics))
+        parts.append('<table class="sortable"><thead><tr>' + "".join(f"<th>{c}</th>" for c in cols)
+                     + "</tr></thead><tbody>")
+        for d in data["defects"]:
+            low_d = bool(d.get("low_confidence"))
+            vals = [(d.get("id"), str(d.get("id"))), (None, str(d.get("kind"))),
+                    (d.get("max_depth_mm"), f"{_num(d.get('max_depth_mm')) or 0.0:.1f}"),
+                    (d.get("mean_depth_mm"), f"{_num(d.get('mean_depth_mm')) or 0.0:.1f}"),
+                    (d.get("area_m2"), f"{_num(d.get('area_m2')) or 0.0:.4f}"),
+                    (d.get("volume_l"), f"{_num(d.get('volume_l')) or 0.0:.2f}"),
+                    (d.get("decided_share"), f"{100 * (_num(d.get('decided_share')) or 0.0):.0f} %"),
+                    (None, "low" if low_d else "ok")]
+            cells = "".join(f'<td data-v="{_num(v) if _num(v) is not None else ""}">{e(t)}</td>' for v, t in vals)
+            row_cls = ' class="low"' if low_d else ""
+            parts.append(f"<tr{row_cls}>{cells}</tr>")
+        parts.append("</tbody></table>")
+        for w in data.get("warnings") or []:
+            parts.append(f'<p class="low">{e(str(w))}</p>')
+        parts.append("</div>")
+    parts.append("</div>")
+    clean = [(p, d) for p, d in done if not d["defects"]]
+    if clean:
+        notes = [p + (f" ({'; '.join(map(str, d.get('warnings') or []))})" if d.get("warnings") else "") for p, d in clean]
+        parts.append("<p>No defects: " + e(", ".join(notes)) + ".</p>")
+    missing = [(p, why) for p, data, why in reports if data is None]
+    if missing:
+        parts.append("<p>No road outputs (no camera, not run with --road-report, or failed; see each "
+                     "result.json): " + e(", ".join(f"{p} ({why})" for p, why in missing)) + ".</p>")
+    return parts
 
 
 def write_report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,

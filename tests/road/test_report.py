@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from d3cli.cli import main
 from d3cli.config import RoadConfig
 from d3cli.data import io
+from d3cli.road.plane import seen_by_both
 from d3cli.road.report import height_colour, road_report, write_defects_csv
 
 from .scene import pothole_scene
@@ -122,3 +123,21 @@ def test_run_without_camera_warns(tmp_path, make_pair_folder):
     assert not (out / "p" / "height.pfm").exists()
     warnings = json.loads((out / "p" / "result.json").read_text())["warnings"]
     assert any(w.startswith("no road report") for w in warnings)
+
+
+def test_left_border_strip_is_no_estimate_and_holds_no_defects(tmp_path):
+    # Left of u = d the right camera does not see the point: the hole filling extrapolates
+    # there.  Make that strip 3 px too large (a 'high' streak): before the fix it was
+    # reported as a bump; now the strip is no estimate and only the pothole is left.
+    disp, cam, _ = pothole_scene()
+    u = np.arange(disp.shape[1])[None, :]
+    strip = u < disp
+    assert 0.05 < strip.mean() < 0.2
+    streaked = np.where(strip, disp + 3.0, disp).astype(np.float32)
+    items, _ = road_report(tmp_path, left_image(disp.shape), streaked, ~strip, cam, {}, ROAD)
+    height = io.read_pfm(tmp_path / "height.pfm")
+    assert np.isinf(height[strip]).all() and np.isfinite(height[~strip]).all()
+    (d,) = items  # only the real pothole, right of the strip
+    assert d["bbox_px"][0] > strip.sum(axis=1).max()
+    assert d["max_depth_mm"] == pytest.approx(80, rel=0.03)
+    assert seen_by_both(np.array([[5.0, 0.5, np.inf, 2.0]], np.float32)).tolist() == [[False, True, False, True]]
