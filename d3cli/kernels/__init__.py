@@ -4,6 +4,16 @@ compile it for their target and drive it.  :func:`get_backend` picks one."""
 from __future__ import annotations
 
 import logging
+import os
+
+# Worker threads of numba's OpenMP layer sleep when a parallel loop ends instead of
+# spinning (GNU OpenMP's default).  The pipeline runs many short parallel loops with
+# serial steps in between; on a busy 2-core machine the spinning threads took the cores
+# those steps (and other processes, and --workers siblings) needed: PT-D3Stereo on a
+# 1280x720 road pair went from 6.2x to 4.0x SGBM's time, Middlebury-Q from 15.7x to 8.8x
+# (scripts/bench_speed.py, one loaded run each way).  Must be set before the OpenMP
+# runtime loads (the first parallel kernel call); a value the user set is kept.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from ..errors import BackendUnavailable
 
