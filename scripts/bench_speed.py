@@ -24,6 +24,7 @@ Cases (``--cases``, default all that exist)::
     middlebury    middlebury2014-adirondack-Q, configs/middlebury.yaml
     kitti         kitti2015-000000_10, configs/kitti.yaml
     road-1440     2560x1440 synthetic road pair, configs/road.yaml
+    road-2160     3840x2160 synthetic road pair, configs/road.yaml (issue 10: PT within 4 GB)
 
 Usage::
 
@@ -50,6 +51,7 @@ CASES = {
     "middlebury": {"pair": "middlebury2014-adirondack-Q", "config": "configs/middlebury.yaml"},
     "kitti": {"pair": "kitti2015-000000_10", "config": "configs/kitti.yaml"},
     "road-1440": {"synth": [2560, 1440], "config": "configs/road.yaml"},
+    "road-2160": {"synth": [3840, 2160], "config": "configs/road.yaml"},
 }
 DEFAULT_CASES = ("road", "road-full", "middlebury", "kitti")
 

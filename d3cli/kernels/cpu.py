@@ -519,25 +519,27 @@ def _uniform_bands(index):
 
 
 @njit(cache=True)
-def _rbf_row(out, v, above, sh_a, here, sh_h, below, sh_b, index, uniform, weights, acc):
-    """New values of row v (into ``out``, indexed from the row's first cell) from the old
-    rows v - 1, v, v + 1 (clamped at the image border).
+def _rbf_row(cost, v, ring, ra, rh, rb, row_start, index, uniform, weights, acc):
+    """New values of row v, written into ``cost``, from the old rows v - 1, v, v + 1
+    (clamped at the image border) held in ``ring`` rows ``ra``, ``rh``, ``rb``.
 
-    Each source row is an array and a shift: cell (y, x, d) is ``src[index[y, x, 0] + d -
-    shift]``.  The nine terms are added in slot order k = 0..8 in float32.  Neighbours
-    outside the image have weight 0 and read a clamped, in-image cell: adding +0.0 leaves
-    the (non-negative) sum unchanged, so the result is the same as skipping them.  Where
-    all nine share the pixel's band (``uniform``) their cells sit at fixed distances (a
-    pixel of band size B follows its left neighbour by B cells) and one vectorised loop
-    does it.  Elsewhere, where a neighbour's band lacks a disparity of the pixel's band,
-    the pixel's own cell stands in: the bands are built (:mod:`d3cli.method.band`) so
-    that this never happens for a cell the later steps read, it only keeps the halo
-    cells finite.
+    Cell (y, x, d) of an old row is ``ring[r, index[y, x, 0] + d - row_start[y]]``.  The
+    nine terms are added in slot order k = 0..8 in float32.  Neighbours outside the image
+    have weight 0 and read a clamped, in-image cell: adding +0.0 leaves the
+    (non-negative) sum unchanged, so the result is the same as skipping them.  Where all
+    nine share the pixel's band (``uniform``) their cells sit at fixed distances (a pixel
+    of band size B follows its left neighbour by B cells) and one vectorised loop does
+    it.  Elsewhere, where a neighbour's band lacks a disparity of the pixel's band, the
+    pixel's own cell stands in: the bands are built (:mod:`d3cli.method.band`) so that
+    this never happens for a cell the later steps read, it only keeps the halo cells
+    finite.
     """
     h, w, _ = index.shape
     ym = max(v - 1, 0)
     yp = min(v + 1, h - 1)
-    out_shift = index[v, 0, 0] + index[v, 0, 1]  # the row's first cell
+    sh_a = row_start[ym]
+    sh_h = row_start[v]
+    sh_b = row_start[yp]
     for u in range(w):
         off = index[v, u, 0]
         lo = index[v, u, 1]
@@ -546,7 +548,7 @@ def _rbf_row(out, v, above, sh_a, here, sh_h, below, sh_b, index, uniform, weigh
             continue
         band = hi - lo
         o4 = off - sh_h
-        res = out[off - out_shift + lo:off - out_shift + hi]
+        res = cost[off + lo:off + hi]
         w0 = weights[v, u, 0]
         w1 = weights[v, u, 1]
         w2 = weights[v, u, 2]
@@ -563,15 +565,15 @@ def _rbf_row(out, v, above, sh_a, here, sh_h, below, sh_b, index, uniform, weigh
             o7 = index[yp, u, 0] - sh_b
             # slices: indices from range(n) are known >= 0, so numba adds no
             # negative-index wraparound and the loop vectorises (4.5x, measured)
-            s0 = above[o1 + dl + lo:o1 + dl + hi]
-            s1 = above[o1 + lo:o1 + hi]
-            s2 = above[o1 + dr + lo:o1 + dr + hi]
-            s3 = here[o4 + dl + lo:o4 + dl + hi]
-            s4 = here[o4 + lo:o4 + hi]
-            s5 = here[o4 + dr + lo:o4 + dr + hi]
-            s6 = below[o7 + dl + lo:o7 + dl + hi]
-            s7 = below[o7 + lo:o7 + hi]
-            s8 = below[o7 + dr + lo:o7 + dr + hi]
+            s0 = ring[ra, o1 + dl + lo:o1 + dl + hi]
+            s1 = ring[ra, o1 + lo:o1 + hi]
+            s2 = ring[ra, o1 + dr + lo:o1 + dr + hi]
+            s3 = ring[rh, o4 + dl + lo:o4 + dl + hi]
+            s4 = ring[rh, o4 + lo:o4 + hi]
+            s5 = ring[rh, o4 + dr + lo:o4 + dr + hi]
+            s6 = ring[rb, o7 + dl + lo:o7 + dl + hi]
+            s7 = ring[rb, o7 + lo:o7 + hi]
+            s8 = ring[rb, o7 + dr + lo:o7 + dr + hi]
             for i in range(band):
                 a = np.float32(0.0)
                 a += w0 * s0[i]
@@ -585,28 +587,21 @@ def _rbf_row(out, v, above, sh_a, here, sh_h, below, sh_b, index, uniform, weigh
                 a += w8 * s8[i]
                 res[i] = a
             continue
-        own = here[o4 + lo:o4 + hi]
+        own = ring[rh, o4 + lo:o4 + hi]
         for i in range(band):
             acc[i] = 0.0
         for k in range(9):
             y = min(max(v + k // 3 - 1, 0), h - 1)
             x = min(max(u + k % 3 - 1, 0), w - 1)
             wk = weights[v, u, k]
-            if k < 3:
-                src = above
-                q_off = index[y, x, 0] - sh_a
-            elif k < 6:
-                src = here
-                q_off = index[y, x, 0] - sh_h
-            else:
-                src = below
-                q_off = index[y, x, 0] - sh_b
+            r = ra if k < 3 else (rh if k < 6 else rb)
+            q_off = index[y, x, 0] - row_start[y]
             a0 = max(lo, index[y, x, 1])
             a1 = max(min(hi, index[y, x, 2]), a0)
             for d in range(lo, a0):
                 acc[d - lo] += wk * own[d - lo]
             for d in range(a0, a1):
-                acc[d - lo] += wk * src[q_off + d]
+                acc[d - lo] += wk * ring[r, q_off + d]
             for d in range(a1, hi):
                 acc[d - lo] += wk * own[d - lo]
         for i in range(band):
@@ -617,10 +612,11 @@ def _rbf_row(out, v, above, sh_a, here, sh_h, below, sh_b, index, uniform, weigh
 def _rbf_pass(cost, index, uniform, weights, row_start, strip, max_band, max_row):
     """One 3x3 pass of eq. 2, in place, streamed over rows (issue 10 item 4).
 
-    The rows are cut into strips, one task each.  A row's new values wait in a row
-    buffer until the next row has been computed from the old ones, and the old rows just
-    outside a strip (owned by the neighbouring tasks) are copied before any task starts.
-    No second volume, and the three rows a row reads stay in cache.  The result equals a
+    The rows are cut into strips, one task each.  A task keeps the old values of the
+    three rows a row reads in a ring of row buffers (all reads from one small array, so
+    the loop vectorises and stays in cache) and writes the row's new values straight
+    into the volume; the old rows just outside its strip (owned by the neighbouring
+    tasks) are copied before any task starts.  No second volume; the result equals a
     pass from one volume into another.
     """
     h = index.shape[0]
@@ -638,31 +634,24 @@ def _rbf_pass(cost, index, uniform, weights, row_start, strip, max_band, max_row
     for s in prange(n_strips):
         s0 = s * strip
         s1 = min(h, s0 + strip)
-        new = np.empty((2, max_row), np.float32)
+        ring = np.empty((3, max_row), np.float32)
         acc = np.empty(max_band, np.float32)
+        n = row_start[s0 + 1] - row_start[s0]
+        ring[s0 % 3, :n] = cost[row_start[s0]:row_start[s0 + 1]]
+        if s0 > 0:
+            n = row_start[s0] - row_start[s0 - 1]
+            ring[(s0 - 1) % 3, :n] = edges[s, 0, :n]
         for v in range(s0, s1):
-            ym = max(v - 1, 0)
-            yp = min(v + 1, h - 1)
-            # row v - 1 still holds its old values: its new ones are written only now,
-            # after row v has read them
-            if v == s0 and ym < v:
-                above = edges[s, 0]
-                sh_a = row_start[ym]
-            else:
-                above = cost
-                sh_a = 0
-            if yp == v or yp < s1:
-                below = cost
-                sh_b = 0
-            else:
-                below = edges[s, 1]
-                sh_b = row_start[yp]
-            _rbf_row(new[v % 2], v, above, sh_a, cost, 0, below, sh_b, index, uniform, weights, acc)
-            if v > s0:
-                n = row_start[v] - row_start[v - 1]
-                cost[row_start[v - 1]:row_start[v]] = new[(v - 1) % 2, :n]
-        n = row_start[s1] - row_start[s1 - 1]
-        cost[row_start[s1 - 1]:row_start[s1]] = new[(s1 - 1) % 2, :n]
+            yp = v + 1
+            if yp < s1:  # not written yet: still old
+                n = row_start[yp + 1] - row_start[yp]
+                ring[yp % 3, :n] = cost[row_start[yp]:row_start[yp + 1]]
+            elif yp < h:
+                n = row_start[yp + 1] - row_start[yp]
+                ring[yp % 3, :n] = edges[s, 1, :n]
+            ra = (v - 1) % 3 if v > 0 else v % 3
+            rb = yp % 3 if yp < h else v % 3
+            _rbf_row(cost, v, ring, ra, v % 3, rb, row_start, index, uniform, weights, acc)
 
 
 #: Rows per task of the in-place RBF pass.
