@@ -8,12 +8,13 @@ volume is allocated.
 The estimate models the pipeline's peak (DESIGN steps 2-5), which is reached at the
 finest level (level 1):
 
-* cost volumes: float32 ``(H, W, D + 1)``; the raw NCC volume plus the RBF double
-  buffer are alive at the same time (3 volumes; 2 when aggregation is off or a single
-  pass, the plain bilateral filter also needs its output volume);
+* cost volumes: float32 ``(H, W, D + 1)``, the worst case of the band search (a band
+  can be the full range); RBF filters the NCC volume in place (1 volume), the plain
+  bilateral filter also needs its output volume (2);
 * the RBF weights: float32 ``(H, W, 9)``;
 * per-pixel maps: grey images and their pyramids, the integer disparity maps and the
-  diffusion's frontier arrays (int64 lists), min-cost, sub-pixel and output maps.
+  diffusion's frontier arrays (int32 lists), the band indexes (two int32 ``(H, W, 3)``),
+  min-cost, sub-pixel and output maps.
 
 SGBM (``sgbm``, ``pt-sgm``) holds OpenCV's int16 path buffers: for the full-DP modes
 (``hh``, ``hh4``) a cost and a sum volume ``(H, W, D16)`` each, for ``sgbm``/``3way`` a
@@ -34,9 +35,10 @@ log = logging.getLogger(__name__)
 #: Bytes per pixel of the per-pixel maps of the d3stereo pipeline: 2 raw images
 #: (worst case 3 x uint16 = 6 B each), 2 grey float32 images with pyramids (x 4/3),
 #: disparity int32 double buffer, seeds int32, min cost float32, diffusion's changed,
-#: stamp and active int64 lists, new values int32, sub-pixel float32, valid/occluded
-#: bool, output float32 and its filled copy.
-D3_BYTES_PER_PIXEL = 12 + 2 * 4 * 4 / 3 + 8 + 4 + 4 + 3 * 8 + 4 + 4 + 2 + 8
+#: stamp and active int32 lists, new values int32, the stored and visible band indexes
+#: (2 x 3 int32) and the uniform-band mask, sub-pixel float32, valid/occluded bool,
+#: output float32 and its filled copy.
+D3_BYTES_PER_PIXEL = 12 + 2 * 4 * 4 / 3 + 8 + 4 + 4 + 3 * 4 + 4 + 2 * 12 + 1 + 4 + 2 + 8
 #: Bytes per pixel around OpenCV SGBM: raw images, grey float32 and uint8, int16
 #: disparity, float32 disparity and filled copy, valid mask, index maps of the filling.
 SGBM_BYTES_PER_PIXEL = 12 + 2 * (4 + 1) + 2 + 2 * 4 + 1 + 4 * 8
@@ -58,14 +60,14 @@ def _sgbm_disparities(max_disparity: int) -> int:
 def _d3_volume_bytes(cfg: Config, pixels: int, n_disp: int) -> int:
     """Bytes of the float32 cost volumes alive at once at the finest level.
 
-    RBF reuses the raw NCC volume as its second buffer (``overwrite_input``), so it
-    holds two volumes whatever ``t_max``; the plain bilateral filter holds the NCC volume
-    and its output.
+    RBF filters the raw NCC volume in place, row strip by row strip (one volume and a
+    few rows); the plain bilateral filter holds the NCC volume and its output.  The
+    full range is assumed (the band search can fall back to it).
     """
     volume = pixels * n_disp * 4
     agg = cfg.aggregation
     if agg.rbf:
-        return 2 * volume if agg.t_max > 0 else volume
+        return volume
     return 2 * volume if agg.kappa_a > 0 else volume
 
 
