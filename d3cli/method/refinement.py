@@ -1,11 +1,17 @@
-"""Step 8: sub-pixel refinement and hole filling."""
+"""Step 8: sub-pixel refinement and hole filling.
+
+The occlusion tests, the filling and the smoothing run on the host for every backend, as
+numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of the NumPy/OpenCV
+formulation they replaced bit for bit (that formulation is the reference in
+``tests/kernels/test_finishing.py``).
+"""
 
 from __future__ import annotations
 
-import warnings
-
 import cv2
 import numpy as np
+
+from ..kernels import finishing
 
 
 def refine_subpixel(cost, disparity, *, backend):
@@ -49,16 +55,8 @@ def occluded_by_uniqueness(disparity: np.ndarray, valid: np.ndarray, *, toleranc
     ndarray, bool, (H, W)
         True where the pixel is judged occluded.
     """
-    h, w = disparity.shape
-    v, u = np.nonzero(valid)
-    d = disparity[v, u]
-    xr = np.clip(np.rint(u - d).astype(np.int64), 0, w - 1)
-    flat = v.astype(np.int64) * w + xr
-    best = np.full(h * w, -np.inf)
-    np.maximum.at(best, flat, d)
-    occluded = np.zeros((h, w), bool)
-    occluded[v, u] = d < best[flat] - tolerance
-    return occluded
+    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    return finishing.uniqueness_occluded(disp, np.ascontiguousarray(valid, dtype=bool), float(tolerance))
 
 
 def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int) -> np.ndarray:
@@ -75,26 +73,12 @@ def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int)
     -------
     ndarray, bool, (H, W)
     """
-    h, w = disparity.shape
+    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    w = disp.shape[1]
     start = min(int(max_disparity), w - 1)
-    sub_valid = valid[:, start:]
-    has = sub_valid.any(axis=1)
-    first = np.argmax(sub_valid, axis=1) + start
-    b = np.where(has, disparity[np.arange(h), first], -np.inf)[:, None]
-    cols = np.arange(w)[None, :]
-    return valid & (cols < b) & (disparity < b - 1)
-
-
-def _nearest_along_rows(disp: np.ndarray, valid: np.ndarray):
-    """Values of the nearest valid pixel to the left and to the right in each row (inf if none)."""
-    h, w = disp.shape
-    cols = np.broadcast_to(np.arange(w), (h, w))
-    left_idx = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)
-    right_idx = np.minimum.accumulate(np.where(valid, cols, w)[:, ::-1], axis=1)[:, ::-1]
-    rows = np.arange(h)[:, None]
-    left_val = np.where(left_idx >= 0, disp[rows, np.clip(left_idx, 0, w - 1)], np.inf)
-    right_val = np.where(right_idx < w, disp[rows, np.clip(right_idx, 0, w - 1)], np.inf)
-    return left_val, right_val
+    if start < 0:  # a slice start, as valid[:, start:] read it
+        start = max(start + w, 0)
+    return finishing.out_of_view_mask(disp, np.ascontiguousarray(valid, dtype=bool), start)
 
 
 def fill_holes(
@@ -118,35 +102,27 @@ def fill_holes(
     -------
     ndarray, float32, (H, W)
     """
-    disp = np.asarray(disparity, dtype=np.float32)
-    valid = np.asarray(valid, dtype=bool) & np.isfinite(disp)
+    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    valid = np.ascontiguousarray(np.asarray(valid, dtype=bool) & np.isfinite(disp))
     if not valid.any():
         return np.full(disp.shape, np.inf, np.float32)
     if valid.all():
         return disp.copy()
-    left_val, right_val = _nearest_along_rows(disp, valid)
-    fill_value = np.minimum(left_val, right_val)
-    if occluded is not None:
+    if occluded is None:
+        filled, row_has = finishing.fill_rows_smaller_side(disp, valid)
+    else:
         # Holes that are not occlusions (undecided: weak texture, rejected matches) lie
         # inside a surface: the median of the nearest valid values in the four directions
         # estimates it better than the background side.
-        up_val, down_val = (x.T for x in _nearest_along_rows(disp.T, valid.T))
-        four = np.stack([left_val, right_val, up_val, down_val])
-        four = np.where(np.isfinite(four), four, np.nan)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: no neighbour
-            inside = np.nanmedian(four, axis=0)
-        use_inside = ~occluded & np.isfinite(inside)
-        fill_value = np.where(use_inside, inside, fill_value)
-    filled = np.where(valid, disp, fill_value).astype(np.float32)
-    empty_rows = ~valid.any(axis=1)
-    if empty_rows.any():
-        good = np.flatnonzero(~empty_rows)
-        for r in np.flatnonzero(empty_rows):
-            filled[r] = filled[good[np.argmin(np.abs(good - r))]]
+        left, right = finishing.nearest_along_rows(disp, valid)
+        up, down = finishing.nearest_along_rows(np.ascontiguousarray(disp.T), np.ascontiguousarray(valid.T))
+        filled = finishing.fill_inside(disp, valid, np.ascontiguousarray(occluded, dtype=bool), left, right,
+                                       np.ascontiguousarray(up.T), np.ascontiguousarray(down.T))
+        row_has = valid.any(axis=1)
+    if not row_has.all():
+        finishing.copy_nearest_rows(filled, row_has)
     if smooth and min(disp.shape) >= 5:
-        median = cv2.medianBlur(filled, 5)
-        filled = np.where(valid, filled, median).astype(np.float32)
+        finishing.keep_valid(filled, valid, cv2.medianBlur(filled, 5))
     return filled
 
 
@@ -195,31 +171,32 @@ def smooth_disparity(
     -------
     ndarray, float32, (H, W)
     """
-    disp = np.asarray(disparity, dtype=np.float32)
-    finite = np.isfinite(disp)
-    use = np.asarray(valid, dtype=bool) & finite
-    if radius <= 0 or not use.any():
+    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    if radius <= 0 or disp.size == 0:
         return disp.copy()
-    base = np.zeros(disp.shape, np.float32) if plane is None else np.asarray(plane, dtype=np.float32)
-    resid = np.where(finite, disp - base, 0.0).astype(np.float32)
-    lo, hi = float(resid[finite].min()), float(resid[finite].max())
+    base = np.zeros(disp.shape, np.float32) if plane is None else np.ascontiguousarray(plane, dtype=np.float32)
+    resid, finite, row_lo, row_hi = finishing.residual_and_range(disp, base)
+    use = np.ascontiguousarray(np.asarray(valid, dtype=bool) & finite)
+    if not use.any():
+        return disp.copy()
+    lo, hi = float(row_lo.min()), float(row_hi.max())
     step = max(float(sigma), (hi - lo) / (_MAX_RANGE_LEVELS - 1))
     n_levels = int(np.floor((hi - lo) / step)) + 2
-    pos = (resid - lo) / step
-    k0 = np.clip(np.floor(pos), 0, n_levels - 2).astype(np.int32)
-    t = (pos - k0).astype(np.float32)
-    weight0 = use.astype(np.float32)
-    ksize = (2 * int(radius) + 1, 2 * int(radius) + 1)
+    # NumPy float32 arithmetic with Python floats: the scalars act as float32
+    k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
+    radius = int(radius)
+    neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
     acc = np.zeros(disp.shape, np.float32)
-    inv2s2 = 0.5 / float(sigma) ** 2
-    for k in range(n_levels):
-        lower, upper = k0 == k, k0 + 1 == k
-        if not (lower.any() or upper.any()):
-            continue  # no pixel interpolates from this level
-        level = lo + k * step
-        w = weight0 * np.exp(-inv2s2 * (resid - level) ** 2).astype(np.float32)
-        num = cv2.boxFilter(w * resid, -1, ksize, normalize=False, borderType=cv2.BORDER_CONSTANT)
-        den = cv2.boxFilter(w, -1, ksize, normalize=False, borderType=cv2.BORDER_CONSTANT)
-        est = np.where(den > 1e-6, num / np.maximum(den, 1e-6), resid)
-        acc += np.where(lower, 1.0 - t, 0.0) * est + np.where(upper, t, 0.0) * est
-    return np.where(finite, acc + base, disp).astype(np.float32)
+    weight = np.empty(disp.shape, np.float32)
+    scratch = np.empty(disp.shape, np.float32)
+    num_rows = np.empty(disp.shape, np.float64)
+    den_rows = np.empty(disp.shape, np.float64)
+    col_sums = np.empty((2, disp.shape[1]), np.float64)
+    for k in np.flatnonzero(used):  # levels no pixel interpolates from are skipped
+        level = np.float32(lo + int(k) * step)
+        finishing.range_exponent(resid, level, neg_inv2s2, weight)
+        # NumPy's float32 exp, not numba's: they differ in the last bit (see the kernels)
+        np.exp(weight, out=weight)
+        finishing.weighted_row_sums(weight, use, resid, radius, num_rows, den_rows, scratch)
+        finishing.blend_level(num_rows, den_rows, resid, k0, t, int(k), radius, acc, col_sums)
+    return finishing.add_base(acc, base, finite, disp)
