@@ -42,16 +42,15 @@ def _right_column(u, d, w):
     x = np.float64(u) - d
     if not abs(x) < _INT64_LIMIT:
         return 0
-    xr = np.int64(np.rint(x))
-    if xr < 0:
+    if x <= -0.5:  # rounds to 0 or below
         return 0
-    if xr > w - 1:
+    if x >= w - 0.5:  # rounds to w - 1 or above
         return w - 1
-    return xr
+    return np.int64(np.rint(x))
 
 
 @njit(parallel=True, cache=True)
-def uniqueness_occluded(disparity, valid, tolerance):
+def uniqueness_occluded(disparity, valid, tolerance, chunks):
     """Left pixels whose right-image match is claimed by a larger disparity.
 
     Parameters
@@ -60,6 +59,8 @@ def uniqueness_occluded(disparity, valid, tolerance):
     valid : ndarray, bool, (H, W), C-contiguous
     tolerance : float
         Pixels with ``d < max_d(match) - tolerance`` are occluded.
+    chunks : int
+        Number of row blocks run in parallel (each owns one row buffer).
 
     Returns
     -------
@@ -70,22 +71,24 @@ def uniqueness_occluded(disparity, valid, tolerance):
     """
     h, w = disparity.shape
     out = np.zeros((h, w), np.bool_)
-    chunks = max(1, min(h, 16))
-    best = np.empty((chunks, max(w, 1)), np.float64)  # one row buffer per chunk of rows
+    chunks = max(1, min(h, chunks))
+    best = np.empty((chunks, max(w, 1)), np.float64)  # one row buffer per block of rows
+    target = np.empty((chunks, max(w, 1)), np.int64)
     for c in prange(chunks):
         row_best = best[c]
+        row_target = target[c]
         for y in range((c * h) // chunks, ((c + 1) * h) // chunks):
             row_best[:] = -np.inf
             for u in range(w):
                 if valid[y, u]:
                     d = np.float64(disparity[y, u])
                     xr = _right_column(u, d, w)
+                    row_target[u] = xr
                     if d > row_best[xr] or d != d:
                         row_best[xr] = d
             for u in range(w):
                 if valid[y, u]:
-                    d = np.float64(disparity[y, u])
-                    out[y, u] = d < row_best[_right_column(u, d, w)] - tolerance
+                    out[y, u] = np.float64(disparity[y, u]) < row_best[row_target[u]] - tolerance
     return out
 
 
@@ -345,171 +348,192 @@ def range_levels(resid, lo, step, n_levels):
     k0 = np.empty((h, w), np.int32)
     t = np.empty((h, w), np.float32)
     top = np.float32(n_levels - 2)
-    row_used = np.zeros((h, n_levels), np.bool_)
+    top_plus_1 = np.float32(n_levels - 1)
+    row_used = np.zeros((h, n_levels + 1), np.bool_)
     for y in prange(h):
         for u in range(w):
             pos = (resid[y, u] - lo) / step
-            f = np.floor(pos)
-            if f < _F32_ZERO:  # np.clip: NaN stays NaN, and its int32 cast follows below
-                f = _F32_ZERO
-            elif f > top:
-                f = top
-            k = np.int32(f) if f == f else np.int32(-2147483648)
+            # np.clip(np.floor(pos), 0, top).astype(np.int32); NaN casts to INT32_MIN
+            if pos >= _F32_ZERO:
+                k = np.int32(pos) if pos < top_plus_1 else np.int32(top)
+            elif pos < _F32_ZERO:
+                k = np.int32(0)
+            else:
+                k = np.int32(-2147483648)
             k0[y, u] = k
             t[y, u] = np.float32(np.float64(pos) - np.float64(k))
-            if 0 <= k < n_levels:
-                row_used[y, k] = True
-            if 0 <= k + 1 < n_levels:
-                row_used[y, k + 1] = True
+        flags = row_used[y]
+        for u in range(w):
+            k = k0[y, u]
+            if k >= 0:
+                flags[k] = True
     used = np.zeros(n_levels, np.bool_)
     for y in range(h):
         for k in range(n_levels):
-            used[k] |= row_used[y, k]
+            if row_used[y, k]:
+                used[k] = True
+                if k + 1 < n_levels:
+                    used[k + 1] = True
     return k0, t, used
 
 
 @njit(parallel=True, cache=True)
-def range_exponent(resid, level, neg_inv2s2, out):
-    """``out = neg_inv2s2 * (resid - level) ** 2`` in float32 (the argument of the range
-    weight; ``np.exp`` of it is taken by the caller)."""
+def range_exponents(resid, levels, neg_inv2s2, out):
+    """``out[i] = neg_inv2s2 * (resid - levels[i]) ** 2`` in float32: the arguments of the
+    range weights of a group of levels (the caller takes ``np.exp`` of them).
+
+    Parameters
+    ----------
+    resid : ndarray, float32, (H, W)
+    levels : ndarray, float32, (L,)
+    neg_inv2s2 : float32
+        ``-1 / (2 sigma^2)``.
+    out : ndarray, float32, (>= L, H, W), written
+    """
     h, w = resid.shape
     for y in prange(h):
-        for u in range(w):
-            a = resid[y, u] - level
-            out[y, u] = neg_inv2s2 * (a * a)
+        for i in range(levels.shape[0]):
+            level = levels[i]
+            for u in range(w):
+                a = resid[y, u] - level
+                out[i, y, u] = neg_inv2s2 * (a * a)
 
 
 @njit(cache=True, inline="always")
-def _padded(row, j, r, w):
-    """Element j of the row padded by r zeros on both sides, as float64."""
-    i = j - r
-    if 0 <= i < w:
-        return np.float64(row[i])
-    return 0.0
-
-
-@njit(parallel=True, cache=True)
-def weighted_row_sums(weight, use, resid, radius, num_rows, den_rows, wr_buf):
-    """Row box sums (window ``2 radius + 1``, zero padding) of ``w r`` and ``w``,
-    ``w = weight`` where ``use`` else 0, summed as ``cv2.boxFilter``'s row pass does.
-
-    Parameters
-    ----------
-    weight : ndarray, float32, (H, W)
-        Range weights exp(-(r - level)^2 / (2 sigma^2)).
-    use : ndarray, bool, (H, W)
-    resid : ndarray, float32, (H, W)
-    radius : int (>= 1)
-    num_rows, den_rows : ndarray, float64, (H, W), written
-    wr_buf : ndarray, float32, (H, W)
-        Scratch for ``w r`` (float32 product, as in the reference).
-    """
-    h, w = resid.shape
+def _row_sums(weight, use, resid, y, radius, pad_n, pad_d, dst_n, dst_d):
+    """Box sums along row y of ``w r`` and ``w`` (``w = use * weight``, float32 products)
+    as ``cv2.boxFilter``'s float32 row pass computes them: float64 sums over the row
+    padded by ``radius`` zeros, 3 and 5 taps summed directly, wider windows as running
+    sums (add the entering element minus the leaving one)."""
+    w = resid.shape[1]
     k = 2 * radius + 1
-    for y in prange(h):
-        wrow = weight[y]
-        for u in range(w):
-            if not use[y, u]:
-                wrow[u] = _F32_ZERO * wrow[u]  # the reference multiplies by a 0/1 mask
-            wr_buf[y, u] = wrow[u] * resid[y, u]
-        nrow = wr_buf[y]
-        if k == 3:  # OpenCV sums 3 and 5 taps directly, left to right
-            for i in range(w):
-                num_rows[y, i] = _padded(nrow, i, 1, w) + _padded(nrow, i + 1, 1, w) + _padded(nrow, i + 2, 1, w)
-                den_rows[y, i] = _padded(wrow, i, 1, w) + _padded(wrow, i + 1, 1, w) + _padded(wrow, i + 2, 1, w)
-        elif k == 5:
-            for i in range(w):
-                num_rows[y, i] = (_padded(nrow, i, 2, w) + _padded(nrow, i + 1, 2, w) + _padded(nrow, i + 2, 2, w)
-                                  + _padded(nrow, i + 3, 2, w) + _padded(nrow, i + 4, 2, w))
-                den_rows[y, i] = (_padded(wrow, i, 2, w) + _padded(wrow, i + 1, 2, w) + _padded(wrow, i + 2, 2, w)
-                                  + _padded(wrow, i + 3, 2, w) + _padded(wrow, i + 4, 2, w))
-        else:  # running sums: add the entering element minus the leaving one
-            sn = 0.0
-            sd = 0.0
-            for j in range(k):
-                sn += _padded(nrow, j, radius, w)
-                sd += _padded(wrow, j, radius, w)
-            num_rows[y, 0] = sn
-            den_rows[y, 0] = sd
-            for i in range(w - 1):
-                sn += _padded(nrow, i + k, radius, w) - _padded(nrow, i, radius, w)
-                sd += _padded(wrow, i + k, radius, w) - _padded(wrow, i, radius, w)
-                num_rows[y, i + 1] = sn
-                den_rows[y, i + 1] = sd
+    for u in range(w):
+        wv = use[y, u] * weight[y, u]
+        pad_d[radius + u] = wv
+        pad_n[radius + u] = wv * resid[y, u]
+    if k == 3:
+        for i in range(w):
+            dst_n[i] = pad_n[i] + pad_n[i + 1] + pad_n[i + 2]
+            dst_d[i] = pad_d[i] + pad_d[i + 1] + pad_d[i + 2]
+    elif k == 5:
+        for i in range(w):
+            dst_n[i] = pad_n[i] + pad_n[i + 1] + pad_n[i + 2] + pad_n[i + 3] + pad_n[i + 4]
+            dst_d[i] = pad_d[i] + pad_d[i + 1] + pad_d[i + 2] + pad_d[i + 3] + pad_d[i + 4]
+    else:
+        sn = 0.0
+        sd = 0.0
+        for j in range(k):
+            sn += pad_n[j]
+            sd += pad_d[j]
+        dst_n[0] = sn
+        dst_d[0] = sd
+        for i in range(w - 1):
+            sn += pad_n[i + k] - pad_n[i]
+            sd += pad_d[i + k] - pad_d[i]
+            dst_n[i + 1] = sn
+            dst_d[i + 1] = sd
 
 
 @njit(parallel=True, cache=True)
-def blend_level(num_rows, den_rows, resid, k0, t, level_index, radius, acc, col_sums):
-    """Column box sums of the row sums (``cv2.boxFilter``'s column pass, float64 running
-    sums rounded to float32), the level's estimate ``num / den`` (``resid`` where
-    ``den <= 1e-6``) and its share in ``acc``: ``(1 - t) est`` where the level is the
-    pixel's lower one, ``t est`` where it is the upper one.
+def smooth_levels(weights, level_ids, use, resid, k0, t, radius, lower, upper, ring, pad, sums, zero):
+    """Box-filtered range levels of the piecewise-linear bilateral filter, one level per
+    parallel task.
+
+    For level ``level_ids[i]`` with weights ``w = use * weights[i]``: the box sums (window
+    ``2 radius + 1``, zero padding) of ``w r`` and ``w`` exactly as ``cv2.boxFilter(...,
+    normalize=False, borderType=cv2.BORDER_CONSTANT)`` gives them on float32 (the row pass,
+    then float64 running sums down the columns rounded to float32), streamed through a
+    ring buffer of ``2 radius + 1`` row sums; the estimate ``num / den`` (``resid`` where
+    ``den <= 1e-6``); ``(1 - t) est`` goes to ``lower`` where the level is the pixel's
+    lower level ``k0``, ``t est`` to ``upper`` where it is ``k0 + 1``.  Every pixel has
+    one lower and one upper level, so the tasks write disjoint cells.
 
     Parameters
     ----------
-    num_rows, den_rows : ndarray, float64, (H, W)
+    weights : ndarray, float32, (>= L, H, W)
+        ``exp(-(r - level)^2 / (2 sigma^2))`` of each level.
+    level_ids : ndarray, int64, (L,)
+    use : ndarray, float32, (H, W)
+        1 where a pixel may be averaged into others, else 0.
     resid : ndarray, float32, (H, W)
     k0 : ndarray, int32, (H, W)
     t : ndarray, float32, (H, W)
-    level_index : int
     radius : int (>= 1)
-    acc : ndarray, float32, (H, W), updated
-    col_sums : ndarray, float64, (2, W)
-        Scratch: running column sums; parallel column blocks own disjoint columns.
+    lower, upper : ndarray, float32, (H, W), written where the level applies
+    ring : ndarray, float64, (>= L, 2, 2 radius + 1, W)
+    pad : ndarray, float64, (>= L, 2, W + 2 radius), zero at both ends
+    sums : ndarray, float64, (>= L, 2, W)
+    zero : ndarray, float64, (W,), all zero
     """
     h, w = resid.shape
     k = 2 * radius + 1
     eps = np.float32(1e-6)
-    block = 64
-    for b in prange((w + block - 1) // block):
-        u0 = b * block
-        u1 = min(w, u0 + block)
-        sum_n = col_sums[0]
-        sum_d = col_sums[1]
-        for u in range(u0, u1):
+    for i in prange(level_ids.shape[0]):
+        level = level_ids[i]
+        wl = weights[i]
+        ring_n = ring[i, 0]
+        ring_d = ring[i, 1]
+        pad_n = pad[i, 0]
+        pad_d = pad[i, 1]
+        sum_n = sums[i, 0]
+        sum_d = sums[i, 1]
+        for u in range(w):
             sum_n[u] = 0.0
             sum_d[u] = 0.0
         for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
             y = j - radius
-            for u in range(u0, u1):
-                if 0 <= y < h:
-                    sum_n[u] += num_rows[y, u]
-                    sum_d[u] += den_rows[y, u]
-                else:
-                    sum_n[u] += 0.0
-                    sum_d[u] += 0.0
+            if 0 <= y < h:
+                _row_sums(wl, use, resid, y, radius, pad_n, pad_d, ring_n[y % k], ring_d[y % k])
+                rn = ring_n[y % k]
+                rd = ring_d[y % k]
+            else:
+                rn = zero
+                rd = zero
+            for u in range(w):
+                sum_n[u] += rn[u]
+                sum_d[u] += rd[u]
         for y in range(h):
             yp = y + radius  # entering row
             ym = y - radius  # leaving row
-            for u in range(u0, u1):
-                pn = num_rows[yp, u] if yp < h else 0.0
-                pd = den_rows[yp, u] if yp < h else 0.0
-                s0n = sum_n[u] + pn
-                s0d = sum_d[u] + pd
-                mn = num_rows[ym, u] if ym >= 0 else 0.0
-                md = den_rows[ym, u] if ym >= 0 else 0.0
-                sum_n[u] = s0n - mn
-                sum_d[u] = s0d - md
+            if yp < h:
+                _row_sums(wl, use, resid, yp, radius, pad_n, pad_d, ring_n[yp % k], ring_d[yp % k])
+                pn = ring_n[yp % k]
+                pd = ring_d[yp % k]
+            else:
+                pn = zero
+                pd = zero
+            mn = ring_n[ym % k] if ym >= 0 else zero
+            md = ring_d[ym % k] if ym >= 0 else zero
+            for u in range(w):
+                s0n = sum_n[u] + pn[u]
+                s0d = sum_d[u] + pd[u]
+                sum_n[u] = s0n - mn[u]
+                sum_d[u] = s0d - md[u]
                 kk = k0[y, u]
-                if kk == level_index or kk + 1 == level_index:
+                if kk == level or kk + 1 == level:
                     num = np.float32(s0n)
                     den = np.float32(s0d)
-                    if den > eps:
-                        est = num / den  # the reference's np.maximum(den, 1e-6) is den here
+                    # the reference's np.maximum(den, 1e-6) is den where it is used
+                    est = num / den if den > eps else resid[y, u]
+                    if kk == level:
+                        lower[y, u] = (_F32_ONE - t[y, u]) * est
                     else:
-                        est = resid[y, u]
-                    if kk == level_index:
-                        acc[y, u] += (_F32_ONE - t[y, u]) * est
-                    else:
-                        acc[y, u] += t[y, u] * est
+                        upper[y, u] = t[y, u] * est
 
 
 @njit(parallel=True, cache=True)
-def add_base(acc, base, finite, disp):
-    """``acc + base`` where finite, else ``disp`` (float32 (H, W), new array)."""
-    h, w = acc.shape
+def add_base(lower, upper, base, finite, disp):
+    """``(0 + lower) + upper + base`` where finite, else ``disp`` (float32 (H, W), new).
+
+    The reference accumulates the levels in increasing order into a zero-initialised sum;
+    the other levels add ``0 * est``, which changes nothing (the sum never holds -0).
+    """
+    h, w = lower.shape
     out = np.empty((h, w), np.float32)
     for y in prange(h):
         for u in range(w):
-            out[y, u] = acc[y, u] + base[y, u] if finite[y, u] else disp[y, u]
+            if finite[y, u]:
+                out[y, u] = ((_F32_ZERO + lower[y, u]) + upper[y, u]) + base[y, u]
+            else:
+                out[y, u] = disp[y, u]
     return out

@@ -56,7 +56,7 @@ def occluded_by_uniqueness(disparity: np.ndarray, valid: np.ndarray, *, toleranc
         True where the pixel is judged occluded.
     """
     disp = np.ascontiguousarray(disparity, dtype=np.float32)
-    return finishing.uniqueness_occluded(disp, np.ascontiguousarray(valid, dtype=bool), float(tolerance))
+    return finishing.uniqueness_occluded(disp, np.ascontiguousarray(valid, dtype=bool), float(tolerance), _CHUNKS)
 
 
 def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int) -> np.ndarray:
@@ -126,6 +126,13 @@ def fill_holes(
     return filled
 
 
+# Row blocks of the parallel row kernels (each owns a row buffer; more blocks than threads
+# balance the load, the results do not depend on it)
+_CHUNKS = 16
+# range levels of the smoothing filtered together (one parallel task each; their weights
+# take H x W float32 each)
+_LEVEL_GROUP = 8
+
 # The piecewise-linear bilateral filter needs one pair of box filters per range level;
 # beyond this many levels the level spacing grows instead (wide-range maps without a plane).
 _MAX_RANGE_LEVELS = 256
@@ -186,17 +193,24 @@ def smooth_disparity(
     k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
     radius = int(radius)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
-    acc = np.zeros(disp.shape, np.float32)
-    weight = np.empty(disp.shape, np.float32)
-    scratch = np.empty(disp.shape, np.float32)
-    num_rows = np.empty(disp.shape, np.float64)
-    den_rows = np.empty(disp.shape, np.float64)
-    col_sums = np.empty((2, disp.shape[1]), np.float64)
-    for k in np.flatnonzero(used):  # levels no pixel interpolates from are skipped
-        level = np.float32(lo + int(k) * step)
-        finishing.range_exponent(resid, level, neg_inv2s2, weight)
+    use = use.astype(np.float32)  # the reference's 0/1 weight mask
+    h, w = disp.shape
+    levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
+    group = min(len(levels), _LEVEL_GROUP)
+    weights = np.empty((group, h, w), np.float32)
+    ring = np.empty((group, 2, 2 * radius + 1, w), np.float64)
+    pad = np.zeros((group, 2, w + 2 * radius), np.float64)
+    sums = np.empty((group, 2, w), np.float64)
+    zero = np.zeros(w, np.float64)
+    lower = np.zeros(disp.shape, np.float32)
+    upper = np.zeros(disp.shape, np.float32)
+    for g in range(0, len(levels), group):
+        ids = levels[g:g + group]
+        # NumPy float32 arithmetic with Python floats: the scalars act as float32
+        values = np.array([lo + int(k) * step for k in ids], np.float64).astype(np.float32)
+        finishing.range_exponents(resid, values, neg_inv2s2, weights)
         # NumPy's float32 exp, not numba's: they differ in the last bit (see the kernels)
-        np.exp(weight, out=weight)
-        finishing.weighted_row_sums(weight, use, resid, radius, num_rows, den_rows, scratch)
-        finishing.blend_level(num_rows, den_rows, resid, k0, t, int(k), radius, acc, col_sums)
-    return finishing.add_base(acc, base, finite, disp)
+        np.exp(weights[: len(ids)], out=weights[: len(ids)])
+        finishing.smooth_levels(weights, ids.astype(np.int64), use, resid, k0, t, radius, lower, upper,
+                                ring, pad, sums, zero)
+    return finishing.add_base(lower, upper, base, finite, disp)
