@@ -289,38 +289,54 @@ def keep_valid(filled, valid, other):
 
 # ----------------------------------------------------------------------------- smoothing
 @njit(parallel=True, cache=True)
-def residual_and_range(disp, base):
-    """Residual ``disp - base`` (0 where disp is not finite) and its finite range.
+def residual_and_range(disp, base, valid):
+    """Residual ``disp - base`` (0 where disp is not finite), the 0/1 weight mask and the
+    residual's finite range.
+
+    Parameters
+    ----------
+    disp, base : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
 
     Returns
     -------
     resid : ndarray, float32, (H, W)
-    finite : ndarray, bool, (H, W)
+    use : ndarray, float32, (H, W)
+        1 where valid and finite, else 0.
     row_lo, row_hi : ndarray, float32, (H,)
         Per-row minimum and maximum of the finite residuals (+inf / -inf: none).
+    row_use : ndarray, bool, (H,)
+        Whether the row has a pixel with ``use`` 1.
     """
     h, w = disp.shape
     resid = np.empty((h, w), np.float32)
-    finite = np.empty((h, w), np.bool_)
+    use = np.empty((h, w), np.float32)
     row_lo = np.full(h, _F32_INF, np.float32)
     row_hi = np.full(h, -_F32_INF, np.float32)
+    row_use = np.zeros(h, np.bool_)
     for y in prange(h):
         lo = _F32_INF
         hi = -_F32_INF
+        any_use = False
         for u in range(w):
             d = disp[y, u]
             if np.isfinite(d):
                 r = d - base[y, u]
                 resid[y, u] = r
-                finite[y, u] = True
                 lo = min(lo, r)
                 hi = max(hi, r)
+                if valid[y, u]:
+                    use[y, u] = _F32_ONE
+                    any_use = True
+                else:
+                    use[y, u] = _F32_ZERO
             else:
                 resid[y, u] = _F32_ZERO
-                finite[y, u] = False
+                use[y, u] = _F32_ZERO
         row_lo[y] = lo
         row_hi[y] = hi
-    return resid, finite, row_lo, row_hi
+        row_use[y] = any_use
+    return resid, use, row_lo, row_hi, row_use
 
 
 @njit(parallel=True, cache=True)
@@ -435,31 +451,26 @@ def _row_sums(weight, use, resid, y, radius, pad_n, pad_d, dst_n, dst_d):
 
 
 @njit(parallel=True, cache=True)
-def smooth_levels(weights, level_ids, use, resid, k0, t, radius, lower, upper, ring, pad, sums, zero):
+def smooth_levels(weights, use, resid, radius, ring, pad, sums, zero):
     """Box-filtered range levels of the piecewise-linear bilateral filter, one level per
-    parallel task.
+    parallel task; each level's estimate replaces its weights.
 
-    For level ``level_ids[i]`` with weights ``w = use * weights[i]``: the box sums (window
+    For level i with weights ``w = use * weights[i]``: the box sums (window
     ``2 radius + 1``, zero padding) of ``w r`` and ``w`` exactly as ``cv2.boxFilter(...,
     normalize=False, borderType=cv2.BORDER_CONSTANT)`` gives them on float32 (the row pass,
     then float64 running sums down the columns rounded to float32), streamed through a
-    ring buffer of ``2 radius + 1`` row sums; the estimate ``num / den`` (``resid`` where
-    ``den <= 1e-6``); ``(1 - t) est`` goes to ``lower`` where the level is the pixel's
-    lower level ``k0``, ``t est`` to ``upper`` where it is ``k0 + 1``.  Every pixel has
-    one lower and one upper level, so the tasks write disjoint cells.
+    ring buffer of ``2 radius + 1`` row sums, and the estimate ``num / den`` (``resid``
+    where ``den <= 1e-6``), written over ``weights[i]`` (row y of the weights is read when
+    it enters the window, before row y of the estimate is written).
 
     Parameters
     ----------
-    weights : ndarray, float32, (>= L, H, W)
+    weights : ndarray, float32, (L, H, W), overwritten by the estimates
         ``exp(-(r - level)^2 / (2 sigma^2))`` of each level.
-    level_ids : ndarray, int64, (L,)
     use : ndarray, float32, (H, W)
         1 where a pixel may be averaged into others, else 0.
     resid : ndarray, float32, (H, W)
-    k0 : ndarray, int32, (H, W)
-    t : ndarray, float32, (H, W)
     radius : int (>= 1)
-    lower, upper : ndarray, float32, (H, W), written where the level applies
     ring : ndarray, float64, (>= L, 2, 2 radius + 1, W)
     pad : ndarray, float64, (>= L, 2, W + 2 radius), zero at both ends
     sums : ndarray, float64, (>= L, 2, W)
@@ -468,8 +479,7 @@ def smooth_levels(weights, level_ids, use, resid, k0, t, radius, lower, upper, r
     h, w = resid.shape
     k = 2 * radius + 1
     eps = np.float32(1e-6)
-    for i in prange(level_ids.shape[0]):
-        level = level_ids[i]
+    for i in prange(weights.shape[0]):
         wl = weights[i]
         ring_n = ring[i, 0]
         ring_d = ring[i, 1]
@@ -504,36 +514,60 @@ def smooth_levels(weights, level_ids, use, resid, k0, t, radius, lower, upper, r
                 pd = zero
             mn = ring_n[ym % k] if ym >= 0 else zero
             md = ring_d[ym % k] if ym >= 0 else zero
+            est_row = wl[y]
+            r_row = resid[y]
             for u in range(w):
                 s0n = sum_n[u] + pn[u]
                 s0d = sum_d[u] + pd[u]
                 sum_n[u] = s0n - mn[u]
                 sum_d[u] = s0d - md[u]
-                kk = k0[y, u]
-                if kk == level or kk + 1 == level:
-                    num = np.float32(s0n)
-                    den = np.float32(s0d)
-                    # the reference's np.maximum(den, 1e-6) is den where it is used
-                    est = num / den if den > eps else resid[y, u]
-                    if kk == level:
-                        lower[y, u] = (_F32_ONE - t[y, u]) * est
-                    else:
-                        upper[y, u] = t[y, u] * est
+                num = np.float32(s0n)
+                den = np.float32(s0d)
+                # the reference's np.maximum(den, 1e-6) is den where it is used
+                est_row[u] = num / den if den > eps else r_row[u]
 
 
 @njit(parallel=True, cache=True)
-def add_base(lower, upper, base, finite, disp):
-    """``(0 + lower) + upper + base`` where finite, else ``disp`` (float32 (H, W), new).
+def blend_levels(estimates, slot, k0, t, acc):
+    """Add the shares of a group of levels: ``(1 - t) est[k0]`` where the pixel's lower
+    level ``k0`` is in the group, then ``t est[k0 + 1]`` where its upper level is.
 
-    The reference accumulates the levels in increasing order into a zero-initialised sum;
-    the other levels add ``0 * est``, which changes nothing (the sum never holds -0).
+    The reference adds every level in increasing order to a zero-initialised sum, the
+    levels other than a pixel's two adding ``0 * est``: that changes nothing (the sum never
+    holds -0), so ``acc = (0 + lower share) + upper share`` is the same float32 sum.
+
+    Parameters
+    ----------
+    estimates : ndarray, float32, (L, H, W)
+    slot : ndarray, int64, (n_levels + 1,)
+        Index into ``estimates`` of each level, -1 where not in this group.
+    k0 : ndarray, int32, (H, W)
+    t : ndarray, float32, (H, W)
+    acc : ndarray, float32, (H, W), zero before the first group, updated
     """
-    h, w = lower.shape
-    out = np.empty((h, w), np.float32)
+    h, w = k0.shape
+    n = slot.shape[0] - 1
     for y in prange(h):
         for u in range(w):
-            if finite[y, u]:
-                out[y, u] = ((_F32_ZERO + lower[y, u]) + upper[y, u]) + base[y, u]
+            kk = k0[y, u]
+            if 0 <= kk < n:
+                i = slot[kk]
+                if i >= 0:
+                    acc[y, u] += (_F32_ONE - t[y, u]) * estimates[i, y, u]
+                i = slot[kk + 1]
+                if i >= 0:
+                    acc[y, u] += t[y, u] * estimates[i, y, u]
+
+
+@njit(parallel=True, cache=True)
+def add_base(acc, base, disp):
+    """``acc + base`` where ``disp`` is finite, else ``disp``, in place in ``acc``
+    (float32 (H, W)); returns ``acc``."""
+    h, w = acc.shape
+    for y in prange(h):
+        for u in range(w):
+            if np.isfinite(disp[y, u]):
+                acc[y, u] = acc[y, u] + base[y, u]
             else:
-                out[y, u] = disp[y, u]
-    return out
+                acc[y, u] = disp[y, u]
+    return acc

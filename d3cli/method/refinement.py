@@ -8,10 +8,33 @@ formulation they replaced bit for bit (that formulation is the reference in
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import cv2
+import numba
 import numpy as np
 
 from ..kernels import finishing
+
+_EXP_POOL: ThreadPoolExecutor | None = None
+_EXP_POOL_SIZE = 0
+
+
+def _parallel_exp(values: np.ndarray) -> None:
+    """``np.exp(values, out=values)`` on a flat float32 array, in slices on numba's thread
+    count of threads (NumPy releases the GIL in the loop; an elementwise function gives the
+    same bytes however the array is sliced)."""
+    global _EXP_POOL, _EXP_POOL_SIZE
+    threads = max(1, numba.get_num_threads())
+    if threads == 1 or values.size < 1 << 16:
+        np.exp(values, out=values)
+        return
+    if _EXP_POOL is None or _EXP_POOL_SIZE < threads:
+        _EXP_POOL = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="d3stereo-exp")
+        _EXP_POOL_SIZE = threads
+    bounds = np.linspace(0, values.size, threads + 1).astype(int)
+    parts = [values[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+    list(_EXP_POOL.map(lambda part: np.exp(part, out=part), parts))
 
 
 def refine_subpixel(cost, disparity, *, backend):
@@ -129,9 +152,10 @@ def fill_holes(
 # Row blocks of the parallel row kernels (each owns a row buffer; more blocks than threads
 # balance the load, the results do not depend on it)
 _CHUNKS = 16
-# range levels of the smoothing filtered together (one parallel task each; their weights
-# take H x W float32 each)
-_LEVEL_GROUP = 8
+# range levels of the smoothing filtered at a time: at least 4 (fewer blending passes),
+# at most 8 (memory), else one per thread
+_MIN_LEVEL_GROUP = 4
+_MAX_LEVEL_GROUP = 8
 
 # The piecewise-linear bilateral filter needs one pair of box filters per range level;
 # beyond this many levels the level spacing grows instead (wide-range maps without a plane).
@@ -182,9 +206,9 @@ def smooth_disparity(
     if radius <= 0 or disp.size == 0:
         return disp.copy()
     base = np.zeros(disp.shape, np.float32) if plane is None else np.ascontiguousarray(plane, dtype=np.float32)
-    resid, finite, row_lo, row_hi = finishing.residual_and_range(disp, base)
-    use = np.ascontiguousarray(np.asarray(valid, dtype=bool) & finite)
-    if not use.any():
+    resid, use, row_lo, row_hi, row_use = finishing.residual_and_range(
+        disp, base, np.ascontiguousarray(valid, dtype=bool))
+    if not row_use.any():
         return disp.copy()
     lo, hi = float(row_lo.min()), float(row_hi.max())
     step = max(float(sigma), (hi - lo) / (_MAX_RANGE_LEVELS - 1))
@@ -193,24 +217,27 @@ def smooth_disparity(
     k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
     radius = int(radius)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
-    use = use.astype(np.float32)  # the reference's 0/1 weight mask
     h, w = disp.shape
     levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
-    group = min(len(levels), _LEVEL_GROUP)
+    # levels filtered together, one per parallel task: each takes H x W float32 of weights;
+    # a group's estimates are blended in one pass
+    group = max(1, min(len(levels), max(numba.get_num_threads(), _MIN_LEVEL_GROUP), _MAX_LEVEL_GROUP))
     weights = np.empty((group, h, w), np.float32)
     ring = np.empty((group, 2, 2 * radius + 1, w), np.float64)
     pad = np.zeros((group, 2, w + 2 * radius), np.float64)
     sums = np.empty((group, 2, w), np.float64)
     zero = np.zeros(w, np.float64)
-    lower = np.zeros(disp.shape, np.float32)
-    upper = np.zeros(disp.shape, np.float32)
+    slot = np.empty(n_levels + 1, np.int64)
+    acc = np.zeros(disp.shape, np.float32)
     for g in range(0, len(levels), group):
         ids = levels[g:g + group]
-        # NumPy float32 arithmetic with Python floats: the scalars act as float32
+        part = weights[: len(ids)]
         values = np.array([lo + int(k) * step for k in ids], np.float64).astype(np.float32)
-        finishing.range_exponents(resid, values, neg_inv2s2, weights)
+        finishing.range_exponents(resid, values, neg_inv2s2, part)
         # NumPy's float32 exp, not numba's: they differ in the last bit (see the kernels)
-        np.exp(weights[: len(ids)], out=weights[: len(ids)])
-        finishing.smooth_levels(weights, ids.astype(np.int64), use, resid, k0, t, radius, lower, upper,
-                                ring, pad, sums, zero)
-    return finishing.add_base(lower, upper, base, finite, disp)
+        _parallel_exp(part.reshape(-1))
+        finishing.smooth_levels(part, use, resid, radius, ring, pad, sums, zero)
+        slot[:] = -1
+        slot[ids] = np.arange(len(ids))
+        finishing.blend_levels(part, slot, k0, t, acc)
+    return finishing.add_base(acc, base, disp)
