@@ -8,6 +8,7 @@ formulation they replaced bit for bit (that formulation is the reference in
 
 from __future__ import annotations
 
+import os
 from concurrent.futures import ThreadPoolExecutor
 
 import cv2
@@ -17,21 +18,23 @@ import numpy as np
 from ..kernels import finishing
 
 _EXP_POOL: ThreadPoolExecutor | None = None
-_EXP_POOL_SIZE = 0
+_EXP_POOL_KEY: tuple[int, int] = (0, 0)  # (process id, threads) the pool was made for
 
 
 def _parallel_exp(values: np.ndarray) -> None:
     """``np.exp(values, out=values)`` on a flat float32 array, in slices on numba's thread
     count of threads (NumPy releases the GIL in the loop; an elementwise function gives the
     same bytes however the array is sliced)."""
-    global _EXP_POOL, _EXP_POOL_SIZE
+    global _EXP_POOL, _EXP_POOL_KEY
     threads = max(1, numba.get_num_threads())
     if threads == 1 or values.size < 1 << 16:
         np.exp(values, out=values)
         return
-    if _EXP_POOL is None or _EXP_POOL_SIZE < threads:
+    key = (os.getpid(), threads)
+    if _EXP_POOL is None or _EXP_POOL_KEY != key:
+        # a forked worker inherits the pool object but not its threads: make a new one
         _EXP_POOL = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="d3stereo-exp")
-        _EXP_POOL_SIZE = threads
+        _EXP_POOL_KEY = key
     bounds = np.linspace(0, values.size, threads + 1).astype(int)
     parts = [values[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
     list(_EXP_POOL.map(lambda part: np.exp(part, out=part), parts))
@@ -182,8 +185,12 @@ def smooth_disparity(
     also keeps any linear ramp, so ``plane=None`` works on slanted surfaces too.
 
     It is computed as a piecewise-linear bilateral filter (Durand and Dorsey 2002):
-    range levels ``sigma`` apart, per level two box filters (cv2.boxFilter), the result
-    linearly interpolated between the two levels that bracket ``r_p``.
+    range levels ``sigma`` apart (wider when there would be more than 256), per level two
+    box sums, the result linearly interpolated between the two levels that bracket
+    ``r_p``; levels no pixel interpolates from are skipped.  The box sums are those of
+    ``cv2.boxFilter(..., normalize=False, borderType=cv2.BORDER_CONSTANT)``, bit for bit
+    (:func:`d3cli.kernels.finishing.smooth_levels`, one level per thread), and the range
+    weights NumPy's float32 ``exp``.
 
     Parameters
     ----------
