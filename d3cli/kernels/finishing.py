@@ -292,8 +292,8 @@ def keep_valid(filled, valid, other):
 # ----------------------------------------------------------------------------- smoothing
 @njit(parallel=True, cache=True)
 def residual_and_range(disp, base, valid):
-    """Residual ``disp - base`` (0 where disp is not finite), the 0/1 weight mask and the
-    residual's finite range.
+    """Residual ``disp - base`` (0 where disp is not finite), the pixels that may be
+    averaged into others and the residual's finite range.
 
     Parameters
     ----------
@@ -303,16 +303,16 @@ def residual_and_range(disp, base, valid):
     Returns
     -------
     resid : ndarray, float32, (H, W)
-    use : ndarray, float32, (H, W)
-        1 where valid and finite, else 0.
+    use : ndarray, bool, (H, W)
+        Valid and finite.
     row_lo, row_hi : ndarray, float32, (H,)
         Per-row minimum and maximum of the finite residuals (+inf / -inf: none).
     row_use : ndarray, bool, (H,)
-        Whether the row has a pixel with ``use`` 1.
+        Whether the row has a pixel in ``use``.
     """
     h, w = disp.shape
     resid = np.empty((h, w), np.float32)
-    use = np.empty((h, w), np.float32)
+    use = np.empty((h, w), np.bool_)
     row_lo = np.full(h, _F32_INF, np.float32)
     row_hi = np.full(h, -_F32_INF, np.float32)
     row_use = np.zeros(h, np.bool_)
@@ -327,14 +327,11 @@ def residual_and_range(disp, base, valid):
                 resid[y, u] = r
                 lo = min(lo, r)
                 hi = max(hi, r)
-                if valid[y, u]:
-                    use[y, u] = _F32_ONE
-                    any_use = True
-                else:
-                    use[y, u] = _F32_ZERO
+                use[y, u] = valid[y, u]
+                any_use |= valid[y, u]
             else:
                 resid[y, u] = _F32_ZERO
-                use[y, u] = _F32_ZERO
+                use[y, u] = False
         row_lo[y] = lo
         row_hi[y] = hi
         row_use[y] = any_use
@@ -396,13 +393,16 @@ def range_levels(resid, lo, step, n_levels):
 
 
 @njit(parallel=True, cache=True)
-def range_exponents(resid, levels, neg_inv2s2, out):
-    """``out[i] = neg_inv2s2 * (resid - levels[i]) ** 2`` in float32: the arguments of the
-    range weights of a group of levels (the caller takes ``np.exp`` of them).
+def range_exponents(resid, use, levels, neg_inv2s2, out):
+    """The arguments of the range weights of a group of levels, float32:
+    ``out[i] = neg_inv2s2 * (resid - levels[i]) ** 2`` where ``use``, else -inf (the caller
+    takes ``np.exp``: the weight is then exactly the reference's ``use * exp(...)``, +0
+    where not used, and NaN stays NaN).
 
     Parameters
     ----------
     resid : ndarray, float32, (H, W)
+    use : ndarray, bool, (H, W)
     levels : ndarray, float32, (L,)
     neg_inv2s2 : float32
         ``-1 / (2 sigma^2)``.
@@ -414,19 +414,22 @@ def range_exponents(resid, levels, neg_inv2s2, out):
             level = levels[i]
             for u in range(w):
                 a = resid[y, u] - level
-                out[i, y, u] = neg_inv2s2 * (a * a)
+                x = neg_inv2s2 * (a * a)
+                if not use[y, u] and x == x:
+                    x = -_F32_INF
+                out[i, y, u] = x
 
 
 @njit(cache=True, inline="always")
-def _row_sums(weight, use, resid, y, radius, pad_n, pad_d, dst_n, dst_d):
-    """Box sums along row y of ``w r`` and ``w`` (``w = use * weight``, float32 products)
-    as ``cv2.boxFilter``'s float32 row pass computes them: float64 sums over the row
-    padded by ``radius`` zeros, 3 and 5 taps summed directly, wider windows as running
-    sums (add the entering element minus the leaving one)."""
+def _row_sums(weight, resid, y, radius, pad_n, pad_d, dst_n, dst_d):
+    """Box sums along row y of ``w r`` and ``w`` (float32 product) as
+    ``cv2.boxFilter``'s float32 row pass computes them: float64 sums over the row padded by
+    ``radius`` zeros, 3 and 5 taps summed directly, wider windows as running sums (add
+    the entering element minus the leaving one)."""
     w = resid.shape[1]
     k = 2 * radius + 1
     for u in range(w):
-        wv = use[y, u] * weight[y, u]
+        wv = weight[y, u]
         pad_d[radius + u] = wv
         pad_n[radius + u] = wv * resid[y, u]
     if k == 3:
@@ -453,11 +456,11 @@ def _row_sums(weight, use, resid, y, radius, pad_n, pad_d, dst_n, dst_d):
 
 
 @njit(parallel=True, cache=True)
-def smooth_levels(weights, use, resid, radius, ring, pad, sums, zero):
+def smooth_levels(weights, resid, radius, ring, pad, sums, zero):
     """Box-filtered range levels of the piecewise-linear bilateral filter, one level per
     parallel task; each level's estimate replaces its weights.
 
-    For level i with weights ``w = use * weights[i]``: the box sums (window
+    For level i with weights ``w = weights[i]``: the box sums (window
     ``2 radius + 1``, zero padding) of ``w r`` and ``w`` exactly as ``cv2.boxFilter(...,
     normalize=False, borderType=cv2.BORDER_CONSTANT)`` gives them on float32 (the row pass,
     then float64 running sums down the columns rounded to float32), streamed through a
@@ -468,9 +471,8 @@ def smooth_levels(weights, use, resid, radius, ring, pad, sums, zero):
     Parameters
     ----------
     weights : ndarray, float32, (L, H, W), overwritten by the estimates
-        ``exp(-(r - level)^2 / (2 sigma^2))`` of each level.
-    use : ndarray, float32, (H, W)
-        1 where a pixel may be averaged into others, else 0.
+        ``exp(-(r - level)^2 / (2 sigma^2))`` of each level, 0 where a pixel may not be
+        averaged into others.
     resid : ndarray, float32, (H, W)
     radius : int (>= 1)
     ring : ndarray, float64, (>= L, 2, 2 radius + 1, W)
@@ -495,7 +497,7 @@ def smooth_levels(weights, use, resid, radius, ring, pad, sums, zero):
         for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
             y = j - radius
             if 0 <= y < h:
-                _row_sums(wl, use, resid, y, radius, pad_n, pad_d, ring_n[y % k], ring_d[y % k])
+                _row_sums(wl, resid, y, radius, pad_n, pad_d, ring_n[y % k], ring_d[y % k])
                 rn = ring_n[y % k]
                 rd = ring_d[y % k]
             else:
@@ -508,7 +510,7 @@ def smooth_levels(weights, use, resid, radius, ring, pad, sums, zero):
             yp = y + radius  # entering row
             ym = y - radius  # leaving row
             if yp < h:
-                _row_sums(wl, use, resid, yp, radius, pad_n, pad_d, ring_n[yp % k], ring_d[yp % k])
+                _row_sums(wl, resid, yp, radius, pad_n, pad_d, ring_n[yp % k], ring_d[yp % k])
                 pn = ring_n[yp % k]
                 pd = ring_d[yp % k]
             else:

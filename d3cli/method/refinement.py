@@ -240,10 +240,10 @@ def smooth_disparity(
         ids = levels[g:g + group]
         part = weights[: len(ids)]
         values = np.array([lo + int(k) * step for k in ids], np.float64).astype(np.float32)
-        finishing.range_exponents(resid, values, neg_inv2s2, part)
+        finishing.range_exponents(resid, use, values, neg_inv2s2, part)
         # NumPy's float32 exp, not numba's: they differ in the last bit (see the kernels)
         _parallel_exp(part.reshape(-1))
-        finishing.smooth_levels(part, use, resid, radius, ring, pad, sums, zero)
+        finishing.smooth_levels(part, resid, radius, ring, pad, sums, zero)
         slot[:] = -1
         slot[ids] = np.arange(len(ids))
         finishing.blend_levels(part, slot, k0, t, acc)
