@@ -7,9 +7,13 @@ docstrings say what each step means.
 
 Every kernel gives exactly the values of the NumPy/OpenCV formulation it replaced (kept
 as the reference in ``tests/kernels/test_finishing.py``): the same float32/float64
-operations in the same order, bit for bit.  Parallel loops (``prange``) run over rows or
-column blocks that write disjoint cells, so the results do not depend on the thread
-count.  The box sums of the smoothing reproduce ``cv2.boxFilter(..., normalize=False,
+operations in the same order, bit for bit.  The kernels release the GIL (``nogil``) and
+run as tasks over blocks of rows (or one task per range level) on a pool of numba's
+thread count of Python threads (:func:`run_tasks`); tasks write disjoint cells, so the
+results do not depend on the thread count.  A thread pool, not ``prange``: OpenMP's
+spin-waiting made the parallel kernels slower than one thread whenever the 2-core test
+machine was shared (smoothing of the road pair: 128 ms CPU with two threads against
+54 ms with one, at a load of 6); idle pool threads block instead of spinning.  The box sums of the smoothing reproduce ``cv2.boxFilter(..., normalize=False,
 borderType=cv2.BORDER_CONSTANT)`` on float32 (float64 running sums along the rows, then
 down the columns; direct 3- and 5-tap sums for radius 1 and 2), and the range weights
 are computed by ``np.exp`` between the kernels, because NumPy's vectorised float32
@@ -19,12 +23,70 @@ third of the arguments.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numba
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 # cpu.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
 # when it is imported; the decorators below read that setting, so it must run first.
 from . import cpu as _cpu  # noqa: F401,E402  (import for its side effect)
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_KEY: tuple[int, int] = (0, 0)  # (process id, threads) the pool was made for
+
+
+def threads() -> int:
+    """Threads the finishing runs on: numba's thread count (``--threads``, NUMBA_NUM_THREADS)."""
+    return max(1, numba.get_num_threads())
+
+
+def run_tasks(func, n_tasks, *args):
+    """``func(i, n_tasks, *args)`` for every task i, on the pool; returns when all are done.
+
+    With one thread (or one task) everything runs in the calling thread.  Exceptions of a
+    task are raised here.
+    """
+    global _POOL, _POOL_KEY
+    n = threads()
+    if n == 1 or n_tasks <= 1:
+        for i in range(n_tasks):
+            func(i, n_tasks, *args)
+        return
+    key = (os.getpid(), n)
+    if _POOL is None or _POOL_KEY != key:
+        # a forked worker inherits the pool object but not its threads: make a new one
+        _POOL = ThreadPoolExecutor(max_workers=n, thread_name_prefix="d3stereo-finish")
+        _POOL_KEY = key
+    for future in [_POOL.submit(func, i, n_tasks, *args) for i in range(n_tasks)]:
+        future.result()
+
+
+def row_tasks(h: int) -> int:
+    """Blocks of rows: a few per thread, so that a thread that was descheduled on a
+    shared machine holds up little."""
+    n = threads()
+    return 1 if n == 1 else max(1, min(h, 4 * n))
+
+
+def parallel_exp(values: np.ndarray) -> None:
+    """``np.exp(values, out=values)`` on a flat float32 array, in slices on the pool
+    (NumPy releases the GIL in the loop; an elementwise function gives the same bytes
+    however the array is sliced)."""
+    n = threads()
+    if n == 1 or values.size < 1 << 16:
+        np.exp(values, out=values)
+        return
+    bounds = np.linspace(0, values.size, 4 * n + 1).astype(np.int64)
+
+    def part(i, _n):
+        chunk = values[bounds[i]:bounds[i + 1]]
+        np.exp(chunk, out=chunk)
+
+    run_tasks(part, 4 * n)
+
 
 _F32_ONE = np.float32(1.0)
 _F32_TWO = np.float32(2.0)
@@ -51,8 +113,26 @@ def _right_column(u, d, w):
     return np.int64((x + 6755399441055744.0) - 6755399441055744.0)
 
 
-@njit(parallel=True, cache=True)
-def uniqueness_occluded(disparity, valid, tolerance, chunks):
+@njit(cache=True, nogil=True)
+def _uniqueness_task(task, tasks, disparity, valid, tolerance, best, target, out):
+    h, w = disparity.shape
+    row_best = best[task]
+    row_target = target[task]
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        row_best[:] = -np.inf
+        for u in range(w):
+            if valid[y, u]:
+                d = np.float64(disparity[y, u])
+                xr = _right_column(u, d, w)
+                row_target[u] = xr
+                if d > row_best[xr] or d != d:
+                    row_best[xr] = d
+        for u in range(w):
+            out[y, u] = valid[y, u] and np.float64(disparity[y, u]) < row_best[row_target[u]] - tolerance
+
+
+def uniqueness_occluded(disparity, valid, tolerance):
     """Left pixels whose right-image match is claimed by a larger disparity.
 
     Parameters
@@ -61,40 +141,38 @@ def uniqueness_occluded(disparity, valid, tolerance, chunks):
     valid : ndarray, bool, (H, W), C-contiguous
     tolerance : float
         Pixels with ``d < max_d(match) - tolerance`` are occluded.
-    chunks : int
-        Number of row blocks run in parallel (each owns one row buffer).
 
     Returns
     -------
     ndarray, bool, (H, W)
         Per row, the largest valid disparity that maps to each right column
-        ``round(u - d)`` (a scatter-max into one row buffer), then the test; NaN wins the
-        maximum as in ``np.maximum``.
+        ``round(u - d)`` (a scatter-max into one row buffer per task), then the test; NaN
+        wins the maximum as in ``np.maximum``.
     """
     h, w = disparity.shape
     out = np.zeros((h, w), np.bool_)
-    chunks = max(1, min(h, chunks))
-    best = np.empty((chunks, max(w, 1)), np.float64)  # one row buffer per block of rows
-    target = np.empty((chunks, max(w, 1)), np.int64)
-    for c in prange(chunks):
-        row_best = best[c]
-        row_target = target[c]
-        for y in range((c * h) // chunks, ((c + 1) * h) // chunks):
-            row_best[:] = -np.inf
-            for u in range(w):
-                if valid[y, u]:
-                    d = np.float64(disparity[y, u])
-                    xr = _right_column(u, d, w)
-                    row_target[u] = xr
-                    if d > row_best[xr] or d != d:
-                        row_best[xr] = d
-            for u in range(w):
-                if valid[y, u]:
-                    out[y, u] = np.float64(disparity[y, u]) < row_best[row_target[u]] - tolerance
+    tasks = row_tasks(h)
+    best = np.empty((tasks, max(w, 1)), np.float64)
+    target = np.empty((tasks, max(w, 1)), np.int64)
+    run_tasks(_uniqueness_task, tasks, disparity, valid, float(tolerance), best, target, out)
     return out
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _out_of_view_task(task, tasks, disparity, valid, start, out):
+    h, w = disparity.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        b = -_F32_INF
+        for u in range(start, w):
+            if valid[y, u]:
+                b = disparity[y, u]
+                break
+        b_minus_1 = b - _F32_ONE
+        for u in range(w):
+            out[y, u] = valid[y, u] and u < b and disparity[y, u] < b_minus_1
+
+
 def out_of_view_mask(disparity, valid, start):
     """Left-border pixels below the first valid disparity ``b`` at or right of ``start``.
 
@@ -112,15 +190,7 @@ def out_of_view_mask(disparity, valid, start):
     """
     h, w = disparity.shape
     out = np.zeros((h, w), np.bool_)
-    for y in prange(h):
-        b = -_F32_INF
-        for u in range(start, w):
-            if valid[y, u]:
-                b = disparity[y, u]
-                break
-        b_minus_1 = b - _F32_ONE
-        for u in range(w):
-            out[y, u] = valid[y, u] and u < b and disparity[y, u] < b_minus_1
+    run_tasks(_out_of_view_task, row_tasks(h), disparity, valid, int(start), out)
     return out
 
 
@@ -131,7 +201,27 @@ def _np_minimum(a, b):
     return a if a < b else b
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _fill_rows_task(task, tasks, disp, valid, filled, row_has):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        right = _F32_INF
+        for u in range(w - 1, -1, -1):  # pass 1: nearest valid value at or right of u
+            if valid[y, u]:
+                right = disp[y, u]
+            filled[y, u] = right
+        left = _F32_INF
+        has = False
+        for u in range(w):  # pass 2: nearest to the left, the smaller of the two
+            if valid[y, u]:
+                left = disp[y, u]
+                has = True
+            else:
+                filled[y, u] = _np_minimum(left, filled[y, u])
+        row_has[y] = has
+
+
 def fill_rows_smaller_side(disp, valid):
     """Row-wise fill: each hole takes the smaller of the nearest valid values left and right.
 
@@ -151,25 +241,27 @@ def fill_rows_smaller_side(disp, valid):
     h, w = disp.shape
     filled = np.empty((h, w), np.float32)
     row_has = np.zeros(h, np.bool_)
-    for y in prange(h):
-        right = _F32_INF
-        for u in range(w - 1, -1, -1):  # pass 1: nearest valid value at or right of u
-            if valid[y, u]:
-                right = disp[y, u]
-            filled[y, u] = right
-        left = _F32_INF
-        has = False
-        for u in range(w):  # pass 2: nearest to the left, the smaller of the two
-            if valid[y, u]:
-                left = disp[y, u]
-                has = True
-            else:
-                filled[y, u] = _np_minimum(left, filled[y, u])
-        row_has[y] = has
+    run_tasks(_fill_rows_task, row_tasks(h), disp, valid, filled, row_has)
     return filled, row_has
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _nearest_task(task, tasks, disp, valid, left, right):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        value = _F32_INF
+        for u in range(w):
+            if valid[y, u]:
+                value = disp[y, u]
+            left[y, u] = value
+        value = _F32_INF
+        for u in range(w - 1, -1, -1):
+            if valid[y, u]:
+                value = disp[y, u]
+            right[y, u] = value
+
+
 def nearest_along_rows(disp, valid):
     """Values of the nearest valid pixel to the left and to the right in each row.
 
@@ -186,43 +278,16 @@ def nearest_along_rows(disp, valid):
     h, w = disp.shape
     left = np.empty((h, w), np.float32)
     right = np.empty((h, w), np.float32)
-    for y in prange(h):
-        value = _F32_INF
-        for u in range(w):
-            if valid[y, u]:
-                value = disp[y, u]
-            left[y, u] = value
-        value = _F32_INF
-        for u in range(w - 1, -1, -1):
-            if valid[y, u]:
-                value = disp[y, u]
-            right[y, u] = value
+    run_tasks(_nearest_task, row_tasks(h), disp, valid, left, right)
     return left, right
 
 
-@njit(parallel=True, cache=True)
-def fill_inside(disp, valid, occluded, left, right, up, down):
-    """Fill with the median of the finite nearest values in four directions where a hole
-    is not occluded and has one, else with the smaller row neighbour.
-
-    Parameters
-    ----------
-    disp : ndarray, float32, (H, W)
-    valid, occluded : ndarray, bool, (H, W)
-    left, right, up, down : ndarray, float32, (H, W)
-        Nearest valid values in the four directions (inf: none).
-
-    Returns
-    -------
-    ndarray, float32, (H, W)
-        As ``np.nanmedian`` over the finite ones (mean of the middle two of an even count,
-        in float32).
-    """
+@njit(cache=True, nogil=True)
+def _fill_inside_task(task, tasks, disp, valid, occluded, left, right, up, down, out):
     h, w = disp.shape
-    out = np.empty((h, w), np.float32)
-    vals = np.empty((h, 4), np.float32)  # one sort buffer per row
-    for y in prange(h):
-        buf = vals[y]
+    buf = np.empty(4, np.float32)  # sort buffer of the task
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
         for u in range(w):
             if valid[y, u]:
                 out[y, u] = disp[y, u]
@@ -247,10 +312,32 @@ def fill_inside(disp, valid, occluded, left, right, up, down):
                 out[y, u] = buf[n // 2]
             else:
                 out[y, u] = (buf[n // 2 - 1] + buf[n // 2]) / _F32_TWO
+
+
+def fill_inside(disp, valid, occluded, left, right, up, down):
+    """Fill with the median of the finite nearest values in four directions where a hole
+    is not occluded and has one, else with the smaller row neighbour.
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W)
+    valid, occluded : ndarray, bool, (H, W)
+    left, right, up, down : ndarray, float32, (H, W)
+        Nearest valid values in the four directions (inf: none).
+
+    Returns
+    -------
+    ndarray, float32, (H, W)
+        As ``np.nanmedian`` over the finite ones (mean of the middle two of an even count,
+        in float32).
+    """
+    h, w = disp.shape
+    out = np.empty((h, w), np.float32)
+    run_tasks(_fill_inside_task, row_tasks(h), disp, valid, occluded, left, right, up, down, out)
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def copy_nearest_rows(filled, row_has):
     """Rows without a valid pixel copy the nearest row that has one (the upper on a tie).
 
@@ -279,18 +366,47 @@ def copy_nearest_rows(filled, row_has):
             filled[y, :] = filled[below, :]
 
 
-@njit(parallel=True, cache=True)
-def keep_valid(filled, valid, other):
-    """``filled`` where valid, else ``other``, in place (float32 (H, W))."""
+@njit(cache=True, nogil=True)
+def _keep_valid_task(task, tasks, filled, valid, other):
     h, w = filled.shape
-    for y in prange(h):
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
         for u in range(w):
             if not valid[y, u]:
                 filled[y, u] = other[y, u]
 
 
+def keep_valid(filled, valid, other):
+    """``filled`` where valid, else ``other``, in place (float32 (H, W))."""
+    run_tasks(_keep_valid_task, row_tasks(filled.shape[0]), filled, valid, other)
+
+
 # ----------------------------------------------------------------------------- smoothing
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _residual_task(task, tasks, disp, base, valid, resid, use, row_lo, row_hi, row_use):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        lo = _F32_INF
+        hi = -_F32_INF
+        any_use = False
+        for u in range(w):
+            d = disp[y, u]
+            if np.isfinite(d):
+                r = d - base[y, u]
+                resid[y, u] = r
+                lo = min(lo, r)
+                hi = max(hi, r)
+                use[y, u] = valid[y, u]
+                any_use |= valid[y, u]
+            else:
+                resid[y, u] = _F32_ZERO
+                use[y, u] = False
+        row_lo[y] = lo
+        row_hi[y] = hi
+        row_use[y] = any_use
+
+
 def residual_and_range(disp, base, valid):
     """Residual ``disp - base`` (0 where disp is not finite), the pixels that may be
     averaged into others and the residual's finite range.
@@ -313,32 +429,37 @@ def residual_and_range(disp, base, valid):
     h, w = disp.shape
     resid = np.empty((h, w), np.float32)
     use = np.empty((h, w), np.bool_)
-    row_lo = np.full(h, _F32_INF, np.float32)
-    row_hi = np.full(h, -_F32_INF, np.float32)
-    row_use = np.zeros(h, np.bool_)
-    for y in prange(h):
-        lo = _F32_INF
-        hi = -_F32_INF
-        any_use = False
-        for u in range(w):
-            d = disp[y, u]
-            if np.isfinite(d):
-                r = d - base[y, u]
-                resid[y, u] = r
-                lo = min(lo, r)
-                hi = max(hi, r)
-                use[y, u] = valid[y, u]
-                any_use |= valid[y, u]
-            else:
-                resid[y, u] = _F32_ZERO
-                use[y, u] = False
-        row_lo[y] = lo
-        row_hi[y] = hi
-        row_use[y] = any_use
+    row_lo = np.empty(h, np.float32)
+    row_hi = np.empty(h, np.float32)
+    row_use = np.empty(h, np.bool_)
+    run_tasks(_residual_task, row_tasks(h), disp, base, valid, resid, use, row_lo, row_hi, row_use)
     return resid, use, row_lo, row_hi, row_use
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _range_levels_task(task, tasks, resid, lo, step, n_levels, k0, t, row_used):
+    h, w = resid.shape
+    top = np.float32(n_levels - 2)
+    top_plus_1 = np.float32(n_levels - 1)
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        flags = row_used[y]
+        flags[:] = False
+        for u in range(w):
+            pos = (resid[y, u] - lo) / step
+            # np.clip(np.floor(pos), 0, top).astype(np.int32); NaN casts to INT32_MIN
+            if pos >= _F32_ZERO:
+                k = np.int32(pos) if pos < top_plus_1 else np.int32(top)
+            elif pos < _F32_ZERO:
+                k = np.int32(0)
+            else:
+                k = np.int32(-2147483648)
+            k0[y, u] = k
+            t[y, u] = np.float32(np.float64(pos) - np.float64(k))
+            if k >= 0:
+                flags[k] = True
+
+
 def range_levels(resid, lo, step, n_levels):
     """Lower range level ``k0`` of every pixel, its interpolation weight ``t`` and which
     levels some pixel interpolates from.
@@ -357,42 +478,35 @@ def range_levels(resid, lo, step, n_levels):
     t : ndarray, float32, (H, W)
         ``pos - k0`` (float64 difference rounded to float32, as NumPy promotes it).
     used : ndarray, bool, (n_levels,)
-        Level k is the lower or the upper level of some pixel.
+        Level k is the lower (k0) or the upper (k0 + 1) level of some pixel.
     """
     h, w = resid.shape
     k0 = np.empty((h, w), np.int32)
     t = np.empty((h, w), np.float32)
-    top = np.float32(n_levels - 2)
-    top_plus_1 = np.float32(n_levels - 1)
-    row_used = np.zeros((h, n_levels + 1), np.bool_)
-    for y in prange(h):
-        for u in range(w):
-            pos = (resid[y, u] - lo) / step
-            # np.clip(np.floor(pos), 0, top).astype(np.int32); NaN casts to INT32_MIN
-            if pos >= _F32_ZERO:
-                k = np.int32(pos) if pos < top_plus_1 else np.int32(top)
-            elif pos < _F32_ZERO:
-                k = np.int32(0)
-            else:
-                k = np.int32(-2147483648)
-            k0[y, u] = k
-            t[y, u] = np.float32(np.float64(pos) - np.float64(k))
-        flags = row_used[y]
-        for u in range(w):
-            k = k0[y, u]
-            if k >= 0:
-                flags[k] = True
-    used = np.zeros(n_levels, np.bool_)
-    for y in range(h):
-        for k in range(n_levels):
-            if row_used[y, k]:
-                used[k] = True
-                if k + 1 < n_levels:
-                    used[k + 1] = True
+    row_used = np.empty((h, n_levels), np.bool_)
+    run_tasks(_range_levels_task, row_tasks(h), resid, np.float32(lo), np.float32(step), int(n_levels),
+              k0, t, row_used)
+    lower = row_used.any(axis=0)
+    used = lower.copy()
+    used[1:] |= lower[:-1]
     return k0, t, used
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _range_exponents_task(task, tasks, resid, use, levels, neg_inv2s2, out):
+    h, w = resid.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for i in range(levels.shape[0]):
+            level = levels[i]
+            for u in range(w):
+                a = resid[y, u] - level
+                x = neg_inv2s2 * (a * a)
+                if not use[y, u] and x == x:
+                    x = -_F32_INF
+                out[i, y, u] = x
+
+
 def range_exponents(resid, use, levels, neg_inv2s2, out):
     """The arguments of the range weights of a group of levels, float32:
     ``out[i] = neg_inv2s2 * (resid - levels[i]) ** 2`` where ``use``, else -inf (the caller
@@ -408,16 +522,7 @@ def range_exponents(resid, use, levels, neg_inv2s2, out):
         ``-1 / (2 sigma^2)``.
     out : ndarray, float32, (>= L, H, W), written
     """
-    h, w = resid.shape
-    for y in prange(h):
-        for i in range(levels.shape[0]):
-            level = levels[i]
-            for u in range(w):
-                a = resid[y, u] - level
-                x = neg_inv2s2 * (a * a)
-                if not use[y, u] and x == x:
-                    x = -_F32_INF
-                out[i, y, u] = x
+    run_tasks(_range_exponents_task, row_tasks(resid.shape[0]), resid, use, levels, np.float32(neg_inv2s2), out)
 
 
 @njit(cache=True, inline="always")
@@ -455,35 +560,12 @@ def _row_sums(weight, resid, y, radius, pad_n, pad_d, dst_n, dst_d):
             dst_d[i + 1] = sd
 
 
-@njit(parallel=True, cache=True)
-def smooth_levels(weights, resid, radius, ring, pad, sums, zero):
-    """Box-filtered range levels of the piecewise-linear bilateral filter, one level per
-    parallel task; each level's estimate replaces its weights.
-
-    For level i with weights ``w = weights[i]``: the box sums (window
-    ``2 radius + 1``, zero padding) of ``w r`` and ``w`` exactly as ``cv2.boxFilter(...,
-    normalize=False, borderType=cv2.BORDER_CONSTANT)`` gives them on float32 (the row pass,
-    then float64 running sums down the columns rounded to float32), streamed through a
-    ring buffer of ``2 radius + 1`` row sums, and the estimate ``num / den`` (``resid``
-    where ``den <= 1e-6``), written over ``weights[i]`` (row y of the weights is read when
-    it enters the window, before row y of the estimate is written).
-
-    Parameters
-    ----------
-    weights : ndarray, float32, (L, H, W), overwritten by the estimates
-        ``exp(-(r - level)^2 / (2 sigma^2))`` of each level, 0 where a pixel may not be
-        averaged into others.
-    resid : ndarray, float32, (H, W)
-    radius : int (>= 1)
-    ring : ndarray, float64, (>= L, 2, 2 radius + 1, W)
-    pad : ndarray, float64, (>= L, 2, W + 2 radius), zero at both ends
-    sums : ndarray, float64, (>= L, 2, W)
-    zero : ndarray, float64, (W,), all zero
-    """
+@njit(cache=True, nogil=True)
+def _smooth_level_task(task, tasks, weights, resid, radius, ring, pad, sums, zero):
     h, w = resid.shape
     k = 2 * radius + 1
     eps = np.float32(1e-6)
-    for i in prange(weights.shape[0]):
+    for i in range(task, task + 1):
         wl = weights[i]
         ring_n = ring[i, 0]
         ring_d = ring[i, 1]
@@ -531,7 +613,50 @@ def smooth_levels(weights, resid, radius, ring, pad, sums, zero):
                 est_row[u] = num / den if den > eps else r_row[u]
 
 
-@njit(parallel=True, cache=True)
+def smooth_levels(weights, resid, radius, ring, pad, sums, zero):
+    """Box-filtered range levels of the piecewise-linear bilateral filter, one level per
+    task; each level's estimate replaces its weights.
+
+    For level i with weights ``w = weights[i]``: the box sums (window
+    ``2 radius + 1``, zero padding) of ``w r`` and ``w`` exactly as ``cv2.boxFilter(...,
+    normalize=False, borderType=cv2.BORDER_CONSTANT)`` gives them on float32 (the row pass,
+    then float64 running sums down the columns rounded to float32), streamed through a
+    ring buffer of ``2 radius + 1`` row sums, and the estimate ``num / den`` (``resid``
+    where ``den <= 1e-6``), written over ``weights[i]`` (row y of the weights is read when
+    it enters the window, before row y of the estimate is written).
+
+    Parameters
+    ----------
+    weights : ndarray, float32, (L, H, W), overwritten by the estimates
+        ``exp(-(r - level)^2 / (2 sigma^2))`` of each level, 0 where a pixel may not be
+        averaged into others.
+    resid : ndarray, float32, (H, W)
+    radius : int (>= 1)
+    ring : ndarray, float64, (>= L, 2, 2 radius + 1, W)
+    pad : ndarray, float64, (>= L, 2, W + 2 radius), zero at both ends
+    sums : ndarray, float64, (>= L, 2, W)
+    zero : ndarray, float64, (W,), all zero
+    """
+    run_tasks(_smooth_level_task, weights.shape[0], weights, resid, int(radius), ring, pad, sums, zero)
+
+
+@njit(cache=True, nogil=True)
+def _blend_task(task, tasks, estimates, slot, k0, t, acc):
+    h, w = k0.shape
+    n = slot.shape[0] - 1
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            kk = k0[y, u]
+            if 0 <= kk < n:
+                i = slot[kk]
+                if i >= 0:
+                    acc[y, u] += (_F32_ONE - t[y, u]) * estimates[i, y, u]
+                i = slot[kk + 1]
+                if i >= 0:
+                    acc[y, u] += t[y, u] * estimates[i, y, u]
+
+
 def blend_levels(estimates, slot, k0, t, acc):
     """Add the shares of a group of levels: ``(1 - t) est[k0]`` where the pixel's lower
     level ``k0`` is in the group, then ``t est[k0 + 1]`` where its upper level is.
@@ -549,29 +674,31 @@ def blend_levels(estimates, slot, k0, t, acc):
     t : ndarray, float32, (H, W)
     acc : ndarray, float32, (H, W), zero before the first group, updated
     """
-    h, w = k0.shape
-    n = slot.shape[0] - 1
-    for y in prange(h):
-        for u in range(w):
-            kk = k0[y, u]
-            if 0 <= kk < n:
-                i = slot[kk]
-                if i >= 0:
-                    acc[y, u] += (_F32_ONE - t[y, u]) * estimates[i, y, u]
-                i = slot[kk + 1]
-                if i >= 0:
-                    acc[y, u] += t[y, u] * estimates[i, y, u]
+    run_tasks(_blend_task, row_tasks(k0.shape[0]), estimates, slot, k0, t, acc)
 
 
-@njit(parallel=True, cache=True)
-def add_base(acc, base, disp):
-    """``acc + base`` where ``disp`` is finite, else ``disp``, in place in ``acc``
-    (float32 (H, W)); returns ``acc``."""
+@njit(cache=True, nogil=True)
+def _add_base_task(task, tasks, acc, base, disp):
     h, w = acc.shape
-    for y in prange(h):
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
         for u in range(w):
             if np.isfinite(disp[y, u]):
                 acc[y, u] = acc[y, u] + base[y, u]
             else:
                 acc[y, u] = disp[y, u]
+
+
+def add_base(acc, base, disp):
+    """``acc + base`` where ``disp`` is finite, else ``disp``, in place in ``acc``
+    (float32 (H, W)); returns ``acc``."""
+    run_tasks(_add_base_task, row_tasks(acc.shape[0]), acc, base, disp)
     return acc
+
+
+#: The compiled kernels of this module (nogil, cached on disk), run by :func:`run_tasks`.
+KERNELS = (
+    _uniqueness_task, _out_of_view_task, _fill_rows_task, _nearest_task, _fill_inside_task,
+    copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _range_exponents_task,
+    _smooth_level_task, _blend_task, _add_base_task,
+)

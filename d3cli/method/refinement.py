@@ -8,37 +8,10 @@ formulation they replaced bit for bit (that formulation is the reference in
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import cv2
-import numba
 import numpy as np
 
 from ..kernels import finishing
-
-_EXP_POOL: ThreadPoolExecutor | None = None
-_EXP_POOL_KEY: tuple[int, int] = (0, 0)  # (process id, threads) the pool was made for
-
-
-def _parallel_exp(values: np.ndarray) -> None:
-    """``np.exp(values, out=values)`` on a flat float32 array, in slices on numba's thread
-    count of threads (NumPy releases the GIL in the loop; an elementwise function gives the
-    same bytes however the array is sliced)."""
-    global _EXP_POOL, _EXP_POOL_KEY
-    threads = max(1, numba.get_num_threads())
-    if threads == 1 or values.size < 1 << 16:
-        np.exp(values, out=values)
-        return
-    key = (os.getpid(), threads)
-    if _EXP_POOL is None or _EXP_POOL_KEY != key:
-        # a forked worker inherits the pool object but not its threads: make a new one
-        _EXP_POOL = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="d3stereo-exp")
-        _EXP_POOL_KEY = key
-    bounds = np.linspace(0, values.size, threads + 1).astype(int)
-    parts = [values[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
-    list(_EXP_POOL.map(lambda part: np.exp(part, out=part), parts))
-
 
 def refine_subpixel(cost, disparity, *, backend):
     """Parabola sub-pixel refinement at full resolution (DESIGN step 8).
@@ -82,7 +55,7 @@ def occluded_by_uniqueness(disparity: np.ndarray, valid: np.ndarray, *, toleranc
         True where the pixel is judged occluded.
     """
     disp = np.ascontiguousarray(disparity, dtype=np.float32)
-    return finishing.uniqueness_occluded(disp, np.ascontiguousarray(valid, dtype=bool), float(tolerance), _CHUNKS)
+    return finishing.uniqueness_occluded(disp, np.ascontiguousarray(valid, dtype=bool), float(tolerance))
 
 
 def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int) -> np.ndarray:
@@ -152,9 +125,6 @@ def fill_holes(
     return filled
 
 
-# Row blocks of the parallel row kernels (each owns a row buffer; more blocks than threads
-# balance the load, the results do not depend on it)
-_CHUNKS = 16
 # range levels of the smoothing filtered at a time: at least 4 (fewer blending passes),
 # at most 8 (memory), else one per thread
 _MIN_LEVEL_GROUP = 4
@@ -228,7 +198,7 @@ def smooth_disparity(
     levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
     # levels filtered together, one per parallel task: each takes H x W float32 of weights;
     # a group's estimates are blended in one pass
-    group = max(1, min(len(levels), max(numba.get_num_threads(), _MIN_LEVEL_GROUP), _MAX_LEVEL_GROUP))
+    group = max(1, min(len(levels), max(finishing.threads(), _MIN_LEVEL_GROUP), _MAX_LEVEL_GROUP))
     weights = np.empty((group, h, w), np.float32)
     ring = np.empty((group, 2, 2 * radius + 1, w), np.float64)
     pad = np.zeros((group, 2, w + 2 * radius), np.float64)
@@ -242,7 +212,7 @@ def smooth_disparity(
         values = np.array([lo + int(k) * step for k in ids], np.float64).astype(np.float32)
         finishing.range_exponents(resid, use, values, neg_inv2s2, part)
         # NumPy's float32 exp, not numba's: they differ in the last bit (see the kernels)
-        _parallel_exp(part.reshape(-1))
+        finishing.parallel_exp(part.reshape(-1))
         finishing.smooth_levels(part, resid, radius, ring, pad, sums, zero)
         slot[:] = -1
         slot[ids] = np.arange(len(ids))

@@ -286,10 +286,25 @@ def test_kernels_give_the_same_bytes_with_one_thread_and_with_all():
         assert_same_bytes(a, b)
 
 
-def test_finishing_kernels_are_numba_dispatchers_with_cache():
-    """The kernels are compiled once and cached on disk (a read-only install uses the
-    user cache folder that importing d3cli.kernels.cpu chose)."""
-    for name in ("uniqueness_occluded", "out_of_view_mask", "fill_rows_smaller_side", "smooth_levels"):
-        kernel = getattr(finishing, name)
-        assert isinstance(kernel, numba.core.registry.CPUDispatcher), name
-        assert kernel._cache is not None and type(kernel._cache).__name__ == "FunctionCache", name
+def test_finishing_kernels_are_cached_and_release_the_gil():
+    """Compiled once and cached on disk (a read-only install uses the user cache folder
+    that importing d3cli.kernels.cpu chose); nogil, so that the pool threads run them
+    side by side."""
+    assert len(finishing.KERNELS) >= 10
+    for kernel in finishing.KERNELS:
+        assert isinstance(kernel, numba.core.registry.CPUDispatcher), kernel
+        assert kernel.targetoptions.get("nogil") is True, kernel.py_func.__name__
+        assert type(kernel._cache).__name__ == "FunctionCache", kernel.py_func.__name__
+
+
+def test_run_tasks_runs_every_task_once_and_raises_a_task_error():
+    seen = []
+    finishing.run_tasks(lambda i, n, out: out.append((i, n)), 7, seen)
+    assert sorted(seen) == [(i, 7) for i in range(7)]
+
+    def fail(i, n):
+        if i == 3:
+            raise ValueError("task 3")
+
+    with pytest.raises(ValueError, match="task 3"):
+        finishing.run_tasks(fail, 5)
