@@ -13,12 +13,14 @@ thread count of Python threads (:func:`run_tasks`); tasks write disjoint cells, 
 results do not depend on the thread count.  A thread pool, not ``prange``: OpenMP's
 spin-waiting made the parallel kernels slower than one thread whenever the 2-core test
 machine was shared (smoothing of the road pair: 128 ms CPU with two threads against
-54 ms with one, at a load of 6); idle pool threads block instead of spinning.  The box sums of the smoothing reproduce ``cv2.boxFilter(..., normalize=False,
-borderType=cv2.BORDER_CONSTANT)`` on float32 (float64 running sums along the rows, then
-down the columns; direct 3- and 5-tap sums for radius 1 and 2), and the range weights
-are computed by ``np.exp`` between the kernels, because NumPy's vectorised float32
-``exp`` and the C library's ``expf`` (what numba calls) differ in the last bit for about a
-third of the arguments.
+54 ms with one, at a load of 6); idle pool threads block instead of spinning.
+
+The box sums of the smoothing reproduce ``cv2.boxFilter(..., normalize=False,
+borderType=cv2.BORDER_CONSTANT)`` on float32 as OpenCV 5.0 computes them (float64 running
+sums along the rows, then down the columns; direct 3- and 5-tap sums for radius 1 and 2).
+The range weights are computed by ``np.exp`` between the kernels: NumPy's float32 ``exp``
+and the C library's ``expf`` (what numba calls) differ in the last bit for about a third
+of the arguments.
 """
 
 from __future__ import annotations
