@@ -13,6 +13,20 @@ import numpy as np
 
 from ..kernels import finishing
 
+
+def _as_map(disparity) -> np.ndarray:
+    """C-contiguous float32 (H, W) copy or view of a disparity map."""
+    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    if disp.ndim != 2:
+        raise ValueError(f"a disparity map is 2-D (H, W), got shape {disp.shape}")
+    return disp
+
+
+def _like(array, disp: np.ndarray, dtype) -> np.ndarray:
+    """``array`` broadcast to the map's shape, C-contiguous (the kernels index it per pixel;
+    a ValueError names both shapes when it does not fit)."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(array, dtype=dtype), disp.shape))
+
 def refine_subpixel(cost, disparity, *, backend):
     """Parabola sub-pixel refinement at full resolution (DESIGN step 8).
 
@@ -54,8 +68,8 @@ def occluded_by_uniqueness(disparity: np.ndarray, valid: np.ndarray, *, toleranc
     ndarray, bool, (H, W)
         True where the pixel is judged occluded.
     """
-    disp = np.ascontiguousarray(disparity, dtype=np.float32)
-    return finishing.uniqueness_occluded(disp, np.ascontiguousarray(valid, dtype=bool), float(tolerance))
+    disp = _as_map(disparity)
+    return finishing.uniqueness_occluded(disp, _like(valid, disp, bool), float(tolerance))
 
 
 def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int) -> np.ndarray:
@@ -72,12 +86,12 @@ def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int)
     -------
     ndarray, bool, (H, W)
     """
-    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    disp = _as_map(disparity)
     w = disp.shape[1]
     start = min(int(max_disparity), w - 1)
     if start < 0:  # a slice start, as valid[:, start:] read it
         start = max(start + w, 0)
-    return finishing.out_of_view_mask(disp, np.ascontiguousarray(valid, dtype=bool), start)
+    return finishing.out_of_view_mask(disp, _like(valid, disp, bool), start)
 
 
 def fill_holes(
@@ -101,8 +115,8 @@ def fill_holes(
     -------
     ndarray, float32, (H, W)
     """
-    disp = np.ascontiguousarray(disparity, dtype=np.float32)
-    valid = np.ascontiguousarray(np.asarray(valid, dtype=bool) & np.isfinite(disp))
+    disp = _as_map(disparity)
+    valid = _like(valid, disp, bool) & np.isfinite(disp)
     if not valid.any():
         return np.full(disp.shape, np.inf, np.float32)
     if valid.all():
@@ -115,7 +129,7 @@ def fill_holes(
         # estimates it better than the background side.
         left, right = finishing.nearest_along_rows(disp, valid)
         up, down = finishing.nearest_along_rows(np.ascontiguousarray(disp.T), np.ascontiguousarray(valid.T))
-        filled = finishing.fill_inside(disp, valid, np.ascontiguousarray(occluded, dtype=bool), left, right,
+        filled = finishing.fill_inside(disp, valid, _like(occluded, disp, bool), left, right,
                                        np.ascontiguousarray(up.T), np.ascontiguousarray(down.T))
         row_has = valid.any(axis=1)
     if not row_has.all():
@@ -179,12 +193,12 @@ def smooth_disparity(
     -------
     ndarray, float32, (H, W)
     """
-    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    disp = _as_map(disparity)
+    valid = _like(valid, disp, bool)
     if radius <= 0 or disp.size == 0:
         return disp.copy()
-    base = np.zeros(disp.shape, np.float32) if plane is None else np.ascontiguousarray(plane, dtype=np.float32)
-    resid, use, row_lo, row_hi, row_use = finishing.residual_and_range(
-        disp, base, np.ascontiguousarray(valid, dtype=bool))
+    base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
+    resid, use, row_lo, row_hi, row_use = finishing.residual_and_range(disp, base, valid)
     if not row_use.any():
         return disp.copy()
     lo, hi = float(row_lo.min()), float(row_hi.max())

@@ -8,6 +8,7 @@ mean, so that both could not share a mistake.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from d3cli.method.refinement import fill_holes, occluded_by_uniqueness, out_of_view, smooth_disparity
 
@@ -108,3 +109,26 @@ def test_smooth_disparity_radius_zero_and_nothing_valid_return_a_copy():
                 smooth_disparity(disp, np.zeros((2, 2), bool), radius=3, sigma=1.0)):
         np.testing.assert_array_equal(out, disp)
         assert out is not disp
+
+
+def test_masks_of_another_shape_raise_instead_of_reading_out_of_bounds():
+    disp = np.ones((4, 6), np.float32)
+    small = np.ones((3, 6), bool)
+    with pytest.raises(ValueError):
+        occluded_by_uniqueness(disp, small)
+    with pytest.raises(ValueError):
+        out_of_view(disp, small, max_disparity=2)
+    with pytest.raises(ValueError):
+        fill_holes(disp, small)
+    with pytest.raises(ValueError):
+        fill_holes(disp, np.ones((4, 6), bool) & (np.arange(6) > 2), occluded=small)
+    with pytest.raises(ValueError):
+        smooth_disparity(disp, small, radius=2, sigma=1.0)
+    with pytest.raises(ValueError):
+        smooth_disparity(disp, np.ones((4, 6), bool), radius=2, sigma=1.0, plane=np.ones((4, 5), np.float32))
+    with pytest.raises(ValueError):
+        occluded_by_uniqueness(np.ones(6, np.float32), np.ones(6, bool))
+    # a row of a plane broadcasts, as NumPy's arithmetic let it before
+    row_plane = np.full((1, 6), 0.5, np.float32)
+    out = smooth_disparity(disp, np.ones((4, 6), bool), radius=2, sigma=1.0, plane=row_plane)
+    np.testing.assert_array_equal(out, disp)
