@@ -1,12 +1,31 @@
-"""Step 8: sub-pixel refinement and hole filling."""
+"""Step 8: sub-pixel refinement and hole filling.
+
+The occlusion tests, the filling and the smoothing run on the host for every backend, as
+numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of the NumPy/OpenCV
+formulation they replaced bit for bit (that formulation is the reference in
+``tests/kernels/test_finishing.py``).
+"""
 
 from __future__ import annotations
-
-import warnings
 
 import cv2
 import numpy as np
 
+from ..kernels import finishing
+
+
+def _as_map(disparity) -> np.ndarray:
+    """C-contiguous float32 (H, W) copy or view of a disparity map."""
+    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    if disp.ndim != 2:
+        raise ValueError(f"a disparity map is 2-D (H, W), got shape {disp.shape}")
+    return disp
+
+
+def _like(array, disp: np.ndarray, dtype) -> np.ndarray:
+    """``array`` broadcast to the map's shape, C-contiguous (the kernels index it per pixel;
+    a ValueError names both shapes when it does not fit)."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(array, dtype=dtype), disp.shape))
 
 def refine_subpixel(cost, disparity, *, backend):
     """Parabola sub-pixel refinement at full resolution (DESIGN step 8).
@@ -49,16 +68,8 @@ def occluded_by_uniqueness(disparity: np.ndarray, valid: np.ndarray, *, toleranc
     ndarray, bool, (H, W)
         True where the pixel is judged occluded.
     """
-    h, w = disparity.shape
-    v, u = np.nonzero(valid)
-    d = disparity[v, u]
-    xr = np.clip(np.rint(u - d).astype(np.int64), 0, w - 1)
-    flat = v.astype(np.int64) * w + xr
-    best = np.full(h * w, -np.inf)
-    np.maximum.at(best, flat, d)
-    occluded = np.zeros((h, w), bool)
-    occluded[v, u] = d < best[flat] - tolerance
-    return occluded
+    disp = _as_map(disparity)
+    return finishing.uniqueness_occluded(disp, _like(valid, disp, bool), float(tolerance))
 
 
 def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int) -> np.ndarray:
@@ -75,26 +86,12 @@ def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int)
     -------
     ndarray, bool, (H, W)
     """
-    h, w = disparity.shape
+    disp = _as_map(disparity)
+    w = disp.shape[1]
     start = min(int(max_disparity), w - 1)
-    sub_valid = valid[:, start:]
-    has = sub_valid.any(axis=1)
-    first = np.argmax(sub_valid, axis=1) + start
-    b = np.where(has, disparity[np.arange(h), first], -np.inf)[:, None]
-    cols = np.arange(w)[None, :]
-    return valid & (cols < b) & (disparity < b - 1)
-
-
-def _nearest_along_rows(disp: np.ndarray, valid: np.ndarray):
-    """Values of the nearest valid pixel to the left and to the right in each row (inf if none)."""
-    h, w = disp.shape
-    cols = np.broadcast_to(np.arange(w), (h, w))
-    left_idx = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)
-    right_idx = np.minimum.accumulate(np.where(valid, cols, w)[:, ::-1], axis=1)[:, ::-1]
-    rows = np.arange(h)[:, None]
-    left_val = np.where(left_idx >= 0, disp[rows, np.clip(left_idx, 0, w - 1)], np.inf)
-    right_val = np.where(right_idx < w, disp[rows, np.clip(right_idx, 0, w - 1)], np.inf)
-    return left_val, right_val
+    if start < 0:  # a slice start, as valid[:, start:] read it
+        start = max(start + w, 0)
+    return finishing.out_of_view_mask(disp, _like(valid, disp, bool), start)
 
 
 def fill_holes(
@@ -118,37 +115,34 @@ def fill_holes(
     -------
     ndarray, float32, (H, W)
     """
-    disp = np.asarray(disparity, dtype=np.float32)
-    valid = np.asarray(valid, dtype=bool) & np.isfinite(disp)
+    disp = _as_map(disparity)
+    valid = _like(valid, disp, bool) & np.isfinite(disp)
     if not valid.any():
         return np.full(disp.shape, np.inf, np.float32)
     if valid.all():
         return disp.copy()
-    left_val, right_val = _nearest_along_rows(disp, valid)
-    fill_value = np.minimum(left_val, right_val)
-    if occluded is not None:
+    if occluded is None:
+        filled, row_has = finishing.fill_rows_smaller_side(disp, valid)
+    else:
         # Holes that are not occlusions (undecided: weak texture, rejected matches) lie
         # inside a surface: the median of the nearest valid values in the four directions
         # estimates it better than the background side.
-        up_val, down_val = (x.T for x in _nearest_along_rows(disp.T, valid.T))
-        four = np.stack([left_val, right_val, up_val, down_val])
-        four = np.where(np.isfinite(four), four, np.nan)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: no neighbour
-            inside = np.nanmedian(four, axis=0)
-        use_inside = ~occluded & np.isfinite(inside)
-        fill_value = np.where(use_inside, inside, fill_value)
-    filled = np.where(valid, disp, fill_value).astype(np.float32)
-    empty_rows = ~valid.any(axis=1)
-    if empty_rows.any():
-        good = np.flatnonzero(~empty_rows)
-        for r in np.flatnonzero(empty_rows):
-            filled[r] = filled[good[np.argmin(np.abs(good - r))]]
+        left, right = finishing.nearest_along_rows(disp, valid)
+        up, down = finishing.nearest_along_rows(np.ascontiguousarray(disp.T), np.ascontiguousarray(valid.T))
+        filled = finishing.fill_inside(disp, valid, _like(occluded, disp, bool), left, right,
+                                       np.ascontiguousarray(up.T), np.ascontiguousarray(down.T))
+        row_has = valid.any(axis=1)
+    if not row_has.all():
+        finishing.copy_nearest_rows(filled, row_has)
     if smooth and min(disp.shape) >= 5:
-        median = cv2.medianBlur(filled, 5)
-        filled = np.where(valid, filled, median).astype(np.float32)
+        finishing.keep_valid(filled, valid, cv2.medianBlur(filled, 5))
     return filled
 
+
+# range levels of the smoothing filtered at a time: at least 4 (fewer blending passes),
+# at most 8 (memory), else one per thread
+_MIN_LEVEL_GROUP = 4
+_MAX_LEVEL_GROUP = 8
 
 # The piecewise-linear bilateral filter needs one pair of box filters per range level;
 # beyond this many levels the level spacing grows instead (wide-range maps without a plane).
@@ -175,8 +169,12 @@ def smooth_disparity(
     also keeps any linear ramp, so ``plane=None`` works on slanted surfaces too.
 
     It is computed as a piecewise-linear bilateral filter (Durand and Dorsey 2002):
-    range levels ``sigma`` apart, per level two box filters (cv2.boxFilter), the result
-    linearly interpolated between the two levels that bracket ``r_p``.
+    range levels ``sigma`` apart (wider when there would be more than 256), per level two
+    box sums, the result linearly interpolated between the two levels that bracket
+    ``r_p``; levels no pixel interpolates from are skipped.  The box sums are those of
+    ``cv2.boxFilter(..., normalize=False, borderType=cv2.BORDER_CONSTANT)``, bit for bit
+    (:func:`d3cli.kernels.finishing.smooth_levels`, one level per thread), and the range
+    weights NumPy's float32 ``exp``.
 
     Parameters
     ----------
@@ -195,31 +193,42 @@ def smooth_disparity(
     -------
     ndarray, float32, (H, W)
     """
-    disp = np.asarray(disparity, dtype=np.float32)
-    finite = np.isfinite(disp)
-    use = np.asarray(valid, dtype=bool) & finite
-    if radius <= 0 or not use.any():
+    disp = _as_map(disparity)
+    valid = _like(valid, disp, bool)
+    if radius <= 0 or disp.size == 0:
         return disp.copy()
-    base = np.zeros(disp.shape, np.float32) if plane is None else np.asarray(plane, dtype=np.float32)
-    resid = np.where(finite, disp - base, 0.0).astype(np.float32)
-    lo, hi = float(resid[finite].min()), float(resid[finite].max())
+    base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
+    resid, use, row_lo, row_hi, row_use = finishing.residual_and_range(disp, base, valid)
+    if not row_use.any():
+        return disp.copy()
+    lo, hi = float(row_lo.min()), float(row_hi.max())
     step = max(float(sigma), (hi - lo) / (_MAX_RANGE_LEVELS - 1))
     n_levels = int(np.floor((hi - lo) / step)) + 2
-    pos = (resid - lo) / step
-    k0 = np.clip(np.floor(pos), 0, n_levels - 2).astype(np.int32)
-    t = (pos - k0).astype(np.float32)
-    weight0 = use.astype(np.float32)
-    ksize = (2 * int(radius) + 1, 2 * int(radius) + 1)
+    # NumPy float32 arithmetic with Python floats: the scalars act as float32
+    k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
+    radius = int(radius)
+    neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
+    h, w = disp.shape
+    levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
+    # levels filtered together, one per parallel task: each takes H x W float32 of weights;
+    # a group's estimates are blended in one pass
+    group = max(1, min(len(levels), max(finishing.threads(), _MIN_LEVEL_GROUP), _MAX_LEVEL_GROUP))
+    weights = np.empty((group, h, w), np.float32)
+    ring = np.empty((group, 2, 2 * radius + 1, w), np.float64)
+    pad = np.zeros((group, 2, w + 2 * radius), np.float64)
+    sums = np.empty((group, 2, w), np.float64)
+    zero = np.zeros(w, np.float64)
+    slot = np.empty(n_levels + 1, np.int64)
     acc = np.zeros(disp.shape, np.float32)
-    inv2s2 = 0.5 / float(sigma) ** 2
-    for k in range(n_levels):
-        lower, upper = k0 == k, k0 + 1 == k
-        if not (lower.any() or upper.any()):
-            continue  # no pixel interpolates from this level
-        level = lo + k * step
-        w = weight0 * np.exp(-inv2s2 * (resid - level) ** 2).astype(np.float32)
-        num = cv2.boxFilter(w * resid, -1, ksize, normalize=False, borderType=cv2.BORDER_CONSTANT)
-        den = cv2.boxFilter(w, -1, ksize, normalize=False, borderType=cv2.BORDER_CONSTANT)
-        est = np.where(den > 1e-6, num / np.maximum(den, 1e-6), resid)
-        acc += np.where(lower, 1.0 - t, 0.0) * est + np.where(upper, t, 0.0) * est
-    return np.where(finite, acc + base, disp).astype(np.float32)
+    for g in range(0, len(levels), group):
+        ids = levels[g:g + group]
+        part = weights[: len(ids)]
+        values = np.array([lo + int(k) * step for k in ids], np.float64).astype(np.float32)
+        finishing.range_exponents(resid, use, values, neg_inv2s2, part)
+        # NumPy's float32 exp, not numba's: they differ in the last bit (see the kernels)
+        finishing.parallel_exp(part.reshape(-1))
+        finishing.smooth_levels(part, resid, radius, ring, pad, sums, zero)
+        slot[:] = -1
+        slot[ids] = np.arange(len(ids))
+        finishing.blend_levels(part, slot, k0, t, acc)
+    return finishing.add_base(acc, base, disp)

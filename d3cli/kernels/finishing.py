@@ -1,0 +1,706 @@
+"""Numba kernels of step 8, the finishing of the disparity map (DESIGN step 8).
+
+CPU only: the finishing runs on the host for every backend (the CUDA backend downloads
+its integer and sub-pixel maps first, see ``D3Stereo._finish``), so these kernels serve
+the CPU and the CUDA pipeline alike.  ``d3cli.method.refinement`` calls them; its
+docstrings say what each step means.
+
+Every kernel gives exactly the values of the NumPy/OpenCV formulation it replaced (kept
+as the reference in ``tests/kernels/test_finishing.py``): the same float32/float64
+operations in the same order, bit for bit.  The kernels release the GIL (``nogil``) and
+run as tasks over blocks of rows (or one task per range level) on a pool of numba's
+thread count of Python threads (:func:`run_tasks`); tasks write disjoint cells, so the
+results do not depend on the thread count.  A thread pool, not ``prange``: OpenMP's
+spin-waiting made the parallel kernels slower than one thread whenever the 2-core test
+machine was shared (smoothing of the road pair: 128 ms CPU with two threads against
+54 ms with one, at a load of 6); idle pool threads block instead of spinning.
+
+The box sums of the smoothing reproduce ``cv2.boxFilter(..., normalize=False,
+borderType=cv2.BORDER_CONSTANT)`` on float32 as OpenCV 5.0 computes them (float64 running
+sums along the rows, then down the columns; direct 3- and 5-tap sums for radius 1 and 2).
+The range weights are computed by ``np.exp`` between the kernels: NumPy's float32 ``exp``
+and the C library's ``expf`` (what numba calls) differ in the last bit for about a third
+of the arguments.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numba
+import numpy as np
+from numba import njit
+
+# cpu.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
+# when it is imported; the decorators below read that setting, so it must run first.
+from . import cpu as _cpu  # noqa: F401,E402  (import for its side effect)
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_KEY: tuple[int, int] = (0, 0)  # (process id, threads) the pool was made for
+
+
+def threads() -> int:
+    """Threads the finishing runs on: numba's thread count (``--threads``, NUMBA_NUM_THREADS)."""
+    return max(1, numba.get_num_threads())
+
+
+def run_tasks(func, n_tasks, *args):
+    """``func(i, n_tasks, *args)`` for every task i, on the pool; returns when all are done.
+
+    With one thread (or one task) everything runs in the calling thread.  Exceptions of a
+    task are raised here.
+    """
+    global _POOL, _POOL_KEY
+    n = threads()
+    if n == 1 or n_tasks <= 1:
+        for i in range(n_tasks):
+            func(i, n_tasks, *args)
+        return
+    key = (os.getpid(), n)
+    if _POOL is None or _POOL_KEY != key:
+        # a forked worker inherits the pool object but not its threads: make a new one
+        _POOL = ThreadPoolExecutor(max_workers=n, thread_name_prefix="d3stereo-finish")
+        _POOL_KEY = key
+    for future in [_POOL.submit(func, i, n_tasks, *args) for i in range(n_tasks)]:
+        future.result()
+
+
+def row_tasks(h: int) -> int:
+    """Blocks of rows: a few per thread, so that a thread that was descheduled on a
+    shared machine holds up little."""
+    n = threads()
+    return 1 if n == 1 else max(1, min(h, 4 * n))
+
+
+def parallel_exp(values: np.ndarray) -> None:
+    """``np.exp(values, out=values)`` on a flat float32 array, in slices on the pool
+    (NumPy releases the GIL in the loop; an elementwise function gives the same bytes
+    however the array is sliced)."""
+    n = threads()
+    if n == 1 or values.size < 1 << 16:
+        np.exp(values, out=values)
+        return
+    bounds = np.linspace(0, values.size, 4 * n + 1).astype(np.int64)
+
+    def part(i, _n):
+        chunk = values[bounds[i]:bounds[i + 1]]
+        np.exp(chunk, out=chunk)
+
+    run_tasks(part, 4 * n)
+
+
+_F32_ONE = np.float32(1.0)
+_F32_TWO = np.float32(2.0)
+_F32_ZERO = np.float32(0.0)
+_F32_INF = np.float32(np.inf)
+# NumPy's float -> int64 cast of a value outside the int64 range (and of NaN) gives
+# INT64_MIN on x86, which the reference's clip then maps to column 0
+_INT64_LIMIT = 9.223372036854775807e18
+
+
+# ----------------------------------------------------------------------------- occlusion tests
+@njit(cache=True, inline="always")
+def _right_column(u, d, w):
+    """Column ``round(u - d)`` clipped to [0, w-1], as NumPy computes it (float64, half to even)."""
+    x = np.float64(u) - d
+    if not abs(x) < _INT64_LIMIT:
+        return 0
+    if x <= -0.5:  # rounds to 0 or below
+        return 0
+    if x >= w - 0.5:  # rounds to w - 1 or above
+        return w - 1
+    # np.rint (half to even) of |x| < 2^51: adding and subtracting 1.5 * 2^52 rounds to an
+    # integer in the current (nearest-even) mode; measured 25 % faster than np.rint here
+    return np.int64((x + 6755399441055744.0) - 6755399441055744.0)
+
+
+@njit(cache=True, nogil=True)
+def _uniqueness_task(task, tasks, disparity, valid, tolerance, best, target, out):
+    h, w = disparity.shape
+    row_best = best[task]
+    row_target = target[task]
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        row_best[:] = -np.inf
+        for u in range(w):
+            if valid[y, u]:
+                d = np.float64(disparity[y, u])
+                xr = _right_column(u, d, w)
+                row_target[u] = xr
+                if d > row_best[xr] or d != d:
+                    row_best[xr] = d
+        for u in range(w):
+            out[y, u] = valid[y, u] and np.float64(disparity[y, u]) < row_best[row_target[u]] - tolerance
+
+
+def uniqueness_occluded(disparity, valid, tolerance):
+    """Left pixels whose right-image match is claimed by a larger disparity.
+
+    Parameters
+    ----------
+    disparity : ndarray, float32, (H, W), C-contiguous
+    valid : ndarray, bool, (H, W), C-contiguous
+    tolerance : float
+        Pixels with ``d < max_d(match) - tolerance`` are occluded.
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+        Per row, the largest valid disparity that maps to each right column
+        ``round(u - d)`` (a scatter-max into one row buffer per task), then the test; NaN
+        wins the maximum as in ``np.maximum``.
+    """
+    h, w = disparity.shape
+    out = np.zeros((h, w), np.bool_)
+    tasks = row_tasks(h)
+    best = np.empty((tasks, max(w, 1)), np.float64)
+    target = np.empty((tasks, max(w, 1)), np.int64)
+    run_tasks(_uniqueness_task, tasks, disparity, valid, float(tolerance), best, target, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _out_of_view_task(task, tasks, disparity, valid, start, out):
+    h, w = disparity.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        b = -_F32_INF
+        for u in range(start, w):
+            if valid[y, u]:
+                b = disparity[y, u]
+                break
+        b_minus_1 = b - _F32_ONE
+        for u in range(w):
+            out[y, u] = valid[y, u] and u < b and disparity[y, u] < b_minus_1
+
+
+def out_of_view_mask(disparity, valid, start):
+    """Left-border pixels below the first valid disparity ``b`` at or right of ``start``.
+
+    Parameters
+    ----------
+    disparity : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
+    start : int
+        First column searched for ``b`` (0 <= start < W); rows without one get b = -inf.
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+        ``valid & (u < b) & (d < b - 1)`` (``b - 1`` in float32, as NumPy computes it).
+    """
+    h, w = disparity.shape
+    out = np.zeros((h, w), np.bool_)
+    run_tasks(_out_of_view_task, row_tasks(h), disparity, valid, int(start), out)
+    return out
+
+
+# ----------------------------------------------------------------------------- hole filling
+@njit(cache=True, inline="always")
+def _np_minimum(a, b):
+    """``np.minimum`` of two non-NaN values (the second when they compare equal)."""
+    return a if a < b else b
+
+
+@njit(cache=True, nogil=True)
+def _fill_rows_task(task, tasks, disp, valid, filled, row_has):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        right = _F32_INF
+        for u in range(w - 1, -1, -1):  # pass 1: nearest valid value at or right of u
+            if valid[y, u]:
+                right = disp[y, u]
+            filled[y, u] = right
+        left = _F32_INF
+        has = False
+        for u in range(w):  # pass 2: nearest to the left, the smaller of the two
+            if valid[y, u]:
+                left = disp[y, u]
+                has = True
+            else:
+                filled[y, u] = _np_minimum(left, filled[y, u])
+        row_has[y] = has
+
+
+def fill_rows_smaller_side(disp, valid):
+    """Row-wise fill: each hole takes the smaller of the nearest valid values left and right.
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
+        Pixels to keep and to fill from (finite values only).
+
+    Returns
+    -------
+    filled : ndarray, float32, (H, W)
+        ``disp`` where valid, else the smaller neighbour (inf where the row has none).
+    row_has : ndarray, bool, (H,)
+        Whether the row has a valid pixel.
+    """
+    h, w = disp.shape
+    filled = np.empty((h, w), np.float32)
+    row_has = np.zeros(h, np.bool_)
+    run_tasks(_fill_rows_task, row_tasks(h), disp, valid, filled, row_has)
+    return filled, row_has
+
+
+@njit(cache=True, nogil=True)
+def _nearest_task(task, tasks, disp, valid, left, right):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        value = _F32_INF
+        for u in range(w):
+            if valid[y, u]:
+                value = disp[y, u]
+            left[y, u] = value
+        value = _F32_INF
+        for u in range(w - 1, -1, -1):
+            if valid[y, u]:
+                value = disp[y, u]
+            right[y, u] = value
+
+
+def nearest_along_rows(disp, valid):
+    """Values of the nearest valid pixel to the left and to the right in each row.
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
+
+    Returns
+    -------
+    left, right : ndarray, float32, (H, W)
+        The nearest valid value at or left (right) of each pixel; inf where there is none.
+    """
+    h, w = disp.shape
+    left = np.empty((h, w), np.float32)
+    right = np.empty((h, w), np.float32)
+    run_tasks(_nearest_task, row_tasks(h), disp, valid, left, right)
+    return left, right
+
+
+@njit(cache=True, nogil=True)
+def _fill_inside_task(task, tasks, disp, valid, occluded, left, right, up, down, out):
+    h, w = disp.shape
+    buf = np.empty(4, np.float32)  # sort buffer of the task
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            if valid[y, u]:
+                out[y, u] = disp[y, u]
+                continue
+            side = _np_minimum(left[y, u], right[y, u])
+            if occluded[y, u]:
+                out[y, u] = side
+                continue
+            n = 0
+            for v in (left[y, u], right[y, u], up[y, u], down[y, u]):
+                if np.isfinite(v):
+                    # insertion sort of at most four values
+                    i = n
+                    while i > 0 and buf[i - 1] > v:
+                        buf[i] = buf[i - 1]
+                        i -= 1
+                    buf[i] = v
+                    n += 1
+            if n == 0:
+                out[y, u] = side
+            elif n % 2 == 1:
+                out[y, u] = buf[n // 2]
+            else:
+                out[y, u] = (buf[n // 2 - 1] + buf[n // 2]) / _F32_TWO
+
+
+def fill_inside(disp, valid, occluded, left, right, up, down):
+    """Fill with the median of the finite nearest values in four directions where a hole
+    is not occluded and has one, else with the smaller row neighbour.
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W)
+    valid, occluded : ndarray, bool, (H, W)
+    left, right, up, down : ndarray, float32, (H, W)
+        Nearest valid values in the four directions (inf: none).
+
+    Returns
+    -------
+    ndarray, float32, (H, W)
+        As ``np.nanmedian`` over the finite ones (mean of the middle two of an even count,
+        in float32).
+    """
+    h, w = disp.shape
+    out = np.empty((h, w), np.float32)
+    run_tasks(_fill_inside_task, row_tasks(h), disp, valid, occluded, left, right, up, down, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def copy_nearest_rows(filled, row_has):
+    """Rows without a valid pixel copy the nearest row that has one (the upper on a tie).
+
+    Parameters
+    ----------
+    filled : ndarray, float32, (H, W), modified in place
+    row_has : ndarray, bool, (H,)
+        At least one True.
+    """
+    h = filled.shape[0]
+    above = np.full(h, -1, np.int64)
+    last = -1
+    for y in range(h):
+        if row_has[y]:
+            last = y
+        above[y] = last
+    below = -1
+    for y in range(h - 1, -1, -1):
+        if row_has[y]:
+            below = y
+            continue
+        up = above[y]
+        if below < 0 or (up >= 0 and y - up <= below - y):
+            filled[y, :] = filled[up, :]
+        else:
+            filled[y, :] = filled[below, :]
+
+
+@njit(cache=True, nogil=True)
+def _keep_valid_task(task, tasks, filled, valid, other):
+    h, w = filled.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            if not valid[y, u]:
+                filled[y, u] = other[y, u]
+
+
+def keep_valid(filled, valid, other):
+    """``filled`` where valid, else ``other``, in place (float32 (H, W))."""
+    run_tasks(_keep_valid_task, row_tasks(filled.shape[0]), filled, valid, other)
+
+
+# ----------------------------------------------------------------------------- smoothing
+@njit(cache=True, nogil=True)
+def _residual_task(task, tasks, disp, base, valid, resid, use, row_lo, row_hi, row_use):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        lo = _F32_INF
+        hi = -_F32_INF
+        any_use = False
+        for u in range(w):
+            d = disp[y, u]
+            if np.isfinite(d):
+                r = d - base[y, u]
+                resid[y, u] = r
+                lo = min(lo, r)
+                hi = max(hi, r)
+                use[y, u] = valid[y, u]
+                any_use |= valid[y, u]
+            else:
+                resid[y, u] = _F32_ZERO
+                use[y, u] = False
+        row_lo[y] = lo
+        row_hi[y] = hi
+        row_use[y] = any_use
+
+
+def residual_and_range(disp, base, valid):
+    """Residual ``disp - base`` (0 where disp is not finite), the pixels that may be
+    averaged into others and the residual's finite range.
+
+    Parameters
+    ----------
+    disp, base : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
+
+    Returns
+    -------
+    resid : ndarray, float32, (H, W)
+    use : ndarray, bool, (H, W)
+        Valid and finite.
+    row_lo, row_hi : ndarray, float32, (H,)
+        Per-row minimum and maximum of the finite residuals (+inf / -inf: none).
+    row_use : ndarray, bool, (H,)
+        Whether the row has a pixel in ``use``.
+    """
+    h, w = disp.shape
+    resid = np.empty((h, w), np.float32)
+    use = np.empty((h, w), np.bool_)
+    row_lo = np.empty(h, np.float32)
+    row_hi = np.empty(h, np.float32)
+    row_use = np.empty(h, np.bool_)
+    run_tasks(_residual_task, row_tasks(h), disp, base, valid, resid, use, row_lo, row_hi, row_use)
+    return resid, use, row_lo, row_hi, row_use
+
+
+@njit(cache=True, nogil=True)
+def _range_levels_task(task, tasks, resid, lo, step, n_levels, k0, t, row_used):
+    h, w = resid.shape
+    top = np.float32(n_levels - 2)
+    top_plus_1 = np.float32(n_levels - 1)
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        flags = row_used[y]
+        flags[:] = False
+        for u in range(w):
+            pos = (resid[y, u] - lo) / step
+            # np.clip(np.floor(pos), 0, top).astype(np.int32); NaN casts to INT32_MIN
+            if pos >= _F32_ZERO:
+                k = np.int32(pos) if pos < top_plus_1 else np.int32(top)
+            elif pos < _F32_ZERO:
+                k = np.int32(0)
+            else:
+                k = np.int32(-2147483648)
+            k0[y, u] = k
+            t[y, u] = np.float32(np.float64(pos) - np.float64(k))
+            if k >= 0:
+                flags[k] = True
+
+
+def range_levels(resid, lo, step, n_levels):
+    """Lower range level ``k0`` of every pixel, its interpolation weight ``t`` and which
+    levels some pixel interpolates from.
+
+    Parameters
+    ----------
+    resid : ndarray, float32, (H, W)
+    lo, step : float32
+        Level k sits at ``lo + k step``.
+    n_levels : int (>= 2)
+
+    Returns
+    -------
+    k0 : ndarray, int32, (H, W)
+        ``clip(floor((resid - lo) / step), 0, n_levels - 2)`` (float32 arithmetic).
+    t : ndarray, float32, (H, W)
+        ``pos - k0`` (float64 difference rounded to float32, as NumPy promotes it).
+    used : ndarray, bool, (n_levels,)
+        Level k is the lower (k0) or the upper (k0 + 1) level of some pixel.
+    """
+    h, w = resid.shape
+    k0 = np.empty((h, w), np.int32)
+    t = np.empty((h, w), np.float32)
+    row_used = np.empty((h, n_levels), np.bool_)
+    run_tasks(_range_levels_task, row_tasks(h), resid, np.float32(lo), np.float32(step), int(n_levels),
+              k0, t, row_used)
+    lower = row_used.any(axis=0)
+    used = lower.copy()
+    used[1:] |= lower[:-1]
+    return k0, t, used
+
+
+@njit(cache=True, nogil=True)
+def _range_exponents_task(task, tasks, resid, use, levels, neg_inv2s2, out):
+    h, w = resid.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for i in range(levels.shape[0]):
+            level = levels[i]
+            for u in range(w):
+                a = resid[y, u] - level
+                x = neg_inv2s2 * (a * a)
+                if not use[y, u] and x == x:
+                    x = -_F32_INF
+                out[i, y, u] = x
+
+
+def range_exponents(resid, use, levels, neg_inv2s2, out):
+    """The arguments of the range weights of a group of levels, float32:
+    ``out[i] = neg_inv2s2 * (resid - levels[i]) ** 2`` where ``use``, else -inf (the caller
+    takes ``np.exp``: the weight is then exactly the reference's ``use * exp(...)``, +0
+    where not used, and NaN stays NaN).
+
+    Parameters
+    ----------
+    resid : ndarray, float32, (H, W)
+    use : ndarray, bool, (H, W)
+    levels : ndarray, float32, (L,)
+    neg_inv2s2 : float32
+        ``-1 / (2 sigma^2)``.
+    out : ndarray, float32, (>= L, H, W), written
+    """
+    run_tasks(_range_exponents_task, row_tasks(resid.shape[0]), resid, use, levels, np.float32(neg_inv2s2), out)
+
+
+@njit(cache=True, inline="always")
+def _row_sums(weight, resid, y, radius, pad_n, pad_d, dst_n, dst_d):
+    """Box sums along row y of ``w r`` and ``w`` (float32 product) as
+    ``cv2.boxFilter``'s float32 row pass computes them: float64 sums over the row padded by
+    ``radius`` zeros, 3 and 5 taps summed directly, wider windows as running sums (add
+    the entering element minus the leaving one)."""
+    w = resid.shape[1]
+    k = 2 * radius + 1
+    for u in range(w):
+        wv = weight[y, u]
+        pad_d[radius + u] = wv
+        pad_n[radius + u] = wv * resid[y, u]
+    if k == 3:
+        for i in range(w):
+            dst_n[i] = pad_n[i] + pad_n[i + 1] + pad_n[i + 2]
+            dst_d[i] = pad_d[i] + pad_d[i + 1] + pad_d[i + 2]
+    elif k == 5:
+        for i in range(w):
+            dst_n[i] = pad_n[i] + pad_n[i + 1] + pad_n[i + 2] + pad_n[i + 3] + pad_n[i + 4]
+            dst_d[i] = pad_d[i] + pad_d[i + 1] + pad_d[i + 2] + pad_d[i + 3] + pad_d[i + 4]
+    else:
+        sn = 0.0
+        sd = 0.0
+        for j in range(k):
+            sn += pad_n[j]
+            sd += pad_d[j]
+        dst_n[0] = sn
+        dst_d[0] = sd
+        for i in range(w - 1):
+            sn += pad_n[i + k] - pad_n[i]
+            sd += pad_d[i + k] - pad_d[i]
+            dst_n[i + 1] = sn
+            dst_d[i + 1] = sd
+
+
+@njit(cache=True, nogil=True)
+def _smooth_level_task(task, tasks, weights, resid, radius, ring, pad, sums, zero):
+    h, w = resid.shape
+    k = 2 * radius + 1
+    eps = np.float32(1e-6)
+    for i in range(task, task + 1):
+        wl = weights[i]
+        ring_n = ring[i, 0]
+        ring_d = ring[i, 1]
+        pad_n = pad[i, 0]
+        pad_d = pad[i, 1]
+        sum_n = sums[i, 0]
+        sum_d = sums[i, 1]
+        for u in range(w):
+            sum_n[u] = 0.0
+            sum_d[u] = 0.0
+        for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
+            y = j - radius
+            if 0 <= y < h:
+                _row_sums(wl, resid, y, radius, pad_n, pad_d, ring_n[y % k], ring_d[y % k])
+                rn = ring_n[y % k]
+                rd = ring_d[y % k]
+            else:
+                rn = zero
+                rd = zero
+            for u in range(w):
+                sum_n[u] += rn[u]
+                sum_d[u] += rd[u]
+        for y in range(h):
+            yp = y + radius  # entering row
+            ym = y - radius  # leaving row
+            if yp < h:
+                _row_sums(wl, resid, yp, radius, pad_n, pad_d, ring_n[yp % k], ring_d[yp % k])
+                pn = ring_n[yp % k]
+                pd = ring_d[yp % k]
+            else:
+                pn = zero
+                pd = zero
+            mn = ring_n[ym % k] if ym >= 0 else zero
+            md = ring_d[ym % k] if ym >= 0 else zero
+            est_row = wl[y]
+            r_row = resid[y]
+            for u in range(w):
+                s0n = sum_n[u] + pn[u]
+                s0d = sum_d[u] + pd[u]
+                sum_n[u] = s0n - mn[u]
+                sum_d[u] = s0d - md[u]
+                num = np.float32(s0n)
+                den = np.float32(s0d)
+                # the reference's np.maximum(den, 1e-6) is den where it is used
+                est_row[u] = num / den if den > eps else r_row[u]
+
+
+def smooth_levels(weights, resid, radius, ring, pad, sums, zero):
+    """Box-filtered range levels of the piecewise-linear bilateral filter, one level per
+    task; each level's estimate replaces its weights.
+
+    For level i with weights ``w = weights[i]``: the box sums (window
+    ``2 radius + 1``, zero padding) of ``w r`` and ``w`` exactly as ``cv2.boxFilter(...,
+    normalize=False, borderType=cv2.BORDER_CONSTANT)`` gives them on float32 (the row pass,
+    then float64 running sums down the columns rounded to float32), streamed through a
+    ring buffer of ``2 radius + 1`` row sums, and the estimate ``num / den`` (``resid``
+    where ``den <= 1e-6``), written over ``weights[i]`` (row y of the weights is read when
+    it enters the window, before row y of the estimate is written).
+
+    Parameters
+    ----------
+    weights : ndarray, float32, (L, H, W), overwritten by the estimates
+        ``exp(-(r - level)^2 / (2 sigma^2))`` of each level, 0 where a pixel may not be
+        averaged into others.
+    resid : ndarray, float32, (H, W)
+    radius : int (>= 1)
+    ring : ndarray, float64, (>= L, 2, 2 radius + 1, W)
+    pad : ndarray, float64, (>= L, 2, W + 2 radius), zero at both ends
+    sums : ndarray, float64, (>= L, 2, W)
+    zero : ndarray, float64, (W,), all zero
+    """
+    run_tasks(_smooth_level_task, weights.shape[0], weights, resid, int(radius), ring, pad, sums, zero)
+
+
+@njit(cache=True, nogil=True)
+def _blend_task(task, tasks, estimates, slot, k0, t, acc):
+    h, w = k0.shape
+    n = slot.shape[0] - 1
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            kk = k0[y, u]
+            if 0 <= kk < n:
+                i = slot[kk]
+                if i >= 0:
+                    acc[y, u] += (_F32_ONE - t[y, u]) * estimates[i, y, u]
+                i = slot[kk + 1]
+                if i >= 0:
+                    acc[y, u] += t[y, u] * estimates[i, y, u]
+
+
+def blend_levels(estimates, slot, k0, t, acc):
+    """Add the shares of a group of levels: ``(1 - t) est[k0]`` where the pixel's lower
+    level ``k0`` is in the group, then ``t est[k0 + 1]`` where its upper level is.
+
+    The reference adds every level in increasing order to a zero-initialised sum, the
+    levels other than a pixel's two adding ``0 * est``: that changes nothing (the sum never
+    holds -0), so ``acc = (0 + lower share) + upper share`` is the same float32 sum.
+
+    Parameters
+    ----------
+    estimates : ndarray, float32, (L, H, W)
+    slot : ndarray, int64, (n_levels + 1,)
+        Index into ``estimates`` of each level, -1 where not in this group.
+    k0 : ndarray, int32, (H, W)
+    t : ndarray, float32, (H, W)
+    acc : ndarray, float32, (H, W), zero before the first group, updated
+    """
+    run_tasks(_blend_task, row_tasks(k0.shape[0]), estimates, slot, k0, t, acc)
+
+
+@njit(cache=True, nogil=True)
+def _add_base_task(task, tasks, acc, base, disp):
+    h, w = acc.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            if np.isfinite(disp[y, u]):
+                acc[y, u] = acc[y, u] + base[y, u]
+            else:
+                acc[y, u] = disp[y, u]
+
+
+def add_base(acc, base, disp):
+    """``acc + base`` where ``disp`` is finite, else ``disp``, in place in ``acc``
+    (float32 (H, W)); returns ``acc``."""
+    run_tasks(_add_base_task, row_tasks(acc.shape[0]), acc, base, disp)
+    return acc
+
+
+#: The compiled kernels of this module (nogil, cached on disk), run by :func:`run_tasks`.
+KERNELS = (
+    _uniqueness_task, _out_of_view_task, _fill_rows_task, _nearest_task, _fill_inside_task,
+    copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _range_exponents_task,
+    _smooth_level_task, _blend_task, _add_base_task,
+)

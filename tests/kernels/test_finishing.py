@@ -1,0 +1,310 @@
+"""The numba kernels of step 8 (``d3cli.kernels.finishing``, called by
+``d3cli.method.refinement``) against the NumPy/OpenCV formulation they replaced.
+
+The references below are that formulation, kept verbatim: ``np.maximum.at`` for the
+uniqueness test, cumulative maxima for the row-wise filling, ``np.nanmedian`` over four
+directions, and the piecewise-linear bilateral filter with one pair of
+``cv2.boxFilter`` calls per range level.  The kernels must give the same bytes (not just
+close values) on random inputs and on the edge cases: rows with nothing valid, nothing or
+everything valid, inf and NaN estimates, half-integer matches (ties of the rounding),
+widths and heights 1..5, box radii 1 and 2 (OpenCV sums 3 and 5 taps directly) and
+larger, more than 256 range levels (wider level spacing, several level groups).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import cv2
+import numba
+import numpy as np
+import pytest
+
+from d3cli.kernels import finishing
+from d3cli.method.refinement import fill_holes, occluded_by_uniqueness, out_of_view, smooth_disparity
+
+
+# ----------------------------------------------------------------------------- references
+def ref_occluded_by_uniqueness(disparity, valid, *, tolerance=1.0):
+    h, w = disparity.shape
+    v, u = np.nonzero(valid)
+    d = disparity[v, u]
+    with np.errstate(invalid="ignore"):  # inf/NaN estimates cast to int64
+        xr = np.clip(np.rint(u - d).astype(np.int64), 0, w - 1)
+    flat = v.astype(np.int64) * w + xr
+    best = np.full(h * w, -np.inf)
+    np.maximum.at(best, flat, d)
+    occluded = np.zeros((h, w), bool)
+    with np.errstate(invalid="ignore"):
+        occluded[v, u] = d < best[flat] - tolerance
+    return occluded
+
+
+def ref_out_of_view(disparity, valid, *, max_disparity):
+    h, w = disparity.shape
+    start = min(int(max_disparity), w - 1)
+    sub_valid = valid[:, start:]
+    has = sub_valid.any(axis=1)
+    first = np.argmax(sub_valid, axis=1) + start
+    b = np.where(has, disparity[np.arange(h), first], -np.inf)[:, None]
+    cols = np.arange(w)[None, :]
+    with np.errstate(invalid="ignore"):
+        return valid & (cols < b) & (disparity < b - 1)
+
+
+def ref_nearest_along_rows(disp, valid):
+    h, w = disp.shape
+    cols = np.broadcast_to(np.arange(w), (h, w))
+    left_idx = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)
+    right_idx = np.minimum.accumulate(np.where(valid, cols, w)[:, ::-1], axis=1)[:, ::-1]
+    rows = np.arange(h)[:, None]
+    left_val = np.where(left_idx >= 0, disp[rows, np.clip(left_idx, 0, w - 1)], np.inf)
+    right_val = np.where(right_idx < w, disp[rows, np.clip(right_idx, 0, w - 1)], np.inf)
+    return left_val, right_val
+
+
+def ref_fill_holes(disparity, valid, *, smooth=True, occluded=None):
+    disp = np.asarray(disparity, dtype=np.float32)
+    valid = np.asarray(valid, dtype=bool) & np.isfinite(disp)
+    if not valid.any():
+        return np.full(disp.shape, np.inf, np.float32)
+    if valid.all():
+        return disp.copy()
+    left_val, right_val = ref_nearest_along_rows(disp, valid)
+    fill_value = np.minimum(left_val, right_val)
+    if occluded is not None:
+        up_val, down_val = (x.T for x in ref_nearest_along_rows(disp.T, valid.T))
+        four = np.stack([left_val, right_val, up_val, down_val])
+        four = np.where(np.isfinite(four), four, np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            inside = np.nanmedian(four, axis=0)
+        use_inside = ~occluded & np.isfinite(inside)
+        fill_value = np.where(use_inside, inside, fill_value)
+    filled = np.where(valid, disp, fill_value).astype(np.float32)
+    empty_rows = ~valid.any(axis=1)
+    if empty_rows.any():
+        good = np.flatnonzero(~empty_rows)
+        for r in np.flatnonzero(empty_rows):
+            filled[r] = filled[good[np.argmin(np.abs(good - r))]]
+    if smooth and min(disp.shape) >= 5:
+        median = cv2.medianBlur(filled, 5)
+        filled = np.where(valid, filled, median).astype(np.float32)
+    return filled
+
+
+def ref_smooth_disparity(disparity, valid, *, radius, sigma, plane=None):
+    disp = np.asarray(disparity, dtype=np.float32)
+    finite = np.isfinite(disp)
+    use = np.asarray(valid, dtype=bool) & finite
+    if radius <= 0 or not use.any():
+        return disp.copy()
+    base = np.zeros(disp.shape, np.float32) if plane is None else np.asarray(plane, dtype=np.float32)
+    resid = np.where(finite, disp - base, 0.0).astype(np.float32)
+    lo, hi = float(resid[finite].min()), float(resid[finite].max())
+    step = max(float(sigma), (hi - lo) / (256 - 1))
+    n_levels = int(np.floor((hi - lo) / step)) + 2
+    pos = (resid - lo) / step
+    k0 = np.clip(np.floor(pos), 0, n_levels - 2).astype(np.int32)
+    t = (pos - k0).astype(np.float32)
+    weight0 = use.astype(np.float32)
+    ksize = (2 * int(radius) + 1, 2 * int(radius) + 1)
+    acc = np.zeros(disp.shape, np.float32)
+    inv2s2 = 0.5 / float(sigma) ** 2
+    for k in range(n_levels):
+        lower, upper = k0 == k, k0 + 1 == k
+        if not (lower.any() or upper.any()):
+            continue
+        level = lo + k * step
+        w = weight0 * np.exp(-inv2s2 * (resid - level) ** 2).astype(np.float32)
+        num = cv2.boxFilter(w * resid, -1, ksize, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        den = cv2.boxFilter(w, -1, ksize, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        est = np.where(den > 1e-6, num / np.maximum(den, 1e-6), resid)
+        acc += np.where(lower, 1.0 - t, 0.0) * est + np.where(upper, t, 0.0) * est
+    return np.where(finite, acc + base, disp).astype(np.float32)
+
+
+def assert_same_bytes(got, want, msg=""):
+    """Equal dtype, shape and bytes (-0.0 differs from 0.0, NaN payloads count)."""
+    assert got.dtype == want.dtype and got.shape == want.shape, msg
+    if got.tobytes() != want.tobytes():
+        diff = np.flatnonzero(got.ravel().view(np.uint8) != want.ravel().view(np.uint8))
+        pytest.fail(f"{msg}: {diff.size} bytes differ, first at byte {diff[0]}; "
+                    f"max abs difference {np.nanmax(np.abs(got.astype(np.float64) - want)) if got.dtype.kind == 'f' else 'n/a'}")
+
+
+SHAPES = [(1, 1), (1, 5), (5, 1), (2, 3), (3, 4), (4, 2), (5, 5), (7, 13), (23, 31), (40, 64)]
+
+
+def random_map(rng, shape, *, valid_share=0.7, spread=20.0, integers=False):
+    """Disparities in [0, spread), with a share of invalid pixels, all-invalid rows and
+    inf/NaN estimates among the invalid ones."""
+    h, w = shape
+    disp = (rng.random(shape) * spread).astype(np.float32)
+    if integers:
+        disp = (np.round(disp * 2) / 2).astype(np.float32)  # half-integers: rounding ties
+    valid = rng.random(shape) < valid_share
+    if h > 2:
+        valid[rng.integers(h)] = False  # a row with nothing valid
+    holes = ~valid
+    disp[holes & (rng.random(shape) < 0.5)] = np.inf
+    disp[holes & (rng.random(shape) < 0.1)] = np.nan
+    return disp, valid
+
+
+# ----------------------------------------------------------------------------- occlusion tests
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("integers", [False, True])
+def test_uniqueness_matches_reference(shape, integers):
+    rng = np.random.default_rng(hash((shape, integers)) % 2**32)
+    for share in (0.0, 0.5, 0.9, 1.0):
+        disp, valid = random_map(rng, shape, valid_share=share, spread=min(shape[1], 8), integers=integers)
+        for tolerance in (0.0, 0.5, 1.0):
+            got = occluded_by_uniqueness(disp, valid, tolerance=tolerance)
+            want = ref_occluded_by_uniqueness(disp, valid, tolerance=tolerance)
+            np.testing.assert_array_equal(got, want, err_msg=f"{shape} {share} {tolerance}")
+
+
+def test_uniqueness_with_inf_and_nan_marked_valid_matches_reference():
+    """Non-finite estimates flagged valid: NumPy casts their target to int64 min, which
+    clips to column 0; a NaN wins the maximum there (np.maximum propagates it)."""
+    rng = np.random.default_rng(3)
+    disp, _ = random_map(rng, (9, 17), spread=6)
+    valid = np.ones(disp.shape, bool)
+    disp[2, 5] = np.inf
+    disp[3, 0] = -np.inf
+    disp[4, 7] = np.nan
+    disp[5, 2] = 1e30
+    disp[5, 3] = -1e30
+    got = occluded_by_uniqueness(disp, valid)
+    np.testing.assert_array_equal(got, ref_occluded_by_uniqueness(disp, valid))
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+def test_out_of_view_matches_reference(shape):
+    rng = np.random.default_rng(hash(shape) % 2**32)
+    for share in (0.0, 0.3, 1.0):
+        disp, valid = random_map(rng, shape, valid_share=share, spread=shape[1] + 2)
+        for max_disparity in range(0, shape[1] + 3):
+            got = out_of_view(disp, valid, max_disparity=max_disparity)
+            want = ref_out_of_view(disp, valid, max_disparity=max_disparity)
+            np.testing.assert_array_equal(got, want, err_msg=f"{shape} {share} {max_disparity}")
+
+
+# ----------------------------------------------------------------------------- hole filling
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("smooth", [False, True])
+@pytest.mark.parametrize("inside", [False, True])
+def test_fill_holes_matches_reference(shape, smooth, inside):
+    rng = np.random.default_rng(hash((shape, smooth, inside)) % 2**32)
+    for share in (0.0, 0.05, 0.5, 0.95, 1.0):
+        disp, valid = random_map(rng, shape, valid_share=share)
+        occluded = (rng.random(shape) < 0.4) & ~valid if inside else None
+        got = fill_holes(disp, valid, smooth=smooth, occluded=occluded)
+        want = ref_fill_holes(disp, valid, smooth=smooth, occluded=occluded)
+        assert_same_bytes(got, want, f"{shape} {share} smooth={smooth} inside={inside}")
+
+
+def test_fill_holes_empty_rows_copy_the_nearest_row_upper_on_a_tie():
+    disp = np.full((7, 4), np.inf, np.float32)
+    valid = np.zeros((7, 4), bool)
+    disp[1] = 1.0
+    disp[5] = 5.0
+    valid[[1, 5]] = True
+    got = fill_holes(disp, valid, smooth=False)
+    np.testing.assert_array_equal(got[:, 0], [1, 1, 1, 1, 5, 5, 5])  # row 3: tie, upper row 1
+    assert_same_bytes(got, ref_fill_holes(disp, valid, smooth=False))
+
+
+# ----------------------------------------------------------------------------- smoothing
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("radius", [1, 2, 3, 7])
+def test_smooth_disparity_matches_reference(shape, radius):
+    rng = np.random.default_rng(hash((shape, radius)) % 2**32)
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    plane = (3.0 + 0.3 * xx + 0.2 * yy).astype(np.float32)
+    for share, sigma, with_plane in ((1.0, 1.5, True), (0.8, 0.5, False), (0.5, 2.0, True), (0.0, 1.0, False)):
+        disp = (plane + rng.normal(0, 1.5, shape) + 6 * (xx > w // 2)).astype(np.float32)
+        valid = rng.random(shape) < share
+        disp[rng.random(shape) < 0.1] = np.inf  # no estimate: stays, never averaged
+        kw = dict(radius=radius, sigma=sigma, plane=plane if with_plane else None)
+        got = smooth_disparity(disp, valid, **kw)
+        want = ref_smooth_disparity(disp, valid, **kw)
+        assert_same_bytes(got, want, f"{shape} radius={radius} share={share} sigma={sigma}")
+
+
+@pytest.mark.parametrize("radius", [2, 15])
+def test_smooth_disparity_many_levels_matches_reference(radius):
+    """A range of 1000 px at sigma 1: 257 levels spaced wider than sigma, filtered in
+    several groups; a few pixels far below the rest (denormal and zero weights)."""
+    rng = np.random.default_rng(radius)
+    disp = (rng.random((37, 53)) * 1000).astype(np.float32)
+    disp[5, 5] = -3000.0
+    disp[6, 6] = 1e-30
+    valid = rng.random(disp.shape) < 0.9
+    got = smooth_disparity(disp, valid, radius=radius, sigma=1.0)
+    assert_same_bytes(got, ref_smooth_disparity(disp, valid, radius=radius, sigma=1.0))
+
+
+def test_smooth_disparity_on_a_road_like_map_matches_reference():
+    """A 96x160 slanted road with noise and a pothole, radius 15, sigma 1.5 (configs/road.yaml)."""
+    rng = np.random.default_rng(11)
+    yy, xx = np.mgrid[0:96, 0:160]
+    plane = (20.0 + 0.4 * yy - 0.05 * xx).astype(np.float32)
+    disp = (plane + rng.normal(0, 0.6, plane.shape)).astype(np.float32)
+    disp[40:60, 70:100] -= 3.0
+    valid = np.isfinite(disp)
+    got = smooth_disparity(disp, valid, radius=15, sigma=1.5, plane=plane)
+    assert_same_bytes(got, ref_smooth_disparity(disp, valid, radius=15, sigma=1.5, plane=plane))
+
+
+# ----------------------------------------------------------------------------- threads
+def test_kernels_give_the_same_bytes_with_one_thread_and_with_all():
+    rng = np.random.default_rng(5)
+    disp, valid = random_map(rng, (61, 77), spread=30)
+    occluded = (rng.random(disp.shape) < 0.3) & ~valid
+    yy, xx = np.mgrid[0:61, 0:77]
+    plane = (2.0 + 0.1 * yy).astype(np.float32)
+
+    def run():
+        return [
+            occluded_by_uniqueness(disp, valid),
+            out_of_view(disp, valid, max_disparity=20),
+            fill_holes(disp, valid, smooth=True),
+            fill_holes(disp, valid, smooth=True, occluded=occluded),
+            smooth_disparity(fill_holes(disp, valid), valid, radius=5, sigma=1.5, plane=plane),
+        ]
+
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        single = run()
+    finally:
+        numba.set_num_threads(threads)
+    for a, b in zip(single, run()):
+        assert_same_bytes(a, b)
+
+
+def test_finishing_kernels_are_cached_and_release_the_gil():
+    """Compiled once and cached on disk (a read-only install uses the user cache folder
+    that importing d3cli.kernels.cpu chose); nogil, so that the pool threads run them
+    side by side."""
+    assert len(finishing.KERNELS) >= 10
+    for kernel in finishing.KERNELS:
+        assert isinstance(kernel, numba.core.registry.CPUDispatcher), kernel
+        assert kernel.targetoptions.get("nogil") is True, kernel.py_func.__name__
+        assert type(kernel._cache).__name__ == "FunctionCache", kernel.py_func.__name__
+
+
+def test_run_tasks_runs_every_task_once_and_raises_a_task_error():
+    seen = []
+    finishing.run_tasks(lambda i, n, out: out.append((i, n)), 7, seen)
+    assert sorted(seen) == [(i, 7) for i in range(7)]
+
+    def fail(i, n):
+        if i == 3:
+            raise ValueError("task 3")
+
+    with pytest.raises(ValueError, match="task 3"):
+        finishing.run_tasks(fail, 5)
