@@ -129,8 +129,9 @@ def main(argv=None) -> int:
             for _ in range(args.reps):
                 for key, funcs in (("before", before), ("after", after)):
                     steps[key].append(_finish_step(method, left, right, dmax, funcs) * 1e3)
+            before_ms, after_ms = statistics.median(steps["before"]), statistics.median(steps["after"])
             print(f"finish step of compute (incl. sub-pixel, PT restore, masks): "
-                  f"before {statistics.median(steps['before']):.1f} ms, after {statistics.median(steps['after']):.1f} ms")
+                  f"before {before_ms:.1f} ms, after {after_ms:.1f} ms")
     return 0
 
 

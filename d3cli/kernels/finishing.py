@@ -59,6 +59,8 @@ def run_tasks(func, n_tasks, *args):
         return
     key = (os.getpid(), n)
     if _POOL is None or _POOL_KEY != key:
+        if _POOL is not None and _POOL_KEY[0] == key[0]:
+            _POOL.shutdown(wait=False)  # the thread count changed (numba.set_num_threads)
         # a forked worker inherits the pool object but not its threads: make a new one
         _POOL = ThreadPoolExecutor(max_workers=n, thread_name_prefix="d3stereo-finish")
         _POOL_KEY = key

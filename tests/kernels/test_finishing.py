@@ -129,8 +129,8 @@ def assert_same_bytes(got, want, msg=""):
     assert got.dtype == want.dtype and got.shape == want.shape, msg
     if got.tobytes() != want.tobytes():
         diff = np.flatnonzero(got.ravel().view(np.uint8) != want.ravel().view(np.uint8))
-        pytest.fail(f"{msg}: {diff.size} bytes differ, first at byte {diff[0]}; "
-                    f"max abs difference {np.nanmax(np.abs(got.astype(np.float64) - want)) if got.dtype.kind == 'f' else 'n/a'}")
+        worst = np.nanmax(np.abs(got.astype(np.float64) - want)) if got.dtype.kind == "f" else "n/a"
+        pytest.fail(f"{msg}: {diff.size} bytes differ, first at byte {diff[0]}; max abs difference {worst}")
 
 
 SHAPES = [(1, 1), (1, 5), (5, 1), (2, 3), (3, 4), (4, 2), (5, 5), (7, 13), (23, 31), (40, 64)]
