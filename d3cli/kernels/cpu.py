@@ -501,36 +501,43 @@ def rbf_weights(img, sigma_space, sigma_color):
 
 
 @njit(parallel=True, cache=True)
-def _uniform_bands(index):
-    """uint8 (H, W): 1 where the 3x3 neighbours (clamped at the border) share the band."""
+def _covered_bands(index):
+    """uint8 (H, W) for the filter passes: 2 where the 3x3 neighbours (clamped at the
+    border) all have the pixel's band, 1 where their bands contain it (every cell a pass
+    reads exists), 0 elsewhere."""
     h, w, _ = index.shape
     out = np.zeros((h, w), np.uint8)
     for v in prange(h):
         for u in range(w):
             lo = index[v, u, 1]
             hi = index[v, u, 2]
-            same = 1
+            covered = 1
+            same = 2
             for y in range(max(v - 1, 0), min(v + 1, h - 1) + 1):
                 for x in range(max(u - 1, 0), min(u + 1, w - 1) + 1):
+                    if index[y, x, 1] > lo or index[y, x, 2] < hi:
+                        covered = 0
                     if index[y, x, 1] != lo or index[y, x, 2] != hi:
-                        same = 0
-            out[v, u] = same
+                        same = 1
+            out[v, u] = covered * same
     return out
 
 
 @njit(cache=True)
-def _rbf_row(cost, v, ring, ra, rh, rb, row_start, index, uniform, weights, acc):
+def _rbf_row(cost, v, ring, ra, rh, rb, row_start, index, covered, weights, acc):
     """New values of row v, written into ``cost``, from the old rows v - 1, v, v + 1
     (clamped at the image border) held in ``ring`` rows ``ra``, ``rh``, ``rb``.
 
-    Cell (y, x, d) of an old row is ``ring[r, index[y, x, 0] + d - row_start[y]]``.  The
+    ``ring`` is flat (one source array of layout C: the loops vectorise) and ``ra``,
+    ``rh``, ``rb`` are the starts of the rows in it: cell (y, x, d) of an old row is
+    ``ring[r + index[y, x, 0] + d - row_start[y]]``.  The
     nine terms are added in slot order k = 0..8 in float32.  Neighbours outside the image
     have weight 0 and read a clamped, in-image cell: adding +0.0 leaves the
-    (non-negative) sum unchanged, so the result is the same as skipping them.  Where all
-    nine share the pixel's band (``uniform``) their cells sit at fixed distances (a pixel
-    of band size B follows its left neighbour by B cells) and one vectorised loop does
-    it.  Elsewhere, where a neighbour's band lacks a disparity of the pixel's band, the
-    pixel's own cell stands in: the bands are built (:mod:`d3cli.method.band`) so that
+    (non-negative) sum unchanged, so the result is the same as skipping them.  Where
+    every neighbour's band contains the pixel's (``covered``: all but thin lines along
+    the tile borders) one vectorised loop over nine slices does it.  Elsewhere, where a
+    neighbour's band lacks a disparity of the pixel's band, the pixel's own cell stands
+    in: the bands are built (:mod:`d3cli.method.band`) so that
     this never happens for a cell the later steps read, it only keeps the halo cells
     finite.
     """
@@ -540,13 +547,61 @@ def _rbf_row(cost, v, ring, ra, rh, rb, row_start, index, uniform, weights, acc)
     sh_a = row_start[ym]
     sh_h = row_start[v]
     sh_b = row_start[yp]
-    for u in range(w):
+    u = 0
+    while u < w:
         off = index[v, u, 0]
         lo = index[v, u, 1]
         hi = index[v, u, 2]
         if hi <= lo:
+            u += 1
             continue
         band = hi - lo
+        if covered[v, u] == 2 and 0 < u < w - 1:
+            # a run of interior pixels whose neighbours all hold this band: their cells,
+            # and each neighbour row's, follow one another B apart, so each of the nine
+            # sources is one (m, B) view and the per-pixel work is nine weights
+            u1 = u + 1
+            while u1 < w - 1 and covered[v, u1] == 2 and index[v, u1, 1] == lo and index[v, u1, 2] == hi:
+                u1 += 1
+            m = u1 - u
+            n = m * band
+            ba = ra + index[ym, u - 1, 0] - sh_a + lo
+            bh = rh + index[v, u - 1, 0] - sh_h + lo
+            bb = rb + index[yp, u - 1, 0] - sh_b + lo
+            q0 = ring[ba:ba + n].reshape(m, band)
+            q1 = ring[ba + band:ba + band + n].reshape(m, band)
+            q2 = ring[ba + 2 * band:ba + 2 * band + n].reshape(m, band)
+            q3 = ring[bh:bh + n].reshape(m, band)
+            q4 = ring[bh + band:bh + band + n].reshape(m, band)
+            q5 = ring[bh + 2 * band:bh + 2 * band + n].reshape(m, band)
+            q6 = ring[bb:bb + n].reshape(m, band)
+            q7 = ring[bb + band:bb + band + n].reshape(m, band)
+            q8 = ring[bb + 2 * band:bb + 2 * band + n].reshape(m, band)
+            dst = cost[off + lo:off + lo + n].reshape(m, band)
+            for p in range(m):
+                w0 = weights[v, u + p, 0]
+                w1 = weights[v, u + p, 1]
+                w2 = weights[v, u + p, 2]
+                w3 = weights[v, u + p, 3]
+                w4 = weights[v, u + p, 4]
+                w5 = weights[v, u + p, 5]
+                w6 = weights[v, u + p, 6]
+                w7 = weights[v, u + p, 7]
+                w8 = weights[v, u + p, 8]
+                for i in range(band):
+                    a = np.float32(0.0)
+                    a += w0 * q0[p, i]
+                    a += w1 * q1[p, i]
+                    a += w2 * q2[p, i]
+                    a += w3 * q3[p, i]
+                    a += w4 * q4[p, i]
+                    a += w5 * q5[p, i]
+                    a += w6 * q6[p, i]
+                    a += w7 * q7[p, i]
+                    a += w8 * q8[p, i]
+                    dst[p, i] = a
+            u = u1
+            continue
         o4 = off - sh_h
         res = cost[off + lo:off + hi]
         w0 = weights[v, u, 0]
@@ -558,22 +613,28 @@ def _rbf_row(cost, v, ring, ra, rh, rb, row_start, index, uniform, weights, acc)
         w6 = weights[v, u, 6]
         w7 = weights[v, u, 7]
         w8 = weights[v, u, 8]
-        if uniform[v, u]:
-            dl = -band if u > 0 else 0
-            dr = band if u < w - 1 else 0
-            o1 = index[ym, u, 0] - sh_a
-            o7 = index[yp, u, 0] - sh_b
+        if covered[v, u]:
+            xm = max(u - 1, 0)
+            xp = min(u + 1, w - 1)
             # slices: indices from range(n) are known >= 0, so numba adds no
             # negative-index wraparound and the loop vectorises (4.5x, measured)
-            s0 = ring[ra, o1 + dl + lo:o1 + dl + hi]
-            s1 = ring[ra, o1 + lo:o1 + hi]
-            s2 = ring[ra, o1 + dr + lo:o1 + dr + hi]
-            s3 = ring[rh, o4 + dl + lo:o4 + dl + hi]
-            s4 = ring[rh, o4 + lo:o4 + hi]
-            s5 = ring[rh, o4 + dr + lo:o4 + dr + hi]
-            s6 = ring[rb, o7 + dl + lo:o7 + dl + hi]
-            s7 = ring[rb, o7 + lo:o7 + hi]
-            s8 = ring[rb, o7 + dr + lo:o7 + dr + hi]
+            o0 = ra + index[ym, xm, 0] - sh_a + lo
+            o1 = ra + index[ym, u, 0] - sh_a + lo
+            o2 = ra + index[ym, xp, 0] - sh_a + lo
+            o3 = rh + index[v, xm, 0] - sh_h + lo
+            o5 = rh + index[v, xp, 0] - sh_h + lo
+            o6 = rb + index[yp, xm, 0] - sh_b + lo
+            o7 = rb + index[yp, u, 0] - sh_b + lo
+            o8 = rb + index[yp, xp, 0] - sh_b + lo
+            s0 = ring[o0:o0 + band]
+            s1 = ring[o1:o1 + band]
+            s2 = ring[o2:o2 + band]
+            s3 = ring[o3:o3 + band]
+            s4 = ring[rh + o4 + lo:rh + o4 + hi]
+            s5 = ring[o5:o5 + band]
+            s6 = ring[o6:o6 + band]
+            s7 = ring[o7:o7 + band]
+            s8 = ring[o8:o8 + band]
             for i in range(band):
                 a = np.float32(0.0)
                 a += w0 * s0[i]
@@ -586,30 +647,40 @@ def _rbf_row(cost, v, ring, ra, rh, rb, row_start, index, uniform, weights, acc)
                 a += w7 * s7[i]
                 a += w8 * s8[i]
                 res[i] = a
+            u += 1
             continue
-        own = ring[rh, o4 + lo:o4 + hi]
+        own = ring[rh + o4 + lo:rh + o4 + hi]
+        total = acc[:band]
         for i in range(band):
-            acc[i] = 0.0
+            total[i] = 0.0
         for k in range(9):
             y = min(max(v + k // 3 - 1, 0), h - 1)
             x = min(max(u + k % 3 - 1, 0), w - 1)
             wk = weights[v, u, k]
             r = ra if k < 3 else (rh if k < 6 else rb)
-            q_off = index[y, x, 0] - row_start[y]
-            a0 = max(lo, index[y, x, 1])
+            a0 = min(max(lo, index[y, x, 1]), hi)  # [a0, a1): the disparities the neighbour holds
             a1 = max(min(hi, index[y, x, 2]), a0)
-            for d in range(lo, a0):
-                acc[d - lo] += wk * own[d - lo]
-            for d in range(a0, a1):
-                acc[d - lo] += wk * ring[r, q_off + d]
-            for d in range(a1, hi):
-                acc[d - lo] += wk * own[d - lo]
+            # slices again (no negative-index checks): own cells, the neighbour's, own cells
+            head = total[:a0 - lo]
+            own_head = own[:a0 - lo]
+            for i in range(a0 - lo):
+                head[i] += wk * own_head[i]
+            q = r + index[y, x, 0] - row_start[y]
+            mid = total[a0 - lo:a1 - lo]
+            theirs = ring[q + a0:q + a1]
+            for i in range(a1 - a0):
+                mid[i] += wk * theirs[i]
+            tail = total[a1 - lo:]
+            own_tail = own[a1 - lo:]
+            for i in range(hi - a1):
+                tail[i] += wk * own_tail[i]
         for i in range(band):
-            res[i] = acc[i]
+            res[i] = total[i]
+        u += 1
 
 
 @njit(parallel=True, cache=True)
-def _rbf_pass(cost, index, uniform, weights, row_start, strip, max_band, max_row):
+def _rbf_pass(cost, index, covered, weights, row_start, strip, max_band, max_row):
     """One 3x3 pass of eq. 2, in place, streamed over rows (issue 10 item 4).
 
     The rows are cut into strips, one task each.  A task keeps the old values of the
@@ -634,24 +705,26 @@ def _rbf_pass(cost, index, uniform, weights, row_start, strip, max_band, max_row
     for s in prange(n_strips):
         s0 = s * strip
         s1 = min(h, s0 + strip)
-        ring = np.empty((3, max_row), np.float32)
+        ring = np.empty(3 * max_row, np.float32)  # row r of the ring at r * max_row
         acc = np.empty(max_band, np.float32)
         n = row_start[s0 + 1] - row_start[s0]
-        ring[s0 % 3, :n] = cost[row_start[s0]:row_start[s0 + 1]]
+        ring[s0 % 3 * max_row:s0 % 3 * max_row + n] = cost[row_start[s0]:row_start[s0 + 1]]
         if s0 > 0:
             n = row_start[s0] - row_start[s0 - 1]
-            ring[(s0 - 1) % 3, :n] = edges[s, 0, :n]
+            r = (s0 - 1) % 3 * max_row
+            ring[r:r + n] = edges[s, 0, :n]
         for v in range(s0, s1):
             yp = v + 1
+            r = yp % 3 * max_row
             if yp < s1:  # not written yet: still old
                 n = row_start[yp + 1] - row_start[yp]
-                ring[yp % 3, :n] = cost[row_start[yp]:row_start[yp + 1]]
+                ring[r:r + n] = cost[row_start[yp]:row_start[yp + 1]]
             elif yp < h:
                 n = row_start[yp + 1] - row_start[yp]
-                ring[yp % 3, :n] = edges[s, 1, :n]
-            ra = (v - 1) % 3 if v > 0 else v % 3
-            rb = yp % 3 if yp < h else v % 3
-            _rbf_row(cost, v, ring, ra, v % 3, rb, row_start, index, uniform, weights, acc)
+                ring[r:r + n] = edges[s, 1, :n]
+            ra = ((v - 1) % 3 if v > 0 else v % 3) * max_row
+            rb = (yp % 3 if yp < h else v % 3) * max_row
+            _rbf_row(cost, v, ring, ra, v % 3 * max_row, rb, row_start, index, covered, weights, acc)
 
 
 #: Rows per task of the in-place RBF pass.
@@ -688,9 +761,9 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
     row_start = np.zeros(index.shape[0] + 1, np.int64)
     np.cumsum(sizes.sum(axis=1), out=row_start[1:])
     max_row = max(1, int(np.diff(row_start).max()))
-    uniform = _uniform_bands(index)
+    covered = _covered_bands(index)
     for _ in range(t_max):
-        _rbf_pass(work, index, uniform, weights, row_start, RBF_STRIP_ROWS, max_band, max_row)
+        _rbf_pass(work, index, covered, weights, row_start, RBF_STRIP_ROWS, max_band, max_row)
     return _pack(work, index, n_disp, dense_shape)
 
 
