@@ -380,8 +380,9 @@ class D3Stereo:
         """Step 8: sub-pixel refinement, occlusion check, hole filling; host arrays.
 
         The one download of the result happens here: the integer map and the sub-pixel
-        map; the occlusion tests and the filling are row-wise NumPy on the host.  With a
-        road model (step 6) the disparity is restored to the full range first; estimates
+        map; the occlusion tests, the filling and the smoothing run on the host
+        (``kernels/finishing.py``).  With a road model (step 6) the disparity is
+        restored to the full range first; estimates
         at the ends of the narrow range (the true match probably lies outside it: not
         road) and estimates whose match falls left of the right image become holes.
         """
