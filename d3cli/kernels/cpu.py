@@ -64,6 +64,7 @@ from .volume import Volume, dense_index  # noqa: E402
 
 ops = build_ops(njit(cache=True))
 _ncc_cost = ops.ncc_cost
+_ncc_window_cost = ops.ncc_window_cost
 _cosine_cost = ops.cosine_cost
 _box_sum = ops.box_sum
 _rbf_weight = ops.rbf_weight
@@ -366,15 +367,10 @@ def _ncc_row(cost, index, v, acc, win, win_l, win_ll, win_r, win_rr, ii_l, ii_ll
                 continue
             c0 = max(u - r, d)
             c1 = min(u + r, w - 1)
-            n = (v1 - v0 + 1) * (c1 - c0 + 1)
-            sl = _box_sum(ii_l, v0, c0, v1, c1)
-            sll = _box_sum(ii_ll, v0, c0, v1, c1)
-            sr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d)
-            srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
             slr = 0.0
             for c in range(c0, c1 + 1):
                 slr += acc[c, d]
-            cost[off + d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+            cost[off + d] = _ncc_window_cost(ii_l, ii_ll, ii_r, ii_rr, v0, v1, c0, c1, d, slr, min_variance)
 
 
 def cosine_cost_volume(fl, fr, nl, nr, max_disparity, index=None):

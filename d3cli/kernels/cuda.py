@@ -37,9 +37,8 @@ BLOCK_1D = 256
 NCC_SCRATCH_BYTES = 1 << 29
 
 ops = build_ops(cuda.jit(device=True))
-_ncc_cost = ops.ncc_cost
+_ncc_window_cost = ops.ncc_window_cost
 _cosine_cost = ops.cosine_cost
-_box_sum = ops.box_sum
 _rbf_weight = ops.rbf_weight
 _seed_at = ops.seed_at
 _diffuse_at = ops.diffuse_at
@@ -231,13 +230,8 @@ def _ncc_band(ii_l, ii_ll, ii_r, ii_rr, prefix, index, r, v_start, n_rows, min_v
             continue
         c0 = max(u - r, d)
         c1 = min(u + r, w - 1)
-        n = (v1 - v0 + 1) * (c1 - c0 + 1)
-        sl = _box_sum(ii_l, v0, c0, v1, c1)
-        sll = _box_sum(ii_ll, v0, c0, v1, c1)
-        sr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d)
-        srr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
         slr = prefix[b, c1 + 1, d] - prefix[b, c0, d]
-        cost[off + d] = _ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+        cost[off + d] = _ncc_window_cost(ii_l, ii_ll, ii_r, ii_rr, v0, v1, c0, c1, d, slr, min_variance)
 
 
 def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None):

@@ -105,6 +105,20 @@ def build_ops(jit):
         return ii[r1 + 1, c1 + 1] - ii[r0, c1 + 1] - ii[r1 + 1, c0] + ii[r0, c0]
 
     @jit
+    def ncc_window_cost(ii_l, ii_ll, ii_r, ii_rr, v0, v1, c0, c1, d, slr, min_variance):
+        """Cost of a window clipped to rows v0..v1 and columns c0..c1 (right: c - d).
+
+        The left and right sums come from the (H+1, W+1) integral images of L, L^2, R and
+        R^2; ``slr`` is the window sum of L*R, which each driver keeps its own way.
+        """
+        n = (v1 - v0 + 1) * (c1 - c0 + 1)
+        sl = box_sum(ii_l, v0, c0, v1, c1)
+        sll = box_sum(ii_ll, v0, c0, v1, c1)
+        sr = box_sum(ii_r, v0, c0 - d, v1, c1 - d)
+        srr = box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
+        return ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+
+    @jit
     def cost_or_inf(cost, index, v, u, d):
         """Cost of cell (u, v, d), or inf where that cell does not exist (pixel outside the
         image, disparity outside the pixel's band)."""
@@ -458,6 +472,7 @@ def build_ops(jit):
 
     return SimpleNamespace(
         ncc_cost=ncc_cost,
+        ncc_window_cost=ncc_window_cost,
         cosine_cost=cosine_cost,
         box_sum=box_sum,
         cost_or_inf=cost_or_inf,

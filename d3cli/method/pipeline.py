@@ -248,14 +248,7 @@ class D3Stereo:
                               features=None if features is None else features[level], bands=bands)
             t1 = time.perf_counter()
             if level == levels - 1:
-                disp = decisive_seeds(
-                    cost,
-                    pkrn_min=cfg.seeds.pkrn_min,
-                    epsilon=cfg.seeds.epsilon,
-                    lr_tolerance=cfg.seeds.lr_tolerance,
-                    exclusion=cfg.seeds.pkrn_exclusion,
-                    backend=backend,
-                )
+                disp = self._seeds(cost)
                 stats["seeds"] = backend.count_decided(disp)
             else:
                 disp = inherit(
@@ -269,15 +262,7 @@ class D3Stereo:
                 stats["inherited"] = backend.count_decided(disp)
                 if cfg.seeds.every_level:
                     # inherited disparities win; fresh seeds cover what inheritance left
-                    seeds = decisive_seeds(
-                        cost,
-                        pkrn_min=cfg.seeds.pkrn_min,
-                        epsilon=cfg.seeds.epsilon,
-                        lr_tolerance=cfg.seeds.lr_tolerance,
-                        exclusion=cfg.seeds.pkrn_exclusion,
-                        backend=backend,
-                        skip=disp,
-                    )
+                    seeds = self._seeds(cost, skip=disp)
                     disp = backend.merge_sparse(disp, seeds)
                     stats["seeds"] = backend.count_decided(seeds)
             t2 = time.perf_counter()
@@ -321,6 +306,13 @@ class D3Stereo:
             if level > stop_level:
                 cost = None  # free the coarse volume before the next, larger one
         return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level)
+
+    def _seeds(self, cost, *, skip=None):
+        """Decisive seeds of a level (step 4) with the configured tests; ``skip`` as in
+        :func:`decisive_seeds`."""
+        seeds = self.cfg.seeds
+        return decisive_seeds(cost, pkrn_min=seeds.pkrn_min, epsilon=seeds.epsilon, lr_tolerance=seeds.lr_tolerance,
+                              exclusion=seeds.pkrn_exclusion, backend=self.backend, skip=skip)
 
     def _perspective(self, pyr_l, pyr_r, dmax: int, timings: dict, info: dict, warnings: list):
         """Step 6: full-range pass at the coarsest level, robust road fit, warped right.
