@@ -38,16 +38,41 @@ class _Group(click.Group):
 
     def invoke(self, ctx):
         try:
-            return super().invoke(ctx)
+            result = super().invoke(ctx)
+            _ignore_late_interrupts()
+            return result
         except D3Error as exc:
             raise click.ClickException(str(exc)) from None
         except KeyboardInterrupt as exc:
             # click would print "Aborted!" and exit 1; say what was kept and exit like a shell.
-            from .batch import BatchInterrupted
-
-            message = str(exc) if isinstance(exc, BatchInterrupted) else "Interrupted"
+            # No import here: Ctrl-C may have landed in the middle of importing the batch
+            # package (numpy, scipy...), and importing it again recursed until a
+            # RecursionError traceback came out instead of this line.
+            batch = sys.modules.get(f"{__package__}.batch")
+            interrupted = getattr(batch, "BatchInterrupted", None)
+            if interrupted is not None and isinstance(exc, interrupted):
+                message = str(exc)
+            else:
+                message = "Interrupted; rerun the same command to resume"
             click.echo(message, err=True)
+            _ignore_late_interrupts()
             ctx.exit(TERMINATED_EXIT if getattr(exc, "terminated", False) else INTERRUPTED_EXIT)
+
+
+def _ignore_late_interrupts() -> None:
+    """Ignore Ctrl-C from here to the end of a ``d3stereo`` process.
+
+    The command's work is done (or its interrupt handled) and its exit status decided; a
+    Ctrl-C during the interpreter's shutdown would otherwise kill the process by the
+    signal (status -2) after a complete batch.  Only in the command's own process, never
+    when the CLI runs inside another program (tests, notebooks).
+    """
+    main_module = sys.modules.get("__main__")
+    spec = getattr(main_module, "__spec__", None)
+    if (spec is not None and spec.name == f"{__package__}.__main__") or Path(sys.argv[0]).name == "d3stereo":
+        import signal
+
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 class _StderrHandler(logging.StreamHandler):
