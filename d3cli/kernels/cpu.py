@@ -437,6 +437,17 @@ def _invalidate(cost, index):
 
 
 # ----------------------------------------------------------------------------- aggregation (step 3)
+@njit(cache=True)
+def _is_grey8(img):
+    """True when every grey level is an integer in 0..255."""
+    for v in range(img.shape[0]):
+        for u in range(img.shape[1]):
+            g = img[v, u]
+            if not (g >= 0 and g <= 255 and g == np.floor(g)):
+                return False
+    return True
+
+
 @njit(parallel=True, cache=True)
 def rbf_weights(img, sigma_space, sigma_color):
     """Normalised 3x3 bilateral weights per pixel (paper eq. 3), computed once per level.
@@ -453,14 +464,23 @@ def rbf_weights(img, sigma_space, sigma_color):
     # Per block of rows, so that the float64 scratch stays small (rows of the block and
     # the one above it).
     centre = _rbf_weight(0, 0, 0.0, 0.0, inv_ss2, inv_sc2)
-    weights = np.zeros((h, w, 9), np.float32)
+    # Grey levels that are all integers 0..255 (a full-resolution 8-bit image: the
+    # largest level) have only 256 differences |i_p - i_q|: the kernel is read from a
+    # table made with the same expression, so the values are the same, without an exp
+    # per neighbour.  Coarser (smoothed) levels compute it.
+    lut = np.empty((2, 256), np.float64)  # row 0: axis neighbours, row 1: diagonal ones
+    for i in range(256):
+        lut[0, i] = _rbf_weight(0, 1, np.float64(i), 0.0, inv_ss2, inv_sc2)
+        lut[1, i] = _rbf_weight(1, 1, np.float64(i), 0.0, inv_ss2, inv_sc2)
+    grey8 = _is_grey8(img)
+    weights = np.empty((h, w, 9), np.float32)  # every slot is written below
     block = 32
     n_blocks = (h + block - 1) // block
     for b in prange(n_blocks):
         vb0 = b * block
         vb1 = min(h, vb0 + block)
         y0 = max(vb0 - 1, 0)
-        fwd = np.zeros((vb1 - y0, w, 4), np.float64)
+        fwd = np.empty((vb1 - y0, w, 4), np.float64)  # read only where written
         for v in range(y0, vb1):
             for u in range(w):
                 for j in range(4):
@@ -470,8 +490,11 @@ def rbf_weights(img, sigma_space, sigma_color):
                     y = v + dy
                     x = u + dx
                     if 0 <= y < h and 0 <= x < w:
-                        fwd[v - y0, u, j] = _rbf_weight(dy, dx, np.float64(img[v, u]), np.float64(img[y, x]),
-                                                        inv_ss2, inv_sc2)
+                        if grey8:
+                            fwd[v - y0, u, j] = lut[dy * dx * dx, abs(int(img[v, u]) - int(img[y, x]))]
+                        else:
+                            fwd[v - y0, u, j] = _rbf_weight(dy, dx, np.float64(img[v, u]), np.float64(img[y, x]),
+                                                            inv_ss2, inv_sc2)
         raw = np.empty(9, np.float64)
         for v in range(vb0, vb1):
             for u in range(w):
@@ -504,9 +527,21 @@ def _covered_bands(index):
     h, w, _ = index.shape
     out = np.zeros((h, w), np.uint8)
     for v in prange(h):
+        ym = max(v - 1, 0)
+        yp = min(v + 1, h - 1)
         for u in range(w):
             lo = index[v, u, 1]
             hi = index[v, u, 2]
+            if 0 < u < w - 1:
+                # most pixels: the same band as all eight neighbours (checked unrolled)
+                same_band = True
+                for y in range(ym, yp + 1):
+                    for x in range(u - 1, u + 2):
+                        if index[y, x, 1] != lo or index[y, x, 2] != hi:
+                            same_band = False
+                if same_band:
+                    out[v, u] = 2
+                    continue
             covered = 1
             same = 2
             for y in range(max(v - 1, 0), min(v + 1, h - 1) + 1):

@@ -235,6 +235,7 @@ def build_ops(jit):
         cur = disp[v, u]
         best_s = UNDECIDED
         best_c = INF
+        last_q = UNDECIDED
         for dv in range(-kappa_d, kappa_d + 1):
             y = v + dv
             if y < 0 or y >= height:
@@ -244,8 +245,11 @@ def build_ops(jit):
                 if x < 0 or x >= width or (dv == 0 and du == 0):
                     continue
                 q = disp[y, x]
-                if q < 0:
+                # Neighbours mostly share a disparity: a repeat of the previous one adds
+                # no candidate (the arg-min does not depend on the order), so skip it.
+                if q < 0 or q == last_q:
                     continue
+                last_q = q
                 for r in range(-tau, tau + 1):
                     s = q + r
                     if s < lo or s >= hi:

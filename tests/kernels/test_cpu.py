@@ -107,6 +107,24 @@ def test_rbf_weights_match_reference(shape):
 
 
 @pytest.mark.parametrize("shape", SHAPES)
+def test_rbf_weights_of_8bit_images_equal_the_computed_kernel(shape):
+    # Integer grey levels read the kernel from a table; one non-integer pixel makes the
+    # whole image take the exp per neighbour.  Away from that pixel both must agree
+    # bit for bit, and both match the reference.
+    rng = np.random.default_rng(sum(shape) + 1)
+    img = rng.integers(0, 256, shape).astype(np.float32)
+    img[0, 0] = 0.0
+    img[-1, -1] = 255.0  # both ends of the table
+    other = img.copy()
+    other[0, 0] = 0.5
+    got = cpu.rbf_weights(img, 1.5, 12.0)
+    computed = cpu.rbf_weights(other, 1.5, 12.0)
+    np.testing.assert_array_equal(got[2:], computed[2:])
+    np.testing.assert_array_equal(got[:, 2:], computed[:, 2:])
+    np.testing.assert_allclose(got, ref.ref_rbf_weights(img, 1.5, 12.0), rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("t_max", [0, 1, 3])
 def test_rbf_filter_matches_reference(shape, t_max):
     rng = np.random.default_rng(t_max + sum(shape))
