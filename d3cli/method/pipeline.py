@@ -258,9 +258,11 @@ class D3Stereo:
                     dfm_pkrn_min=cfg.inheritance.dfm_pkrn_min,
                     epsilon=cfg.seeds.epsilon,
                     backend=backend,
+                    candidates=cfg.inheritance.candidates,
                 )
                 stats["inherited"] = backend.count_decided(disp)
-                if cfg.seeds.every_level:
+                if cfg.seeds.every_level and cfg.pyramid.ars:
+                    # (the linear structure, ars false, has seeds at the coarsest level only)
                     # inherited disparities win; fresh seeds cover what inheritance left
                     seeds = self._seeds(cost, skip=disp)
                     disp = backend.merge_sparse(disp, seeds)
