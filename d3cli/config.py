@@ -83,6 +83,10 @@ class FeaturesConfig:
     scale: float = 1.0 / 255.0  # pixel values (0-255) are multiplied by this ...
     mean: tuple[float, ...] = (0.485, 0.456, 0.406)  # ... then (x - mean) / std per channel (ImageNet)
     std: tuple[float, ...] = (0.229, 0.224, 0.225)
+    # precomputed feature maps instead of the model: an .npz with left_0, right_0, left_1,
+    # ... (level i: (H / 2^i, W / 2^i, C)); relative to the pair's folder when the caller
+    # gives it (D3Stereo.compute(pair_dir=...)), else to the working directory
+    npz: str | None = None
 
 
 @dataclass(frozen=True)
