@@ -268,3 +268,56 @@ def load_feature_npz(path, image_shape: tuple[int, int], level_shapes: list[tupl
             fitted = [normalise(_fit(np.asarray(m, np.float32).transpose(2, 0, 1), level_shapes[level])) for m in maps]
             levels[level] = LevelFeatures(fitted[0][0], fitted[1][0], fitted[0][1], fitted[1][1])
     return levels
+
+
+#: Channels assumed per level when a model's outputs do not state them (VGG16's widest
+#: tap has 512): an upper bound for the memory check.
+DEFAULT_CHANNELS = 512
+
+
+def _npz_level_shapes(path) -> dict[int, tuple[int, ...]]:
+    """``{level: (h, w, C)}`` of the ``left_<i>`` arrays, read from the headers only."""
+    import zipfile
+
+    shapes = {}
+    with zipfile.ZipFile(path) as archive:
+        for name in archive.namelist():
+            key = name[:-4] if name.endswith(".npy") else name
+            view, _, level = key.partition("_")
+            if view != "left" or not level.isdigit():
+                continue
+            with archive.open(name) as f:
+                version = np.lib.format.read_magic(f)
+                read_header = {(1, 0): np.lib.format.read_array_header_1_0,
+                               (2, 0): np.lib.format.read_array_header_2_0}[version]
+                shape = read_header(f)[0]
+            shapes[int(level)] = tuple(int(s) for s in shape)
+    return shapes
+
+
+def feature_channels(cfg: FeaturesConfig, levels: int) -> list[int]:
+    """Feature channels per pyramid level (finest first) for the memory check.
+
+    From the ``left_<i>`` headers of ``features.npz`` (levels it lacks: 0, they use NCC),
+    else from the model's output shapes, taking output k as level k (a backbone whose
+    first tap has stride 2 is over-counted: an upper bound).  A channel count the model
+    leaves symbolic, an npz path that cannot be read here (a path relative to each pair's
+    folder) or a model that cannot be loaded count as :data:`DEFAULT_CHANNELS` per level.
+    """
+    if cfg.npz:
+        try:
+            shapes = _npz_level_shapes(cfg.npz)
+        except Exception:  # noqa: BLE001 - any unreadable file: the upper bound
+            return [DEFAULT_CHANNELS] * levels
+        return [shapes[i][2] if i in shapes and len(shapes[i]) == 3 else 0 for i in range(levels)]
+    channels = [DEFAULT_CHANNELS] * min(levels, len(cfg.outputs))
+    if cfg.model:
+        try:
+            outputs = {o.name: o.shape for o in _session(cfg.model).get_outputs()}
+        except ConfigError:
+            outputs = {}
+        for k, name in enumerate(cfg.outputs[:levels]):
+            shape = outputs.get(name)
+            if shape is not None and len(shape) == 4 and isinstance(shape[1], int) and shape[1] > 0:
+                channels[k] = shape[1]
+    return channels + [0] * (levels - len(channels))
