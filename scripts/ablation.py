@@ -40,6 +40,7 @@ from benchmark import evaluate_pairs, family_means
 from d3cli import load_config
 from d3cli.config import read_yaml_lines
 from d3cli.data.datasets import discover
+from d3cli.errors import D3Error
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_CONFIG = ROOT / "configs" / "paper.yaml"
@@ -142,7 +143,11 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     configs = args.config or [str(PAPER_CONFIG)]
     base = [s for path in configs[1:] for s in file_overrides(path)] + args.set
-    load_config(configs[0], base)  # a bad file or value stops here, before any pair runs
+    try:
+        load_config(configs[0], base)  # a bad file or value stops here, before any pair runs
+    except D3Error as exc:
+        print(f"Error: {exc}", file=sys.stderr)
+        return 2
     pairs = discover(args.inputs)
     if args.family:
         pairs = [p for p in pairs if any(p.family.startswith(f) for f in args.family)]
