@@ -83,6 +83,10 @@ class FeaturesConfig:
     scale: float = 1.0 / 255.0  # pixel values (0-255) are multiplied by this ...
     mean: tuple[float, ...] = (0.485, 0.456, 0.406)  # ... then (x - mean) / std per channel (ImageNet)
     std: tuple[float, ...] = (0.229, 0.224, 0.225)
+    # precomputed feature maps instead of the model: an .npz with left_0, right_0, left_1,
+    # ... (level i: (H / 2^i, W / 2^i, C)); relative to the pair's folder when the caller
+    # gives it (D3Stereo.compute(pair_dir=...)), else to the working directory
+    npz: str | None = None
 
 
 @dataclass(frozen=True)
@@ -94,6 +98,9 @@ class AggregationConfig:
     sigma_space: float = 1.5  # sigma_1 in eq. 3, pixels
     sigma_color: float = 12.0  # sigma_2 in eq. 3, grey levels (0-255)
     kappa_a: int = 4  # radius of the plain bilateral filter used when rbf is False
+    # sigma_1 of that plain filter; None: sigma_space * kappa_a, the 3x3 kernel of eq. 3
+    # stretched to the (2 kappa_a + 1)^2 window (same receptive field as RBF, Fig. 4)
+    bf_sigma_space: float | None = None
 
 
 @dataclass(frozen=True)
@@ -124,6 +131,9 @@ class InheritanceConfig:
 
     prc: bool = True  # patch reliability constraint; False: DFM-style PKRN test in the patch
     dfm_pkrn_min: float = 1.05  # PKRN threshold of the DFM-style test (prc False)
+    # symmetric: {2dc-1, 2dc, 2dc+1} in the patch, {2dc-2, 2dc+2} outside, every pixel;
+    # paper: eq. 6-7 read literally, the co-row partners of each pixel (two per pixel)
+    candidates: str = "symmetric"
 
 
 @dataclass(frozen=True)
@@ -270,6 +280,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "aggregation.sigma_space": (lambda v: v > 0, "a number > 0"),
     "aggregation.sigma_color": (lambda v: v > 0, "a number > 0"),
     "aggregation.kappa_a": (lambda v: 0 <= v <= 32, "an integer in [0, 32]"),
+    "aggregation.bf_sigma_space": (lambda v: v is None or v > 0, "a number > 0 (pixels) or null"),
     "seeds.pkrn_min": (lambda v: v >= 1.0, "a number >= 1"),
     "seeds.epsilon": (lambda v: v >= 0, "a number >= 0"),
     "seeds.lr_tolerance": (lambda v: v >= 0, "an integer >= 0"),
@@ -279,6 +290,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "diffusion.max_sweeps": (lambda v: v >= 1, "an integer >= 1"),
     "diffusion.max_gap": (lambda v: v >= 0 or v == -1, "a number >= 0, or -1 for off"),
     "inheritance.dfm_pkrn_min": (lambda v: v >= 1.0, "a number >= 1"),
+    "inheritance.candidates": (lambda v: v in ("symmetric", "paper"), "one of symmetric, paper"),
     "pt.margin": (lambda v: 1 <= v <= 256, "an integer in [1, 256]"),
     "pt.slack": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
     "pt.min_inlier_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),

@@ -270,36 +270,59 @@ def view_cost(cost, v, x, d, right_view):
     return right_cell(cost, v, x, d) if right_view else cell(cost, v, x, d)
 
 
-def ref_patch_least_outside(cost, rows, cols, d, right_view):
+def ref_candidates(x, d, right_view, candidates):
+    """(in-patch, outside) candidate disparities of the patch pixel in column x.
+
+    symmetric: {d-1, d, d+1} and {d-2, d+2}.  paper (eq. 6-7 read literally): the
+    partners of a pixel are the co-row pixels of the other view's patch, the outside
+    pixels those just beside it.  Left patch columns u0, u0 + 1 (u0 even), right patch
+    columns x0 = u0 - d, x0 + 1; the left pixel u0 + a meets right columns x0 + {0, 1}
+    (disparities d + a - {0, 1}) and x0 - 1, x0 + 2 (d + a + 1, d + a - 2); the right
+    pixel x0 + b meets left columns u0 + {0, 1} (d - b + {0, 1}) and u0 - 1, u0 + 2
+    (d - b - 1, d - b + 2).
+    """
+    if candidates == "symmetric":
+        return (d - 1, d, d + 1), (d - 2, d + 2)
+    if right_view:
+        b = (x - d) % 2  # the right patch starts at an even column (u0 and d even)
+        return (d - b, d - b + 1), (d - b - 1, d - b + 2)
+    a = x % 2
+    return (d + a - 1, d + a), (d + a - 2, d + a + 1)
+
+
+def ref_patch_least_outside(cost, rows, cols, d, right_view, candidates="symmetric"):
     """PRC of one view's 2x2 patch: least outside cost, or None when unreliable.
 
-    In-patch cost of a pixel: least of its costs at d-1, d, d+1; outside cost: least of
-    its costs at d-2, d+2.  Reliable when mean(in-patch) < min(outside).
+    In-patch cost of a pixel: least of its costs at its in-patch candidates; outside
+    cost: least of its costs at its outside candidates (:func:`ref_candidates`).
+    Reliable when mean(in-patch) < min(outside).
     """
     inside, outside = [], []
     for y in rows:
         for x in cols:
-            inside.append(min(view_cost(cost, y, x, s, right_view) for s in (d - 1, d, d + 1)))
-            outside.append(min(view_cost(cost, y, x, s, right_view) for s in (d - 2, d + 2)))
+            ins, outs = ref_candidates(x, d, right_view, candidates)
+            inside.append(min(view_cost(cost, y, x, s, right_view) for s in ins))
+            outside.append(min(view_cost(cost, y, x, s, right_view) for s in outs))
     if sum(inside) / 4.0 < min(outside):
         return min(outside)
     return None
 
 
-def ref_pixel_decisive(cost, v, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon):
+def ref_pixel_decisive(cost, v, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon, candidates="symmetric"):
     """Best in-patch disparity of one pixel in one view if it passes its test, else -1."""
-    curve = {s: view_cost(cost, v, x, s, right_view) for s in (d - 2, d - 1, d, d + 1, d + 2)}
-    best_d, best_c = argmin_smallest([(s, curve[s]) for s in (d - 1, d, d + 1) if curve[s] < INF])
+    ins = ref_candidates(x, d, right_view, candidates)[0]
+    curve = {s: view_cost(cost, v, x, s, right_view) for s in range(d - 3, d + 4)}
+    best_d, best_c = argmin_smallest([(s, curve[s]) for s in ins if curve[s] < INF])
     if best_d < 0 or best_c >= 1.0:
         return UNDECIDED
     if prc:
         ok = best_c < curve[best_d - 1] and best_c < curve[best_d + 1] and best_c < least_out
         return best_d if ok else UNDECIDED
-    second = min([curve[s] for s in (d - 1, d, d + 1) if s != best_d])
+    second = min([curve[s] for s in ins if s != best_d])
     return best_d if (second + epsilon) / (best_c + epsilon) >= dfm_pkrn_min else UNDECIDED
 
 
-def ref_inherit_pixel(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon):
+def ref_inherit_pixel(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon, candidates="symmetric"):
     """Inherited disparity of fine pixel (u, v), or -1 (paper Algorithm 2, eq. 7-9).
 
     Coarse pixel (u // 2, v // 2) with disparity dc; d = 2 dc; left patch rows
@@ -315,24 +338,24 @@ def ref_inherit_pixel(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon):
     right_cols = (2 * pu - d, 2 * pu - d + 1)
     least_l = least_r = INF
     if prc:
-        least_l = ref_patch_least_outside(cost, rows, left_cols, d, right_view=False)
-        least_r = ref_patch_least_outside(cost, rows, right_cols, d, right_view=True)
+        least_l = ref_patch_least_outside(cost, rows, left_cols, d, False, candidates)
+        least_r = ref_patch_least_outside(cost, rows, right_cols, d, True, candidates)
         if least_l is None or least_r is None:
             return UNDECIDED
-    dl = ref_pixel_decisive(cost, v, u, d, False, prc, least_l, dfm_pkrn_min, epsilon)
+    dl = ref_pixel_decisive(cost, v, u, d, False, prc, least_l, dfm_pkrn_min, epsilon, candidates)
     if dl < 0:
         return UNDECIDED
-    dr = ref_pixel_decisive(cost, v, u - dl, d, True, prc, least_r, dfm_pkrn_min, epsilon)
+    dr = ref_pixel_decisive(cost, v, u - dl, d, True, prc, least_r, dfm_pkrn_min, epsilon, candidates)
     return dl if dr == dl else UNDECIDED
 
 
-def ref_inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
-    """Sparse inherited map, int32 (H, W), -1 undecided."""
+def ref_inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates="symmetric"):
+    """Sparse inherited map, int32 (H, W), -1 undecided; ``candidates`` symmetric | paper."""
     h, w, _ = cost.shape
     out = np.full((h, w), UNDECIDED, np.int32)
     for v in range(h):
         for u in range(w):
-            out[v, u] = ref_inherit_pixel(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon)
+            out[v, u] = ref_inherit_pixel(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon, candidates)
     return out
 
 

@@ -12,6 +12,10 @@ finest level (level 1):
   can be the full range); RBF filters the NCC volume in place (1 volume), the plain
   bilateral filter also needs its output volume (2);
 * the RBF weights: float32 ``(H, W, 9)``;
+* with ``cost.kind: features``: the feature maps of both views at every level, float32
+  ``(H / 2^i, W / 2^i, C_i + 1)`` (vectors and norms), twice (the model's raw outputs and
+  the normalised copies); C_i from ``features.npz``'s headers or the model's output
+  shapes (:func:`d3cli.method.features.feature_channels`);
 * per-pixel maps: grey images and their pyramids, the integer disparity maps and the
   diffusion's frontier arrays (int32 lists), the band indexes (two int32 ``(H, W, 3)``),
   min-cost, sub-pixel and output maps.
@@ -29,6 +33,7 @@ import os
 
 from ..config import Config
 from ..errors import InputError, where_what_fix
+from ..method.features import feature_bytes, feature_channels
 
 log = logging.getLogger(__name__)
 
@@ -110,7 +115,13 @@ def estimate_peak_bytes(shape, max_disparity: int, cfg: Config, *, method: str) 
         return int(4 * pixels * n_disp * 4 + SGBM_BYTES_PER_PIXEL * pixels)
     volumes = _d3_volume_bytes(cfg, pixels, n_disp)
     weights = pixels * 9 * 4
-    return int(volumes + weights + D3_BYTES_PER_PIXEL * pixels)
+    features = 0
+    if cfg.cost.kind == "features":
+        # the model's raw maps of both views, then the normalised (H_i, W_i, C) maps and
+        # norms of every level, alive while the levels are matched: twice the latter
+        channels = feature_channels(cfg.features, cfg.pyramid.levels)
+        features = 2 * feature_bytes((height, width), channels)
+    return int(volumes + weights + features + D3_BYTES_PER_PIXEL * pixels)
 
 
 def physical_memory_bytes() -> int | None:

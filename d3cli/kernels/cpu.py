@@ -1040,7 +1040,7 @@ def _min_cost(cost, index):
 
 
 # ----------------------------------------------------------------------------- inheritance (step 7)
-def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
+def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
     """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
 
     The patch tests (eq. 7-8) run once per coarse pixel and serve the four fine pixels
@@ -1052,6 +1052,9 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
         Cost volume of the finer level i.
     coarse : ndarray, int32, (>= H // 2, >= W // 2)
         Disparity map of level i + 1 (-1 undecided).
+    candidates : int
+        0: symmetric candidate sets; 1: the per-pixel sets of the paper
+        (``pixel.candidate_range``).
 
     Returns
     -------
@@ -1059,16 +1062,16 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
         Sparse map D_i^S.
     """
     flat, index, _, _ = _unpack(cost)
-    return _inherit(flat, index, coarse, bool(prc), float(dfm_pkrn_min), float(epsilon))
+    return _inherit(flat, index, coarse, bool(prc), float(dfm_pkrn_min), float(epsilon), int(candidates))
 
 
 @njit(parallel=True, cache=True)
-def _inherit(cost, index, coarse, prc, dfm_pkrn_min, epsilon):
+def _inherit(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates):
     h, w, _ = index.shape
     out = np.empty((h, w), np.int32)
     for pv in prange((h + 1) // 2):
         for pu in range((w + 1) // 2):
-            d, least_l, least_r = _inherit_patch(cost, index, coarse, pv, pu, prc)
+            d, least_l, least_r = _inherit_patch(cost, index, coarse, pv, pu, prc, candidates)
             for b in range(2):
                 v = 2 * pv + b
                 if v >= h:
@@ -1081,7 +1084,7 @@ def _inherit(cost, index, coarse, prc, dfm_pkrn_min, epsilon):
                         out[v, u] = UNDECIDED
                     else:
                         out[v, u] = _inherit_pixel(cost, index, v, u, d, least_l, least_r, prc, dfm_pkrn_min,
-                                                   epsilon)
+                                                   epsilon, candidates)
     return out
 
 

@@ -650,13 +650,13 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
 
 # ----------------------------------------------------------------------------- inheritance (step 7)
 @cuda.jit
-def _inherit_kernel(cost, index, coarse, prc, dfm_pkrn_min, epsilon, out):
+def _inherit_kernel(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates, out):
     u, v = cuda.grid(2)
     if v < index.shape[0] and u < index.shape[1]:
-        out[v, u] = _inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon)
+        out[v, u] = _inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon, candidates)
 
 
-def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
+def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
     """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
 
     Parameters
@@ -666,6 +666,8 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
         shares them between the four pixels of a patch: the same values).
     coarse : int32 (>= H // 2, >= W // 2), device or host
         Disparity map of level i + 1 (-1 undecided).
+    candidates : int
+        0: symmetric candidate sets; 1: the per-pixel sets of the paper.
 
     Returns
     -------
@@ -675,7 +677,7 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon):
     flat, index, _, _ = _unpack(cost)
     return _per_pixel(
         _inherit_kernel, index.shape, np.int32, flat, index, _dev(coarse), bool(prc), _f64(dfm_pkrn_min),
-        _f64(epsilon),
+        _f64(epsilon), np.int32(candidates),
     )
 
 

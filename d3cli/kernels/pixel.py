@@ -271,15 +271,31 @@ def build_ops(jit):
         return cur
 
     @jit
-    def best_of_three(cost, index, v, x, d, right_view):
-        """Least cost among disparities d-1, d, d+1 at (x, v) (smaller disparity on ties).
+    def candidate_range(x, d, right_view, candidates):
+        """In-patch candidate disparities ``lo <= s < hi`` of the patch pixel in column x.
 
+        ``candidates`` 0 (symmetric): {d-1, d, d+1} for every pixel.  1 (paper eq. 7 read
+        literally): the two co-row partners only; with u0 and x0 = u0 - d both even, the
+        left pixel in patch column a = x & 1 gets {d-1+a, d+a}, the right pixel in column
+        b = x & 1 gets {d-b, d+1-b}.
+        """
+        if candidates == 0:
+            return d - 1, d + 2
+        s = 1 - (x & 1) if right_view else x & 1
+        return d - 1 + s, d + 1 + s
+
+    @jit
+    def best_of_three(cost, index, v, x, d, right_view, candidates):
+        """Least cost among the in-patch candidates at (x, v) (smaller disparity on ties).
+
+        The candidates are d-1, d, d+1, or two of them (:func:`candidate_range`).
         ``right_view`` selects the right-view cost C_R(x, v, .) instead of C_L.
-        Returns (disparity, cost); (-1, inf) when none of the three cells exists.
+        Returns (disparity, cost); (-1, inf) when none of the cells exists.
         """
         best_d = UNDECIDED
         best_c = INF
-        for s in range(d - 1, d + 2):
+        lo, hi = candidate_range(x, d, right_view, candidates)
+        for s in range(lo, hi):
             if right_view:
                 c = right_cost_or_inf(cost, index, v, x, s)
             else:
@@ -290,20 +306,24 @@ def build_ops(jit):
         return best_d, best_c
 
     @jit
-    def outside_cost(cost, index, v, x, d, right_view):
-        """Least cost at the 'outside' disparities d - 2 and d + 2 (the G sets of eq. 8)."""
+    def outside_cost(cost, index, v, x, d, right_view, candidates):
+        """Least cost at the 'outside' disparities (the G sets of eq. 6), lo - 1 and hi of
+        :func:`candidate_range`: d - 2 and d + 2, or with ``candidates`` 1 the two pixels
+        just beside the partner patch ({d-2, d+1} or {d-1, d+2})."""
+        lo, hi = candidate_range(x, d, right_view, candidates)
         if right_view:
-            return min(right_cost_or_inf(cost, index, v, x, d - 2), right_cost_or_inf(cost, index, v, x, d + 2))
-        return min(cost_or_inf(cost, index, v, x, d - 2), cost_or_inf(cost, index, v, x, d + 2))
+            return min(right_cost_or_inf(cost, index, v, x, lo - 1), right_cost_or_inf(cost, index, v, x, hi))
+        return min(cost_or_inf(cost, index, v, x, lo - 1), cost_or_inf(cost, index, v, x, hi))
 
     @jit
-    def patch_reliable(cost, index, y0, x0, d, right_view):
+    def patch_reliable(cost, index, y0, x0, d, right_view, candidates):
         """Patch reliability constraint (PRC, paper eq. 7-8) in one view.
 
         The 2x2 patch at rows y0, y0+1 and columns x0, x0+1 of the chosen view (the left
         patch for the left view, the right patch for the right view), with the
         in-patch disparities {d-1, d, d+1} (d = 2 dc, the coarse disparity doubled) and the
-        outside disparities {d-2, d+2} of the pixels just beside the partner patch.  The
+        outside disparities {d-2, d+2} of the pixels just beside the partner patch
+        (``candidates`` 1: the per-pixel sets of :func:`candidate_range`).  The
         patch is reliable when the mean of the four best in-patch costs is below the least
         outside cost.  Returns that least outside cost, or -1 when the patch is unreliable.
         """
@@ -311,22 +331,22 @@ def build_ops(jit):
         least_out = INF
         for b in range(2):
             for a in range(2):
-                c_in = best_of_three(cost, index, y0 + b, x0 + a, d, right_view)[1]
+                c_in = best_of_three(cost, index, y0 + b, x0 + a, d, right_view, candidates)[1]
                 sum_in += c_in
-                least_out = min(least_out, outside_cost(cost, index, y0 + b, x0 + a, d, right_view))
+                least_out = min(least_out, outside_cost(cost, index, y0 + b, x0 + a, d, right_view, candidates))
         if sum_in * 0.25 < least_out:
             return least_out
         return -1.0
 
     @jit
-    def pixel_decisive(cost, index, v, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon):
+    def pixel_decisive(cost, index, v, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon, candidates):
         """Best in-patch disparity of one pixel if it passes the pixel test, else -1.
 
         With ``prc``: local minimum C(d*) < C(d* +- 1) and below the patch's least outside
         cost (eq. 9).  Without (DFM-style ablation): PKRN of the best against the second
         best in-patch cost >= dfm_pkrn_min.
         """
-        best_d, best_c = best_of_three(cost, index, v, x, d, right_view)
+        best_d, best_c = best_of_three(cost, index, v, x, d, right_view, candidates)
         if best_d < 0 or best_c >= 1.0:
             return UNDECIDED
         if prc:
@@ -340,7 +360,8 @@ def build_ops(jit):
                 return best_d
             return UNDECIDED
         second = INF
-        for s in range(d - 1, d + 2):
+        lo, hi = candidate_range(x, d, right_view, candidates)
+        for s in range(lo, hi):
             if s != best_d:
                 if right_view:
                     c = right_cost_or_inf(cost, index, v, x, s)
@@ -352,7 +373,7 @@ def build_ops(jit):
         return UNDECIDED
 
     @jit
-    def inherit_patch(cost, index, coarse, pv, pu, prc):
+    def inherit_patch(cost, index, coarse, pv, pu, prc, candidates):
         """Patch part of inheritance (eq. 7-8) for the coarse pixel (pu, pv).
 
         Returns ``(d, least_out_l, least_out_r)``: ``d = 2 dc`` the doubled coarse
@@ -372,29 +393,29 @@ def build_ops(jit):
         least_out_l = INF
         least_out_r = INF
         if prc:
-            least_out_l = patch_reliable(cost, index, y0, u0, d, False)
+            least_out_l = patch_reliable(cost, index, y0, u0, d, False, candidates)
             if least_out_l < 0.0:
                 return UNDECIDED, INF, INF
-            least_out_r = patch_reliable(cost, index, y0, x0, d, True)
+            least_out_r = patch_reliable(cost, index, y0, x0, d, True, candidates)
             if least_out_r < 0.0:
                 return UNDECIDED, INF, INF
         return d, least_out_l, least_out_r
 
     @jit
-    def inherit_pixel(cost, index, v, u, d, least_out_l, least_out_r, prc, dfm_pkrn_min, epsilon):
+    def inherit_pixel(cost, index, v, u, d, least_out_l, least_out_r, prc, dfm_pkrn_min, epsilon, candidates):
         """Pixel part of inheritance (eq. 9) for fine pixel (u, v) of a patch that passed
         :func:`inherit_patch` with ``(d, least_out_l, least_out_r)``; bidirectional as in
         LRDC: the matched right pixel must pass its own test with the same disparity."""
-        dl = pixel_decisive(cost, index, v, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon)
+        dl = pixel_decisive(cost, index, v, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon, candidates)
         if dl < 0:
             return UNDECIDED
-        dr = pixel_decisive(cost, index, v, u - dl, d, True, prc, least_out_r, dfm_pkrn_min, epsilon)
+        dr = pixel_decisive(cost, index, v, u - dl, d, True, prc, least_out_r, dfm_pkrn_min, epsilon, candidates)
         if dr != dl:
             return UNDECIDED
         return dl
 
     @jit
-    def inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon):
+    def inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon, candidates):
         """Inherited disparity of fine pixel (u, v) from the coarser map, or UNDECIDED.
 
         Paper Algorithm 2, eq. 7-9.  The coarse pixel (u//2, v//2) with disparity dc maps
@@ -405,12 +426,13 @@ def build_ops(jit):
         reliability constraint in both views and the pixel the local-minimum constraint
         (:func:`pixel_decisive`); without, the DFM-style PKRN test.  The drivers evaluate
         :func:`inherit_patch` once per patch and :func:`inherit_pixel` per pixel; this is
-        the two composed for one pixel.
+        the two composed for one pixel.  ``candidates`` 1 replaces the symmetric sets by
+        the per-pixel sets of eq. 6-7 read literally (:func:`candidate_range`).
         """
-        d, least_out_l, least_out_r = inherit_patch(cost, index, coarse, v // 2, u // 2, prc)
+        d, least_out_l, least_out_r = inherit_patch(cost, index, coarse, v // 2, u // 2, prc, candidates)
         if d < 0:
             return UNDECIDED
-        return inherit_pixel(cost, index, v, u, d, least_out_l, least_out_r, prc, dfm_pkrn_min, epsilon)
+        return inherit_pixel(cost, index, v, u, d, least_out_l, least_out_r, prc, dfm_pkrn_min, epsilon, candidates)
 
     @jit
     def subpixel_at(cost, index, disp, v, u):
@@ -485,6 +507,7 @@ def build_ops(jit):
         seed_at=seed_at,
         accept_state=accept_state,
         diffuse_at=diffuse_at,
+        candidate_range=candidate_range,
         best_of_three=best_of_three,
         outside_cost=outside_cost,
         patch_reliable=patch_reliable,

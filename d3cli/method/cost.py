@@ -51,6 +51,7 @@ def aggregate(
     kappa_a: int,
     backend,
     overwrite_input: bool = False,
+    bf_sigma_space: float | None = None,
 ):
     """Aggregate a cost volume with RBF, or with one plain bilateral pass (ablation).
 
@@ -67,6 +68,8 @@ def aggregate(
     backend : module
     overwrite_input : bool
         ``cost`` may be clobbered (RBF uses it as a buffer): one volume less at the peak.
+    bf_sigma_space : float, optional
+        sigma_1 of the plain bilateral filter; default :func:`bilateral_sigma_space`.
 
     Returns
     -------
@@ -81,10 +84,36 @@ def aggregate(
     else:
         if kappa_a == 0:
             return cost
-        out = backend.bilateral_filter(cost, image, int(kappa_a), float(sigma_space), float(sigma_color))
+        sigma_bf = bilateral_sigma_space(sigma_space, kappa_a) if bf_sigma_space is None else bf_sigma_space
+        out = backend.bilateral_filter(cost, image, int(kappa_a), float(sigma_bf), float(sigma_color))
     # Filtering mixes the out-of-view cells (u - d < 0, cost 1) with valid neighbours;
     # put them back to 1 so that they never win.
     return backend.invalidate_out_of_view(out)
+
+
+def bilateral_sigma_space(sigma_space: float, kappa_a: int) -> float:
+    """sigma_1 of the plain bilateral filter of the ablation: ``sigma_space * kappa_a``.
+
+    The paper's baseline (Table I, Fig. 4) is a bilateral filter with the same receptive
+    field as RBF: radius kappa_a = t_max.  Reusing RBF's sigma_1 = 1.5 in a 9x9 window
+    gives its outer ring weights below exp(-16 / 2.25) = 0.001: it acts like a 5x5 filter.
+    Scaling sigma_1 with the radius stretches the 3x3 kernel of eq. 3 over the (2 kappa_a
+    + 1)^2 window: the spatial weight at distance kappa_a (exp(-1 / sigma_1^2)) and at
+    the window's corner are those of the 3x3 kernel at distance 1 and at its corner.
+
+    Parameters
+    ----------
+    sigma_space : float
+        sigma_1 of eq. 3 (pixels), the RBF kernel's.
+    kappa_a : int
+        Radius of the plain filter (pixels).
+
+    Returns
+    -------
+    float
+        sigma_1 of the plain filter, pixels.
+    """
+    return float(sigma_space) * max(1, int(kappa_a))
 
 
 def feature_cost_volume(features, *, max_disparity: int, backend, index=None):
@@ -173,5 +202,6 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
         kappa_a=agg.kappa_a,
         backend=backend,
         overwrite_input=True,  # the raw NCC volume is not needed afterwards
+        bf_sigma_space=agg.bf_sigma_space,
     )
     return cost if visible is None else Volume(cost.cost, visible, cost.n_disp)

@@ -76,7 +76,12 @@ def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, a
     return backend.diffuse(cost, disparity, least, float(max_gap), int(tau), int(kappa_d), bool(adversarial), int(max_sweeps))
 
 
-def inherit(cost, coarse, *, prc: bool, dfm_pkrn_min: float, epsilon: float, backend):
+#: ``inheritance.candidates`` -> the kernels' int argument (``pixel.candidate_range``).
+CANDIDATE_MODES = {"symmetric": 0, "paper": 1}
+
+
+def inherit(cost, coarse, *, prc: bool, dfm_pkrn_min: float, epsilon: float, backend,
+            candidates: str = "symmetric"):
     """Map decided coarse disparities into 2x2 patches of the finer level.
 
     Parameters
@@ -92,10 +97,17 @@ def inherit(cost, coarse, *, prc: bool, dfm_pkrn_min: float, epsilon: float, bac
     dfm_pkrn_min, epsilon : float
         PKRN threshold and epsilon of the DFM-style test.
     backend : module
+    candidates : {"symmetric", "paper"}
+        Which disparities a patch pixel tests, with d = 2 dc.  ``symmetric``: {d-1, d,
+        d+1} in the patch and {d-2, d+2} outside, for every pixel.  ``paper``: eq. 6-7 of
+        the paper read literally, the co-row partner pixels of the other view's patch and
+        the two pixels beside it: a left pixel in patch column 0 tests {d-1, d} (outside
+        {d-2, d+1}), in column 1 {d, d+1} (outside {d-1, d+2}); the right view mirrored.
 
     Returns
     -------
     ndarray, int32, (H, W)
         Sparse map D_i^S (-1 undecided).
     """
-    return backend.inherit(cost, coarse, bool(prc), float(dfm_pkrn_min), float(epsilon))
+    return backend.inherit(cost, coarse, bool(prc), float(dfm_pkrn_min), float(epsilon),
+                           CANDIDATE_MODES[candidates])

@@ -195,3 +195,129 @@ def feature_bytes(shape: tuple[int, int], channels_per_level: list[int]) -> int:
     """Bytes of the normalised feature maps of both views over all levels (memory check)."""
     h, w = int(shape[0]), int(shape[1])
     return int(sum(2 * (h >> i) * (w >> i) * (c + 1) * 4 for i, c in enumerate(channels_per_level)))
+
+
+#: Keys of a precomputed feature file (``features.npz``): ``left_<i>`` and ``right_<i>``
+#: for pyramid level i (stride 2^i, 0 = full resolution), each (h, w, C).
+NPZ_KEY = "{view}_{level}"
+
+
+def _npz_error(path, what: str) -> InputError:
+    return InputError(f"{path}: {what}; write per-level arrays left_0, right_0, left_1, ... of shape "
+                      "(H / 2^i, W / 2^i, C), finite, equal for both views (README 'Deep-feature cost pyramids')")
+
+
+def load_feature_npz(path, image_shape: tuple[int, int], level_shapes: list[tuple[int, int]]
+                     ) -> list[LevelFeatures | None]:
+    """Per pyramid level (finest first) the normalised features of a precomputed ``.npz``.
+
+    The file holds ``left_<i>`` and ``right_<i>`` (:data:`NPZ_KEY`) for the levels it
+    covers: float arrays of shape (h, w, C) with h, w within one pixel of H / 2^i and
+    W / 2^i (a backbone's map at stride 2^i), cropped or zero-padded to the level's grid
+    like a model's output.  Levels without keys keep the NCC cost; keys of levels beyond
+    the pyramid are ignored.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.npz`` file (``numpy.savez``).
+    image_shape : (H, W)
+        Full-resolution image size, pixels.
+    level_shapes : list of (H_i, W_i)
+        The grid of every pyramid level, finest first.
+
+    Raises
+    ------
+    InputError
+        The file is missing or unreadable, has no ``left_<i>``/``right_<i>`` pair, a key
+        without its partner view, an array that is not (h, w, C), not at the level's
+        stride, of different shapes for the two views, or with NaN/inf values.
+    """
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise InputError(f"{path}: features.npz not found; give the path of an .npz file of feature maps") from None
+    except Exception as exc:  # noqa: BLE001 - numpy raises several types for a bad archive
+        raise _npz_error(path, f"cannot be read as .npz ({str(exc).splitlines()[0][:120]})") from None
+    with archive:
+        names = set(archive.files)
+        found = sorted({int(n.split("_", 1)[1]) for n in names
+                        if n.split("_", 1)[0] in ("left", "right") and n.split("_", 1)[-1].isdigit()})
+        if not found:
+            raise _npz_error(path, f"no left_<i>/right_<i> arrays (keys: {', '.join(sorted(names)[:8]) or 'none'})")
+        levels: list[LevelFeatures | None] = [None] * len(level_shapes)
+        for level in found:
+            keys = [NPZ_KEY.format(view=view, level=level) for view in ("left", "right")]
+            missing = [k for k in keys if k not in names]
+            if missing:
+                raise _npz_error(path, f"{keys[0] if missing[0] == keys[1] else keys[1]} has no partner {missing[0]}")
+            if level >= len(level_shapes):
+                continue
+            maps = [archive[k] for k in keys]
+            for key, fmap in zip(keys, maps):
+                if fmap.ndim != 3 or fmap.dtype.kind not in "fiu":
+                    raise _npz_error(path, f"{key} has shape {fmap.shape} ({fmap.dtype}), expected numbers (h, w, C)")
+                if not np.isfinite(fmap).all():
+                    raise _npz_error(path, f"{key} has NaN or inf values")
+                expect = (image_shape[0] / 2**level, image_shape[1] / 2**level)
+                if abs(fmap.shape[0] - expect[0]) > 1 or abs(fmap.shape[1] - expect[1]) > 1:
+                    raise _npz_error(path, f"{key} is {fmap.shape[0]}x{fmap.shape[1]} but level {level} of an "
+                                           f"image of {image_shape[0]}x{image_shape[1]} is {expect[0]:g}x{expect[1]:g}")
+            if maps[0].shape != maps[1].shape:
+                raise _npz_error(path, f"{keys[0]} is {maps[0].shape} but {keys[1]} is {maps[1].shape}")
+            fitted = [normalise(_fit(np.asarray(m, np.float32).transpose(2, 0, 1), level_shapes[level])) for m in maps]
+            levels[level] = LevelFeatures(fitted[0][0], fitted[1][0], fitted[0][1], fitted[1][1])
+    return levels
+
+
+#: Channels assumed per level when a model's outputs do not state them (VGG16's widest
+#: tap has 512): an upper bound for the memory check.
+DEFAULT_CHANNELS = 512
+
+
+def _npz_level_shapes(path) -> dict[int, tuple[int, ...]]:
+    """``{level: (h, w, C)}`` of the ``left_<i>`` arrays, read from the headers only."""
+    import zipfile
+
+    shapes = {}
+    with zipfile.ZipFile(path) as archive:
+        for name in archive.namelist():
+            key = name[:-4] if name.endswith(".npy") else name
+            view, _, level = key.partition("_")
+            if view != "left" or not level.isdigit():
+                continue
+            with archive.open(name) as f:
+                version = np.lib.format.read_magic(f)
+                read_header = {(1, 0): np.lib.format.read_array_header_1_0,
+                               (2, 0): np.lib.format.read_array_header_2_0}[version]
+                shape = read_header(f)[0]
+            shapes[int(level)] = tuple(int(s) for s in shape)
+    return shapes
+
+
+def feature_channels(cfg: FeaturesConfig, levels: int) -> list[int]:
+    """Feature channels per pyramid level (finest first) for the memory check.
+
+    From the ``left_<i>`` headers of ``features.npz`` (levels it lacks: 0, they use NCC),
+    else from the model's output shapes, taking output k as level k (a backbone whose
+    first tap has stride 2 is over-counted: an upper bound).  A channel count the model
+    leaves symbolic, an npz path that cannot be read here (a path relative to each pair's
+    folder) or a model that cannot be loaded count as :data:`DEFAULT_CHANNELS` per level.
+    """
+    if cfg.npz:
+        try:
+            shapes = _npz_level_shapes(cfg.npz)
+        except Exception:  # noqa: BLE001 - any unreadable file: the upper bound
+            return [DEFAULT_CHANNELS] * levels
+        return [shapes[i][2] if i in shapes and len(shapes[i]) == 3 else 0 for i in range(levels)]
+    channels = [DEFAULT_CHANNELS] * min(levels, len(cfg.outputs))
+    if cfg.model:
+        try:
+            outputs = {o.name: o.shape for o in _session(cfg.model).get_outputs()}
+        except ConfigError:
+            outputs = {}
+        for k, name in enumerate(cfg.outputs[:levels]):
+            shape = outputs.get(name)
+            if shape is not None and len(shape) == 4 and isinstance(shape[1], int) and shape[1] > 0:
+                channels[k] = shape[1]
+    return channels + [0] * (levels - len(channels))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -15,7 +16,7 @@ from ..kernels import get_backend
 from .band import band_indexes
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
-from .features import feature_pyramid
+from .features import feature_pyramid, load_feature_npz
 from .perspective import RoadModel, fit_road_model, restored_validity, shift_map
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
 from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity
@@ -100,7 +101,7 @@ class D3Stereo:
         self.cfg = cfg if cfg is not None else Config()
         self.backend, self.backend_name = get_backend(self.cfg.run.backend)
 
-    def compute(self, left, right, *, max_disparity: int | None = None) -> DisparityResult:
+    def compute(self, left, right, *, max_disparity: int | None = None, pair_dir=None) -> DisparityResult:
         """Estimate the left-view disparity map of a rectified pair.
 
         Parameters
@@ -110,6 +111,8 @@ class D3Stereo:
         max_disparity : int, optional, keyword-only
             Largest disparity searched at full resolution; default ``cfg.run.max_disparity``
             or, if that is unset, ``W // 4``.
+        pair_dir : path-like, optional, keyword-only
+            The pair's folder: a relative ``features.npz`` is looked up there.
 
         Returns
         -------
@@ -143,8 +146,11 @@ class D3Stereo:
         features = None
         if cfg.cost.kind == "features":
             t0 = time.perf_counter()
-            features = self._features(left, right if road is None else self._warped_right(right, road),
-                                      [tuple(p.shape) for p in pyr_l])
+            if cfg.features.npz:
+                features = self._npz_features(grey_l.shape, [tuple(p.shape) for p in pyr_l], pair_dir, road)
+            else:
+                features = self._features(left, right if road is None else self._warped_right(right, road),
+                                          [tuple(p.shape) for p in pyr_l])
             timings["features"] = time.perf_counter() - t0
             info["feature_levels"] = [level + 1 for level, f in enumerate(features) if f is not None]
         match = self._match(pyr_l, pyr_r, search, timings, features=features)
@@ -190,6 +196,16 @@ class D3Stereo:
     def _features(self, left, right, shapes):
         """Feature pyramid of the pair (step 2 with deep features), finest level first."""
         return feature_pyramid(_as_0_255(left), _as_0_255(right), shapes, self.cfg.features)
+
+    def _npz_features(self, image_shape, shapes, pair_dir, road):
+        """Feature pyramid from the precomputed ``features.npz`` (finest level first)."""
+        path = self.cfg.features.npz
+        if pair_dir is not None and not os.path.isabs(path):
+            path = os.path.join(os.fspath(pair_dir), path)
+        if road is not None:
+            raise InputError(f"{path}: precomputed features cannot follow the perspective transformation (the "
+                             "right features must come from the warped image); use features.model or pt.enabled: false")
+        return load_feature_npz(path, tuple(image_shape), shapes)
 
     def _warped_right(self, right, road: RoadModel):
         """The right image warped by the road model, every channel (PT with features).
@@ -258,9 +274,11 @@ class D3Stereo:
                     dfm_pkrn_min=cfg.inheritance.dfm_pkrn_min,
                     epsilon=cfg.seeds.epsilon,
                     backend=backend,
+                    candidates=cfg.inheritance.candidates,
                 )
                 stats["inherited"] = backend.count_decided(disp)
-                if cfg.seeds.every_level:
+                if cfg.seeds.every_level and cfg.pyramid.ars:
+                    # (the linear structure, ars false, has seeds at the coarsest level only)
                     # inherited disparities win; fresh seeds cover what inheritance left
                     seeds = self._seeds(cost, skip=disp)
                     disp = backend.merge_sparse(disp, seeds)

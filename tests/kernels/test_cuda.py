@@ -230,17 +230,24 @@ def test_diffusion_max_sweeps_and_no_seeds_match_cpu(gpu):
 
 
 # ----------------------------------------------------------------------------- inheritance
+@pytest.mark.parametrize("candidates", [0, 1])  # symmetric, paper (eq. 6-7 literally)
 @pytest.mark.parametrize("prc", [True, False])
-def test_inheritance_matches_cpu(gpu, prc):
-    rng = np.random.default_rng(20 + prc)
+def test_inheritance_matches_cpu(gpu, prc, candidates):
+    rng = np.random.default_rng(20 + prc + 2 * candidates)
+    decided = 0
     for n_disp in (5, 8):
-        cost = random_volume(rng, H, W, n_disp, levels=8)
-        coarse = rng.integers(0, (n_disp + 1) // 2, (H // 2, W // 2)).astype(np.int32)
-        coarse[rng.random(coarse.shape) >= 0.7] = -1
-        want = cpu.inherit(cost, coarse, prc, 1.05, 1e-3)
-        got = host(gpu, gpu.inherit(gpu.to_device(cost), gpu.to_device(coarse), prc, 1.05, 1e-3))
-        assert got.dtype == np.int32
-        np.testing.assert_array_equal(got, want, err_msg=f"{n_disp=}")
+        # even disparities constant over the 2x2 patches: many patches pass the PRC
+        true = np.kron(2 * rng.integers(0, (n_disp + 1) // 2, (H // 2 + 1, W // 2 + 1)), np.ones((2, 2), int))[:H, :W]
+        for cost in (random_volume(rng, H, W, n_disp, levels=8), structured_volume(rng, true, n_disp)):
+            coarse = rng.integers(0, (n_disp + 1) // 2, (H // 2, W // 2)).astype(np.int32)
+            coarse = np.where(rng.random(coarse.shape) < 0.5, true[: H - 1:2, : W - 1:2] // 2, coarse).astype(np.int32)
+            coarse[rng.random(coarse.shape) >= 0.7] = -1
+            want = cpu.inherit(cost, coarse, prc, 1.05, 1e-3, candidates)
+            got = host(gpu, gpu.inherit(gpu.to_device(cost), gpu.to_device(coarse), prc, 1.05, 1e-3, candidates))
+            assert got.dtype == np.int32
+            decided += (want >= 0).sum()
+            np.testing.assert_array_equal(got, want, err_msg=f"{n_disp=}")
+    assert decided > 10
 
 
 def test_inheritance_of_a_perfect_coarse_map_matches_cpu(gpu):

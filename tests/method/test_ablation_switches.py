@@ -1,0 +1,133 @@
+"""What each switch of the paper's ablation (Table I) changes in the pipeline.
+
+- ``pyramid.ars`` false is DFM's linear structure: seeds at the coarsest level only (no
+  fresh seeds below it, whatever ``seeds.every_level`` says) and diffusion only at the
+  finest level;
+- ``inheritance.prc`` false is DFM's PKRN test in the patch;
+- ``inheritance.candidates`` selects the candidate sets the inheritance kernel tests;
+- ``aggregation.rbf`` false is one plain bilateral pass of radius kappa_a whose sigma_1
+  is scaled with the radius (``bilateral_sigma_space``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from tests.helpers import textured_pair
+
+from d3cli import D3Stereo, load_config
+from d3cli.kernels import cpu
+from d3cli.method.cost import aggregate, bilateral_sigma_space
+
+
+def cfg(*overrides):
+    return load_config(overrides=["run.backend=cpu", "pyramid.levels=3", *overrides])
+
+
+@pytest.fixture(scope="module")
+def pair():
+    left, right, _ = textured_pair(6, (64, 96), seed=4)
+    return left, right
+
+
+def per_level(pair, *overrides):
+    result = D3Stereo(cfg(*overrides)).compute(*pair, max_disparity=12)
+    return result.info["per_level"]  # coarsest first
+
+
+def test_alternating_structure_diffuses_and_seeds_at_every_level(pair):
+    levels = per_level(pair, "pyramid.ars=true", "seeds.every_level=true")
+    assert [s["level"] for s in levels] == [3, 2, 1]
+    assert all(s["sweeps"] > 0 for s in levels)
+    assert all("seeds" in s for s in levels)  # fresh seeds below the coarsest level too
+
+
+@pytest.mark.parametrize("every_level", [True, False])
+def test_linear_structure_seeds_only_at_the_coarsest_level_and_diffuses_only_at_the_finest(pair, every_level):
+    levels = per_level(pair, "pyramid.ars=false", f"seeds.every_level={str(every_level).lower()}")
+    assert levels[0]["seeds"] > 0 and levels[0]["sweeps"] == 0
+    assert levels[1]["sweeps"] == 0 and "seeds" not in levels[1]
+    assert levels[2]["sweeps"] > 0 and "seeds" not in levels[2]
+    # without diffusion, level 2 holds only what inheritance kept
+    assert levels[1]["decided_share"] == pytest.approx(levels[1]["inherited"] / (levels[1]["shape"][0] * levels[1]["shape"][1]))
+
+
+def test_every_level_false_keeps_the_alternating_structure_without_fresh_seeds(pair):
+    levels = per_level(pair, "pyramid.ars=true", "seeds.every_level=false")
+    assert all(s["sweeps"] > 0 for s in levels)
+    assert all("seeds" not in s for s in levels[1:])
+
+
+@pytest.mark.parametrize("candidates, mode", [("symmetric", 0), ("paper", 1)])
+@pytest.mark.parametrize("prc", [True, False])
+def test_inheritance_gets_the_configured_test_and_candidates(pair, monkeypatch, candidates, mode, prc):
+    calls = []
+    real = cpu.inherit
+
+    def spy(cost, coarse, prc_arg, dfm_pkrn_min, epsilon, candidates_arg=0):
+        calls.append((prc_arg, dfm_pkrn_min, candidates_arg))
+        return real(cost, coarse, prc_arg, dfm_pkrn_min, epsilon, candidates_arg)
+
+    monkeypatch.setattr(cpu, "inherit", spy)
+    per_level(pair, f"inheritance.candidates={candidates}", f"inheritance.prc={str(prc).lower()}",
+              "inheritance.dfm_pkrn_min=1.2")
+    assert calls == [(prc, 1.2, mode)] * 2  # levels 2 and 1
+
+
+def test_paper_candidates_change_what_is_inherited(pair):
+    sym = per_level(pair, "inheritance.candidates=symmetric")
+    paper = per_level(pair, "inheritance.candidates=paper")
+    assert sym[0]["seeds"] == paper[0]["seeds"]  # the coarsest level does not inherit
+    # two candidates per pixel instead of three: fewer pixels pass
+    assert paper[1]["inherited"] < sym[1]["inherited"]
+
+
+def test_bilateral_sigma_is_scaled_with_the_radius():
+    assert bilateral_sigma_space(1.5, 4) == 6.0
+    assert bilateral_sigma_space(1.5, 1) == 1.5
+    # the weight at the window's edge (distance kappa_a) and corner equal the 3x3 kernel's
+    # at distance 1 and at its corner
+    for kappa in (2, 4, 7):
+        s = bilateral_sigma_space(1.5, kappa)
+        assert math.exp(-(kappa**2) / s**2) == pytest.approx(math.exp(-1 / 1.5**2))
+        assert math.exp(-2 * kappa**2 / s**2) == pytest.approx(math.exp(-2 / 1.5**2))
+
+
+@pytest.mark.parametrize("rbf", [True, False])
+def test_aggregation_switch_runs_rbf_passes_or_one_scaled_bilateral_pass(pair, monkeypatch, rbf):
+    calls = []
+    real_bf, real_rbf = cpu.bilateral_filter, cpu.rbf_filter
+
+    def bf(cost, img, radius, sigma_space, sigma_color):
+        calls.append(("bf", radius, sigma_space, sigma_color))
+        return real_bf(cost, img, radius, sigma_space, sigma_color)
+
+    def rbf_filter(cost, weights, t_max, **kw):
+        calls.append(("rbf", t_max))
+        return real_rbf(cost, weights, t_max, **kw)
+
+    monkeypatch.setattr(cpu, "bilateral_filter", bf)
+    monkeypatch.setattr(cpu, "rbf_filter", rbf_filter)
+    per_level(pair, f"aggregation.rbf={str(rbf).lower()}", "aggregation.t_max=3", "aggregation.kappa_a=3",
+              "aggregation.sigma_space=1.25", "aggregation.sigma_color=10")
+    if rbf:
+        assert calls == [("rbf", 3)] * 3
+    else:
+        assert calls == [("bf", 3, 3.75, 10.0)] * 3
+
+
+def test_bilateral_sigma_override_and_its_effect():
+    rng = np.random.default_rng(0)
+    cost = rng.random((12, 20, 5)).astype(np.float32)
+    img = rng.uniform(0, 255, (12, 20)).astype(np.float32)
+    common = dict(rbf=False, t_max=4, sigma_space=1.5, sigma_color=1e6, kappa_a=4, backend=cpu)
+    scaled = aggregate(cost.copy(), img, **common)
+    explicit = aggregate(cost.copy(), img, bf_sigma_space=6.0, **common)
+    narrow = aggregate(cost.copy(), img, bf_sigma_space=1.5, **common)
+    np.testing.assert_array_equal(scaled, explicit)
+    # with a huge colour sigma the filter is a spatial Gaussian: the scaled one averages
+    # 81 cells almost evenly, so it leaves far less variance than the narrow one
+    inner = (slice(4, -4), slice(4, -4))
+    assert scaled[inner].std() < 0.5 * narrow[inner].std()
