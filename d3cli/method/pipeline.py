@@ -400,6 +400,10 @@ class D3Stereo:
         backend = self.backend
         if cfg.refine.subpixel:
             sub = refine_subpixel(match.cost, match.disparity, backend=backend)
+        # The volume's last reader was the sub-pixel step: release it before the host
+        # finishing allocates its own maps (the peak of a 720p road pair, issue 10 item 8).
+        match.cost = None
+        if cfg.refine.subpixel:
             if road is not None:
                 sub = self._pt_restore(sub, road)
             out = backend.to_host(sub)
