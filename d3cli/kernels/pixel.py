@@ -35,8 +35,11 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
+import numpy as np
+
 UNDECIDED = -1
 INF = math.inf
+UINT = np.uint64  # subscripts already checked to be >= 0
 
 
 def build_ops(jit):
@@ -124,9 +127,12 @@ def build_ops(jit):
         image, disparity outside the pixel's band)."""
         if v < 0 or v >= index.shape[0] or u < 0 or u >= index.shape[1]:
             return INF
-        if d < index[v, u, 1] or d >= index[v, u, 2]:
+        # unsigned subscripts (known >= 0 here): no negative-index wraparound code
+        vu = UINT(v)
+        uu = UINT(u)
+        if d < index[vu, uu, 1] or d >= index[vu, uu, 2]:
             return INF
-        return cost[index[v, u, 0] + d]
+        return cost[UINT(index[vu, uu, 0] + d)]
 
     @jit
     def right_cost_or_inf(cost, index, v, x, d):
