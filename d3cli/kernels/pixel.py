@@ -250,7 +250,7 @@ def build_ops(jit):
                 x = u + du
                 if x < 0 or x >= width or (dv == 0 and du == 0):
                     continue
-                q = disp[y, x]
+                q = disp[UINT(y), UINT(x)]
                 # Neighbours mostly share a disparity: a repeat of the previous one adds
                 # no candidate (the arg-min does not depend on the order), so skip it.
                 if q < 0 or q == last_q:
@@ -260,7 +260,7 @@ def build_ops(jit):
                     s = q + r
                     if s < lo or s >= hi:
                         continue  # outside the band: the cell does not exist
-                    c = cost[off + s]
+                    c = cost[UINT(off + s)]
                     if c < best_c or (c == best_c and s < best_s):
                         best_c = c
                         best_s = s
