@@ -467,13 +467,14 @@ class DaskExecutor:
         return max(times.values(), default=0.0)
 
     def imap(self, task: Callable, pairs: Sequence) -> Iterator:
-        """Yield ``(pair, result)`` as tasks complete, with at most 2 x worker threads in flight."""
+        """Yield ``(pair, result)`` as tasks complete, largest pairs first, with at most
+        2 x worker threads in flight."""
         from distributed import as_completed
         from distributed.client import FutureCancelledError
         from distributed.scheduler import KilledWorker
 
         window = max(2, 2 * sum(self.client.nthreads().values()))
-        todo = iter(pairs)
+        todo = iter(largest_first(pairs))  # a large pair submitted last would run alone at the end
         pending = {}
 
         def submit_next():
