@@ -140,6 +140,12 @@ def main(argv=None) -> int:
         cpu_text = f"{cpu:.1f}" if not name.startswith("--scheduler") else "-"
         print(f"| {name} | {wall:.1f} | {60 * n_pairs / wall:.1f} | {cpu_text} | {min(loads):.1f}-{max(loads):.1f} |"
               f" {all(r['identical'] for r in mine)} |")
+    serial = [r["wall_s"] for r in runs if r["way"] == "serial"]
+    for name, _, _ in ways[1:]:
+        # Each run against the serial run just before it: the load changes less between neighbours.
+        ratios = [r["wall_s"] / s for r, s in zip((r for r in runs if r["way"] == name), serial)]
+        print(f"{name}: wall / serial wall of the same repetition, median {statistics.median(ratios):.2f} "
+              f"(each: {', '.join(f'{x:.2f}' for x in ratios)})")
     if args.json:
         args.json.write_text(json.dumps({"n_pairs": n_pairs, "runs": runs}, indent=1))
     return 0
