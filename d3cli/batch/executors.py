@@ -7,9 +7,13 @@ whichever runs them.  The parent (client) keeps the OUT lock, collects the resul
 writes ``run.json`` / the summary.
 
 * :class:`SerialExecutor` - one pair after the other, here (``--workers 1``, the default).
-* :class:`PoolExecutor` - ``--workers N``: N spawned processes, each taking whole pairs,
-  ``NUMBA_NUM_THREADS`` set per worker so that workers x threads <= cores.  At most
-  2 N pairs are in flight, so a huge manifest never becomes a huge queue.
+* :class:`PoolExecutor` - ``--workers N``: N processes, each taking whole pairs (largest
+  first), numba and OpenCV threads set per worker so that workers x threads <= cores.
+  Workers are forked where that is safe, inheriting every imported module (a spawned
+  worker re-imports them: 1.2 s of CPU each on the 2-core test machine, as much as
+  two pairs of 640x360); the first worker compiles or loads the kernels, the others then
+  load the cache it wrote.  At most 2 N pairs are in flight, so a huge manifest never
+  becomes a huge queue.
 * :class:`DaskExecutor` - ``--scheduler tcp://HOST:PORT``: each pair a task on an existing
   ``dask.distributed`` cluster, submitted through a window of in-flight futures
   (``as_completed``), checked up front (scheduler reachable, workers present with the
@@ -59,8 +63,18 @@ def available_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: ``--workers auto`` runs serially on this many cores or fewer.  Measured on the 2-core
+#: test machine shared with other sessions (README "Scaling out", scripts/bench_scaling.py):
+#: two forked workers spend the same CPU seconds as serial (+1-4 %) but took 0.8-1.5x the
+#: serial wall time of the same repetition (medians 1.13 on ../shared/data, 1.23 on 8
+#: synth pairs) - the machine shares CPU time per session, so running two pairs at once
+#: buys nothing there.
+AUTO_SERIAL_CORES = 2
+
+
 def parse_workers(value: str | int) -> int:
-    """``--workers`` value -> number of worker processes (``auto``: one per core).
+    """``--workers`` value -> number of worker processes (``auto``: one per core, and 1 -
+    serial - on :data:`AUTO_SERIAL_CORES` cores or fewer).
 
     Raises
     ------
@@ -70,7 +84,8 @@ def parse_workers(value: str | int) -> int:
     if isinstance(value, int):
         n = value
     elif str(value).strip().lower() == "auto":
-        return available_cores()
+        cores = available_cores()
+        return 1 if cores <= AUTO_SERIAL_CORES else cores
     else:
         try:
             n = int(value)

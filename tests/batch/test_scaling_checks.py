@@ -15,7 +15,7 @@ import pytest
 from click.testing import CliRunner
 
 import d3cli
-from d3cli.batch.executors import largest_first, pair_cost
+from d3cli.batch.executors import AUTO_SERIAL_CORES, available_cores, largest_first, pair_cost, parse_workers
 from d3cli.cli import main
 from d3cli.data import datasets
 
@@ -49,6 +49,14 @@ def same_maps(first: Path, second: Path, names) -> None:
 
 
 # ----------------------------------------------------------------------------- local pool
+def test_auto_workers_is_serial_on_two_cores_or_fewer(monkeypatch):
+    for cores, expected in ((1, 1), (2, 1), (3, 3), (16, 16)):
+        monkeypatch.setattr(os, "sched_getaffinity", lambda pid, n=cores: set(range(n)))
+        assert available_cores() == cores
+        assert parse_workers("auto") == parse_workers("AUTO") == expected
+    assert AUTO_SERIAL_CORES == 2
+
+
 def test_largest_pairs_first(small_pairs):
     pairs = datasets.discover([small_pairs])
     # pixels x disparity range (width // 4 when the pair states none)
