@@ -7,9 +7,13 @@ whichever runs them.  The parent (client) keeps the OUT lock, collects the resul
 writes ``run.json`` / the summary.
 
 * :class:`SerialExecutor` - one pair after the other, here (``--workers 1``, the default).
-* :class:`PoolExecutor` - ``--workers N``: N spawned processes, each taking whole pairs,
-  ``NUMBA_NUM_THREADS`` set per worker so that workers x threads <= cores.  At most
-  2 N pairs are in flight, so a huge manifest never becomes a huge queue.
+* :class:`PoolExecutor` - ``--workers N``: N processes, each taking whole pairs (largest
+  first), numba and OpenCV threads set per worker so that workers x threads <= cores.
+  Workers are forked where that is safe, inheriting every imported module (a spawned
+  worker re-imports them: 1.2 s of CPU each on the 2-core test machine, as much as
+  two pairs of 640x360); the first worker compiles or loads the kernels, the others then
+  load the cache it wrote.  At most 2 N pairs are in flight, so a huge manifest never
+  becomes a huge queue.
 * :class:`DaskExecutor` - ``--scheduler tcp://HOST:PORT``: each pair a task on an existing
   ``dask.distributed`` cluster, submitted through a window of in-flight futures
   (``as_completed``), checked up front (scheduler reachable, workers present with the
@@ -25,9 +29,11 @@ cancelled pair leaves no ``result.json``, so a rerun computes it again).
 
 from __future__ import annotations
 
+import gc
 import logging
 import os
 import signal
+import sys
 import tempfile
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -36,6 +42,7 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from .. import __version__
+from ..data import io
 from ..errors import ConfigError, D3Error, OutputError, where_what_fix
 from .warmup import warm_jit
 
@@ -56,8 +63,18 @@ def available_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: ``--workers auto`` runs serially on this many cores or fewer.  Measured on the 2-core
+#: test machine shared with other sessions (README "Scaling out", scripts/bench_scaling.py):
+#: two forked workers spend the same CPU seconds as serial (+1-4 %) but took 0.8-1.5x the
+#: serial wall time of the same repetition (medians 1.13 on ../shared/data, 1.23 on 8
+#: synth pairs) - the machine shares CPU time per session, so running two pairs at once
+#: buys nothing there.
+AUTO_SERIAL_CORES = 2
+
+
 def parse_workers(value: str | int) -> int:
-    """``--workers`` value -> number of worker processes (``auto``: one per core).
+    """``--workers`` value -> number of worker processes (``auto``: one per core, and 1 -
+    serial - on :data:`AUTO_SERIAL_CORES` cores or fewer).
 
     Raises
     ------
@@ -67,7 +84,8 @@ def parse_workers(value: str | int) -> int:
     if isinstance(value, int):
         n = value
     elif str(value).strip().lower() == "auto":
-        return available_cores()
+        cores = available_cores()
+        return 1 if cores <= AUTO_SERIAL_CORES else cores
     else:
         try:
             n = int(value)
@@ -136,41 +154,168 @@ class SerialExecutor:
 
 
 # ----------------------------------------------------------------------------- local pool
-def _init_pool_worker(threads: int, log_level: int, cfg=None, method: str | None = None) -> None:
-    """Runs first in each spawned worker, before it imports numba; then loads the kernels."""
-    # Before numba is imported: it reads the variable once, at import.
-    os.environ["NUMBA_NUM_THREADS"] = str(threads)
+#: Environment variable forcing the pool's start method (``fork``, ``spawn``,
+#: ``forkserver``); for measurements and for platforms where fork misbehaves.
+START_METHOD_ENV = "D3STEREO_POOL_START"
+
+#: Above this many pairs the pool keeps the input order instead of reading every image
+#: header to start the largest pairs first (the idle tail is then a tiny share of the run).
+LARGEST_FIRST_LIMIT = 20_000
+
+_WORKER_WARM_S: float | None = None  # set in each pool worker by its initializer
+
+
+def _numba_threads_started() -> bool:
+    """Whether this process has started numba's threading layer (OpenMP); True if unknown.
+
+    GNU OpenMP is not fork-safe: numba kills (SIGTERM) a forked child whose parent had
+    started it.  Private numba state, read defensively: when it cannot be read the pool
+    spawns instead of forking.
+    """
+    try:
+        from numba.np.ufunc import parallel
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return True
+    return bool(getattr(parallel, "_is_initialized", True))
+
+
+def pool_start_method() -> str:
+    """How pool workers start: ``fork`` where safe (Linux, numba's threads not started and
+    no other thread in this process), else ``spawn``; ``$D3STEREO_POOL_START`` overrides.
+
+    A forked worker inherits every module this process imported (about 1.2 s of CPU per
+    worker here) and numba's typing registries (0.4 s); a spawned one imports all again.
+    """
+    import multiprocessing
+    import threading
+
+    forced = os.environ.get(START_METHOD_ENV, "").strip().lower()
+    if forced:
+        if forced not in multiprocessing.get_all_start_methods():
+            raise ConfigError(f"${START_METHOD_ENV}={forced}: use one of "
+                              f"{', '.join(multiprocessing.get_all_start_methods())}")
+        return forced
+    if (sys.platform.startswith("linux") and threading.active_count() == 1
+            and not _numba_threads_started()):
+        return "fork"
+    return "spawn"
+
+
+def _preload_numba_registries() -> None:
+    """Import numba's typing and lowering registries now, in the parent, so forked workers
+    inherit them instead of each importing them on its first kernel (0.4 s CPU each here).
+
+    Starts no thread (numba's threading layer is started by the first parallel kernel).
+    """
+    try:
+        from numba.core.registry import cpu_target
+
+        cpu_target.target_context.refresh()
+    except Exception as exc:  # noqa: BLE001 - an optimisation only; the worker imports them itself
+        log.debug("numba registries not preloaded: %s", exc)
+
+
+def _init_pool_worker(threads: int, log_level: int, cfg, method: str | None, jit_lock, forked: bool) -> None:
+    """Runs first in each worker: threads, signals, logging, then the kernels.
+
+    ``jit_lock`` (a multiprocessing lock shared by the workers) makes the first worker
+    compile the kernels, writing numba's on-disk cache, while the others wait and then
+    load that cache: one compile, never a compile storm of N workers compiling the same
+    kernels at once.  With a warm cache the first worker starts its first pair while the
+    next one is still loading.
+    """
+    global _WORKER_WARM_S
+    if forked:
+        import numba
+
+        # numba read NUMBA_NUM_THREADS in the parent; the mask is per thread, and the tasks
+        # run in this (main) thread.
+        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+        # The parent's SIGTERM handler (end the batch like Ctrl-C) is not the worker's.
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    else:
+        # Before numba is imported: it reads the variable once, at import.
+        os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    try:
+        import cv2
+
+        cv2.setNumThreads(threads)  # OpenCV's own pool too: workers x threads <= cores
+    except ImportError:  # pragma: no cover - opencv is a dependency
+        pass
     # Ctrl-C goes to the whole process group; the parent decides, the worker finishes its pair.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     logging.basicConfig(level=log_level, format="%(levelname)s: %(message)s", force=True)
     logging.getLogger("numba").setLevel(max(log_level, logging.INFO))
     if method is not None:
-        # Loads the kernels from the cache the parent wrote (about 1.5 s per worker here),
-        # so the worker's first pair is timed without it.
-        warm_jit(cfg, method)
+        with jit_lock:
+            _WORKER_WARM_S = warm_jit(cfg, method)
+
+
+def _worker_warm_seconds() -> float:
+    """Runs in a pool worker: the seconds its initializer spent on the kernels."""
+    return _WORKER_WARM_S or 0.0
+
+
+def pair_cost(pair) -> int:
+    """Estimated work of a pair: pixels x disparity range (the cost volume's size).
+
+    From the left image's header (no decoding); 0 when it cannot be read (the pair then
+    fails on its own when it runs).
+    """
+    try:
+        size = io.image_size(pair.left)
+    except Exception:  # noqa: BLE001 - an estimate only: a broken file is reported by its pair
+        size = None
+    if not size:
+        return 0
+    width, height = size
+    return width * height * max(1, pair.max_disparity or width // 4)
+
+
+def largest_first(pairs: Sequence, *, limit: int = LARGEST_FIRST_LIMIT) -> list:
+    """``pairs`` with the most expensive first (:func:`pair_cost`; ties keep their order).
+
+    With whole pairs per worker, a large pair started last runs alone on one worker's
+    threads while the others idle; started first, the small ones fill the end.  Beyond
+    ``limit`` pairs the input order is kept (reading every header would cost more than
+    the tail it saves).
+    """
+    pairs = list(pairs)
+    if len(pairs) > limit:
+        return pairs
+    return sorted(pairs, key=pair_cost, reverse=True)
 
 
 class PoolExecutor:
-    """``workers`` spawned processes taking whole pairs; ``threads`` numba threads each.
+    """``workers`` local processes taking whole pairs; ``threads`` numba threads each.
+
+    The workers are forked from this process where that is safe (:func:`pool_start_method`),
+    so they start with every module imported; the first compiles or loads the kernels,
+    the others load them after it (see :func:`_init_pool_worker`).  Pairs are handed out
+    largest first (:func:`largest_first`).
 
     Parameters
     ----------
     workers : int
         Number of worker processes (>= 2; 1 is :class:`SerialExecutor`).
     threads : int, optional, keyword-only
-        Numba threads per worker; default ``max(1, cores // workers)``.
+        Numba (and OpenCV) threads per worker; default ``max(1, cores // workers)``.
+    start_method : str, optional, keyword-only
+        ``fork``, ``spawn`` or ``forkserver``; default :func:`pool_start_method`.
     """
 
     mode = "local-pool"
 
-    def __init__(self, workers: int, *, threads: int | None = None):
+    def __init__(self, workers: int, *, threads: int | None = None, start_method: str | None = None):
         self.workers = workers
         self.threads = threads or max(1, available_cores() // workers)
+        self.start_method = start_method
         self.current = None
         self._pool = None
 
     def describe(self) -> dict:
-        return {"mode": self.mode, "workers": self.workers, "threads_per_worker": self.threads}
+        return {"mode": self.mode, "workers": self.workers, "threads_per_worker": self.threads,
+                "start": self.start_method or pool_start_method()}
 
     def __enter__(self):
         return self
@@ -182,20 +327,36 @@ class PoolExecutor:
         return False
 
     def warm(self, cfg, method) -> float:
-        """Compile in the parent (writing the on-disk numba cache), then start the workers,
-        which load that cache in their initializer instead of compiling at once."""
+        """Start the workers; returns the seconds the first one spent compiling or loading
+        the kernels (the others load the cache it wrote, see :func:`_init_pool_worker`).
+
+        The kernels are not run here: a forked worker must not inherit a started OpenMP.
+        """
         import multiprocessing
 
-        seconds = warm_jit(cfg, method)
-        # spawn, not fork: a fork of a parent whose numba thread pool is running can hang.
+        self.start_method = self.start_method or pool_start_method()
+        ctx = multiprocessing.get_context(self.start_method)
+        forked = self.start_method == "fork"
+        if forked:
+            _preload_numba_registries()
+            # The ~140,000 objects of the imported modules move to the permanent generation:
+            # the workers' garbage collections no longer walk them, nor copy the memory pages
+            # holding them (copy-on-write) by writing to their GC headers.
+            gc.freeze()
         self._pool = ProcessPoolExecutor(
-            max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"), initializer=_init_pool_worker,
-            initargs=(self.threads, logging.getLogger().getEffectiveLevel(), cfg, method))
-        return seconds
+            max_workers=self.workers, mp_context=ctx, initializer=_init_pool_worker,
+            initargs=(self.threads, logging.getLogger().getEffectiveLevel(), cfg, method, ctx.Lock(), forked))
+        try:
+            # Returns once one worker is ready, i.e. has compiled (or loaded) the kernels.
+            return self._pool.submit(_worker_warm_seconds).result()
+        except BrokenProcessPool:
+            raise D3Error(f"the --workers processes could not start ({self.start_method}); "
+                          f"run with --workers 1, or set {START_METHOD_ENV}=spawn") from None
 
     def imap(self, task: Callable, pairs: Sequence) -> Iterator:
-        """Yield ``(pair, result)`` as pairs complete, with at most 2 x workers in flight."""
-        todo = iter(pairs)
+        """Yield ``(pair, result)`` as pairs complete, largest pairs first, with at most
+        2 x workers in flight."""
+        todo = iter(largest_first(pairs))
         pending = {}
 
         def submit_next() -> bool:
@@ -326,13 +487,14 @@ class DaskExecutor:
         return max(times.values(), default=0.0)
 
     def imap(self, task: Callable, pairs: Sequence) -> Iterator:
-        """Yield ``(pair, result)`` as tasks complete, with at most 2 x worker threads in flight."""
+        """Yield ``(pair, result)`` as tasks complete, largest pairs first, with at most
+        2 x worker threads in flight."""
         from distributed import as_completed
         from distributed.client import FutureCancelledError
         from distributed.scheduler import KilledWorker
 
         window = max(2, 2 * sum(self.client.nthreads().values()))
-        todo = iter(pairs)
+        todo = iter(largest_first(pairs))  # a large pair submitted last would run alone at the end
         pending = {}
 
         def submit_next():
