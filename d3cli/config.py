@@ -57,7 +57,7 @@ class PyramidConfig:
     """Image/cost pyramid and hierarchy (paper section III, Fig. 1)."""
 
     levels: int = 4  # k: number of scales; level 1 is full resolution
-    ars: bool = True  # alternating inheritance/diffusion; False: linear hierarchy (DFM)
+    ars: bool = True  # alternating inheritance/diffusion; False: DFM linear hierarchy (diffusion at level 1 only, no fresh seeds)
     band: bool = True  # levels below the coarsest search a band around the coarser level's map (issue 10)
     band_margin: int = 2  # the band: 2 d_coarse +- this many disparities, hull over a tile and its neighbours
     band_tile: int = 32  # tile size (pixels of the level); a tile searches the hull over itself and its 8 neighbours
@@ -111,7 +111,7 @@ class SeedConfig:
     epsilon: float = 1e-3  # eps in the PKRN ratio
     lr_tolerance: int = 1  # max |d_left - d_right| for the left-right check
     pkrn_exclusion: int = 0  # 0: naive PKRN; r > 0: c2 ignores disparities within r of d*
-    every_level: bool = True  # also add fresh seeds below the coarsest level where nothing was inherited
+    every_level: bool = True  # also add fresh seeds below the coarsest level where nothing was inherited (ars only)
 
 
 @dataclass(frozen=True)

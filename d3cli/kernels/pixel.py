@@ -280,7 +280,7 @@ def build_ops(jit):
     def candidate_range(x, d, right_view, candidates):
         """In-patch candidate disparities ``lo <= s < hi`` of the patch pixel in column x.
 
-        ``candidates`` 0 (symmetric): {d-1, d, d+1} for every pixel.  1 (paper eq. 7 read
+        ``candidates`` 0 (symmetric): {d-1, d, d+1} for every pixel.  1 (paper eq. 6-7 read
         literally): the two co-row partners only; with u0 and x0 = u0 - d both even, the
         left pixel in patch column a = x & 1 gets {d-1+a, d+a}, the right pixel in column
         b = x & 1 gets {d-b, d+1-b}.

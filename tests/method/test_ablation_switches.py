@@ -51,7 +51,8 @@ def test_linear_structure_seeds_only_at_the_coarsest_level_and_diffuses_only_at_
     assert levels[1]["sweeps"] == 0 and "seeds" not in levels[1]
     assert levels[2]["sweeps"] > 0 and "seeds" not in levels[2]
     # without diffusion, level 2 holds only what inheritance kept
-    assert levels[1]["decided_share"] == pytest.approx(levels[1]["inherited"] / (levels[1]["shape"][0] * levels[1]["shape"][1]))
+    h, w = levels[1]["shape"]
+    assert levels[1]["decided_share"] == pytest.approx(levels[1]["inherited"] / (h * w))
 
 
 def test_every_level_false_keeps_the_alternating_structure_without_fresh_seeds(pair):
