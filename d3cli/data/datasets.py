@@ -66,6 +66,7 @@ two image files
 from __future__ import annotations
 
 import dataclasses
+import errno
 import logging
 import math
 import os
@@ -178,6 +179,19 @@ def family_from_name(name: str) -> str:
     if any(lowered.startswith(prefix + "-") or re.match(rf"{prefix}\d{{4}}-", lowered) for prefix in ROAD_PREFIXES):
         return "road"
     return lowered.split("-", 1)[0] if "-" in lowered else ""
+
+
+def _missing_why(path: Path) -> tuple[str, str]:
+    """(what, fix) for an input that does not exist: a symlink loop and a broken link are
+    named as such (issue 12 item 15), anything else is a wrong path."""
+    if path.is_symlink():
+        try:
+            os.stat(path)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                return "a symlink loop (the link leads back to itself)", "point it at the data or remove it"
+        return f"a broken symlink (to {os.readlink(path)}, which does not exist)", "fix the link or the path"
+    return "no such file or folder", "check the path"
 
 
 def _entries(folder: Path, keep) -> list[Path]:
@@ -870,7 +884,7 @@ def discover(inputs: Sequence[str | os.PathLike] | str | os.PathLike) -> list[Pa
                 where_what_fix(str(item), f"not a folder, manifest or image ({item.suffix or 'no extension'})", f"give {_EXPECTED}")
             )
         else:
-            raise InputError(where_what_fix(str(item), "no such file or folder", "check the path"))
+            raise InputError(where_what_fix(str(item), *_missing_why(item)))
     if images:
         if len(images) != 2:
             raise InputError(
