@@ -18,7 +18,7 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .config import BACKENDS, METHODS, Config, load_config
+from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, load_config
 from .errors import D3Error
 
 log = logging.getLogger("d3cli")
@@ -217,9 +217,10 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     from .evaluation import report
 
     _setup_logging(verbose, quiet)
-    if max_disparity is not None and max_disparity <= 0:
-        raise click.BadParameter(f"must be a positive number of pixels, got {max_disparity}",
-                                 param_hint="--max-disparity")
+    if max_disparity is not None and not 0 < max_disparity <= MAX_CONFIG_INT:
+        # bounded like every integer setting (issue 12 item 14): the kernels take 32-bit scalars
+        raise click.BadParameter(f"must be a positive number of pixels (at most {MAX_CONFIG_INT}), got "
+                                 f"{str(max_disparity)[:30]}", param_hint="--max-disparity")
     cfg, source = _resolve_config(config_path, overrides, method=method, backend=backend, no_fill=no_fill)
     if color_range is not None:
         cfg = replace(cfg, run=replace(cfg.run, color_range=_color_range(color_range)))

@@ -406,8 +406,14 @@ def run_batch(
         # Workers may run in another folder, on another machine: only absolute paths mean the same there.
         out = out.resolve()
         pairs = [_absolute(p) for p in pairs]
-    lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
+    # SIGTERM handled before the lock file exists: a kill between the two left a lock behind.
     previous = _sigterm_as_interrupt()
+    try:
+        lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
+    except BaseException:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+        raise
     try:
         executor = make_executor(workers, scheduler, out)
         return _locked_batch(pairs, out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,

@@ -77,7 +77,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from ..config import parse_yaml, read_bounded
+from ..config import MAX_CONFIG_INT, parse_yaml, quote, read_bounded
 from ..errors import InputError, where_what_fix
 from . import io
 
@@ -719,20 +719,34 @@ def _check_value(key: str, value: Any, where: str) -> Any:
     if key == "bit_depth":
         if value is None:
             return None
-        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 16:
+        number = _whole_number(value)
+        if number is None or not 1 <= number <= 16:
             raise InputError(
-                where_what_fix(where, f"bit_depth must be an integer in [1, 16], got {value!r}", "e.g. bit_depth: 12")
+                where_what_fix(where, f"bit_depth must be an integer in [1, 16], got {quote(value)}", "e.g. bit_depth: 12")
             )
-        return value
+        return number
     if key == "max_disparity":
         if value is None:
             return None
-        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-            raise InputError(
-                where_what_fix(where, f"max_disparity must be a positive integer, got {value!r}", "e.g. max_disparity: 64")
-            )
-        return value
+        number = _whole_number(value)
+        if number is None or not 1 <= number <= MAX_CONFIG_INT:
+            raise InputError(where_what_fix(
+                where, f"max_disparity must be a positive integer of at most {MAX_CONFIG_INT}, got {quote(value)}",
+                "e.g. max_disparity: 64"))
+        return number
     raise KeyError(key)  # pragma: no cover - callers check the key first
+
+
+def _whole_number(value) -> int | None:
+    """``value`` as an int when it is a whole number (``64``, ``64.0``, ``1e2`` as YAML 1.2
+    reads it), else None; as the config reads integer keys (issue 12 item 14)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int):
+        return value
+    if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+        return int(value)
+    return None
 
 
 def _manifest_path(root: Path, value: str, key: str, where: str) -> Path:

@@ -14,6 +14,12 @@ from d3cli.batch import LOCK_FILE
 from d3cli.cli import main
 
 
+def _default_sigint():
+    """In the child before exec: SIGINT back to its default.  A shell starts background jobs
+    with SIGINT ignored, children inherit that, and Python then installs no Ctrl-C handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_inside_a_numba_kernel_stops_the_batch_and_fails_no_pair(tmp_path, pairs_root, monkeypatch):
     real = d3cli.batch.runner.compute_pair
 
@@ -82,7 +88,7 @@ def test_ctrl_c_at_eight_moments_of_a_d3stereo_batch(tmp_path, make_pair_folder)
     for k in range(8):
         out = tmp_path / f"out{k}"
         proc = subprocess.Popen(cmd + ["-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                env=env)
+                                env=env, preexec_fn=_default_sigint)
         time.sleep(span * (0.35 + 0.6 * k / 7))
         if proc.poll() is not None:  # finished before the signal: nothing to interrupt
             assert proc.returncode == 0, proc.communicate()
