@@ -408,20 +408,20 @@ def run_batch(
         pairs = [_absolute(p) for p in pairs]
     # SIGTERM handled before the lock file exists: a kill between the two left a lock behind.
     previous = _sigterm_as_interrupt()
+    lock = None
     try:
-        lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
-    except BaseException:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
-        raise
-    try:
+        # A Ctrl-C in the middle of taking the lock left the lock file behind: it is
+        # taken whole, and the interrupt raised once it is held (and released below).
+        with _signals_deferred():
+            lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
         executor = make_executor(workers, scheduler, out)
         return _locked_batch(pairs, out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
                              max_disparity=max_disparity, progress=progress, config_source=config_source,
                              pointcloud=pointcloud, executor=executor, shard=shard)
     finally:
-        with _signals_held():  # a Ctrl-C now would leave the lock behind
-            release_lock(lock)
+        if lock is not None:
+            with _signals_held():  # a Ctrl-C now would leave the lock behind
+                release_lock(lock)
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
 
@@ -459,6 +459,33 @@ def _signals_held():
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold SIGINT/SIGTERM back for the duration and deliver them at its end.
+
+    Only signals whose handler is a Python function (Ctrl-C's KeyboardInterrupt, our
+    SIGTERM handler) are held; in the main thread only.  A signal that came meanwhile
+    is delivered once the block is done, by calling its own handler.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending = []
+    held = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(sig)
+        if callable(handler):
+            held[sig] = handler
+            signal.signal(sig, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for sig, handler in held.items():
+            signal.signal(sig, handler)
+    if pending:
+        held[pending[0]](pending[0], None)
 
 
 def _raise_interrupt(signum, frame):
