@@ -9,17 +9,21 @@ Python entry points::
 
 __version__ = "0.1.0"
 
-from .config import Config, load_config  # noqa: E402
 from .errors import BackendUnavailable, ConfigError, D3Error, InputError, OutputError  # noqa: E402
 
 
 def __getattr__(name):
     # The pipeline pulls in numba; import it lazily so `d3stereo info` and the config
-    # checks stay fast.
+    # checks stay fast.  The config (PyYAML) is lazy too: `d3stereo` imports this package
+    # before its Ctrl-C guard (d3cli.__main__.entry) is in place, so it must be quick.
     if name in ("D3Stereo", "DisparityResult"):
         from . import method
 
         return getattr(method, name)
+    if name in ("Config", "load_config"):
+        from . import config
+
+        return getattr(config, name)
     raise AttributeError(name)
 
 

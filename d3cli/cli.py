@@ -18,7 +18,7 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .config import BACKENDS, METHODS, Config, load_config
+from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, load_config
 from .errors import D3Error
 
 log = logging.getLogger("d3cli")
@@ -39,40 +39,79 @@ class _Group(click.Group):
     def invoke(self, ctx):
         try:
             result = super().invoke(ctx)
-            _ignore_late_interrupts()
+            _end_of_command()
             return result
         except D3Error as exc:
             raise click.ClickException(str(exc)) from None
         except KeyboardInterrupt as exc:
-            # click would print "Aborted!" and exit 1; say what was kept and exit like a shell.
-            # No import here: Ctrl-C may have landed in the middle of importing the batch
-            # package (numpy, scipy...), and importing it again recursed until a
-            # RecursionError traceback came out instead of this line.
-            batch = sys.modules.get(f"{__package__}.batch")
-            interrupted = getattr(batch, "BatchInterrupted", None)
-            if interrupted is not None and isinstance(exc, interrupted):
-                message = str(exc)
-            else:
-                message = "Interrupted; rerun the same command to resume"
-            click.echo(message, err=True)
-            _ignore_late_interrupts()
-            ctx.exit(TERMINATED_EXIT if getattr(exc, "terminated", False) else INTERRUPTED_EXIT)
+            _interrupted(ctx, exc)
+        except Exception as exc:
+            # A Ctrl-C that lands inside a numba kernel comes out as "SystemError: ...
+            # returned a result with an exception set" with the KeyboardInterrupt as its
+            # cause: an interrupt, not a crash (issue 12 item 8).
+            interrupt = _interrupt_behind(exc)
+            if interrupt is None:
+                raise
+            _interrupted(ctx, interrupt)
 
 
-def _ignore_late_interrupts() -> None:
-    """Ignore Ctrl-C from here to the end of a ``d3stereo`` process.
+def _interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt in ``exc``'s chain of causes and contexts (8 links at most), if any."""
+    for _ in range(8):
+        if exc is None or isinstance(exc, KeyboardInterrupt):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+    return None
 
-    The command's work is done (or its interrupt handled) and its exit status decided; a
-    Ctrl-C during the interpreter's shutdown would otherwise kill the process by the
-    signal (status -2) after a complete batch.  Only in the command's own process, never
-    when the CLI runs inside another program (tests, notebooks).
-    """
+
+def _interrupted(ctx, exc: KeyboardInterrupt):
+    """Say what was kept and exit 130 (143 after SIGTERM), like a shell; click would print
+    "Aborted!" and exit 1."""
+    _end_of_command()  # first: a second Ctrl-C from here on must not end us by the signal
+    # No import here: Ctrl-C may have landed in the middle of importing the batch
+    # package (numpy, scipy...), and importing it again recursed until a
+    # RecursionError traceback came out instead of this line.
+    batch = sys.modules.get(f"{__package__}.batch")
+    interrupted = getattr(batch, "BatchInterrupted", None)
+    if interrupted is not None and isinstance(exc, interrupted):
+        message = str(exc)
+    else:
+        message = "Interrupted; rerun the same command to resume"
+    click.echo(message, err=True)
+    ctx.exit(TERMINATED_EXIT if getattr(exc, "terminated", False) else INTERRUPTED_EXIT)
+
+
+def _own_process() -> bool:
+    """True in a ``d3stereo`` / ``python -m d3cli`` process; False when the CLI runs inside
+    another program (tests, notebooks), whose signal handling is not ours to change."""
     main_module = sys.modules.get("__main__")
     spec = getattr(main_module, "__spec__", None)
-    if (spec is not None and spec.name == f"{__package__}.__main__") or Path(sys.argv[0]).name == "d3stereo":
+    return (spec is not None and spec.name == f"{__package__}.__main__") or Path(sys.argv[0]).name == "d3stereo"
+
+
+def _end_of_command() -> None:
+    """The command's exit status is decided: make sure the process ends with it.
+
+    Two ways a handled Ctrl-C still ended a ``d3stereo`` process by the signal (status
+    -2 instead of 130, issue 12):
+
+    * a second SIGINT during the interpreter's shutdown (atexit, thread joins): SIGINT
+      is ignored from here on;
+    * CPython sets its "unhandled KeyboardInterrupt" flag (``_Py_UnhandledKeyboardInterrupt``,
+      checked by ``Py_RunMain`` after shutdown, which then kills the process with SIGINT)
+      whenever a KeyboardInterrupt leaves code run by ``exec()`` of a string, even when
+      the interrupt is caught further up.  The standard library runs such code while
+      importing (dataclasses, namedtuple): a Ctrl-C during the batch package's imports
+      set it in 2 of 60 trials.  Every ``exec()`` of a string clears the flag first, so
+      one harmless ``exec`` clears it; nothing can set it again once SIGINT is ignored.
+
+    Only in the command's own process, never when the CLI runs inside another program.
+    """
+    if _own_process():
         import signal
 
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        exec("pass")  # noqa: S102 - clears the flag, see above
 
 
 class _StderrHandler(logging.StreamHandler):
@@ -178,9 +217,10 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     from .evaluation import report
 
     _setup_logging(verbose, quiet)
-    if max_disparity is not None and max_disparity <= 0:
-        raise click.BadParameter(f"must be a positive number of pixels, got {max_disparity}",
-                                 param_hint="--max-disparity")
+    if max_disparity is not None and not 0 < max_disparity <= MAX_CONFIG_INT:
+        # bounded like every integer setting (issue 12 item 14): the kernels take 32-bit scalars
+        raise click.BadParameter(f"must be a positive number of pixels (at most {MAX_CONFIG_INT}), got "
+                                 f"{str(max_disparity)[:30]}", param_hint="--max-disparity")
     cfg, source = _resolve_config(config_path, overrides, method=method, backend=backend, no_fill=no_fill)
     if color_range is not None:
         cfg = replace(cfg, run=replace(cfg.run, color_range=_color_range(color_range)))

@@ -34,6 +34,9 @@ MAX_YAML_BYTES = 1_000_000
 #: Largest YAML document, counted in nodes after expanding every alias: a few hundred
 #: bytes of nested aliases ("billion laughs") would otherwise expand to gigabytes.
 MAX_YAML_NODES = 100_000
+#: Deepest nesting of lists/mappings in a config or manifest (a config needs 3 levels;
+#: thousands of "[" would otherwise end in a RecursionError traceback).
+MAX_YAML_DEPTH = 100
 #: Integers in a config are bounded: the kernels take 32-bit scalars.
 MAX_CONFIG_INT = 2**31 - 1
 #: How much of an offending value an error message quotes.
@@ -577,12 +580,15 @@ def read_bounded(path: str, *, what: str, missing_fix: str, error: type = Config
 
 
 def _expanded_nodes(node, seen: dict, stack: set, name: str, error: type) -> int:
-    """Number of nodes of ``node`` with every alias expanded (memoised, cycle-checked)."""
+    """Number of nodes of ``node`` with every alias expanded (memoised, cycle-checked,
+    at most :data:`MAX_YAML_DEPTH` levels deep)."""
     key = id(node)
     if key in seen:
         return seen[key]
     if key in stack:
         raise error(f"{name}:{node.start_mark.line + 1}: a recursive YAML alias; write the value out instead")
+    if len(stack) >= MAX_YAML_DEPTH:
+        raise _too_deep(name, error, node.start_mark.line + 1)
     stack.add(key)
     if isinstance(node, yaml.SequenceNode):
         children = node.value
@@ -598,6 +604,12 @@ def _expanded_nodes(node, seen: dict, stack: set, name: str, error: type) -> int
     stack.discard(key)
     seen[key] = total
     return total
+
+
+def _too_deep(name: str, error: type, line: int | None = None):
+    where = f"{name}:{line}" if line is not None else name
+    return error(f"{where}: YAML nested more than {MAX_YAML_DEPTH} levels deep; "
+                 "write a flat config or manifest (a config needs 3 levels)")
 
 
 def parse_yaml(raw: bytes, path: str, *, what: str = "config file", error: type = ConfigError):
@@ -646,6 +658,8 @@ def parse_yaml(raw: bytes, path: str, *, what: str = "config file", error: type 
         if isinstance(exc, error):
             raise
         raise error(str(exc)) from None
+    except RecursionError:  # PyYAML's composer recurses once per level, before our depth check
+        raise _too_deep(path, error) from None
     return data, lines
 
 
@@ -661,6 +675,8 @@ def parse_override(text: str) -> tuple[str, str, Any]:
         value = yaml.load(raw, Loader=_UniqueKeyLoader) if raw.strip() else None
     except yaml.YAMLError:
         value = raw
+    except RecursionError:
+        raise _too_deep(f"--set {text[:60]}", ConfigError) from None
     return section, key, value
 
 

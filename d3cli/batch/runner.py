@@ -25,6 +25,7 @@ or swapped pair (:func:`d3cli.evaluation.diagnostics.suspicious_result`; warning
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import logging
@@ -405,17 +406,86 @@ def run_batch(
         # Workers may run in another folder, on another machine: only absolute paths mean the same there.
         out = out.resolve()
         pairs = [_absolute(p) for p in pairs]
-    lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
+    # SIGTERM handled before the lock file exists: a kill between the two left a lock behind.
     previous = _sigterm_as_interrupt()
+    lock = None
     try:
+        # A Ctrl-C in the middle of taking the lock left the lock file behind: it is
+        # taken whole, and the interrupt raised once it is held (and released below).
+        with _signals_deferred():
+            lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
         executor = make_executor(workers, scheduler, out)
         return _locked_batch(pairs, out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
                              max_disparity=max_disparity, progress=progress, config_source=config_source,
                              pointcloud=pointcloud, executor=executor, shard=shard)
     finally:
+        if lock is not None:
+            with _signals_held():  # a Ctrl-C now would leave the lock behind
+                release_lock(lock)
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
-        release_lock(lock)
+
+
+@contextlib.contextmanager
+def _interrupts_unwrapped():
+    """Let a Ctrl-C that surfaced wrapped in another exception (a numba kernel's
+    ``SystemError``, e.g. during the JIT warm-up before the first pair) stop the batch as
+    the KeyboardInterrupt it is."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise
+    except Exception as exc:
+        interrupt = _interrupt_behind(exc)
+        if interrupt is None:
+            raise
+        raise interrupt from None
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Ignore SIGINT and SIGTERM for the duration (in the main thread; elsewhere a no-op).
+
+    Used while run.json records an interruption: a second Ctrl-C (people press it twice)
+    would otherwise interrupt the handler of the first and leave no run.json.  The
+    handlers are restored afterwards, so a later Ctrl-C still works.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold SIGINT/SIGTERM back for the duration and deliver them at its end.
+
+    Only signals whose handler is a Python function (Ctrl-C's KeyboardInterrupt, our
+    SIGTERM handler) are held; in the main thread only.  A signal that came meanwhile
+    is delivered once the block is done, by calling its own handler.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending = []
+    held = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(sig)
+        if callable(handler):
+            held[sig] = handler
+            signal.signal(sig, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for sig, handler in held.items():
+            signal.signal(sig, handler)
+    if pending:
+        held[pending[0]](pending[0], None)
 
 
 def _raise_interrupt(signum, frame):
@@ -458,7 +528,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
                              max_disparity=max_disparity, settings=settings, pointcloud=pointcloud)
     order = {pair.name: i for i, pair in enumerate(pairs)}
     try:
-        with executor:
+        with _interrupts_unwrapped(), executor:
             meta["execution"] = executor.describe()
             # Compile before the first pair (and before a pool fans out): no pair's time includes it.
             meta["compile_s"] = round(executor.warm(cfg, method), 3) if pairs else 0.0
@@ -477,8 +547,9 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     except KeyboardInterrupt as exc:
         current = executor.current
         terminated = isinstance(exc, Terminated)
-        _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
-                        stop_reason="terminated (SIGTERM)" if terminated else "interrupted (Ctrl-C / SIGINT)")
+        with _signals_held():  # a second Ctrl-C must not cut the record of the first short
+            _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
+                            stop_reason="terminated (SIGTERM)" if terminated else "interrupted (Ctrl-C / SIGINT)")
         n_done = sum(r["status"] in ("ok", "skipped") for r in records)
         raise BatchInterrupted(n_done, len(pairs), batch.run_json, terminated=terminated) from None
     except OutputError as exc:
@@ -508,9 +579,9 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     if evaluate and shard is not None:
         log.info("--shard: summary files are left to `d3stereo eval %s --gt ... -o REPORT` once every shard is done", out)
     elif evaluate:
-        report.write_summary(out, batch.rows, method=method,
-                             extra={"settings": settings, "computed": batch.n_computed,
-                                    "skipped_complete": batch.n_skipped})
+        report.write_summary(out, batch.rows, method=method, extra={"settings": settings},
+                             run_counts={"n_computed": batch.n_computed, "n_skipped": batch.n_skipped,
+                                         "n_failed": batch.n_failed})
         batch.summary = report.summarize(batch.rows)
     if not evaluate or shard is not None:
         # issue 12 item 7: the summary of an earlier --eval run (maybe another method) would

@@ -66,6 +66,7 @@ two image files
 from __future__ import annotations
 
 import dataclasses
+import errno
 import logging
 import math
 import os
@@ -76,7 +77,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from ..config import parse_yaml, read_bounded
+from ..config import MAX_CONFIG_INT, parse_yaml, quote, read_bounded
 from ..errors import InputError, where_what_fix
 from . import io
 
@@ -178,6 +179,19 @@ def family_from_name(name: str) -> str:
     if any(lowered.startswith(prefix + "-") or re.match(rf"{prefix}\d{{4}}-", lowered) for prefix in ROAD_PREFIXES):
         return "road"
     return lowered.split("-", 1)[0] if "-" in lowered else ""
+
+
+def _missing_why(path: Path) -> tuple[str, str]:
+    """(what, fix) for an input that does not exist: a symlink loop and a broken link are
+    named as such (issue 12 item 15), anything else is a wrong path."""
+    if path.is_symlink():
+        try:
+            os.stat(path)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                return "a symlink loop (the link leads back to itself)", "point it at the data or remove it"
+        return f"a broken symlink (to {os.readlink(path)}, which does not exist)", "fix the link or the path"
+    return "no such file or folder", "check the path"
 
 
 def _entries(folder: Path, keep) -> list[Path]:
@@ -705,20 +719,34 @@ def _check_value(key: str, value: Any, where: str) -> Any:
     if key == "bit_depth":
         if value is None:
             return None
-        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 16:
+        number = _whole_number(value)
+        if number is None or not 1 <= number <= 16:
             raise InputError(
-                where_what_fix(where, f"bit_depth must be an integer in [1, 16], got {value!r}", "e.g. bit_depth: 12")
+                where_what_fix(where, f"bit_depth must be an integer in [1, 16], got {quote(value)}", "e.g. bit_depth: 12")
             )
-        return value
+        return number
     if key == "max_disparity":
         if value is None:
             return None
-        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-            raise InputError(
-                where_what_fix(where, f"max_disparity must be a positive integer, got {value!r}", "e.g. max_disparity: 64")
-            )
-        return value
+        number = _whole_number(value)
+        if number is None or not 1 <= number <= MAX_CONFIG_INT:
+            raise InputError(where_what_fix(
+                where, f"max_disparity must be a positive integer of at most {MAX_CONFIG_INT}, got {quote(value)}",
+                "e.g. max_disparity: 64"))
+        return number
     raise KeyError(key)  # pragma: no cover - callers check the key first
+
+
+def _whole_number(value) -> int | None:
+    """``value`` as an int when it is a whole number (``64``, ``64.0``, ``1e2`` as YAML 1.2
+    reads it), else None; as the config reads integer keys (issue 12 item 14)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int):
+        return value
+    if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+        return int(value)
+    return None
 
 
 def _manifest_path(root: Path, value: str, key: str, where: str) -> Path:
@@ -870,7 +898,7 @@ def discover(inputs: Sequence[str | os.PathLike] | str | os.PathLike) -> list[Pa
                 where_what_fix(str(item), f"not a folder, manifest or image ({item.suffix or 'no extension'})", f"give {_EXPECTED}")
             )
         else:
-            raise InputError(where_what_fix(str(item), "no such file or folder", "check the path"))
+            raise InputError(where_what_fix(str(item), *_missing_why(item)))
     if images:
         if len(images) != 2:
             raise InputError(

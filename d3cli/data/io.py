@@ -119,6 +119,18 @@ def image_size(path: str | os.PathLike) -> tuple[int, int] | None:
         return None
 
 
+def _opencv_max_side() -> int:
+    """Longest image side OpenCV's decoders accept: 2**20 unless the user raised it with
+    ``OPENCV_IO_MAX_IMAGE_WIDTH`` / ``OPENCV_IO_MAX_IMAGE_HEIGHT`` (OpenCV's own variables)."""
+    limits = []
+    for name in ("OPENCV_IO_MAX_IMAGE_WIDTH", "OPENCV_IO_MAX_IMAGE_HEIGHT"):
+        try:
+            limits.append(int(os.environ.get(name, 1 << 20)))
+        except ValueError:
+            limits.append(1 << 20)
+    return min(limits)
+
+
 def _decode_unchanged(path: Path) -> np.ndarray:
     """Decode an image file with OpenCV keeping bit depth and channels (BGR order)."""
     # imdecode on the raw bytes instead of imread(path): imread cannot open non-ASCII
@@ -129,11 +141,21 @@ def _decode_unchanged(path: Path) -> np.ndarray:
             str(path), f"image of {size[0]}x{size[1]} pixels is larger than {MAX_IMAGE_PIXELS} pixels "
                        f"(about {size[0] * size[1] * 6 / 1e9:.1f} GB to decode)",
             "give an image of at most 16384x16384 pixels, or crop or downscale it"))
+    side = _opencv_max_side()
+    if size is not None and max(size) > side:
+        # OpenCV would refuse it with its own assertion text (or libpng lines on stderr)
+        # and no file name (issue 12 item 13).
+        raise InputError(where_what_fix(
+            str(path), f"image of {size[0]}x{size[1]} pixels has a side longer than {side} pixels, "
+                       "the most OpenCV decodes",
+            "crop or downscale it (a stereo pair this wide is likely a mistake)"))
     data = np.frombuffer(_read_bytes(path), dtype=np.uint8)
     try:
         image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     except cv2.error as exc:  # e.g. a header beyond OpenCV's own size limit
-        reason = str(exc).strip().splitlines()[-1][:120]
+        # "OpenCV(4.9.0) /path/loadsave.cpp:77: error: (-215:Assertion failed) ... in function
+        # '...'": the part after "error:" says what is wrong.
+        reason = " ".join(str(exc).split()).rpartition(" error: ")[2][:160]
         raise InputError(where_what_fix(str(path), f"cannot decode image (OpenCV: {reason})",
                                         "give an 8/16-bit PNG, JPEG, PPM/PGM or TIFF of a sensible size")) from None
     if image is None:

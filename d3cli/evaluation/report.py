@@ -295,6 +295,7 @@ def write_summary(
     *,
     method: str,
     extra: dict | None = None,
+    run_counts: Mapping | None = None,
 ) -> tuple[Path, Path]:
     """Write ``metrics.csv``, ``summary.json`` and ``summary.md`` into ``out_dir``, atomically.
 
@@ -308,6 +309,11 @@ def write_summary(
         Name of the method that produced the disparities (e.g. ``"d3stereo"``).
     extra : dict, optional, keyword-only
         Passed through into ``summary.json`` under ``"extra"`` (config, versions, ...).
+    run_counts : dict, optional, keyword-only
+        ``{"n_computed", "n_skipped", "n_failed"}`` as ``run.json`` of a ``d3stereo run``
+        has them (``n_skipped``: pairs kept complete from an earlier run, ``ok`` rows
+        here).  Stored as ``summary.json["run"]`` and stated in summary.md's counts line,
+        so the summary and run.json never disagree about what this run computed.
 
     Returns
     -------
@@ -339,6 +345,8 @@ def write_summary(
         ) from exc
 
     summary = {"method": method, **summarize(rows), "extra": dict(extra or {})}
+    if run_counts is not None:
+        summary["run"] = {key: int(run_counts[key]) for key in ("n_computed", "n_skipped", "n_failed")}
     write_pair_csv(out_dir / "metrics.csv", rows)
     json_path = out_dir / "summary.json"
     md_path = out_dir / "summary.md"
@@ -385,12 +393,10 @@ def summary_markdown(summary: Mapping, rows: Iterable[Mapping]) -> str:
     """
     rows = [_checked_row(row) for row in rows]
     keys = _columns_with_values(rows)
-    counts = summary["counts"]
     lines = [
         f"# Evaluation: {summary.get('method', '')}".rstrip(),
         "",
-        f"{counts['total']} pairs: {counts['ok']} ok, {counts['failed']} failed, "
-        f"{counts['skipped']} skipped.",
+        _counts_sentence(summary),
         "",
         "Means over the ok pairs that have the value. EPE in px; PEP(δ) = % of pixels with "
         "|d - gt| > δ px over pixels with valid ground truth (a pixel without an estimate "
@@ -413,6 +419,22 @@ def summary_markdown(summary: Mapping, rows: Iterable[Mapping]) -> str:
         lines += ["", "## Warnings", "", "Maps of these pairs may be wrong; see each pair's result.json.", ""]
         lines += [f"- {item['pair']}: {_one_line(item['warning'])}" for item in summary["warnings"]]
     return "\n".join(lines) + "\n"
+
+
+def _counts_sentence(summary: Mapping) -> str:
+    """``6 pairs: 4 ok, 1 failed, 1 skipped.``; after a ``d3stereo run`` (``summary["run"]``)
+    the ok pairs are split as run.json counts them: ``6 pairs: 6 ok (2 computed, 4 skipped
+    as complete), 0 failed.`` (issue 12 item 7: "skipped" there means kept from an earlier
+    run, never left out)."""
+    counts = summary["counts"]
+    run = summary.get("run")
+    if run is None:
+        return f"{counts['total']} pairs: {counts['ok']} ok, {counts['failed']} failed, {counts['skipped']} skipped."
+    text = (f"{counts['total']} pairs: {counts['ok']} ok ({run['n_computed']} computed, {run['n_skipped']} "
+            f"skipped as complete), {counts['failed']} failed")
+    if counts["skipped"]:
+        text += f", {counts['skipped']} left out"
+    return text + "."
 
 
 def _family_table(rows: list[dict], group: Mapping, keys: list[str]) -> list[str]:

@@ -117,7 +117,9 @@ def test_sigint_keeps_finished_pairs_and_rerun_is_byte_identical(tmp_path, four_
     script.write_text(SLOW_RUN)
     proc = subprocess.Popen([sys.executable, str(script), "run", str(four_pairs), "-o", str(out),
                              "--method", "sgbm", "-q"], cwd=tmp_path, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            # SIGINT back to default: background shells start jobs with it ignored
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         _wait_for(out / "a" / RESULT_FILE, proc)
         # A second run into the same folder, while the first one writes: refused.

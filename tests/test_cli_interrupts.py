@@ -1,0 +1,94 @@
+"""Ctrl-C ends a ``d3stereo`` process with exit 130 and one line, whenever it comes
+(issue 12, item 8): while Python imports the libraries, and after a handled interrupt
+whose KeyboardInterrupt passed through ``exec()``'d code (CPython then marks the process
+to be killed by SIGINT after shutdown: status -2 instead of 130)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+RESUME = "Interrupted; rerun the same command to resume"
+
+
+def _run_python(code: str, tmp_path) -> subprocess.CompletedProcess:
+    """Run ``code`` as ``python -m`` runs d3cli: the module mode is the one where CPython
+    turns its "unhandled KeyboardInterrupt" flag into death by SIGINT (``python -c`` and
+    scripts exit through another path)."""
+    (tmp_path / "inject_d3.py").write_text(textwrap.dedent(code))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [os.getcwd(), os.environ.get("PYTHONPATH")]))}
+    return subprocess.run([sys.executable, "-m", "inject_d3"], capture_output=True, text=True, env=env,
+                          timeout=300, cwd=tmp_path)
+
+
+@pytest.mark.parametrize("module", ["click", "numpy", "numba"])
+def test_ctrl_c_while_importing_exits_130_with_one_line(tmp_path, make_pair_folder, module):
+    """The interrupt lands while the command imports ``module``, inside exec()'d code as
+    the standard library's dataclasses and namedtuple run it."""
+    make_pair_folder(tmp_path / "pairs", "a")
+    code = f"""
+        import sys
+
+        class Interrupting:  # a Ctrl-C at the moment {module!r} is imported
+            def find_spec(self, name, path=None, target=None):
+                if name == {module!r}:
+                    exec("raise KeyboardInterrupt")
+                return None
+
+        sys.meta_path.insert(0, Interrupting())
+        sys.argv = ["d3stereo", "run", "pairs", "-o", "out", "--method", "d3stereo", "-q"]
+        from d3cli.__main__ import entry
+        entry()
+        """
+    done = _run_python(code, tmp_path)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr == RESUME + "\n"
+    assert done.stdout == ""
+
+
+def test_handled_interrupt_from_exec_code_in_the_batch_exits_130_not_by_the_signal(tmp_path, make_pair_folder):
+    make_pair_folder(tmp_path / "pairs", "a")
+    code = """
+        import sys
+        import d3cli.data.datasets as datasets
+
+        def discover(inputs):  # Ctrl-C inside exec()'d code, as in a dataclass definition
+            exec("raise KeyboardInterrupt")
+
+        datasets.discover = discover
+        sys.argv = ["d3stereo", "run", "pairs", "-o", "out", "--method", "sgbm"]
+        from d3cli.__main__ import entry
+        entry()
+        """
+    done = _run_python(code, tmp_path)
+    assert done.returncode == 130, (done.returncode, done.stderr)  # was -2: killed by SIGINT after the line
+    assert done.stderr == RESUME + "\n"
+
+
+def test_ctrl_c_inside_a_kernel_during_the_jit_warm_up_is_an_interrupt(tmp_path, make_pair_folder):
+    """A Ctrl-C inside a numba kernel before the first pair (the JIT warm-up) came out as a
+    SystemError traceback with exit 1."""
+    make_pair_folder(tmp_path / "pairs", "a")
+    code = """
+        import sys
+        import d3cli.batch.methods as methods
+
+        def compute_pair(*args, **kwargs):  # what numba raises when SIGINT lands in a kernel
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt:
+                raise SystemError("CPUDispatcher(<function _diffuse>) returned a result with an exception set")
+
+        methods.compute_pair = compute_pair
+        sys.argv = ["d3stereo", "run", "pairs", "-o", "out", "--method", "d3stereo", "-q"]
+        from d3cli.__main__ import entry
+        entry()
+        """
+    done = _run_python(code, tmp_path)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr == "Interrupted: 0 of 1 pairs done; rerun the same command to resume\n"
+    assert (tmp_path / "out" / "run.json").is_file() and not (tmp_path / "out" / ".d3stereo.lock").exists()
