@@ -13,6 +13,10 @@ A rerun skips a pair only when the :func:`pair_fingerprint` stored in its
   function of these (the override, the manifest value, or the ground truth and the
   image width), so it is covered without reading the ground truth to skip a pair.
 
+* the feature files of ``cost.kind: features`` (:func:`feature_files`): the ONNX model,
+  or the precomputed ``features.npz`` (a relative one per pair, beside its left image),
+  by the same identity as the pair's files.
+
 ``cloud.ply`` has its own :func:`cloud_fingerprint` (camera section, calibration file),
 so a changed ``camera.f`` or calib.txt recomputes the cloud but not the map.
 
@@ -124,9 +128,27 @@ def input_identity(pair) -> dict:
     return out
 
 
-def pair_fingerprint(settings: str, pair) -> str:
-    """Short hash of :func:`settings_fingerprint` ``settings`` and the pair's :func:`input_identity`."""
-    return _digest([settings, input_identity(pair)])
+def feature_files(cfg: Config, method: str, pair) -> list:
+    """The feature files d3stereo reads for ``pair`` (``cost.kind: features``), as paths.
+
+    ``features.npz`` wins over ``features.model`` (as in the pipeline); a relative npz is
+    the pair's own, in the folder of its left image.  Empty for NCC and other methods.
+    """
+    if method != "d3stereo" or cfg.cost.kind != "features":
+        return []
+    if cfg.features.npz:
+        path = Path(cfg.features.npz)
+        return [path if path.is_absolute() else Path(pair.left).parent / path]
+    return [Path(cfg.features.model)] if cfg.features.model else []
+
+
+def pair_fingerprint(settings: str, pair, features: list | None = None) -> str:
+    """Short hash of :func:`settings_fingerprint` ``settings``, the pair's
+    :func:`input_identity` and the identity of its :func:`feature_files` ``features``."""
+    key = [settings, input_identity(pair)]
+    if features:  # only then: NCC fingerprints stay what they were
+        key.append([file_identity(path) for path in features])
+    return _digest(key)
 
 
 def cloud_fingerprint(cfg: Config, pair) -> str:

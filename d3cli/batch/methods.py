@@ -24,6 +24,7 @@ def compute_pair(
     right: np.ndarray,
     *,
     max_disparity: int,
+    pair_dir=None,
 ) -> DisparityResult:
     """Run the stereo method named ``method`` on one pair.
 
@@ -36,6 +37,9 @@ def compute_pair(
         Raw images of equal shape (any dtype).
     max_disparity : int
         Largest disparity searched, pixels.
+    pair_dir : path-like, optional
+        Folder of the pair's input images: where d3stereo looks up a relative
+        ``features.npz`` (precomputed feature maps).
 
     Returns
     -------
@@ -44,7 +48,7 @@ def compute_pair(
     if method == "sgbm":
         return sgbm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.sgbm)
     if method == "d3stereo":
-        return D3Stereo(cfg).compute(left, right, max_disparity=max_disparity)
+        return D3Stereo(cfg).compute(left, right, max_disparity=max_disparity, pair_dir=pair_dir)
     if method == "pt-sgm":
         return pt_sgm_disparity(left, right, max_disparity=max_disparity, cfg=cfg)
     if method == "elas":

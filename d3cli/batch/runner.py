@@ -50,7 +50,7 @@ from ..road.report import DEFECTS_CSV, road_report, write_defects_csv
 from . import resources
 from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .executors import make_executor, select_shard
-from .fingerprint import cloud_fingerprint, package_versions, pair_fingerprint, settings_fingerprint
+from .fingerprint import cloud_fingerprint, feature_files, package_versions, pair_fingerprint, settings_fingerprint
 from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock, shard_lock_name
 from .methods import compute_pair
 from ..evaluation.html import write_report_html
@@ -178,7 +178,7 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
     height, width = left.shape[:2]
     dmax, range_note = _resolve_range(pair, width, max_disparity)
     resources.check_memory((height, width), dmax, cfg, method=method, where=pair.name)
-    result = compute_pair(method, cfg, left, right, max_disparity=dmax)
+    result = compute_pair(method, cfg, left, right, max_disparity=dmax, pair_dir=Path(pair.left).parent)
     if range_note:
         result.warnings.insert(0, range_note)
     result.warnings.extend(diagnostics.suspicious_result(result, dmax))
@@ -605,7 +605,8 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
     t0 = time.perf_counter()
     reused = False
     try:
-        fingerprint = pair_fingerprint(settings, pair)  # settings and the pair's input files
+        # settings, the pair's input files and the feature files it reads
+        fingerprint = pair_fingerprint(settings, pair, feature_files(cfg, method, pair))
         stored = None if overwrite else read_result(pair_dir)
         if stored is not None and stored.get("fingerprint") == fingerprint:
             log.info("%s: complete, skipped (use --overwrite to compute it again)", pair.name)

@@ -38,6 +38,7 @@ from . import cpu as _cpu  # noqa: F401,E402  (import for its side effect)
 
 _POOL: ThreadPoolExecutor | None = None
 _POOL_KEY: tuple[int, int] = (0, 0)  # (process id, threads) the pool was made for
+_LOADED: set = set()  # (process id, task function) already called once in this process
 
 
 def threads() -> int:
@@ -48,8 +49,9 @@ def threads() -> int:
 def run_tasks(func, n_tasks, *args):
     """``func(i, n_tasks, *args)`` for every task i, on the pool; returns when all are done.
 
-    With one thread (or one task) everything runs in the calling thread.  Exceptions of a
-    task are raised here.
+    With one thread (or one task) everything runs in the calling thread, and so does task 0
+    of the first call of ``func`` in a process (it compiles or loads the kernel).
+    Exceptions of a task are raised here.
     """
     global _POOL, _POOL_KEY
     n = threads()
@@ -57,6 +59,16 @@ def run_tasks(func, n_tasks, *args):
         for i in range(n_tasks):
             func(i, n_tasks, *args)
         return
+    start = 0
+    if (os.getpid(), func) not in _LOADED:
+        # The first call of a kernel in a process compiles it or loads it from numba's
+        # cache: do that here, in the calling thread, with task 0, and fan out after.
+        # A pool thread loading a kernel while Ctrl-C interrupted the main thread hung
+        # once in llvmlite's global lock (seen in gdb, 1 of 13 runs of the interrupt
+        # tests); with the loading in the main thread an interrupt cannot strand it.
+        func(0, n_tasks, *args)
+        _LOADED.add((os.getpid(), func))
+        start = 1
     key = (os.getpid(), n)
     if _POOL is None or _POOL_KEY != key:
         if _POOL is not None and _POOL_KEY[0] == key[0]:
@@ -64,7 +76,7 @@ def run_tasks(func, n_tasks, *args):
         # a forked worker inherits the pool object but not its threads: make a new one
         _POOL = ThreadPoolExecutor(max_workers=n, thread_name_prefix="d3stereo-finish")
         _POOL_KEY = key
-    for future in [_POOL.submit(func, i, n_tasks, *args) for i in range(n_tasks)]:
+    for future in [_POOL.submit(func, i, n_tasks, *args) for i in range(start, n_tasks)]:
         future.result()
 
 

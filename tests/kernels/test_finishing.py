@@ -308,3 +308,26 @@ def test_run_tasks_runs_every_task_once_and_raises_a_task_error():
 
     with pytest.raises(ValueError, match="task 3"):
         finishing.run_tasks(fail, 5)
+
+
+def test_run_tasks_loads_a_kernel_in_the_calling_thread_before_fanning_out():
+    import threading
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs two threads")
+    numba.set_num_threads(2)
+    try:
+        calls = []
+
+        def task(i, n, out):
+            out.append((i, threading.current_thread() is threading.main_thread()))
+
+        finishing.run_tasks(task, 6, calls)
+        assert calls[0] == (0, True)  # the first call: task 0 here, before any pool thread
+        assert sorted(i for i, _ in calls) == list(range(6))
+        calls.clear()
+        finishing.run_tasks(task, 6, calls)  # afterwards every task goes to the pool
+        assert sorted(i for i, _ in calls) == list(range(6))
+        assert not any(main for _, main in calls)
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
