@@ -56,9 +56,14 @@ class Defect:
     volume_l: float
     decided_share: float
     low_confidence: bool
+    # Exterior outline of each connected part of the region: polygons of (u, v) pixel
+    # vertices (cv2.approxPolyDP, 1 px), largest part first.
+    outline_px: tuple = ()
 
     def to_dict(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+        out = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+        out["outline_px"] = [[list(p) for p in poly] for poly in self.outline_px]
+        return out
 
 
 def _median_filled(height: np.ndarray, size: int) -> np.ndarray:
@@ -86,6 +91,10 @@ def find_defects(
     noise_k: float = 3.0,
     mean_noise_k: float = 5.0,
     noise_cell_px: float = 900.0,
+    split_prominence_mm: float = 6.0,
+    split_neck: float = 0.9,
+    split_min_area_m2: float = 0.01,
+    split_smooth_px: float = 12.0,
     return_regions: bool = False,
 ):
     """Potholes and bumps of one height map.
@@ -147,7 +156,10 @@ def find_defects(
             cand = finite & (sign * smooth > thr_mm * 1e-3)
         other = finite & (np.abs(smooth) > min(min_depth_mm, min_height_mm) * 1e-3)
         n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
-        for comp in _split(labels, n, sign * smooth, prominence=max(0.5 * thr_mm * 1e-3, split_noise)):
+        # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
+        # below it the outline of a noisy map is drawn by the noise.
+        for comp in _split(labels, n, sign * smooth, footprint, level=max(thr_mm * 1e-3, split_noise), prominence=max(split_prominence_mm * 1e-3, split_noise),
+                           smooth_px=split_smooth_px, neck=split_neck, min_part_m2=split_min_area_m2):
             if footprint[comp].sum() < 0.25 * min_area_m2:
                 continue  # cannot pass the area test even with its rim
             grown = cv2.dilate(comp.astype(np.uint8), kernel_gap).astype(bool)
@@ -193,6 +205,7 @@ def find_defects(
                 mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
                 volume_l=vol * 1e3,
                 decided_share=float(decided[region].mean()),
+                outline_px=outline(region),
             )))
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
     defects = [Defect(id=i + 1, kind=kind, low_confidence=d["decided_share"] < min_decided_share, **d)
@@ -216,30 +229,103 @@ def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane) -> flo
     return float(1.4826 * np.median(np.abs(resid - np.median(resid))))
 
 
-def _split(labels: np.ndarray, n: int, depth: np.ndarray, *, prominence: float):
-    """Masks of the components of ``labels``, each split at saddles between deepest points
-    that stand ``prominence`` (metres) above the saddle (watershed on the depth), so two
-    potholes joined by a shallow dip are measured apart."""
+def _split(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.ndarray, *, level: float,
+           prominence: float, smooth_px: float, neck: float, min_part_m2: float):
+    """Masks of the components of ``labels``, each cut into separate potholes.
+
+    Two cues, because overlapping potholes join in two ways:
+
+    1. **Depth saddle**: deepest points of the depth map (Gaussian-smoothed with
+       ``smooth_px``, about one noise cell, so a rough or noisy floor does not count) that
+       stand ``prominence`` metres above the saddle between them seed a watershed on the
+       depth (two pits joined by a shallower dip).
+    2. **Neck**: within each part, lobes of the outline whose narrowest passage (the
+       distance-transform saddle, half the neck's width) is at most ``neck`` times the
+       inscribed radius of the smaller lobe seed a watershed on the distance transform (of
+       the part's smoothed depth deeper than ``level``):
+       the h-maxima of ``log(1 + dt)`` with ``h = -log(neck)`` are exactly those lobes.  A
+       shallow pothole whose rim runs into a deeper one's wall joins it without any depth
+       saddle (a terrace), but the union of the two openings has a neck.
+
+    Parts smaller than ``min_part_m2`` (plane area, ``footprint``) are merged back into the
+    neighbour they share the longest border with.
+    """
     from skimage.morphology import h_maxima
     from skimage.segmentation import watershed
 
+    finite_depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
+    smoothed = cv2.GaussianBlur(finite_depth, (0, 0), smooth_px) if smooth_px > 0 else finite_depth
+    kernel_open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
     for lab in range(1, n):
         comp = labels == lab
         v, u = np.nonzero(comp)
         box = (slice(v.min(), v.max() + 1), slice(u.min(), u.max() + 1))
         sub_comp = comp[box]
-        sub_depth = np.where(sub_comp & np.isfinite(depth[box]), depth[box], 0.0)
-        peaks = h_maxima(sub_depth, prominence) & sub_comp
-        markers, k = _label(peaks)
-        if k <= 1:
+        if footprint[box][sub_comp].sum() < 2 * min_part_m2:  # too small to hold two parts
             yield comp
             continue
-        parts = watershed(-sub_depth, markers, mask=sub_comp)
-        for i in range(1, k + 1):
+        sub_depth = np.where(sub_comp, smoothed[box], 0.0)
+        parts = _watershed_parts(-sub_depth, h_maxima(sub_depth, prominence) & sub_comp, sub_comp)
+        pieces = []
+        for part in parts:
+            # The outline of the smoothed depth: the noisy map's own outline is ragged at
+            # the noise-cell scale and shows necks that are not there.
+            opened = cv2.morphologyEx((part & (sub_depth > level)).astype(np.uint8), cv2.MORPH_OPEN, kernel_open)
+            dt = cv2.distanceTransform(np.pad(opened, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
+            lobes = h_maxima(np.log1p(dt), -np.log(neck)) & opened.astype(bool) if neck < 1 else np.zeros_like(part)
+            pieces += _watershed_parts(-dt, lobes, part)
+        for piece in _merge_small(pieces, footprint[box], min_part_m2):
             mask = np.zeros_like(comp)
-            mask[box] = parts == i
-            if mask.any():
-                yield mask
+            mask[box] = piece
+            yield mask
+
+
+def _watershed_parts(surface: np.ndarray, peaks: np.ndarray, mask: np.ndarray) -> list:
+    """Watershed basins of ``surface`` from the connected ``peaks`` inside ``mask``; [mask]
+    when there are fewer than two peaks."""
+    from skimage.segmentation import watershed
+
+    # h_maxima can return one maximum as pixels a step apart on a plateau: join those.
+    peaks = cv2.dilate(peaks.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))).astype(bool) & mask
+    markers, k = _label(peaks)
+    if k <= 1:
+        return [mask]
+    basins = watershed(surface, markers, mask=mask)
+    return [basins == i for i in range(1, k + 1) if (basins == i).any()]
+
+
+def _merge_small(parts: list, footprint: np.ndarray, min_m2: float) -> list:
+    """Merge the smallest part below ``min_m2`` into the neighbour sharing most border, until none is."""
+    parts = list(parts)
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    while len(parts) > 1:
+        areas = [float(footprint[p].sum()) for p in parts]
+        i = int(np.argmin(areas))
+        if areas[i] >= min_m2:
+            break
+        ring = cv2.dilate(parts[i].astype(np.uint8), cross).astype(bool) & ~parts[i]
+        shared = [int((ring & p).sum()) if j != i else -1 for j, p in enumerate(parts)]
+        j = int(np.argmax(shared))
+        parts[j] = parts[j] | parts[i]
+        del parts[i]
+    return parts
+
+
+def outline(mask: np.ndarray, *, tolerance_px: float = 1.0) -> tuple:
+    """Exterior outline polygons of a bool mask's connected parts, largest first.
+
+    Returns
+    -------
+    tuple of tuple of (int, int)
+        ((u, v), ...) vertices per part, simplified to ``tolerance_px`` (Douglas-Peucker).
+    """
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    contours = sorted(contours, key=lambda c: -cv2.contourArea(c))
+    polys = []
+    for c in contours:
+        c = cv2.approxPolyDP(c, tolerance_px, True)
+        polys.append(tuple((int(p[0][0]), int(p[0][1])) for p in c))
+    return tuple(polys)
 
 
 def _label(mask: np.ndarray):
