@@ -95,6 +95,8 @@ def find_defects(
     split_neck: float = 0.9,
     split_min_area_m2: float = 0.01,
     split_smooth_px: float = 12.0,
+    min_region_decided_share: float = 0.25,
+    local_noise_px: int = 80,
     return_regions: bool = False,
 ):
     """Potholes and bumps of one height map.
@@ -145,12 +147,16 @@ def find_defects(
     v_all, u_all = np.mgrid[0:shape[0], 0:shape[1]]
     kernel_ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
     kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    kernel_local = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * local_noise_px + 1, 2 * local_noise_px + 1))
+    map_decided = float(decided[finite].mean()) if finite.any() else 0.0
     found: list = []
     sigma_d = disparity_noise(smooth, camera, plane)
     # Saddle depth that splits a region: half the threshold, but not less than the height
     # noise at the median distance (noisy floors would otherwise split into pieces).
     z_med = float(np.median(_points(smooth, *np.nonzero(finite)[::-1], camera, plane)[:, 2])) if finite.any() else 0.0
     split_noise = noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
+    with np.errstate(invalid="ignore"):
+        outlier = finite & (np.abs(smooth) > max(min_depth_mm * 1e-3, split_noise))
     for kind, sign, thr_mm in (("pothole", -1.0, min_depth_mm), ("bump", 1.0, min_height_mm)):
         with np.errstate(invalid="ignore"):
             cand = finite & (sign * smooth > thr_mm * 1e-3)
@@ -182,6 +188,16 @@ def find_defects(
             # the fixed threshold: far, noisy road otherwise yields false potholes.
             z_region = float(np.median(_points(height, u_all[region], v_all[region], camera, plane)[:, 2]))
             sigma_h = plane.offset * z_region / (camera.f * camera.baseline) * sigma_d
+            # The local noise where it is higher: the map's error is not uniform (a dark or
+            # far part of the image matches worse), and a blob of that local noise passes a
+            # test made with the map's median noise.  Robust spread of the road heights in
+            # an annulus outside the ring; pixels beyond the map's noise_k sigma left out (other
+            # defects: not below that, or the spread of a noisy part is cut off and too small).
+            annulus = (cv2.dilate(comp.astype(np.uint8), kernel_local).astype(bool)
+                       & ~cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & finite & ~outlier)
+            if annulus.sum() >= 50:
+                local = height[annulus]
+                sigma_h = max(sigma_h, float(1.4826 * np.median(np.abs(local - np.median(local)))))
             if peak < noise_k * sigma_h:
                 continue
             # Significance of the mean depth: a small blob of correlated matching noise can
@@ -190,6 +206,9 @@ def find_defects(
             mean_raw = float(np.mean(depth[region & finite])) if n_px else 0.0
             if mean_raw < mean_noise_k * sigma_h * np.sqrt(noise_cell_px / max(n_px, noise_cell_px)):
                 continue
+            share = float(decided[region].mean())
+            if share < min_region_decided_share and map_decided >= min_decided_share:
+                continue  # measured on filled pixels: the hole filling's extrapolation, no depth
             zone = cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & finite
             vol = float((footprint[zone] * np.clip(depth_s[zone], 0, None)).sum())
             w = footprint[region]
@@ -204,7 +223,7 @@ def find_defects(
                 max_depth_mm=peak * 1e3,
                 mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
                 volume_l=vol * 1e3,
-                decided_share=float(decided[region].mean()),
+                decided_share=share,
                 outline_px=outline(region),
             )))
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
