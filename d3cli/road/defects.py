@@ -15,8 +15,8 @@ Definitions (what the numbers in defects.json mean):
   the pothole in square metres, independent of the image scale and of the viewing angle.
 * ``max_depth_mm``: 98th percentile of the median-filtered depth over the region
   (robust to single-pixel spikes; ~2 % below the true maximum of a paraboloid, equal on a
-  flat-floored pothole).  Regions joined by a shallow saddle are split by a watershed
-  when each deepest point stands ``min_depth`` above the saddle.  A region must also be
+  flat-floored pothole).  Joined potholes are split at a depth saddle or at a neck of
+  their outline (:func:`_split`).  A region must also be
   deeper than ``noise_k`` times the height noise expected at its distance, and its mean
   depth must exceed ``mean_noise_k`` standard errors of a mean of spatially correlated
   stereo noise (``noise_cell_px`` pixels per independent error).
@@ -132,6 +132,19 @@ def find_defects(
         smoothing radius 15 of configs/road.yaml).  5 standard errors: the map holds
         ~10^3 such cells per kind, and the errors of the noisy pairs have heavier tails
         than a Gaussian (the usual 5-sigma allowance for looking everywhere).
+    split_prominence_mm, split_neck, split_min_area_m2, split_smooth_px : float, keyword-only
+        Splitting of joined potholes (:func:`_split`): depth-saddle prominence (at least the
+        map's ``noise_k`` sigma_h too), neck ratio (1: no neck split), smallest part
+        (plane area) and the Gaussian smoothing of the depth for the saddles, pixels (about
+        one noise cell: ``0.4 sqrt(noise_cell_px)``).
+    min_region_decided_share : float, keyword-only
+        A region with a smaller share of decided pixels is dropped (measured on the hole
+        filling's extrapolation), unless the map's own decided share is below
+        ``min_decided_share`` (then every defect is kept, low confidence).
+    local_noise_px : int, keyword-only
+        Outer radius of the annulus around a region whose robust height spread (pixels
+        beyond the map's ``noise_k`` sigma left out) replaces sigma_h in both significance
+        tests where it is larger.
     return_regions : bool, keyword-only
         Also return each defect's pixel mask (bool (H, W)), same order.
 
