@@ -218,6 +218,15 @@ class RoadConfig:
     ring_px: int = 12  # width of the surrounding ring that gives a defect's reference height
     min_decided_share: float = 0.5  # below this decided share a defect is low confidence
     colour_range_mm: float = 50.0  # height_color.png saturates at +- this
+    # Splitting joined potholes (d3cli.road.defects._split): a depth saddle this deep, or a
+    # neck at most split_neck x the smaller lobe's inscribed radius, separates two defects
+    # whose parts are each at least split_min_area_m2.
+    split_prominence_mm: float = 6.0
+    split_neck: float = 0.9
+    split_min_area_m2: float = 0.01
+    # A region with a smaller share of decided pixels is not reported (its depth is the hole
+    # filling's extrapolation), unless the whole map is below min_decided_share.
+    min_region_decided_share: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -315,6 +324,10 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "road.ring_px": (lambda v: 2 <= v <= 100, "an integer in [2, 100]"),
     "road.min_decided_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
     "road.colour_range_mm": (lambda v: v > 0, "a number > 0 (mm)"),
+    "road.split_prominence_mm": (lambda v: v > 0, "a number > 0 (mm)"),
+    "road.split_neck": (lambda v: 0 < v <= 1, "a number in (0, 1] (1: no split at necks)"),
+    "road.split_min_area_m2": (lambda v: v >= 0, "a number >= 0 (m^2)"),
+    "road.min_region_decided_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
     "sgbm.block_size": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "sgbm.mode": (lambda v: v in ("sgbm", "hh", "3way", "hh4"), "one of sgbm, hh, 3way, hh4"),
     # 100 kills the process: OpenCV's 3-way SGBM divides by (100 - uniquenessRatio) (SIGFPE).

@@ -7,16 +7,26 @@ Usage::
     python -m d3cli run /tmp/road-synth -c configs/road.yaml --road-report -o /tmp/road-out
     python scripts/bench_road.py /tmp/road-synth /tmp/road-out [--min-gt-depth-mm 20]
 
-Matching: a predicted pothole (defects.json, kind "pothole") matches the ground-truth
-pothole id (potholes_gt.png) that covers most of its bounding box, if that id covers at
-least ``--min-overlap`` of the box.  The first (deepest) match of a ground-truth pothole
-is a hit; further ones are counted as duplicates (split regions).  Predictions with no
-overlap are false defects.  A predicted bump is true when the pair has a ground-truth bump
-(SOURCE.txt ``bump: x= y= height=``, world metres) whose centre, projected with the rig
-of calib.txt, lies in the bump's bounding box (+ ``--bump-margin-px``); any other bump is a
-false defect too (synth roads have at most one bump, 10-25 mm high).  Ground truth counted for recall: depth > --min-gt-depth-mm
-and visible in the left image.  Errors are relative: |pred - gt| / gt with pred =
-max_depth_mm, area_m2, volume_l and gt = depth_mm, area_m2 (deeper than 10 mm), volume_l.
+Matching (one ground-truth pothole to at most one detection, one detection to at most one
+pothole): a detection's pixels are its ``outline_px`` polygons (defects.json; its bounding
+box for outputs without them), a ground-truth pothole's pixels are its id in
+potholes_gt.png (the surface it lowers by more than 1 mm, deeper pothole wins where two
+overlap).  A detection and a pothole *can match* when at least ``--min-inside`` (0.5) of the
+detection lies on that pothole AND the detection covers at least ``--min-cover`` (0.3) of the
+pothole's visible pixels; matches are taken greedily, largest overlap first.  A detection
+that matches nothing is a **false defect** when less than half of it lies on pothole pixels
+of any id, else a **duplicate** (a fragment of a pothole matched already, or one region
+spanning two potholes: a split or merge error).  A pothole joined with its neighbour into
+one region therefore counts as missed (the region matches at most one of them), and a
+pothole cut into pieces is found once, with the area error of its largest piece.
+
+Bumps: a predicted bump is true when the pair has a ground-truth bump (SOURCE.txt
+``bump: x= y= height=``, world metres) whose centre, projected with the rig of calib.txt,
+lies in the bump's bounding box (+ ``--bump-margin-px``); any other bump is a false defect
+too (synth roads have at most one bump, 10-25 mm high).  Ground truth counted for recall:
+depth > --min-gt-depth-mm and visible in the left image.  Errors are relative: |pred - gt| /
+gt with pred = max_depth_mm, area_m2, volume_l and gt = depth_mm, area_m2 (deeper than
+10 mm), volume_l.  "spurious" per pair = false potholes + false bumps + duplicates.
 """
 
 from __future__ import annotations
@@ -49,8 +59,54 @@ def gt_bump_px(gt_dir: Path):
     return float(rig.f * p[0] / p[2] + rig.cx), float(rig.f * p[1] / p[2] + rig.cy)
 
 
-def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_overlap: float,
-               bump_margin_px: float = 10.0) -> dict:
+def detection_mask(d: dict, shape) -> np.ndarray:
+    """bool (H, W): the pixels of a detection (its outline polygons, else its bounding box)."""
+    mask = np.zeros(shape, np.uint8)
+    polys = [np.asarray(p, np.int32).reshape(-1, 1, 2) for p in d.get("outline_px") or [] if len(p)]
+    if polys:
+        cv2.fillPoly(mask, polys, 1)
+        cv2.polylines(mask, polys, True, 1)
+    else:
+        u0, v0, u1, v1 = d["bbox_px"]
+        mask[v0:v1 + 1, u0:u1 + 1] = 1
+    return mask.astype(bool)
+
+
+def match_potholes(ids: np.ndarray, pits: list, *, min_inside: float, min_cover: float):
+    """One-to-one matching of detections to ground-truth pothole ids (module docstring).
+
+    Returns
+    -------
+    hits : dict gt id -> detection
+    duplicates, false : int
+    """
+    gt_px = {int(k): int(c) for k, c in zip(*np.unique(ids[ids > 0], return_counts=True))}
+    masks = [detection_mask(d, ids.shape) for d in pits]
+    overlaps = []
+    for i, m in enumerate(masks):
+        labels, counts = np.unique(ids[m], return_counts=True)
+        size = max(int(m.sum()), 1)
+        for k, c in zip(labels, counts):
+            if k > 0 and c >= min_inside * size and c >= min_cover * gt_px[int(k)]:
+                overlaps.append((int(c), i, int(k)))
+    hits, used = {}, set()
+    for _, i, k in sorted(overlaps, reverse=True):
+        if i not in used and k not in hits:
+            hits[k] = pits[i]
+            used.add(i)
+    duplicates = false = 0
+    for i, m in enumerate(masks):
+        if i in used:
+            continue
+        if (ids[m] > 0).sum() >= 0.5 * max(int(m.sum()), 1):
+            duplicates += 1
+        else:
+            false += 1
+    return hits, duplicates, false
+
+
+def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_inside: float = 0.5,
+               min_cover: float = 0.3, bump_margin_px: float = 10.0) -> dict:
     gt = json.loads((gt_dir / "defects_gt.json").read_text())["potholes"]
     ids = cv2.imread(str(gt_dir / "potholes_gt.png"), cv2.IMREAD_UNCHANGED)
     pred_path = out_dir / "defects.json"
@@ -58,19 +114,7 @@ def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_overl
     pits = [d for d in preds if d["kind"] == "pothole"]
     by_id = {g["id"]: g for g in gt}
     counted = {g["id"] for g in gt if g["depth_mm"] > min_gt_depth_mm and g["visible_px"] > 0}
-    hits, dup, false = {}, 0, 0
-    for d in sorted(pits, key=lambda d: -d["max_depth_mm"]):
-        u0, v0, u1, v1 = d["bbox_px"]
-        box = ids[v0:v1 + 1, u0:u1 + 1]
-        labels, counts = np.unique(box[box > 0], return_counts=True)
-        if len(labels) == 0 or counts.max() < min_overlap * box.size:
-            false += 1
-            continue
-        gid = int(labels[np.argmax(counts)])
-        if gid in hits:
-            dup += 1
-        else:
-            hits[gid] = d
+    hits, dup, false = match_potholes(ids, pits, min_inside=min_inside, min_cover=min_cover)
     bump_at = gt_bump_px(gt_dir)
     false_bumps = 0
     for d in preds:
@@ -100,7 +144,10 @@ def main(argv=None) -> int:
     ap.add_argument("gt_root", type=Path, help="folder of synth pairs (defects_gt.json, potholes_gt.png)")
     ap.add_argument("out_root", type=Path, help="output folder of `run --road-report`")
     ap.add_argument("--min-gt-depth-mm", type=float, default=20.0)
-    ap.add_argument("--min-overlap", type=float, default=0.2)
+    ap.add_argument("--min-inside", type=float, default=0.5,
+                    help="share of a detection that must lie on the pothole it matches")
+    ap.add_argument("--min-cover", type=float, default=0.3,
+                    help="share of a pothole's visible pixels its matching detection must cover")
     ap.add_argument("--bump-margin-px", type=float, default=10.0)
     ap.add_argument("--json", type=Path, help="also write the per-pair scores here")
     args = ap.parse_args(argv)
@@ -110,7 +157,7 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 1
     rows = [score_pair(p, args.out_root / p.name, min_gt_depth_mm=args.min_gt_depth_mm,
-                       min_overlap=args.min_overlap, bump_margin_px=args.bump_margin_px) for p in pairs]
+                       min_inside=args.min_inside, min_cover=args.min_cover, bump_margin_px=args.bump_margin_px) for p in pairs]
     for r in rows:
         errs = ", ".join(f"#{e['id']} {e['gt_depth_mm']:.0f}mm d{100 * e['signed_depth']:+.0f}% "
                          f"a{100 * e['signed_area']:+.0f}% v{100 * e['volume']:.0f}%" for e in r["errors"])
@@ -125,12 +172,14 @@ def main(argv=None) -> int:
     summary = {
         "pairs": len(rows), "gt_potholes": gt, "found": found,
         "recall": found / gt if gt else float("nan"),
-        "precision": (predicted - false) / predicted if predicted else float("nan"),
+        # A duplicate is no correct detection either: precision = matched / predicted.
+        "precision": sum(r["matched"] for r in rows) / predicted if predicted else float("nan"),
         "false_per_pair": false / len(rows),
         "false_bumps_per_pair": false_bumps / len(rows),
         "false_defects_per_pair": (false + false_bumps) / len(rows),
         "max_false_defects_in_a_pair": max(r["false"] + r["false_bumps"] for r in rows),
         "duplicates": sum(r["duplicates"] for r in rows),
+        "max_spurious_in_a_pair": max(r["false"] + r["false_bumps"] + r["duplicates"] for r in rows),
         "median_depth_error": float(np.median([e["depth"] for e in errors])) if errors else float("nan"),
         "median_area_error": float(np.nanmedian([e["area"] for e in errors])) if errors else float("nan"),
         "median_volume_error": float(np.median([e["volume"] for e in errors])) if errors else float("nan"),
@@ -138,7 +187,8 @@ def main(argv=None) -> int:
     print(f"recall {100 * summary['recall']:.1f} % ({found}/{gt} deeper than {args.min_gt_depth_mm:g} mm)  "
           f"precision {100 * summary['precision']:.1f} %  duplicates {summary['duplicates']}")
     print(f"false defects/pair {summary['false_defects_per_pair']:.2f} (potholes {summary['false_per_pair']:.2f}, "
-          f"bumps {summary['false_bumps_per_pair']:.2f}; most in one pair: {summary['max_false_defects_in_a_pair']})")
+          f"bumps {summary['false_bumps_per_pair']:.2f}; most in one pair: {summary['max_false_defects_in_a_pair']}; "
+          f"false + duplicates, most in one pair: {summary['max_spurious_in_a_pair']})")
     print(f"median error: depth {100 * summary['median_depth_error']:.1f} %  "
           f"area {100 * summary['median_area_error']:.1f} %  volume {100 * summary['median_volume_error']:.1f} %")
     if args.json:

@@ -15,8 +15,8 @@ Definitions (what the numbers in defects.json mean):
   the pothole in square metres, independent of the image scale and of the viewing angle.
 * ``max_depth_mm``: 98th percentile of the median-filtered depth over the region
   (robust to single-pixel spikes; ~2 % below the true maximum of a paraboloid, equal on a
-  flat-floored pothole).  Regions joined by a shallow saddle are split by a watershed
-  when each deepest point stands ``min_depth`` above the saddle.  A region must also be
+  flat-floored pothole).  Joined potholes are split at a depth saddle or at a neck of
+  their outline (:func:`_split`).  A region must also be
   deeper than ``noise_k`` times the height noise expected at its distance, and its mean
   depth must exceed ``mean_noise_k`` standard errors of a mean of spatially correlated
   stereo noise (``noise_cell_px`` pixels per independent error).
@@ -56,9 +56,14 @@ class Defect:
     volume_l: float
     decided_share: float
     low_confidence: bool
+    # Exterior outline of each connected part of the region: polygons of (u, v) pixel
+    # vertices (cv2.approxPolyDP, 1 px), largest part first.
+    outline_px: tuple = ()
 
     def to_dict(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+        out = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+        out["outline_px"] = [[list(p) for p in poly] for poly in self.outline_px]
+        return out
 
 
 def _median_filled(height: np.ndarray, size: int) -> np.ndarray:
@@ -86,6 +91,12 @@ def find_defects(
     noise_k: float = 3.0,
     mean_noise_k: float = 5.0,
     noise_cell_px: float = 900.0,
+    split_prominence_mm: float = 6.0,
+    split_neck: float = 0.9,
+    split_min_area_m2: float = 0.01,
+    split_smooth_px: float = 12.0,
+    min_region_decided_share: float = 0.25,
+    local_noise_px: int = 80,
     return_regions: bool = False,
 ):
     """Potholes and bumps of one height map.
@@ -121,6 +132,19 @@ def find_defects(
         smoothing radius 15 of configs/road.yaml).  5 standard errors: the map holds
         ~10^3 such cells per kind, and the errors of the noisy pairs have heavier tails
         than a Gaussian (the usual 5-sigma allowance for looking everywhere).
+    split_prominence_mm, split_neck, split_min_area_m2, split_smooth_px : float, keyword-only
+        Splitting of joined potholes (:func:`_split`): depth-saddle prominence (at least the
+        map's ``noise_k`` sigma_h too), neck ratio (1: no neck split), smallest part
+        (plane area) and the Gaussian smoothing of the depth for the saddles, pixels (about
+        one noise cell: ``0.4 sqrt(noise_cell_px)``).
+    min_region_decided_share : float, keyword-only
+        A region with a smaller share of decided pixels is dropped (measured on the hole
+        filling's extrapolation), unless the map's own decided share is below
+        ``min_decided_share`` (then every defect is kept, low confidence).
+    local_noise_px : int, keyword-only
+        Outer radius of the annulus around a region whose robust height spread (pixels
+        beyond the map's ``noise_k`` sigma left out) replaces sigma_h in both significance
+        tests where it is larger.
     return_regions : bool, keyword-only
         Also return each defect's pixel mask (bool (H, W)), same order.
 
@@ -136,18 +160,25 @@ def find_defects(
     v_all, u_all = np.mgrid[0:shape[0], 0:shape[1]]
     kernel_ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
     kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    kernel_local = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * local_noise_px + 1, 2 * local_noise_px + 1))
+    map_decided = float(decided[finite].mean()) if finite.any() else 0.0
     found: list = []
     sigma_d = disparity_noise(smooth, camera, plane)
     # Saddle depth that splits a region: half the threshold, but not less than the height
     # noise at the median distance (noisy floors would otherwise split into pieces).
     z_med = float(np.median(_points(smooth, *np.nonzero(finite)[::-1], camera, plane)[:, 2])) if finite.any() else 0.0
     split_noise = noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
+    with np.errstate(invalid="ignore"):
+        outlier = finite & (np.abs(smooth) > max(min_depth_mm * 1e-3, split_noise))
     for kind, sign, thr_mm in (("pothole", -1.0, min_depth_mm), ("bump", 1.0, min_height_mm)):
         with np.errstate(invalid="ignore"):
             cand = finite & (sign * smooth > thr_mm * 1e-3)
         other = finite & (np.abs(smooth) > min(min_depth_mm, min_height_mm) * 1e-3)
         n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
-        for comp in _split(labels, n, sign * smooth, prominence=max(0.5 * thr_mm * 1e-3, split_noise)):
+        # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
+        # below it the outline of a noisy map is drawn by the noise.
+        for comp in _split(labels, n, sign * smooth, footprint, level=max(thr_mm * 1e-3, split_noise), prominence=max(split_prominence_mm * 1e-3, split_noise),
+                           smooth_px=split_smooth_px, neck=split_neck, min_part_m2=split_min_area_m2):
             if footprint[comp].sum() < 0.25 * min_area_m2:
                 continue  # cannot pass the area test even with its rim
             grown = cv2.dilate(comp.astype(np.uint8), kernel_gap).astype(bool)
@@ -170,6 +201,16 @@ def find_defects(
             # the fixed threshold: far, noisy road otherwise yields false potholes.
             z_region = float(np.median(_points(height, u_all[region], v_all[region], camera, plane)[:, 2]))
             sigma_h = plane.offset * z_region / (camera.f * camera.baseline) * sigma_d
+            # The local noise where it is higher: the map's error is not uniform (a dark or
+            # far part of the image matches worse), and a blob of that local noise passes a
+            # test made with the map's median noise.  Robust spread of the road heights in
+            # an annulus outside the ring; pixels beyond the map's noise_k sigma left out (other
+            # defects: not below that, or the spread of a noisy part is cut off and too small).
+            annulus = (cv2.dilate(comp.astype(np.uint8), kernel_local).astype(bool)
+                       & ~cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & finite & ~outlier)
+            if annulus.sum() >= 50:
+                local = height[annulus]
+                sigma_h = max(sigma_h, float(1.4826 * np.median(np.abs(local - np.median(local)))))
             if peak < noise_k * sigma_h:
                 continue
             # Significance of the mean depth: a small blob of correlated matching noise can
@@ -178,6 +219,9 @@ def find_defects(
             mean_raw = float(np.mean(depth[region & finite])) if n_px else 0.0
             if mean_raw < mean_noise_k * sigma_h * np.sqrt(noise_cell_px / max(n_px, noise_cell_px)):
                 continue
+            share = float(decided[region].mean())
+            if share < min_region_decided_share and map_decided >= min_decided_share:
+                continue  # measured on filled pixels: the hole filling's extrapolation, no depth
             zone = cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & finite
             vol = float((footprint[zone] * np.clip(depth_s[zone], 0, None)).sum())
             w = footprint[region]
@@ -192,7 +236,8 @@ def find_defects(
                 max_depth_mm=peak * 1e3,
                 mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
                 volume_l=vol * 1e3,
-                decided_share=float(decided[region].mean()),
+                decided_share=share,
+                outline_px=outline(region),
             )))
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
     defects = [Defect(id=i + 1, kind=kind, low_confidence=d["decided_share"] < min_decided_share, **d)
@@ -216,30 +261,103 @@ def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane) -> flo
     return float(1.4826 * np.median(np.abs(resid - np.median(resid))))
 
 
-def _split(labels: np.ndarray, n: int, depth: np.ndarray, *, prominence: float):
-    """Masks of the components of ``labels``, each split at saddles between deepest points
-    that stand ``prominence`` (metres) above the saddle (watershed on the depth), so two
-    potholes joined by a shallow dip are measured apart."""
+def _split(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.ndarray, *, level: float,
+           prominence: float, smooth_px: float, neck: float, min_part_m2: float):
+    """Masks of the components of ``labels``, each cut into separate potholes.
+
+    Two cues, because overlapping potholes join in two ways:
+
+    1. **Depth saddle**: deepest points of the depth map (Gaussian-smoothed with
+       ``smooth_px``, about one noise cell, so a rough or noisy floor does not count) that
+       stand ``prominence`` metres above the saddle between them seed a watershed on the
+       depth (two pits joined by a shallower dip).
+    2. **Neck**: within each part, lobes of the outline whose narrowest passage (the
+       distance-transform saddle, half the neck's width) is at most ``neck`` times the
+       inscribed radius of the smaller lobe seed a watershed on the distance transform (of
+       the part's smoothed depth deeper than ``level``):
+       the h-maxima of ``log(1 + dt)`` with ``h = -log(neck)`` are exactly those lobes.  A
+       shallow pothole whose rim runs into a deeper one's wall joins it without any depth
+       saddle (a terrace), but the union of the two openings has a neck.
+
+    Parts smaller than ``min_part_m2`` (plane area, ``footprint``) are merged back into the
+    neighbour they share the longest border with.
+    """
     from skimage.morphology import h_maxima
     from skimage.segmentation import watershed
 
+    finite_depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
+    smoothed = cv2.GaussianBlur(finite_depth, (0, 0), smooth_px) if smooth_px > 0 else finite_depth
+    kernel_open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
     for lab in range(1, n):
         comp = labels == lab
         v, u = np.nonzero(comp)
         box = (slice(v.min(), v.max() + 1), slice(u.min(), u.max() + 1))
         sub_comp = comp[box]
-        sub_depth = np.where(sub_comp & np.isfinite(depth[box]), depth[box], 0.0)
-        peaks = h_maxima(sub_depth, prominence) & sub_comp
-        markers, k = _label(peaks)
-        if k <= 1:
+        if footprint[box][sub_comp].sum() < 2 * min_part_m2:  # too small to hold two parts
             yield comp
             continue
-        parts = watershed(-sub_depth, markers, mask=sub_comp)
-        for i in range(1, k + 1):
+        sub_depth = np.where(sub_comp, smoothed[box], 0.0)
+        parts = _watershed_parts(-sub_depth, h_maxima(sub_depth, prominence) & sub_comp, sub_comp)
+        pieces = []
+        for part in parts:
+            # The outline of the smoothed depth: the noisy map's own outline is ragged at
+            # the noise-cell scale and shows necks that are not there.
+            opened = cv2.morphologyEx((part & (sub_depth > level)).astype(np.uint8), cv2.MORPH_OPEN, kernel_open)
+            dt = cv2.distanceTransform(np.pad(opened, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
+            lobes = h_maxima(np.log1p(dt), -np.log(neck)) & opened.astype(bool) if neck < 1 else np.zeros_like(part)
+            pieces += _watershed_parts(-dt, lobes, part)
+        for piece in _merge_small(pieces, footprint[box], min_part_m2):
             mask = np.zeros_like(comp)
-            mask[box] = parts == i
-            if mask.any():
-                yield mask
+            mask[box] = piece
+            yield mask
+
+
+def _watershed_parts(surface: np.ndarray, peaks: np.ndarray, mask: np.ndarray) -> list:
+    """Watershed basins of ``surface`` from the connected ``peaks`` inside ``mask``; [mask]
+    when there are fewer than two peaks."""
+    from skimage.segmentation import watershed
+
+    # h_maxima can return one maximum as pixels a step apart on a plateau: join those.
+    peaks = cv2.dilate(peaks.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))).astype(bool) & mask
+    markers, k = _label(peaks)
+    if k <= 1:
+        return [mask]
+    basins = watershed(surface, markers, mask=mask)
+    return [basins == i for i in range(1, k + 1) if (basins == i).any()]
+
+
+def _merge_small(parts: list, footprint: np.ndarray, min_m2: float) -> list:
+    """Merge the smallest part below ``min_m2`` into the neighbour sharing most border, until none is."""
+    parts = list(parts)
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    while len(parts) > 1:
+        areas = [float(footprint[p].sum()) for p in parts]
+        i = int(np.argmin(areas))
+        if areas[i] >= min_m2:
+            break
+        ring = cv2.dilate(parts[i].astype(np.uint8), cross).astype(bool) & ~parts[i]
+        shared = [int((ring & p).sum()) if j != i else -1 for j, p in enumerate(parts)]
+        j = int(np.argmax(shared))
+        parts[j] = parts[j] | parts[i]
+        del parts[i]
+    return parts
+
+
+def outline(mask: np.ndarray, *, tolerance_px: float = 1.0) -> tuple:
+    """Exterior outline polygons of a bool mask's connected parts, largest first.
+
+    Returns
+    -------
+    tuple of tuple of (int, int)
+        ((u, v), ...) vertices per part, simplified to ``tolerance_px`` (Douglas-Peucker).
+    """
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    contours = sorted(contours, key=lambda c: -cv2.contourArea(c))
+    polys = []
+    for c in contours:
+        c = cv2.approxPolyDP(c, tolerance_px, True)
+        polys.append(tuple((int(p[0][0]), int(p[0][1])) for p in c))
+    return tuple(polys)
 
 
 def _label(mask: np.ndarray):

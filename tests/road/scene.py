@@ -27,8 +27,9 @@ def rotation(pitch_deg: float, roll_deg: float) -> np.ndarray:
 
 
 def pothole_scene(*, width=320, height=240, f=300.0, baseline=0.12, cam_height=1.5, pitch_deg=45.0,
-                  roll_deg=8.0, depth=0.08, radius=0.3, centre=(0.1, 1.5), bump=None):
-    """-> (disparity float32 (H, W), camera, rotation).  ``bump``: optional (x, y, R, H) dome."""
+                  roll_deg=8.0, depth=0.08, radius=0.3, centre=(0.1, 1.5), bump=None, more=()):
+    """-> (disparity float32 (H, W), camera, rotation).  ``bump``: optional (x, y, R, H) dome;
+    ``more``: further paraboloid potholes (x, y, R, D); where they overlap the deepest wins."""
     cam = Camera(f=f, baseline=baseline, cx=(width - 1) / 2.0, cy=(height - 1) / 2.0)
     rot = rotation(pitch_deg, roll_deg)
     v, u = np.mgrid[0:height, 0:width].astype(np.float64)
@@ -37,8 +38,11 @@ def pothole_scene(*, width=320, height=240, f=300.0, baseline=0.12, cam_height=1
     o = np.array([0.0, 0.0, cam_height])
 
     def surface(x, y):
-        r2 = ((x - centre[0]) ** 2 + (y - centre[1]) ** 2) / radius ** 2
-        z = -depth * np.clip(1.0 - r2, 0.0, None)
+        sink = np.zeros_like(x)
+        for hx, hy, hr, hd in ((centre[0], centre[1], radius, depth), *more):
+            r2 = ((x - hx) ** 2 + (y - hy) ** 2) / hr ** 2
+            sink = np.maximum(sink, hd * np.clip(1.0 - r2, 0.0, None))
+        z = -sink
         if bump is not None:
             bx, by, br, bh = bump
             b2 = ((x - bx) ** 2 + (y - by) ** 2) / br ** 2
