@@ -323,11 +323,11 @@ def test_failing_pair_in_the_middle(tmp_path, pairs_root):
 def test_unexpected_exception_in_a_pair_is_recorded(tmp_path, pairs_root, monkeypatch):
     real = d3cli.batch.runner.compute_pair
 
-    def flaky(method, cfg, left, right, *, max_disparity):
+    def flaky(method, cfg, left, right, *, max_disparity, **kwargs):
         flaky.calls += 1
         if flaky.calls == 2:  # the second pair, b
             raise ValueError("kernel exploded")
-        return real(method, cfg, left, right, max_disparity=max_disparity)
+        return real(method, cfg, left, right, max_disparity=max_disparity, **kwargs)
 
     flaky.calls = 0
     monkeypatch.setattr(d3cli.batch.runner, "compute_pair", flaky)
@@ -378,7 +378,7 @@ def test_keyboard_interrupt_propagates_and_is_recorded(tmp_path, pairs_root, mon
 
     calls = []
 
-    def interrupt(method, cfg, left, right, *, max_disparity):
+    def interrupt(method, cfg, left, right, *, max_disparity, **kwargs):
         calls.append(1)
         if len(calls) == 2:
             raise KeyboardInterrupt

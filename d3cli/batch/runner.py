@@ -571,6 +571,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     batch.n_failed = sum(r["status"] == "failed" for r in batch.rows)
     batch.n_computed = sum(r["status"] == "ok" for r in records)
     batch.n_skipped = sum(r["status"] == "skipped" for r in records)
+    run_counts = {"n_computed": batch.n_computed, "n_skipped": batch.n_skipped, "n_failed": batch.n_failed}
     if cfg.road.report or (shard is None and is_our_summary(out / DEFECTS_CSV)):
         # Without --road-report too: pairs computed again lost their defects.json, so an
         # earlier defects.csv would list defects of maps that are gone.
@@ -579,9 +580,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     if evaluate and shard is not None:
         log.info("--shard: summary files are left to `d3stereo eval %s --gt ... -o REPORT` once every shard is done", out)
     elif evaluate:
-        report.write_summary(out, batch.rows, method=method, extra={"settings": settings},
-                             run_counts={"n_computed": batch.n_computed, "n_skipped": batch.n_skipped,
-                                         "n_failed": batch.n_failed})
+        report.write_summary(out, batch.rows, method=method, extra={"settings": settings}, run_counts=run_counts)
         batch.summary = report.summarize(batch.rows)
     if not evaluate or shard is not None:
         # issue 12 item 7: the summary of an earlier --eval run (maybe another method) would
@@ -590,8 +589,8 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
             log.info("%s: removed the summary of an earlier --eval run (rerun with --eval to score)", out / name)
     _write_run_json(batch, records, **meta, interrupted=False)
     # issue 13: the page people look at, after every batch.
-    write_report_html(out, batch.rows, title=f"d3stereo {method}: {out}",
-                                          config=cfg.to_dict(), versions=package_versions())
+    write_report_html(out, batch.rows, title=f"d3stereo {method}: {out}", config=cfg.to_dict(),
+                      versions=package_versions(), run_counts=run_counts)
     return batch
 
 

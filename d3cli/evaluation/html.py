@@ -20,7 +20,7 @@ from pathlib import Path
 from urllib.parse import quote
 
 from ..data.io import atomic_write
-from .report import jsonable, summarize
+from .report import counts_sentence, jsonable, summarize
 
 REPORT_FILE = "report.html"
 
@@ -96,18 +96,24 @@ def histogram_svg(values: list[float], *, label: str, bins: int = 12, width: int
 
 
 def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
-                config: Mapping | None = None, versions: Mapping | None = None) -> str:
-    """The page's text for the pair rows of a batch whose pair folders lie in ``out_dir``."""
+                config: Mapping | None = None, versions: Mapping | None = None,
+                run_counts: Mapping | None = None) -> str:
+    """The page's text for the pair rows of a batch whose pair folders lie in ``out_dir``.
+
+    ``run_counts`` (``n_computed``, ``n_skipped``, ``n_failed`` of run.json) splits the
+    ok pairs into computed and kept from an earlier run, as summary.md does.
+    """
     out_dir = Path(out_dir)
     rows = [dict(r) for r in rows]
     summary = summarize(rows)
+    if run_counts is not None:
+        summary["run"] = {key: int(run_counts[key]) for key in ("n_computed", "n_skipped", "n_failed")}
     columns = [c for c in TABLE_COLUMNS if any(_num(r.get(c)) is not None for r in rows)]
     e = html.escape
     out = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{e(title)}</title>'
            f"<style>{_CSS}</style></head><body><h1>{e(title)}</h1>"]
     counts = summary["counts"]
-    out.append(f"<p>{len(rows)} pairs: " + ", ".join(f"{counts.get(s, 0)} {s}" for s in ("ok", "failed", "skipped"))
-               + ". Metric definitions: README section “Metrics (exact definitions)”; _all = all pixels with "
+    out.append(f"<p>{e(counts_sentence(summary))} Metric definitions: README section “Metrics (exact definitions)”; _all = all pixels with "
                  "ground truth, _noc = non-occluded mask.</p>")
     # Summary table
     out.append('<h2>Pairs</h2><table class="sortable"><thead><tr><th>pair</th><th>family</th><th>status</th>'
@@ -269,7 +275,8 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
 
 
 def write_report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
-                      config: Mapping | None = None, versions: Mapping | None = None) -> Path:
-    """Write ``out_dir/report.html`` atomically; returns its path."""
-    text = report_html(out_dir, rows, title=title, config=config, versions=versions)
+                      config: Mapping | None = None, versions: Mapping | None = None,
+                      run_counts: Mapping | None = None) -> Path:
+    """Write ``out_dir/report.html`` atomically (:func:`report_html`); returns its path."""
+    text = report_html(out_dir, rows, title=title, config=config, versions=versions, run_counts=run_counts)
     return atomic_write(Path(out_dir) / REPORT_FILE, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))

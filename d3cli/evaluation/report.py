@@ -396,7 +396,7 @@ def summary_markdown(summary: Mapping, rows: Iterable[Mapping]) -> str:
     lines = [
         f"# Evaluation: {summary.get('method', '')}".rstrip(),
         "",
-        _counts_sentence(summary),
+        counts_sentence(summary),
         "",
         "Means over the ok pairs that have the value. EPE in px; PEP(δ) = % of pixels with "
         "|d - gt| > δ px over pixels with valid ground truth (a pixel without an estimate "
@@ -421,7 +421,7 @@ def summary_markdown(summary: Mapping, rows: Iterable[Mapping]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _counts_sentence(summary: Mapping) -> str:
+def counts_sentence(summary: Mapping) -> str:
     """``6 pairs: 4 ok, 1 failed, 1 skipped.``; after a ``d3stereo run`` (``summary["run"]``)
     the ok pairs are split as run.json counts them: ``6 pairs: 6 ok (2 computed, 4 skipped
     as complete), 0 failed.`` (issue 12 item 7: "skipped" there means kept from an earlier

@@ -23,7 +23,7 @@ def _default_sigint():
 def test_ctrl_c_inside_a_numba_kernel_stops_the_batch_and_fails_no_pair(tmp_path, pairs_root, monkeypatch):
     real = d3cli.batch.runner.compute_pair
 
-    def kernel_interrupted(method, cfg, left, right, *, max_disparity):
+    def kernel_interrupted(method, cfg, left, right, *, max_disparity, **kwargs):
         if (tmp_path / "second").exists():
             # what numba raises when SIGINT arrives inside a compiled function
             try:
@@ -31,7 +31,7 @@ def test_ctrl_c_inside_a_numba_kernel_stops_the_batch_and_fails_no_pair(tmp_path
             except KeyboardInterrupt:
                 raise SystemError("<numba function> returned a result with an exception set")
         (tmp_path / "second").touch()
-        return real(method, cfg, left, right, max_disparity=max_disparity)
+        return real(method, cfg, left, right, max_disparity=max_disparity, **kwargs)
 
     monkeypatch.setattr(d3cli.batch.runner, "compute_pair", kernel_interrupted)
     out = tmp_path / "out"

@@ -411,9 +411,9 @@ def test_oversize_pair_fails_alone_before_computing(tmp_path, make_pair_folder, 
     computed = []
     real = d3cli.batch.runner.compute_pair
 
-    def spy(method, cfg, left, right, *, max_disparity):
+    def spy(method, cfg, left, right, *, max_disparity, **kwargs):
         computed.append(left.shape)
-        return real(method, cfg, left, right, max_disparity=max_disparity)
+        return real(method, cfg, left, right, max_disparity=max_disparity, **kwargs)
 
     monkeypatch.setattr(d3cli.batch.runner, "compute_pair", spy)
     out = tmp_path / "out"

@@ -281,7 +281,10 @@ def test_ctrl_c_or_sigterm_with_workers_exits_130_or_143_and_rerun_resumes(tmp_p
     serial, out = big_serial, tmp_path / "pool"
     cmd = [sys.executable, "-m", "d3cli", "run", str(big_pairs), "-o", str(out), "--method", "sgbm", "-q",
            "--workers", "2"]
-    proc = subprocess.Popen(cmd, env=env_with_package(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # SIGINT back to its default in the child: a shell starts background jobs with it
+    # ignored, and an ignored SIGINT would never reach the batch
+    proc = subprocess.Popen(cmd, env=env_with_package(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 90
         while not list(out.glob("*/result.json")):

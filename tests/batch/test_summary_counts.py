@@ -1,4 +1,4 @@
-"""summary.md and summary.json count the pairs as run.json does (issue 12 item 7): pairs
+"""summary.md, summary.json and report.html count the pairs as run.json does (issue 12 item 7): pairs
 kept complete from an earlier run are "skipped as complete", not silently "ok"."""
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ def test_summary_counts_agree_with_run_json_on_a_rerun(tmp_path, pairs_root):
     again = _run(pairs_root, out)
     assert [p["status"] for p in again["pairs"]] == ["skipped", "ok", "skipped"]
     assert _counts_line(out) == "3 pairs: 3 ok (1 computed, 2 skipped as complete), 0 failed."
+    assert "<p>3 pairs: 3 ok (1 computed, 2 skipped as complete), 0 failed. " in (out / "report.html").read_text()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["run"] == {"n_computed": again["n_computed"], "n_skipped": again["n_skipped"],
                               "n_failed": again["n_failed"]} == {"n_computed": 1, "n_skipped": 2, "n_failed": 0}
