@@ -125,16 +125,6 @@ def test_shards_fill_one_out_and_eval_covers_all(tmp_path, pair_root, serial_sgb
 distributed = pytest.importorskip("distributed")
 
 
-@pytest.fixture
-def local_cluster():
-    cluster = distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1, host="127.0.0.1",
-                                       dashboard_address=None, worker_dashboard_address=None)
-    try:
-        yield cluster
-    finally:
-        cluster.close()
-
-
 def test_local_cluster_is_byte_identical_and_records_a_bad_pair_once(tmp_path, pair_root, serial_sgbm,
                                                                       local_cluster):
     cfg = load_config(None)

@@ -133,16 +133,6 @@ def test_bad_start_method_is_one_error_line(tmp_path, small_pairs, monkeypatch):
 distributed = pytest.importorskip("distributed")
 
 
-@pytest.fixture
-def cluster():
-    cluster = distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1, host="127.0.0.1",
-                                       dashboard_address=None, worker_dashboard_address=None)
-    try:
-        yield cluster
-    finally:
-        cluster.close()
-
-
 def on_workers(cluster, function) -> list[str]:
     """Run ``function`` in every worker process of ``cluster``; their addresses, sorted."""
     with distributed.Client(cluster, set_as_default=False) as client:
@@ -150,7 +140,8 @@ def on_workers(cluster, function) -> list[str]:
         return sorted(client.scheduler_info()["workers"])
 
 
-def test_worker_with_another_version_is_one_error_line(tmp_path, small_pairs, cluster):
+def test_worker_with_another_version_is_one_error_line(tmp_path, small_pairs, local_cluster):
+    cluster = local_cluster
     # As a worker with another install would answer: its d3cli says another version.
     workers = on_workers(cluster, lambda: setattr(importlib.import_module("d3cli"), "__version__", "0.0.1+other"))
     out = tmp_path / "o"
@@ -185,7 +176,8 @@ def read_only_under(folder: str):
     return patch
 
 
-def test_workers_that_cannot_write_out_is_one_error_line(tmp_path, small_pairs, cluster):
+def test_workers_that_cannot_write_out_is_one_error_line(tmp_path, small_pairs, local_cluster):
+    cluster = local_cluster
     out = (tmp_path / "o").resolve()
     workers = on_workers(cluster, read_only_under(str(out)))
     result = invoke("run", small_pairs, "-o", out, "--method", "sgbm", "-q", "--scheduler", cluster.scheduler_address)
