@@ -42,6 +42,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..config import Config
+from ..method.features import npz_path
 
 #: Config sections that are all a baseline receives (d3cli.batch.methods.compute_pair).
 _BASELINE_SECTIONS = {"sgbm": ("sgbm",), "elas": ("peers",), "pandora-sgm": ("peers",)}
@@ -137,8 +138,7 @@ def feature_files(cfg: Config, method: str, pair) -> list:
     if method != "d3stereo" or cfg.cost.kind != "features":
         return []
     if cfg.features.npz:
-        path = Path(cfg.features.npz)
-        return [path if path.is_absolute() else Path(pair.left).parent / path]
+        return [Path(npz_path(cfg.features.npz, Path(pair.left).parent))]
     return [Path(cfg.features.model)] if cfg.features.model else []
 
 

@@ -202,6 +202,14 @@ def feature_bytes(shape: tuple[int, int], channels_per_level: list[int]) -> int:
 NPZ_KEY = "{view}_{level}"
 
 
+def npz_path(npz: str, pair_dir=None) -> str:
+    """Where ``features.npz`` is for a pair: a relative path is the pair's own, in
+    ``pair_dir`` (the folder of its left image); without one, as given."""
+    if pair_dir is not None and not os.path.isabs(npz):
+        return os.path.join(os.fspath(pair_dir), npz)
+    return npz
+
+
 def _npz_error(path, what: str) -> InputError:
     return InputError(f"{path}: {what}; write per-level arrays left_0, right_0, left_1, ... of shape "
                       "(H / 2^i, W / 2^i, C), finite, equal for both views (README 'Deep-feature cost pyramids')")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import os
 import time
 from dataclasses import dataclass, field
 
@@ -16,7 +15,7 @@ from ..kernels import get_backend
 from .band import band_indexes
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
-from .features import feature_pyramid, load_feature_npz
+from .features import feature_pyramid, load_feature_npz, npz_path
 from .perspective import RoadModel, fit_road_model, restored_validity, shift_map
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
 from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity
@@ -199,9 +198,7 @@ class D3Stereo:
 
     def _npz_features(self, image_shape, shapes, pair_dir, road):
         """Feature pyramid from the precomputed ``features.npz`` (finest level first)."""
-        path = self.cfg.features.npz
-        if pair_dir is not None and not os.path.isabs(path):
-            path = os.path.join(os.fspath(pair_dir), path)
+        path = npz_path(self.cfg.features.npz, pair_dir)
         if road is not None:
             raise InputError(f"{path}: precomputed features cannot follow the perspective transformation (the "
                              "right features must come from the warped image); use features.model or pt.enabled: false")
