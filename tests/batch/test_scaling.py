@@ -216,10 +216,36 @@ def big_serial(big_pairs, tmp_path_factory):
     return out
 
 
-def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, big_pairs, big_serial):
-    """`dask scheduler` + two `dask worker --no-nanny` on 127.0.0.1, `python -m d3cli run --scheduler`;
-    one worker is SIGKILLed after the first pair finishes: exit 0, every map as serial."""
-    serial = big_serial
+@pytest.fixture(scope="module")
+def d3_pairs(tmp_path_factory):
+    """Eight 360x640 pairs for the default method (d3stereo): a few tenths of a second each."""
+    from tests.helpers import textured_pair, write_png
+
+    root = tmp_path_factory.mktemp("d3-eight")
+    for i, name in enumerate(BIG):
+        folder = root / name
+        folder.mkdir()
+        left, right, _ = textured_pair(3 + i, (360, 640), seed=10 + i)
+        write_png(folder / "left.png", left)
+        write_png(folder / "right.png", right)
+    return root
+
+
+@pytest.fixture(scope="module")
+def d3_serial(d3_pairs, tmp_path_factory):
+    out = tmp_path_factory.mktemp("d3-eight-serial")
+    assert invoke("run", d3_pairs, "-o", out, "-q").exit_code == 0
+    return out
+
+
+@pytest.mark.parametrize("method", ["d3stereo", "sgbm"])
+def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, request, method):
+    """Issue 11's Done-when: `dask scheduler` + two `dask worker --no-nanny` on 127.0.0.1,
+    `python -m d3cli run --scheduler` on 8 pairs; one worker is SIGKILLed after the first
+    pair finishes: exit 0, every map as serial.  The default method (d3stereo) on 360x640
+    pairs, SGBM on 720x1280 ones."""
+    pairs_fixture, serial_fixture = ("d3_pairs", "d3_serial") if method == "d3stereo" else ("big_pairs", "big_serial")
+    big_pairs, serial = request.getfixturevalue(pairs_fixture), request.getfixturevalue(serial_fixture)
     env = env_with_package()
     sched_file = tmp_path / "scheduler.json"
     procs = []
@@ -240,7 +266,7 @@ def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, bi
         procs += workers
         out = tmp_path / "cluster-out"
         client = subprocess.Popen([sys.executable, "-m", "d3cli", "run", str(big_pairs), "-o", str(out),
-                                   "--method", "sgbm", "-q", "--scheduler", address],
+                                   "--method", method, "-q", "--scheduler", address],
                                   env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         procs.append(client)
         deadline = time.monotonic() + 90
