@@ -74,6 +74,9 @@ class CostConfig:
     level_windows: tuple[int, ...] = ()  # ... unless given per level, finest first
     min_variance: float = 1e-2  # grey-level variance (0-255 scale) below which a window is flat
     kind: str = "ncc"  # ncc | features (the features section; levels without a feature map use NCC)
+    # census cost blended into NCC, C = (1 - w) C_ncc + w C_census (issue 16; 0: NCC only)
+    census_weight: float = 0.0
+    census_window: int = 7  # odd census window; window^2 - 1 <= 63 bits
 
 
 @dataclass(frozen=True)
@@ -162,6 +165,10 @@ class RefineConfig:
 
     subpixel: bool = True  # parabola through C(d-1), C(d), C(d+1), clamped to +-0.5
     occlusion_check: bool = True  # uniqueness + left-border tests: estimates with no possible true match become holes
+    # connected regions of decided pixels (neighbours within speckle_range px) with at most
+    # speckle_size pixels become holes before filling (issue 16); 0: off
+    speckle_size: int = 0
+    speckle_range: float = 1.0
     fill: bool = True  # False: undecided pixels stay inf in disp.pfm
     fill_inside: bool = False  # non-occluded holes take the median of 4 directions, not the background side
     smooth_filled: bool = True  # 5x5 median over the filled pixels only
@@ -284,6 +291,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     ),
     "cost.min_variance": (lambda v: v >= 0, "a number >= 0"),
     "cost.kind": (lambda v: v in ("ncc", "features"), "one of ncc, features"),
+    "cost.census_weight": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
+    "cost.census_window": (lambda v: v >= 3 and v % 2 == 1 and v * v - 1 <= 63, "an odd integer in [3, 7]"),
     "features.channel_order": (lambda v: v in ("rgb", "bgr"), "one of rgb, bgr"),
     "features.scale": (lambda v: v > 0, "a number > 0"),
     "features.mean": (lambda v: len(v) in (1, 3), "a list of 1 or 3 numbers"),
@@ -308,6 +317,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "pt.min_inlier_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
     "pt.inlier_threshold": (lambda v: v > 0, "a number > 0"),
     "pt.iterations": (lambda v: 1 <= v <= 100, "an integer in [1, 100]"),
+    "refine.speckle_size": (lambda v: 0 <= v <= 100000, "an integer in [0, 100000]"),
+    "refine.speckle_range": (lambda v: 0 < v <= 64, "a number in (0, 64]"),
     "refine.smooth_radius": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
     "refine.smooth_sigma": (lambda v: v > 0, "a number > 0 (pixels)"),
     "camera.f": (lambda v: v is None or v > 0, "a positive number (pixels) or null"),

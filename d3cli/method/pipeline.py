@@ -18,7 +18,7 @@ from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
 from .perspective import RoadModel, fit_road_model, restored_validity, shift_map
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
-from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity
+from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity, speckles
 
 log = logging.getLogger(__name__)
 
@@ -420,6 +420,11 @@ class D3Stereo:
             valid = valid & ~occluded
             out = np.where(valid, out, np.inf).astype(np.float32)
             info["occluded_share"] = float(occluded.mean())
+        if cfg.refine.speckle_size > 0:
+            speck = speckles(out, valid, max_size=cfg.refine.speckle_size, max_diff=cfg.refine.speckle_range)
+            valid = valid & ~speck
+            out = np.where(valid, out, np.inf).astype(np.float32)
+            info["speckle_share"] = float(speck.mean())
         if cfg.refine.fill:
             out = fill_holes(
                 out, valid, smooth=cfg.refine.smooth_filled, occluded=occluded if cfg.refine.fill_inside else None
