@@ -74,9 +74,6 @@ class CostConfig:
     level_windows: tuple[int, ...] = ()  # ... unless given per level, finest first
     min_variance: float = 1e-2  # grey-level variance (0-255 scale) below which a window is flat
     kind: str = "ncc"  # ncc | features (the features section; levels without a feature map use NCC)
-    # census cost blended into NCC, C = (1 - w) C_ncc + w C_census (issue 16; 0: NCC only)
-    census_weight: float = 0.0
-    census_window: int = 7  # odd census window; window^2 - 1 <= 63 bits
 
 
 @dataclass(frozen=True)
@@ -291,8 +288,6 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     ),
     "cost.min_variance": (lambda v: v >= 0, "a number >= 0"),
     "cost.kind": (lambda v: v in ("ncc", "features"), "one of ncc, features"),
-    "cost.census_weight": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
-    "cost.census_window": (lambda v: v >= 3 and v % 2 == 1 and v * v - 1 <= 63, "an odd integer in [3, 7]"),
     "features.channel_order": (lambda v: v in ("rgb", "bgr"), "one of rgb, bgr"),
     "features.scale": (lambda v: v > 0, "a number > 0"),
     "features.mean": (lambda v: len(v) in (1, 3), "a list of 1 or 3 numbers"),

@@ -9,10 +9,7 @@ configuration into the scalars the kernels take; the kernels live in
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..config import Config
-from ..kernels import census
 from ..kernels.volume import Volume, dense_index
 from .pyramid import level_max_disparity
 
@@ -41,46 +38,6 @@ def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: f
         Lower is better; 1 where u - d < 0 or a window is flat.
     """
     return backend.ncc_cost_volume(left, right, int(max_disparity), int(window), float(min_variance), index=index)
-
-
-def blend_census(cost: Volume, left, right, *, window: int, weight: float, backend) -> Volume:
-    """Mix the census cost into a raw NCC volume, in place (addition to step 2, issue 16).
-
-    ``C = (1 - weight) C_ncc + weight H / n`` with ``H`` the Hamming distance of the
-    ``window`` x ``window`` census codes of the left pixel and its match, ``n`` the number
-    of bits (:mod:`d3cli.kernels.census`).  Census depends only on the order of grey levels:
-    it stays informative where the two cameras' gains differ and where a nearly flat
-    window makes NCC stretch sensor noise to full contrast (KITTI road surfaces: of the
-    decided pixels more than 1.5 px off, 98 % had a lower NCC cost at their wrong
-    disparity than at the true one, so no decision rule could have fixed them).
-
-    Parameters
-    ----------
-    cost : Volume
-        Raw NCC volume of the level (backend arrays); modified in place and returned.
-    left, right : float32 (H, W) arrays of the backend
-        Grey images of the level.
-    window : int
-        Odd census window, ``window**2 - 1 <= 63``.
-    weight : float
-        Share of the census cost, in [0, 1].
-    backend : module
-
-    Returns
-    -------
-    Volume
-        ``cost`` itself; cells with ``u - d < 0`` keep 1.0.
-    """
-    host_l = np.ascontiguousarray(backend.to_host(left), dtype=np.float32)
-    host_r = np.ascontiguousarray(backend.to_host(right), dtype=np.float32)
-    codes_l = census.census_codes(host_l, int(window))
-    codes_r = census.census_codes(host_r, int(window))
-    bits = census.census_bits(window)
-    if backend.__name__.rsplit(".", 1)[-1] == "cuda":
-        census.blend_census_cuda(cost.cost, cost.index, codes_l, codes_r, float(weight), bits)
-    else:
-        census.blend_census(cost.cost, np.asarray(cost.index), codes_l, codes_r, float(weight), bits)
-    return cost
 
 
 def aggregate(
@@ -234,9 +191,6 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
             backend=backend,
             index=store,
         )
-        if cfg.cost.census_weight > 0:
-            cost = blend_census(cost, left, right, window=cfg.cost.census_window, weight=cfg.cost.census_weight,
-                                backend=backend)
     agg = cfg.aggregation
     cost = aggregate(
         cost,
