@@ -171,6 +171,7 @@ class RefineConfig:
     smooth_filled: bool = True  # 5x5 median over the filled pixels only
     smooth_radius: int = 0  # edge-preserving smoothing of the result, box radius in pixels; 0: off
     smooth_sigma: float = 1.0  # range sigma of that smoothing, disparity pixels (residual to the road model with PT)
+    smooth_kernel: str = "gaussian"  # its range kernel: gaussian | box (mean of neighbours within smooth_sigma; faster)
 
 
 @dataclass(frozen=True)
@@ -312,6 +313,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "pt.min_inlier_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
     "pt.inlier_threshold": (lambda v: v > 0, "a number > 0"),
     "pt.iterations": (lambda v: 1 <= v <= 100, "an integer in [1, 100]"),
+    "refine.smooth_kernel": (lambda v: v in ("gaussian", "box"), "one of gaussian, box"),
     "refine.speckle_size": (lambda v: 0 <= v <= 100000, "an integer in [0, 100000]"),
     "refine.speckle_range": (lambda v: 0 < v <= 64, "a number in (0, 64]"),
     "refine.smooth_radius": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),

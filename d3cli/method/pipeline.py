@@ -434,7 +434,8 @@ class D3Stereo:
             # residuals from the road plane when there is one (a slanted road is no edge)
             plane = None if road is None else shift_map(road, out.shape, margin=0.0)
             out = smooth_disparity(out, np.isfinite(out), radius=cfg.refine.smooth_radius,
-                                   sigma=cfg.refine.smooth_sigma, plane=plane)
+                                   sigma=cfg.refine.smooth_sigma, plane=plane,
+                                   kernel=cfg.refine.smooth_kernel)
             # averaging residuals to a plane that dips below zero (far road, sky) can end
             # a hair below 0; disparities are >= 0 by contract
             with np.errstate(invalid="ignore"):

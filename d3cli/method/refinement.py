@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..kernels import finishing
+from ..kernels import finishing, range_box
 
 
 def _as_map(disparity) -> np.ndarray:
@@ -191,6 +191,7 @@ def smooth_disparity(
     radius: int,
     sigma: float,
     plane: np.ndarray | None = None,
+    kernel: str = "gaussian",
 ) -> np.ndarray:
     """Edge-preserving smoothing of a disparity map (addition to step 8, measured).
 
@@ -223,6 +224,11 @@ def smooth_disparity(
         Range sigma in disparity pixels (> 0).
     plane : ndarray, float, (H, W), optional, keyword-only
         Reference disparity subtracted before and added after filtering (road model).
+    kernel : {"gaussian", "box"}, keyword-only
+        Range kernel.  ``box`` (issue 16): every finite pixel takes the plain mean of the
+        valid residuals in its box that lie within ``sigma`` of its own
+        (:func:`d3cli.kernels.range_box.box_range_smooth`, direct sums, no ``exp``): the
+        same KITTI accuracy as the Gaussian at radius 4, about ten times faster.
 
     Returns
     -------
@@ -233,6 +239,13 @@ def smooth_disparity(
     if radius <= 0 or disp.size == 0:
         return disp.copy()
     base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
+    if kernel == "box":
+        finite = np.isfinite(disp)
+        resid = np.where(finite, disp - base, np.float32(np.inf)).astype(np.float32)
+        smoothed = range_box.box_range_smooth(resid, valid & finite, int(radius), float(sigma))
+        return np.where(finite, smoothed + base, disp).astype(np.float32)
+    if kernel != "gaussian":
+        raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
     resid, use, row_lo, row_hi, row_use = finishing.residual_and_range(disp, base, valid)
     if not row_use.any():
         return disp.copy()
