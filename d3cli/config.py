@@ -162,11 +162,16 @@ class RefineConfig:
 
     subpixel: bool = True  # parabola through C(d-1), C(d), C(d+1), clamped to +-0.5
     occlusion_check: bool = True  # uniqueness + left-border tests: estimates with no possible true match become holes
+    # connected regions of decided pixels (neighbours within speckle_range px) with at most
+    # speckle_size pixels become holes before filling (issue 16); 0: off
+    speckle_size: int = 0
+    speckle_range: float = 1.0
     fill: bool = True  # False: undecided pixels stay inf in disp.pfm
     fill_inside: bool = False  # non-occluded holes take the median of 4 directions, not the background side
     smooth_filled: bool = True  # 5x5 median over the filled pixels only
     smooth_radius: int = 0  # edge-preserving smoothing of the result, box radius in pixels; 0: off
     smooth_sigma: float = 1.0  # range sigma of that smoothing, disparity pixels (residual to the road model with PT)
+    smooth_kernel: str = "gaussian"  # its range kernel: gaussian | box (mean of neighbours within smooth_sigma; faster)
 
 
 @dataclass(frozen=True)
@@ -308,6 +313,9 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "pt.min_inlier_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
     "pt.inlier_threshold": (lambda v: v > 0, "a number > 0"),
     "pt.iterations": (lambda v: 1 <= v <= 100, "an integer in [1, 100]"),
+    "refine.smooth_kernel": (lambda v: v in ("gaussian", "box"), "one of gaussian, box"),
+    "refine.speckle_size": (lambda v: 0 <= v <= 100000, "an integer in [0, 100000]"),
+    "refine.speckle_range": (lambda v: 0 < v <= 64, "a number in (0, 64]"),
     "refine.smooth_radius": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
     "refine.smooth_sigma": (lambda v: v > 0, "a number > 0 (pixels)"),
     "camera.f": (lambda v: v is None or v > 0, "a positive number (pixels) or null"),

@@ -18,7 +18,7 @@ from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
 from .perspective import RoadModel, fit_road_model, restored_validity, shift_map
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
-from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity
+from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity, speckles
 
 log = logging.getLogger(__name__)
 
@@ -420,6 +420,11 @@ class D3Stereo:
             valid = valid & ~occluded
             out = np.where(valid, out, np.inf).astype(np.float32)
             info["occluded_share"] = float(occluded.mean())
+        if cfg.refine.speckle_size > 0:
+            speck = speckles(out, valid, max_size=cfg.refine.speckle_size, max_diff=cfg.refine.speckle_range)
+            valid = valid & ~speck
+            out = np.where(valid, out, np.inf).astype(np.float32)
+            info["speckle_share"] = float(speck.mean())
         if cfg.refine.fill:
             out = fill_holes(
                 out, valid, smooth=cfg.refine.smooth_filled, occluded=occluded if cfg.refine.fill_inside else None
@@ -429,7 +434,8 @@ class D3Stereo:
             # residuals from the road plane when there is one (a slanted road is no edge)
             plane = None if road is None else shift_map(road, out.shape, margin=0.0)
             out = smooth_disparity(out, np.isfinite(out), radius=cfg.refine.smooth_radius,
-                                   sigma=cfg.refine.smooth_sigma, plane=plane)
+                                   sigma=cfg.refine.smooth_sigma, plane=plane,
+                                   kernel=cfg.refine.smooth_kernel)
             # averaging residuals to a plane that dips below zero (far road, sky) can end
             # a hair below 0; disparities are >= 0 by contract
             with np.errstate(invalid="ignore"):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..kernels import finishing
+from ..kernels import finishing, range_box
 
 
 def _as_map(disparity) -> np.ndarray:
@@ -94,6 +94,41 @@ def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int)
     return finishing.out_of_view_mask(disp, _like(valid, disp, bool), start)
 
 
+def speckles(disparity: np.ndarray, valid: np.ndarray, *, max_size: int, max_diff: float) -> np.ndarray:
+    """Small isolated regions of estimates: the speckle filter (issue 16).
+
+    Decided pixels are joined into regions through their 4-neighbours whose disparity
+    differs by at most ``max_diff``; a region of at most ``max_size`` pixels is a speckle.
+    A wrong local minimum of the cost spreads (diffusion, tau = 1) into a small patch
+    that no smooth surface continues; a true surface, even a thin one, is mostly larger.
+    Disparities are compared in 1/16 px fixed point (``cv2.filterSpeckles``).
+
+    Parameters
+    ----------
+    disparity : ndarray, float32, (H, W)
+        Values of non-valid pixels are ignored.
+    valid : ndarray, bool, (H, W)
+    max_size : int, keyword-only
+        Largest speckle, pixels; 0 returns no speckle.
+    max_diff : float, keyword-only
+        Largest disparity step between two neighbours of a region, pixels.
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+        True on valid pixels that belong to a speckle.
+    """
+    disp = _as_map(disparity)
+    valid = _like(valid, disp, bool) & np.isfinite(disp)
+    if max_size <= 0 or not valid.any():
+        return np.zeros(disp.shape, bool)
+    # 1/16 px fixed point as OpenCV's own disparities; -1 marks the holes, which
+    # filterSpeckles leaves out of every region (its newVal)
+    fixed = np.where(valid, np.clip(np.round(disp * 16.0), 0, 32767), -1).astype(np.int16)
+    cv2.filterSpeckles(fixed, -1, int(max_size), max(1, int(round(float(max_diff) * 16.0))))
+    return valid & (fixed == -1)
+
+
 def fill_holes(
     disparity: np.ndarray, valid: np.ndarray, *, smooth: bool = True, occluded: np.ndarray | None = None
 ) -> np.ndarray:
@@ -156,6 +191,7 @@ def smooth_disparity(
     radius: int,
     sigma: float,
     plane: np.ndarray | None = None,
+    kernel: str = "gaussian",
 ) -> np.ndarray:
     """Edge-preserving smoothing of a disparity map (addition to step 8, measured).
 
@@ -188,6 +224,11 @@ def smooth_disparity(
         Range sigma in disparity pixels (> 0).
     plane : ndarray, float, (H, W), optional, keyword-only
         Reference disparity subtracted before and added after filtering (road model).
+    kernel : {"gaussian", "box"}, keyword-only
+        Range kernel.  ``box`` (issue 16): every finite pixel takes the plain mean of the
+        valid residuals in its box that lie within ``sigma`` of its own
+        (:func:`d3cli.kernels.range_box.box_range_smooth`, direct sums, no ``exp``): the
+        same KITTI accuracy as the Gaussian at radius 4, about ten times faster.
 
     Returns
     -------
@@ -198,6 +239,13 @@ def smooth_disparity(
     if radius <= 0 or disp.size == 0:
         return disp.copy()
     base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
+    if kernel == "box":
+        finite = np.isfinite(disp)
+        resid = np.where(finite, disp - base, np.float32(np.inf)).astype(np.float32)
+        smoothed = range_box.box_range_smooth(resid, valid & finite, int(radius), float(sigma))
+        return np.where(finite, smoothed + base, disp).astype(np.float32)
+    if kernel != "gaussian":
+        raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
     resid, use, row_lo, row_hi, row_use = finishing.residual_and_range(disp, base, valid)
     if not row_use.any():
         return disp.copy()
