@@ -128,17 +128,39 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
     ch, cw = coarse.shape
     nty = (h + tile - 1) // tile
     ntx = (w + tile - 1) // tile
+    # Per column, once (issue 10: no integer divisions per pixel): the coarse column, the
+    # tile column and the tile columns within the halo.
+    col_cu = np.empty(w, np.int64)
+    col_tx = np.empty(w, np.int64)
+    col_tx0 = np.empty(w, np.int64)
+    col_tx1 = np.empty(w, np.int64)
+    for u in range(w):
+        col_cu[u] = min(u // 2, cw - 1)
+        col_tx[u] = u // tile
+        col_tx0[u] = min(max((u - halo) // tile, 0), ntx - 1)
+        col_tx1[u] = min(max((u + halo) // tile, 0), ntx - 1)
     own_lo = np.zeros((nty, ntx), np.int64)
     own_hi = np.full((nty, ntx), n_disp, np.int64)
     for ty in prange(nty):  # one tile row per task: no two tasks touch a tile
         t_min = np.full(ntx, np.iinfo(np.int64).max, np.int64)
         t_max = np.full(ntx, -1, np.int64)
+        last_cv = -1
         for v in range(ty * tile, min(h, ty * tile + tile)):
             cv = min(v // 2, ch - 1)
+            if cv == last_cv:
+                continue  # the row before read the same coarse row into the same tiles
+            last_cv = cv
+            last_cu = -1
+            last_tx = -1
             for u in range(w):
-                dc = np.int64(coarse[cv, min(u // 2, cw - 1)])
+                cu = col_cu[u]
+                tx = col_tx[u]
+                if cu == last_cu and tx == last_tx:
+                    continue  # the same coarse pixel into the same tile: min/max unchanged
+                last_cu = cu
+                last_tx = tx
+                dc = np.int64(coarse[cv, cu])
                 if dc >= 0:
-                    tx = u // tile
                     t_min[tx] = min(t_min[tx], dc)
                     t_max[tx] = max(t_max[tx], dc)
         for tx in range(ntx):
@@ -164,16 +186,25 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
         ty1 = min(max((v + halo) // tile, 0), nty - 1)
         ty = v // tile
         total = 0
+        last_tx0 = -1
+        last_tx1 = -1
+        last_tx = -1
+        s_lo = 0
+        s_hi = 0
         for u in range(w):
-            tx0 = min(max((u - halo) // tile, 0), ntx - 1)
-            tx1 = min(max((u + halo) // tile, 0), ntx - 1)
-            tx = u // tile
-            s_lo = t_lo[ty, tx]
-            s_hi = t_hi[ty, tx]
-            for yy in range(ty0, ty1 + 1):
-                for xx in range(tx0, tx1 + 1):
-                    s_lo = min(s_lo, t_lo[yy, xx])
-                    s_hi = max(s_hi, t_hi[yy, xx])
+            tx0 = col_tx0[u]
+            tx1 = col_tx1[u]
+            tx = col_tx[u]
+            if tx0 != last_tx0 or tx1 != last_tx1 or tx != last_tx:  # else the same tiles: the same hull
+                last_tx0 = tx0
+                last_tx1 = tx1
+                last_tx = tx
+                s_lo = t_lo[ty, tx]
+                s_hi = t_hi[ty, tx]
+                for yy in range(ty0, ty1 + 1):
+                    for xx in range(tx0, tx1 + 1):
+                        s_lo = min(s_lo, t_lo[yy, xx])
+                        s_hi = max(s_hi, t_hi[yy, xx])
             store[v, u, 1] = s_lo
             store[v, u, 2] = s_hi
             visible[v, u, 1] = t_lo[ty, tx]
