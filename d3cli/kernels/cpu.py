@@ -551,6 +551,33 @@ def rbf_weights(img, sigma_space, sigma_color):
 
 
 @njit(parallel=True, cache=True)
+def _row_layout(index):
+    """``(row_start, max_band, max_row)`` of a volume for the filter passes: the first
+    cell of every row (int64 (H + 1,), cells packed row after row), the widest band and
+    the most cells of a row (each at least 1).  One parallel pass over the index instead
+    of five NumPy passes in the calling thread (issue 10)."""
+    h, w, _ = index.shape
+    row_start = np.zeros(h + 1, np.int64)
+    row_band = np.zeros(h, np.int64)
+    for v in prange(h):
+        total = 0
+        widest = 0
+        for u in range(w):
+            size = np.int64(index[v, u, 2]) - np.int64(index[v, u, 1])
+            total += size
+            widest = max(widest, size)
+        row_start[v + 1] = total
+        row_band[v] = widest
+    max_band = 1
+    max_row = 1
+    for v in range(h):
+        max_band = max(max_band, row_band[v])
+        max_row = max(max_row, row_start[v + 1])
+        row_start[v + 1] += row_start[v]
+    return row_start, max_band, max_row
+
+
+@njit(parallel=True, cache=True)
 def _covered_bands(index):
     """uint8 (H, W) for the filter passes: 2 where the 3x3 neighbours (clamped at the
     border) all have the pixel's band, 1 where their bands contain it (every cell a pass
@@ -818,11 +845,7 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
     work = flat if overwrite_input else flat.copy()
     if t_max == 0 or work.size == 0:
         return _pack(work, index, n_disp, dense_shape)
-    sizes = (index[:, :, 2] - index[:, :, 1]).astype(np.int64)
-    max_band = max(1, int(sizes.max()))
-    row_start = np.zeros(index.shape[0] + 1, np.int64)
-    np.cumsum(sizes.sum(axis=1), out=row_start[1:])
-    max_row = max(1, int(np.diff(row_start).max()))
+    row_start, max_band, max_row = _row_layout(index)
     covered = _covered_bands(index)
     for _ in range(t_max):
         _rbf_pass(work, index, covered, weights, row_start, RBF_STRIP_ROWS, max_band, max_row)
