@@ -131,8 +131,8 @@ def _ransac(u, v, d, threshold, rng):
     solved and scored all at once: NumPy's stacked ``det``/``solve`` run the same LAPACK
     routine per matrix and the scores are the same element-wise float64 expressions, so
     the result is bit for bit that of a loop over the hypotheses (the first of the best
-    counts wins), without 200 rounds of Python and small-array overhead (issue 10:
-    0.094 -> 0.02 s CPU on the 1280x720 road pair).
+    counts wins), without 200 rounds of Python and small-array overhead (issue 10: the
+    whole fit on the coarse map of the 1280x720 road pair 0.044 -> 0.028 s CPU).
     """
     n = u.size
     idx = rng.choice(n, size=min(n, _RANSAC_SAMPLE), replace=False)
