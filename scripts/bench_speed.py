@@ -7,7 +7,9 @@ For every case (a stereo pair + a config):
   ``--reps`` times d3stereo and SGBM *alternately*; the medians and their ratio are
   reported. Alternating in one process keeps the ratio meaningful on a shared, noisy
   machine, where absolute seconds drift between runs. The median of every step of
-  ``result.timings`` (pyramid, cost per level, seeds, diffusion, finish, ...) is printed.
+  ``result.timings`` (pyramid, cost per level, seeds, diffusion, finish, ...) is printed,
+  and the md5 of the d3stereo disparity map (a speed-up that should change no output
+  must leave it as it was).
 * **memory**: one fresh process per method does a single call and reads its peak
   resident set size, ``VmHWM`` of ``/proc/self/status`` (``ru_maxrss`` would carry the
   parent's peak across ``exec``); this is the whole process, interpreter and libraries
@@ -103,6 +105,10 @@ def _config(spec: dict):
 
 def _child_time(spec: dict) -> dict:
     """Warm-up, then d3stereo and SGBM alternately; medians of time and of every step."""
+    import hashlib
+
+    import numpy as np
+
     from d3cli.batch import compute_pair
 
     left, right, dmax, name = _load(spec)
@@ -127,6 +133,8 @@ def _child_time(spec: dict) -> dict:
         if isinstance(res.info.get("pt"), dict) else None,
         "cold_s": cold, "d3_s": statistics.median(d3), "sgbm_s": statistics.median(sg),
         "steps": {k: statistics.median(v) for k, v in steps.items()},
+        # bit-identity check of a speed-up: the same md5 before and after the change
+        "disparity_md5": hashlib.md5(np.ascontiguousarray(res.disparity, dtype=np.float32).tobytes()).hexdigest(),
     }
 
 
@@ -211,6 +219,9 @@ def main(argv=None) -> int:
     print("\nper-step medians (s):")
     for r in rows:
         print(f"  {r['case']}: " + ", ".join(f"{k} {v:.3f}" for k, v in r["steps"].items()))
+    print("\ndisparity md5 (equal before and after a bit-identical speed-up):")
+    for r in rows:
+        print(f"  {r['case']}: {r['disparity_md5']}")
     if args.json_out:
         Path(args.json_out).write_text(json.dumps(rows, indent=2))
     return 0

@@ -31,6 +31,7 @@ log = logging.getLogger(__name__)
 MIN_POINTS = 50
 _RANSAC_HYPOTHESES = 200
 _RANSAC_SAMPLE = 5000  # points scored per hypothesis (a seeded subsample)
+_RANSAC_CHUNK = 50  # hypotheses scored per array operation (50 x 5000 float64: 2 MB)
 _TUKEY_C = 4.685  # Tukey biweight constant (95 % efficiency for Gaussian residuals)
 
 
@@ -124,22 +125,30 @@ def _solve(u, v, d, w=None):
 
 
 def _ransac(u, v, d, threshold, rng):
-    """Best 3-point hypothesis by inlier count on a subsample; None if all degenerate."""
+    """Best 3-point hypothesis by inlier count on a subsample; None if all degenerate.
+
+    The hypotheses are drawn one by one (the generator's stream fixes them) and then
+    solved and scored all at once: NumPy's stacked ``det``/``solve`` run the same LAPACK
+    routine per matrix and the scores are the same element-wise float64 expressions, so
+    the result is bit for bit that of a loop over the hypotheses (the first of the best
+    counts wins), without 200 rounds of Python and small-array overhead (issue 10: the
+    whole fit on the coarse map of the 1280x720 road pair 0.044 -> 0.028 s CPU).
+    """
     n = u.size
     idx = rng.choice(n, size=min(n, _RANSAC_SAMPLE), replace=False)
     us, vs, ds = u[idx], v[idx], d[idx]
-    best, best_count = None, -1
-    for _ in range(_RANSAC_HYPOTHESES):
-        pick = rng.choice(us.size, size=3, replace=False)
-        a = np.stack([np.ones(3), vs[pick], us[pick]], axis=1)
-        if abs(np.linalg.det(a)) < 1e-6:
-            continue  # collinear sample
-        sol = np.linalg.solve(a, ds[pick])
-        count = int(np.count_nonzero(np.abs(ds - (sol[0] + sol[1] * vs + sol[2] * us)) <= threshold))
-        if count > best_count:
-            best, best_count = sol, count
-    if best is None:
+    picks = np.array([rng.choice(us.size, size=3, replace=False) for _ in range(_RANSAC_HYPOTHESES)])
+    a = np.stack([np.ones(picks.shape, np.float64), vs[picks], us[picks]], axis=2)  # (hypotheses, 3, 3)
+    usable = np.abs(np.linalg.det(a)) >= 1e-6  # not a collinear sample
+    if not usable.any():
         return None
+    sols = np.linalg.solve(a[usable], ds[picks[usable]][:, :, None])[:, :, 0]
+    counts = np.empty(sols.shape[0], np.int64)
+    for start in range(0, sols.shape[0], _RANSAC_CHUNK):  # bounded temporaries
+        sol = sols[start:start + _RANSAC_CHUNK, :, None]
+        counts[start:start + _RANSAC_CHUNK] = np.count_nonzero(
+            np.abs(ds - (sol[:, 0] + sol[:, 1] * vs + sol[:, 2] * us)) <= threshold, axis=1)
+    best = sols[int(np.argmax(counts))]
     # Refit on the hypothesis' inliers: a 3-point model is noisy.
     inl = np.abs(d - (best[0] + best[1] * v + best[2] * u)) <= threshold
     refit = _solve(u[inl], v[inl], d[inl]) if inl.sum() >= 3 else None

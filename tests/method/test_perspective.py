@@ -62,6 +62,50 @@ def test_fit_is_deterministic_and_integer_maps_work():
     assert first.a1 == pytest.approx(A1, rel=0.03)
 
 
+def loop_ransac(u, v, d, threshold, seed, hypotheses=200, sample=5000):
+    """The RANSAC start as a plain loop over the hypotheses (the code before issue 10's
+    batched version), with the same generator calls and the refit on the inliers."""
+    rng = np.random.default_rng(seed)
+    idx = rng.choice(u.size, size=min(u.size, sample), replace=False)
+    us, vs, ds = u[idx], v[idx], d[idx]
+    best, best_count = None, -1
+    for _ in range(hypotheses):
+        pick = rng.choice(us.size, size=3, replace=False)
+        a = np.stack([np.ones(3), vs[pick], us[pick]], axis=1)
+        if abs(np.linalg.det(a)) < 1e-6:
+            continue
+        sol = np.linalg.solve(a, ds[pick])
+        count = int(np.count_nonzero(np.abs(ds - (sol[0] + sol[1] * vs + sol[2] * us)) <= threshold))
+        if count > best_count:
+            best, best_count = sol, count
+    if best is None:
+        return None
+    inl = np.abs(d - (best[0] + best[1] * v + best[2] * u)) <= threshold
+    sol, _, rank, _ = np.linalg.lstsq(np.stack([np.ones(inl.sum()), v[inl], u[inl]], axis=1), d[inl], rcond=None)
+    return sol if rank == 3 else best
+
+
+@pytest.mark.parametrize("seed, outliers, shape", [(0, 0.3, (45, 80)), (4, 0.6, (45, 80)), (5, 0.3, (3, 200)),
+                                                   (6, 0.1, (90, 160))])
+def test_ransac_start_equals_the_loop_over_hypotheses_bit_for_bit(seed, outliers, shape):
+    # iterations=0: the model is the RANSAC start itself (no IRLS round).  (3, 200): three
+    # rows of points, so many 3-point samples are collinear and skipped.
+    rng = np.random.default_rng(10 + seed)
+    coarse = road_coarse_map(rng, shape, outliers=outliers)
+    u, v, d = coarse_points(coarse, scale=SCALE)
+    want = loop_ransac(u, v, d, 1.0 * SCALE, seed)
+    got = fit_road_model(coarse, scale=SCALE, iterations=0, seed=seed)
+    assert (got.a0, got.b1, got.b2) == tuple(float(x) for x in want)
+
+
+def test_fit_of_collinear_points_is_not_road_like():
+    coarse = np.full((45, 80), -1.0)
+    coarse[20, :] = np.linspace(2, 12, 80)  # one row: every sample is collinear
+    model = fit_road_model(coarse, scale=SCALE)
+    assert not model.road_like
+    assert "collinear" in model.reason
+
+
 def test_coarse_points_use_area_averaging_centres():
     disp = np.full((2, 3), -1, np.int32)
     disp[1, 2] = 5
