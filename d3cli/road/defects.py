@@ -15,7 +15,7 @@ Definitions (what the numbers in defects.json mean):
   the pothole in square metres, independent of the image scale and of the viewing angle.
 * ``max_depth_mm``: 98th percentile of the median-filtered depth over the region
   (robust to single-pixel spikes; ~2 % below the true maximum of a paraboloid, equal on a
-  flat-floored pothole).  Joined potholes are split at a depth saddle or at a neck of
+  flat-floored pothole).  Joined potholes are split at a depth saddle, a terrace or a neck of
   their outline (:func:`_split`).  A region must also be
   deeper than ``noise_k`` times the height noise expected at its distance, and its mean
   depth must exceed ``mean_noise_k`` standard errors of a mean of spatially correlated
@@ -138,6 +138,9 @@ def find_defects(
         map's ``noise_k`` sigma_h too), neck ratio (1: no neck split), smallest part
         (plane area) and the Gaussian smoothing of the depth for the saddles, pixels (about
         one noise cell: ``0.4 sqrt(noise_cell_px)``).
+    split_terrace : bool, keyword-only
+        Cut terraces too (a shallow pothole whose floor runs into a deeper one's wall, cue 3
+        of :func:`_split`); the shelf must lie ``max(min_depth_mm, 3 sigma_h)`` above the pit.
     min_region_decided_share : float, keyword-only
         A region with a smaller share of decided pixels is dropped (measured on the hole
         filling's extrapolation), unless the map's own decided share is below
