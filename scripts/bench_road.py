@@ -11,7 +11,8 @@ Matching (one ground-truth pothole to at most one detection, one detection to at
 pothole): a detection's pixels are its ``outline_px`` polygons (defects.json; its bounding
 box for outputs without them), a ground-truth pothole's pixels are its id in
 potholes_gt.png (the surface it lowers by more than 1 mm, deeper pothole wins where two
-overlap).  A detection and a pothole *can match* when at least ``--min-inside`` (0.5) of the
+overlap; nested potholes are one defect under the deepest one's id, the others' entries say
+``part_of`` and have no pixels, so they are not counted).  A detection and a pothole *can match* when at least ``--min-inside`` (0.5) of the
 detection lies on that pothole AND the detection covers at least ``--min-cover`` (0.3) of the
 pothole's visible pixels; matches are taken greedily, largest overlap first.  A detection
 that matches nothing is a **false defect** when less than half of it lies on pothole pixels

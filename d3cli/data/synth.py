@@ -197,12 +197,15 @@ class SynthPair:
         How the pair was made: seed, variant, material, potholes (world and left-image
         positions, depths), bump, lighting.
     pothole_ids : ndarray, uint8, (H, W) or None
-        Pothole id (1..N, the order of ``defects_gt``) of the surface point each left
-        pixel sees where that pothole lowers the road by more than 1 mm, else 0.
+        Defect id (1..N, the order of ``defects_gt``) of the surface point each left
+        pixel sees where a pothole lowers the road by more than 1 mm, else 0; nested
+        potholes carry their group's id (:func:`pothole_groups`).
     defects_gt : list of dict
         Per pothole: ``id``, ``depth_mm`` (below the surrounding surface), ``area_m2``
         (horizontal area deeper than 10 mm), ``volume_l`` (fill volume up to the
-        surrounding surface), ``visible_px`` (pixels of the id mask), ``u``, ``v``.
+        surrounding surface), ``visible_px`` (pixels of the id mask), ``u``, ``v``, and
+        ``members`` (ids of the nested potholes it stands for, itself included) or
+        ``part_of`` (the id of the deeper pothole it is part of; no pixels, area 0).
     """
 
     left: np.ndarray
@@ -1038,7 +1041,7 @@ def render_pair(
     left_img, right_img = (_expose(r, scale, lighting, rng, noise, rig) for r in radiance)
 
     disparity, nocc, points = _ground_truth(rig, field_, h_top)
-    pothole_ids, defects_gt = _pothole_truth(holes, rig, points)
+    pothole_ids, defects_gt = pothole_truth(holes, rig, points)
     finite = disparity[np.isfinite(disparity)]
     calib = rig.calib()
     calib["ndisp"] = int(math.ceil(float(finite.max()))) + 8 if finite.size else width // 4
@@ -1072,40 +1075,127 @@ def _describe_hole(hole: Pothole, rig: StereoRig) -> dict:
     }
 
 
-def _pothole_truth(holes, rig: StereoRig, points: np.ndarray) -> tuple[np.ndarray, list]:
+_OPENING_M = 0.01  # a pothole's opening: where it lowers the road by more than 10 mm
+
+
+def _opening_ratio(hole: Pothole, x: float, y: float) -> float:
+    """Where world point (x, y) lies in ``hole``: its normalised radius over that of the
+    hole's opening (< 1: inside the part deeper than 10 mm)."""
+    dx, dy = x - hole.x, y - hole.y
+    ca, sa = math.cos(hole.angle), math.sin(hole.angle)
+    xr = (dx * ca + dy * sa) / hole.semi_a
+    yr = (-dx * sa + dy * ca) / hole.semi_b
+    theta = math.atan2(yr, xr)
+    a2, p2, a3, p3 = hole.wobble
+    rho = math.hypot(xr, yr) / (1.0 + a2 * math.cos(2 * theta + p2) + a3 * math.cos(3 * theta + p3))
+    w = _OPENING_M / hole.depth
+    if w >= 1.0:
+        return math.inf
+    # Inverse of the raised-cosine wall of _pothole_weight at weight w.
+    rho_open = hole.flat_fraction + (1.0 - hole.flat_fraction) * math.acos(2.0 * w - 1.0) / math.pi
+    return rho / rho_open
+
+
+def pothole_groups(holes) -> list[int]:
+    """Which potholes form one defect: for each hole, the 0-based index of its group's
+    deepest hole.
+
+    Overlapping potholes of the generator merge into one surface (the deepest wins).  Two
+    of them are *nested* when the centre (the floor) of one lies inside the other's
+    opening (the part deeper than 10 mm, ``min_depth_mm`` of a pothole): a pit inside a
+    shallower pothole's outline is a deeper spot of that pothole, and a shallow hole
+    centred on a deeper one's wall is a shelf of it; an inspector reports one pothole,
+    as deep as its deepest point, as large as the union.  Each hole joins the nearest
+    (centre distance) deeper hole it is nested with; chains join (union-find).  Potholes
+    that only touch or overlap rim to rim, each floor outside the other's opening, stay
+    separate defects (a saddle or a terrace between two pits).
+
+    Parameters
+    ----------
+    holes : sequence of Pothole
+
+    Returns
+    -------
+    list of int
+        ``len(holes)`` indices into ``holes``.
+    """
+    parent = list(range(len(holes)))
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for k, hole in enumerate(holes):
+        nested = [j for j, other in enumerate(holes)
+                  if other.depth > hole.depth or (other.depth == hole.depth and j < k)
+                  if _opening_ratio(hole, other.x, other.y) < 1.0 or _opening_ratio(other, hole.x, hole.y) < 1.0]
+        if nested:
+            j = min(nested, key=lambda j: math.hypot(holes[j].x - hole.x, holes[j].y - hole.y))
+            rk, rj = root(k), root(j)
+            if rk != rj:
+                parent[rk] = rj
+    deepest = {}
+    for k in range(len(holes)):
+        r = root(k)
+        if r not in deepest or holes[k].depth > holes[deepest[r]].depth:
+            deepest[r] = k
+    return [deepest[root(k)] for k in range(len(holes))]
+
+
+def pothole_truth(holes, rig: StereoRig, points: np.ndarray) -> tuple[np.ndarray, list]:
     """Pothole id mask (uint8 (H, W)) and the per-pothole ground truth of defects_gt.json.
 
-    Depth is the pothole's nominal depth below the surrounding surface (the floor relief
-    of a few mm is not counted); area and volume are integrated on a 2 mm world grid of
-    the hole's own depth profile (where potholes overlap, the deeper one owns a point, as
-    in the rendered surface).
+    Nested potholes (:func:`pothole_groups`) are one defect: the entry of the group's
+    deepest hole describes the whole group (its depth, the area and volume of the union)
+    and its id marks the group's pixels; every other member's entry says ``part_of`` that
+    id and has no pixels (``visible_px`` 0).  Depth is the nominal depth below the
+    surrounding surface (the floor relief of a few mm is not counted); area and volume are
+    integrated on a 2 mm world grid of the group's own depth profile (where separate
+    defects overlap, the deeper one owns a point, as in the rendered surface).
+
+    Parameters
+    ----------
+    holes : sequence of Pothole
+    rig : StereoRig
+    points : ndarray, float64, (H, W, 3)
+        World point each left pixel sees (inf/nan where none).
     """
     h, w = points.shape[:2]
+    groups = pothole_groups(holes)
+    members = {g: [k for k, gk in enumerate(groups) if gk == g] for g in set(groups)}
     ids = np.zeros((h, w), np.uint8)
     best = np.zeros((h, w))
     xs, ys = points[..., 0], points[..., 1]
     finite = np.isfinite(xs) & np.isfinite(ys)
     xs, ys = np.where(finite, xs, 1e9), np.where(finite, ys, 1e9)
-    for k, hole in enumerate(holes, start=1):
+    for k, hole in enumerate(holes):
         sink = hole.depth * _pothole_weight(hole, xs, ys)
         take = finite & (sink > 1e-3) & (sink > best)
-        ids[take] = k
+        ids[take] = groups[k] + 1
         best = np.where(take, sink, best)
     spacing = 2e-3
     truth = []
-    for k, hole in enumerate(holes, start=1):
-        reach = 1.25 * max(hole.semi_a, hole.semi_b)
-        gx, gy = np.meshgrid(np.arange(hole.x - reach, hole.x + reach, spacing),
-                             np.arange(hole.y - reach, hole.y + reach, spacing))
-        own = hole.depth * _pothole_weight(hole, gx, gy)
-        for other in holes:
-            if other is not hole:
-                own = np.where(other.depth * _pothole_weight(other, gx, gy) > own, 0.0, own)
+    for k, hole in enumerate(holes):
         desc = _describe_hole(hole, rig)
-        truth.append({"id": k, "depth_mm": 1e3 * hole.depth,
-                      "area_m2": float((own > 0.01).sum() * spacing ** 2),
+        if groups[k] != k:
+            truth.append({"id": k + 1, "depth_mm": 1e3 * hole.depth, "area_m2": 0.0, "volume_l": 0.0,
+                          "visible_px": 0, "u": desc["u"], "v": desc["v"], "part_of": groups[k] + 1})
+            continue
+        group = [holes[j] for j in members[k]]
+        reach = [1.25 * max(g.semi_a, g.semi_b) for g in group]
+        gx, gy = np.meshgrid(np.arange(min(g.x - r for g, r in zip(group, reach)), max(g.x + r for g, r in zip(group, reach)), spacing),
+                             np.arange(min(g.y - r for g, r in zip(group, reach)), max(g.y + r for g, r in zip(group, reach)), spacing))
+        own = np.max([g.depth * _pothole_weight(g, gx, gy) for g in group], axis=0)
+        for j, other in enumerate(holes):
+            if groups[j] != k:
+                own = np.where(other.depth * _pothole_weight(other, gx, gy) > own, 0.0, own)
+        truth.append({"id": k + 1, "depth_mm": 1e3 * hole.depth,
+                      "area_m2": float((own > _OPENING_M).sum() * spacing ** 2),
                       "volume_l": float(own.sum() * spacing ** 2 * 1e3),
-                      "visible_px": int((ids == k).sum()), "u": desc["u"], "v": desc["v"]})
+                      "visible_px": int((ids == k + 1).sum()), "u": desc["u"], "v": desc["v"],
+                      "members": [j + 1 for j in members[k]]})
     return ids, truth
 
 
@@ -1276,7 +1366,10 @@ def _write_pair(folder: Path, pair: SynthPair, *, dataset_seed: int, index: int)
         _write_png(folder / "potholes_gt.png", pair.pothole_ids)
     gt_text = json.dumps({"definitions": "depth_mm: below the surrounding surface; area_m2: horizontal area "
                                          "deeper than 10 mm; volume_l: fill volume up to the surrounding "
-                                         "surface; visible_px: pixels of potholes_gt.png with this id",
+                                         "surface; visible_px: pixels of potholes_gt.png with this id; nested potholes (the "
+                                         "floor of one inside the other's part deeper than 10 mm) are one defect: "
+                                         "the deepest one's entry lists its members and holds the union's area and "
+                                         "volume, the others say part_of that id",
                           "potholes": pair.defects_gt}, indent=2) + "\n"
     _atomic_write(folder / "defects_gt.json", lambda tmp: tmp.write_text(gt_text, encoding="utf-8"))
     calib = pair.calib

@@ -1,7 +1,8 @@
 """An analytic road scene for the road tests: a plane with a paraboloid pothole.
 
 World frame: X right, Y forward, Z up, road at Z = 0; the pothole's surface is
-``Z = -D (1 - r^2 / R^2)`` for ``r < R`` around (xc, yc).  Its volume is ``pi R^2 D / 2``
+``Z = -D (1 - r^2 / R^2)`` for ``r < R`` around (xc, yc) (further potholes may have a flat
+floor, :func:`flat_profile`).  Its volume is ``pi R^2 D / 2``
 and the area deeper than t is ``pi R^2 (1 - t / D)``.  The disparity of every pixel is
 computed exactly by intersecting its ray with the surface (bisection).
 """
@@ -29,7 +30,9 @@ def rotation(pitch_deg: float, roll_deg: float) -> np.ndarray:
 def pothole_scene(*, width=320, height=240, f=300.0, baseline=0.12, cam_height=1.5, pitch_deg=45.0,
                   roll_deg=8.0, depth=0.08, radius=0.3, centre=(0.1, 1.5), bump=None, more=()):
     """-> (disparity float32 (H, W), camera, rotation).  ``bump``: optional (x, y, R, H) dome;
-    ``more``: further paraboloid potholes (x, y, R, D); where they overlap the deepest wins."""
+    ``more``: further potholes (x, y, R, D) paraboloids or (x, y, R, D, flat[, aspect])
+    flat-floored (:func:`flat_profile`), elliptical with semi-axes R along X and R aspect
+    along Y; where they overlap the deepest wins."""
     cam = Camera(f=f, baseline=baseline, cx=(width - 1) / 2.0, cy=(height - 1) / 2.0)
     rot = rotation(pitch_deg, roll_deg)
     v, u = np.mgrid[0:height, 0:width].astype(np.float64)
@@ -39,9 +42,10 @@ def pothole_scene(*, width=320, height=240, f=300.0, baseline=0.12, cam_height=1
 
     def surface(x, y):
         sink = np.zeros_like(x)
-        for hx, hy, hr, hd in ((centre[0], centre[1], radius, depth), *more):
-            r2 = ((x - hx) ** 2 + (y - hy) ** 2) / hr ** 2
-            sink = np.maximum(sink, hd * np.clip(1.0 - r2, 0.0, None))
+        for hx, hy, hr, hd, *flat in ((centre[0], centre[1], radius, depth), *more):
+            aspect = flat[1] if len(flat) > 1 else 1.0
+            r = np.sqrt(((x - hx) / hr) ** 2 + ((y - hy) / (hr * aspect)) ** 2)
+            sink = np.maximum(sink, hd * (flat_profile(r, flat[0]) if flat else np.clip(1.0 - r ** 2, 0.0, None)))
         z = -sink
         if bump is not None:
             bx, by, br, bh = bump
@@ -61,6 +65,13 @@ def pothole_scene(*, width=320, height=240, f=300.0, baseline=0.12, cam_height=1
     z_cam = t * rays_c[..., 2]  # rays_c has z = 1, so the camera depth is t
     disp = (f * baseline / z_cam).astype(np.float32)
     return disp, cam, rot
+
+
+def flat_profile(r, flat: float):
+    """Depth profile in [0, 1] of a flat-floored pothole at normalised radius ``r``: 1 on the
+    floor (r < flat), a raised-cosine wall out to r = 1 (the profile of d3cli.data.synth)."""
+    wall = np.clip((r - flat) / (1.0 - flat), 0.0, 1.0)
+    return 0.5 * (1.0 + np.cos(np.pi * wall))
 
 
 def paraboloid_truth(depth: float, radius: float, threshold: float) -> dict:

@@ -10,7 +10,7 @@ from d3cli.road.defects import find_defects
 from d3cli.road.plane import fit_road_plane, height_map, plane_footprint
 from d3cli.road.pointcloud import disparity_to_points
 
-from .scene import paraboloid_truth, pothole_scene
+from .scene import flat_profile, paraboloid_truth, pothole_scene
 
 
 @pytest.fixture(scope="module")
@@ -169,7 +169,7 @@ def test_overlapping_potholes_are_two_defects(two_pits, kw):
 
 def test_both_cues_off_keep_the_joined_region_whole(two_pits):
     h, valid, cam, plane = two_pits
-    pits = find_defects(h, valid, cam, plane, split_prominence_mm=100.0, split_neck=1.0)
+    pits = find_defects(h, valid, cam, plane, split_prominence_mm=100.0, split_neck=1.0, split_terrace=False)
     assert len(pits) == 1
 
 
@@ -204,3 +204,66 @@ def test_locally_noisy_band_gives_fewer_false_defects():
             false_local += len(found) - 1
             false_global += len(find_defects(h, valid, cam, plane, local_noise_px=1)) - 1  # no annulus
     assert false_global >= 5 and false_local <= false_global // 2
+
+
+def _union_area(holes, threshold=0.01, spacing=1e-3):
+    """Plane area deeper than ``threshold`` of flat-floored potholes (x, y, R, D, flat[, aspect]), numerically."""
+    xs = np.arange(-0.8, 0.8, spacing)
+    ys = np.arange(1.0, 2.4, spacing)
+    x, y = np.meshgrid(xs, ys)
+    sink = np.max([d * flat_profile(np.hypot((x - hx) / r, (y - hy) / (r * (a[0] if a else 1.0))), f)
+                   for hx, hy, r, d, f, *a in holes], axis=0)
+    return float((sink > threshold).sum() * spacing ** 2)
+
+
+# A 25 mm pothole with a wide flat floor (0.7 of its radius), elongated across (semi-axes
+# 0.14 m along X, 0.28 m along Y), 0.27 m beside a 50 mm one (R 0.25 m): its floor runs into
+# the deep one's wall where that is 34 mm deep (no depth saddle), the union's 10 mm outline
+# has no neck (the deep opening's chord, half-width ~0.12 m, is as wide as the shallow
+# opening's inscribed radius, 0.122 m), and each floor lies outside the other's 10 mm
+# opening (0.122 m along X; 0.213 m): two potholes (d3cli.data.synth.pothole_groups).
+TERRACE = ((0.15, 1.6, 0.25, 0.05, 0.5), (-0.12, 1.6, 0.14, 0.025, 0.7, 2.0))
+# A 50 mm pit (R 0.15 m) inside the outline of a 25 mm pothole (R 0.35 m): one pothole.
+NESTED = ((0.05, 1.6, 0.15, 0.05, 0.5), (-0.05, 1.6, 0.35, 0.025, 0.7))
+
+
+def _flat_scene(holes):
+    disp, cam, _ = pothole_scene(width=480, height=320, f=400.0, pitch_deg=50.0, roll_deg=0.0, depth=0.0,
+                                 radius=0.01, centre=(5.0, 5.0), more=holes)
+    h, valid, plane = _heights(disp, cam, 0.05)
+    return h, valid, cam, plane
+
+
+# This scene's pixels are ~3x as large on the road as those of a 1280x720 synth pair: 4 px
+# of depth smoothing before the split is the default's 12 px there (~2 cm on the road).
+SMOOTH = {"split_smooth_px": 4.0}
+
+
+def test_a_shallow_pothole_on_a_deeper_ones_wall_is_a_second_defect():
+    h, valid, cam, plane = _flat_scene(TERRACE)
+    pits = find_defects(h, valid, cam, plane, **SMOOTH)
+    assert [d.kind for d in pits] == ["pothole", "pothole"]
+    deep, shallow = pits  # deepest first
+    assert deep.max_depth_mm == pytest.approx(50.0, rel=0.03)
+    assert shallow.max_depth_mm == pytest.approx(25.0, rel=0.03)
+    assert deep.centroid_m[0] > shallow.centroid_m[0]  # image x and world X both to the right
+    # Together they cover the union's 10 mm opening; the shallow one keeps most of its own.
+    assert deep.area_m2 + shallow.area_m2 == pytest.approx(_union_area(TERRACE), rel=0.05)
+    own = _union_area(TERRACE[1:])
+    assert 0.7 * own < shallow.area_m2 < own
+
+
+def test_without_the_terrace_cue_the_neck_cut_gives_the_shallow_one_deep_wall():
+    # Why terraces are cut first: the neck cut follows the outline, not the wall between
+    # the floors, and the shallow part then reads 20 % too deep.
+    h, valid, cam, plane = _flat_scene(TERRACE)
+    pits = find_defects(h, valid, cam, plane, split_terrace=False, **SMOOTH)
+    assert len(pits) == 2 and pits[1].max_depth_mm > 28.0
+
+
+def test_a_pit_inside_a_shallower_pothole_is_one_defect():
+    h, valid, cam, plane = _flat_scene(NESTED)
+    pits = find_defects(h, valid, cam, plane, **SMOOTH)
+    assert len(pits) == 1
+    assert pits[0].max_depth_mm == pytest.approx(50.0, rel=0.03)
+    assert pits[0].area_m2 == pytest.approx(_union_area(NESTED), rel=0.05)
