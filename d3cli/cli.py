@@ -191,8 +191,8 @@ def main():
               help="Also write OUT/<pair>/cloud.ply (x, y, z metres in the left camera frame, colour from the "
                    "left image, decided pixels only) from calib.txt or the camera config section.")
 @click.option("--workers", default="1", show_default=True, metavar="N|auto",
-              help="Local worker processes, each taking whole pairs (auto: one per core, serial on 2 cores or "
-                   "fewer); numba threads per worker = cores // N.")
+              help="Local worker processes, each taking whole pairs (auto: one per core); numba threads "
+                   "per worker = cores // N.")
 @click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
               help="Run each pair as a task on this Dask scheduler [default: $DASK_SCHEDULER_ADDRESS]; "
                    "OUT must be shared with the workers. Needs the 'distributed' extra.")

@@ -63,18 +63,18 @@ def available_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-#: ``--workers auto`` runs serially on this many cores or fewer.  Measured on the 2-core
-#: test machine shared with other sessions (README "Scaling out", scripts/bench_scaling.py):
-#: two forked workers spend the same CPU seconds as serial (+1-4 %) but took 0.8-1.5x the
-#: serial wall time of the same repetition (medians 1.13 on ../shared/data, 1.23 on 8
-#: synth pairs) - the machine shares CPU time per session, so running two pairs at once
-#: buys nothing there.
-AUTO_SERIAL_CORES = 2
+#: ``--workers auto`` runs serially on this many cores or fewer (one core: a pool has
+#: nothing to gain).  Was 2 while the only measurements were taken with other sessions
+#: loading the 2-core test machine (pool wall 0.8-1.5x serial's); on the quiet machine two
+#: forked workers took 0.81x the serial wall time on 8 synth pairs (5 repetitions, every
+#: one below 1) and 0.76x on the 29 pairs of ../shared/data (3 repetitions), with the same
+#: CPU seconds (README "Scaling out", scripts/bench_scaling.py).
+AUTO_SERIAL_CORES = 1
 
 
 def parse_workers(value: str | int) -> int:
     """``--workers`` value -> number of worker processes (``auto``: one per core, and 1 -
-    serial - on :data:`AUTO_SERIAL_CORES` cores or fewer).
+    serial - on :data:`AUTO_SERIAL_CORES` core).
 
     Raises
     ------

@@ -49,12 +49,12 @@ def same_maps(first: Path, second: Path, names) -> None:
 
 
 # ----------------------------------------------------------------------------- local pool
-def test_auto_workers_is_serial_on_two_cores_or_fewer(monkeypatch):
-    for cores, expected in ((1, 1), (2, 1), (3, 3), (16, 16)):
+def test_auto_workers_is_one_per_core(monkeypatch):
+    for cores, expected in ((1, 1), (2, 2), (3, 3), (16, 16)):
         monkeypatch.setattr(os, "sched_getaffinity", lambda pid, n=cores: set(range(n)))
         assert available_cores() == cores
         assert parse_workers("auto") == parse_workers("AUTO") == expected
-    assert AUTO_SERIAL_CORES == 2
+    assert AUTO_SERIAL_CORES == 1
 
 
 def test_largest_pairs_first(small_pairs):
