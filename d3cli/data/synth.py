@@ -585,8 +585,9 @@ def _sample_potholes(rng, rig: StereoRig, count: int) -> list[Pothole]:
     return holes
 
 
-def _pothole_weight(hole: Pothole, xx: np.ndarray, yy: np.ndarray) -> np.ndarray:
-    """Depth profile in [0, 1] (1 = floor) of one pothole at world points (xx, yy)."""
+def _normalised_radius(hole: Pothole, xx, yy):
+    """Radius of world points (xx, yy) in the hole's rotated, wobbled ellipse (1 = its rim);
+    arrays or scalars."""
     dx, dy = xx - hole.x, yy - hole.y
     ca, sa = math.cos(hole.angle), math.sin(hole.angle)
     xr = (dx * ca + dy * sa) / hole.semi_a
@@ -594,7 +595,12 @@ def _pothole_weight(hole: Pothole, xx: np.ndarray, yy: np.ndarray) -> np.ndarray
     theta = np.arctan2(yr, xr)
     a2, p2, a3, p3 = hole.wobble
     rim = 1.0 + a2 * np.cos(2 * theta + p2) + a3 * np.cos(3 * theta + p3)
-    rho = np.hypot(xr, yr) / rim
+    return np.hypot(xr, yr) / rim
+
+
+def _pothole_weight(hole: Pothole, xx: np.ndarray, yy: np.ndarray) -> np.ndarray:
+    """Depth profile in [0, 1] (1 = floor) of one pothole at world points (xx, yy)."""
+    rho = _normalised_radius(hole, xx, yy)
     wall = np.clip((rho - hole.flat_fraction) / (1.0 - hole.flat_fraction), 0.0, 1.0)
     return 0.5 * (1.0 + np.cos(np.pi * wall))
 
@@ -1081,13 +1087,7 @@ _OPENING_M = 0.01  # a pothole's opening: where it lowers the road by more than 
 def _opening_ratio(hole: Pothole, x: float, y: float) -> float:
     """Where world point (x, y) lies in ``hole``: its normalised radius over that of the
     hole's opening (< 1: inside the part deeper than 10 mm)."""
-    dx, dy = x - hole.x, y - hole.y
-    ca, sa = math.cos(hole.angle), math.sin(hole.angle)
-    xr = (dx * ca + dy * sa) / hole.semi_a
-    yr = (-dx * sa + dy * ca) / hole.semi_b
-    theta = math.atan2(yr, xr)
-    a2, p2, a3, p3 = hole.wobble
-    rho = math.hypot(xr, yr) / (1.0 + a2 * math.cos(2 * theta + p2) + a3 * math.cos(3 * theta + p3))
+    rho = float(_normalised_radius(hole, x, y))
     w = _OPENING_M / hole.depth
     if w >= 1.0:
         return math.inf

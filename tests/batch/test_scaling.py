@@ -193,19 +193,23 @@ def test_unreachable_scheduler_is_one_error_line(tmp_path, pair_root):
 BIG = "abcdefgh"
 
 
-@pytest.fixture(scope="module")
-def big_pairs(tmp_path_factory):
-    """Eight 720x1280 pairs: about 0.1 s of SGBM each, so a batch is still running after its first pair."""
+def eight_pairs(root: Path, shape, *, first_seed: int) -> Path:
+    """Pair folders ``BIG`` under ``root``: textured pairs of ``shape``, shifts 3..10."""
     from tests.helpers import textured_pair, write_png
 
-    root = tmp_path_factory.mktemp("big")
     for i, name in enumerate(BIG):
         folder = root / name
         folder.mkdir()
-        left, right, _ = textured_pair(3 + i, (720, 1280), seed=i)
+        left, right, _ = textured_pair(3 + i, shape, seed=first_seed + i)
         write_png(folder / "left.png", left)
         write_png(folder / "right.png", right)
     return root
+
+
+@pytest.fixture(scope="module")
+def big_pairs(tmp_path_factory):
+    """Eight 720x1280 pairs: about 0.1 s of SGBM each, so a batch is still running after its first pair."""
+    return eight_pairs(tmp_path_factory.mktemp("big"), (720, 1280), first_seed=0)
 
 
 @pytest.fixture(scope="module")
@@ -219,16 +223,7 @@ def big_serial(big_pairs, tmp_path_factory):
 @pytest.fixture(scope="module")
 def d3_pairs(tmp_path_factory):
     """Eight 360x640 pairs for the default method (d3stereo): a few tenths of a second each."""
-    from tests.helpers import textured_pair, write_png
-
-    root = tmp_path_factory.mktemp("d3-eight")
-    for i, name in enumerate(BIG):
-        folder = root / name
-        folder.mkdir()
-        left, right, _ = textured_pair(3 + i, (360, 640), seed=10 + i)
-        write_png(folder / "left.png", left)
-        write_png(folder / "right.png", right)
-    return root
+    return eight_pairs(tmp_path_factory.mktemp("d3-eight"), (360, 640), first_seed=10)
 
 
 @pytest.fixture(scope="module")
