@@ -15,7 +15,12 @@ import os
 # runtime loads (the first parallel kernel call); a value the user set is kept.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from ..errors import BackendUnavailable
+from ..errors import BackendUnavailable  # noqa: E402
+from .allocator import keep_freed_memory  # noqa: E402
+
+# Freed volumes stay in the heap: the next level's and the next pair's arrays are not
+# faulted in page by page again (allocator.py has the measurement).
+keep_freed_memory()
 
 log = logging.getLogger(__name__)
 
