@@ -115,6 +115,17 @@ def integral_image(img, power):
     return ii
 
 
+@njit(parallel=True, cache=True, error_model="numpy")
+def _integral_images(left, right):
+    """The four integral images of the NCC (L, L^2, R, R^2), two at a time: each is a
+    serial scan, and four in a row were 4 ms of one thread at 1280x720."""
+    h, w = left.shape
+    out = np.empty((4, h + 1, w + 1), np.float64)
+    for k in prange(4):
+        out[k] = integral_image(left if k < 2 else right, 1 if k % 2 == 0 else 2)
+    return out[0], out[1], out[2], out[3]
+
+
 # ----------------------------------------------------------------------------- band search (issue 10)
 @njit(parallel=True, cache=True, error_model="numpy")
 def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
@@ -270,10 +281,7 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None
 def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
     h, w = left.shape
     r = window // 2
-    ii_l = integral_image(left, 1)
-    ii_ll = integral_image(left, 2)
-    ii_r = integral_image(right, 1)
-    ii_rr = integral_image(right, 2)
+    ii_l, ii_ll, ii_r, ii_rr = _integral_images(left, right)
     cost = np.empty(n_cells, np.float32)
     # The rows are cut into blocks, one prange task each; inside a block acc is a running
     # sum along the rows (add the row entering the window, subtract the one leaving it),
@@ -311,10 +319,10 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
         # acc[u, d]: column sum over the window rows of L(y, u) R(y, u - d)
         acc = np.zeros((w, n_disp), np.float64)
         win = np.zeros(n_disp, np.float64)
-        win_l = np.zeros(w, np.float64)
-        win_ll = np.zeros(w, np.float64)
-        win_r = np.zeros(w, np.float64)
-        win_rr = np.zeros(w, np.float64)
+        ml = np.zeros(w, np.float64)  # window means and variances per column (left, right)
+        vl = np.zeros(w, np.float64)
+        mr = np.zeros(w, np.float64)
+        vr = np.zeros(w, np.float64)
         for y in range(max(0, vb0 - r), min(h - 1, vb0 + r) + 1):
             _add_row_products(acc, acc_lo, acc_hi, left, right, y, 1.0)
         for v in range(vb0, vb1):
@@ -323,8 +331,7 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
                     _add_row_products(acc, acc_lo, acc_hi, left, right, v + r, 1.0)
                 if v - r - 1 >= 0:
                     _add_row_products(acc, acc_lo, acc_hi, left, right, v - r - 1, -1.0)
-            _ncc_row(cost, index, v, acc, win, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii_r, ii_rr,
-                     h, w, r, min_variance)
+            _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, ii_l, ii_ll, ii_r, ii_rr, h, w, r, min_variance)
     return cost
 
 
@@ -344,24 +351,54 @@ def _add_row_products(acc, acc_lo, acc_hi, left, right, y, sign):
 
 
 @njit(cache=True, error_model="numpy")
-def _ncc_row(cost, index, v, acc, win, win_l, win_ll, win_r, win_rr, ii_l, ii_ll, ii_r, ii_rr,
-             h, w, r, min_variance):
+def _window_stats(ii, ii2, v0, v1, r, inv, mean, var):
+    """Mean and variance of the unclipped windows (columns c - r .. c + r, rows v0 .. v1)
+    of one image, for every column c with such a window: ``mean[c], var[c]``.
+
+    The box sums are :func:`_box_sum`'s expression ``ii[r1+1, c1+1] - ii[r0, c1+1] -
+    ii[r1+1, c0] + ii[r0, c0]`` and the moments :func:`pixel.ncc_cost`'s (``s inv``,
+    ``ss inv - m m``), so the values are bit for bit those the formula computed per
+    cell; written over slices (non-negative subscripts) the loop vectorises (issue 10:
+    the per-column box sums took a third of the NCC time at level 1 of Middlebury-Q).
+    """
+    m = ii.shape[1] - 1 - 2 * r  # columns with an unclipped window
+    if m <= 0:
+        return
+    a1 = ii[v1 + 1, 2 * r + 1:2 * r + 1 + m]
+    b1 = ii[v0, 2 * r + 1:2 * r + 1 + m]
+    c1 = ii[v1 + 1, 0:m]
+    d1 = ii[v0, 0:m]
+    a2 = ii2[v1 + 1, 2 * r + 1:2 * r + 1 + m]
+    b2 = ii2[v0, 2 * r + 1:2 * r + 1 + m]
+    c2 = ii2[v1 + 1, 0:m]
+    d2 = ii2[v0, 0:m]
+    mean_c = mean[r:r + m]
+    var_c = var[r:r + m]
+    for i in range(m):
+        s = a1[i] - b1[i] - c1[i] + d1[i]
+        ss = a2[i] - b2[i] - c2[i] + d2[i]
+        mu = s * inv
+        mean_c[i] = mu
+        var_c[i] = ss * inv - mu * mu
+
+
+@njit(cache=True, error_model="numpy")
+def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, ii_l, ii_ll, ii_r, ii_rr, h, w, r, min_variance):
     """Costs of the bands of row v from the window-row column sums ``acc``.
 
     ``win[d]`` is the window sum of ``acc`` over the columns u - r .. u + r; it slides
     from column to column while the band stays the same and the window is not clipped,
-    and is summed afresh otherwise.
+    and is summed afresh otherwise.  The window means and variances of unclipped windows
+    are computed once per column (:func:`_window_stats`), not once per cell; the cell's
+    cost is then :func:`pixel.ncc_cost`'s formula on them, operation for operation (the
+    same bits; ``tests/kernels`` compare with the float64 reference and CUDA).
     """
     v0 = max(0, v - r)
     v1 = min(h - 1, v + r)
-    # Window sums of an unclipped window (columns c - r .. c + r), once per column
-    # instead of once per cell; the same box sums, so the same values.
-    for c in range(r, w - r):
-        win_l[c] = _box_sum(ii_l, v0, c - r, v1, c + r)
-        win_ll[c] = _box_sum(ii_ll, v0, c - r, v1, c + r)
-        win_r[c] = _box_sum(ii_r, v0, c - r, v1, c + r)
-        win_rr[c] = _box_sum(ii_rr, v0, c - r, v1, c + r)
     n_full = (v1 - v0 + 1) * (2 * r + 1)
+    inv = 1.0 / n_full
+    _window_stats(ii_l, ii_ll, v0, v1, r, inv, ml, vl)
+    _window_stats(ii_r, ii_rr, v0, v1, r, inv, mr, vr)
     run_lo = 0
     run_hi = -1  # no running window sum yet
     for u in range(w):
@@ -390,12 +427,29 @@ def _ncc_row(cost, index, v, acc, win, win_l, win_ll, win_r, win_rr, ii_l, ii_ll
                         run[i] += col[i]
             run_lo = lo
             run_hi = d_fast
-            sl_u = win_l[u]
-            sll_u = win_ll[u]
             out = cost[off + lo:off + d_fast]
-            for i in range(n):
-                x = u - lo - i
-                out[i] = _ncc_cost(n_full, sl_u, sll_u, win_r[x], win_rr[x], run[i], min_variance)
+            ml_u = ml[u]
+            vl_u = vl[u]
+            if vl_u <= min_variance:  # a flat left window: NCC undefined
+                for i in range(n):
+                    out[i] = 1.0
+            else:
+                # the right windows of d = lo .. d_fast - 1 sit at columns u - d: a
+                # reversed slice
+                mrs = mr[u - d_fast + 1:u - lo + 1]
+                vrs = vr[u - d_fast + 1:u - lo + 1]
+                for i in range(n):
+                    j = n - 1 - i
+                    vr_x = vrs[j]
+                    ncc = (run[i] * inv - ml_u * mrs[j]) / np.sqrt(vl_u * vr_x)
+                    if ncc > 1.0:
+                        ncc = 1.0
+                    elif ncc < -1.0:
+                        ncc = -1.0
+                    c = 0.5 * (1.0 - ncc)
+                    if vr_x <= min_variance:
+                        c = 1.0
+                    out[i] = c
         else:
             run_hi = -1
         for d in range(d_fast, hi):
