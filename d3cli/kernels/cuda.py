@@ -360,7 +360,7 @@ def rbf_weights(img, sigma_space, sigma_color):
 def _rbf_pass(src, dst, index, weights):
     """One pass of eq. 2; one thread per pixel, float32 accumulation in slot order as on
     the CPU; a neighbour whose band lacks the disparity contributes the pixel's own cell
-    (``cpu._rbf_pass``)."""
+    (``cpu._rbf_passes``)."""
     u, v = cuda.grid(2)
     h = index.shape[0]
     w = index.shape[1]

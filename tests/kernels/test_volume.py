@@ -139,3 +139,28 @@ def test_banded_invalidation_sets_only_out_of_view_cells(case):
     exists = ~np.isnan(before)
     np.testing.assert_array_equal(after[exists & (d > u)], 1.0)
     np.testing.assert_array_equal(after[exists & (d <= u)], before[exists & (d <= u)])
+
+
+@pytest.mark.parametrize("shape", [(23, 17), (5, 9), (1, 6)])
+@pytest.mark.parametrize("t_max", [1, 2, 4])
+@pytest.mark.parametrize("n_tasks", [1, 2, 3, 7, 40])
+def test_blocked_rbf_passes_equal_one_pass_at_a_time(shape, t_max, n_tasks):
+    """All passes at once over strips (temporal blocking, issue 10) give the bits of
+    ``t_max`` single passes, on bands of every width and for any number of strips (the
+    halo rows each strip recomputes included; 40 strips on 23 rows: one row each)."""
+    rng = np.random.default_rng(t_max * 100 + n_tasks + shape[0])
+    h, w = shape
+    lo, hi = random_bands(rng, h, w, 9)
+    vol = banded(rng.uniform(0, 1, (h, w, 9)).astype(np.float32), lo, hi)
+    flat = vol.cost
+    img = rng.uniform(100, 120, shape).astype(np.float32)  # similar grey levels: the passes mix
+    weights = cpu.rbf_weights(img, 1.5, 12.0)
+    row_start, max_band, max_row = cpu._row_layout(vol.index)
+    covered = cpu._covered_bands(vol.index)
+    one_by_one = flat.copy()
+    for _ in range(t_max):
+        cpu._rbf_passes(one_by_one, vol.index, covered, weights, row_start, 1, max_band, max_row, 1)
+    blocked = flat.copy()
+    cpu._rbf_passes(blocked, vol.index, covered, weights, row_start, n_tasks, max_band, max_row, t_max)
+    np.testing.assert_array_equal(blocked, one_by_one)
+    assert not np.array_equal(blocked, flat)
