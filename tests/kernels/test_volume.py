@@ -164,3 +164,32 @@ def test_blocked_rbf_passes_equal_one_pass_at_a_time(shape, t_max, n_tasks):
     cpu._rbf_passes(blocked, vol.index, covered, weights, row_start, n_tasks, max_band, max_row, t_max)
     np.testing.assert_array_equal(blocked, one_by_one)
     assert not np.array_equal(blocked, flat)
+
+
+def _covered_reference(index):
+    """The covered-band map by its definition: 2 where the 3x3 neighbours (clamped) all
+    have the pixel's band, 1 where their bands contain it, 0 elsewhere."""
+    h, w, _ = index.shape
+    out = np.zeros((h, w), np.uint8)
+    for v in range(h):
+        for u in range(w):
+            lo, hi = index[v, u, 1], index[v, u, 2]
+            nb = index[max(v - 1, 0):min(v + 1, h - 1) + 1, max(u - 1, 0):min(u + 1, w - 1) + 1]
+            if ((nb[:, :, 1] == lo) & (nb[:, :, 2] == hi)).all():
+                out[v, u] = 2
+            elif ((nb[:, :, 1] <= lo) & (nb[:, :, 2] >= hi)).all():
+                out[v, u] = 1
+    return out
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 5), (5, 1), (2, 2), (7, 9), (30, 40)])
+def test_covered_bands_match_their_definition(shape):
+    rng = np.random.default_rng(sum(shape))
+    for trial in range(10):
+        # few distinct bands, so that runs of equal bands (the map's 2s) occur
+        lo, hi = random_bands(rng, *shape, 3)
+        index, _ = banded_index(lo, hi)
+        np.testing.assert_array_equal(cpu._covered_bands(index), _covered_reference(index))
+    lo = np.full(shape, 1)
+    index, _ = banded_index(lo, lo + 2)
+    assert (cpu._covered_bands(index) == 2).all()
