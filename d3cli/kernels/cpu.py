@@ -553,15 +553,35 @@ def _invalidate(cost, index):
 
 
 # ----------------------------------------------------------------------------- aggregation (step 3)
+#: Grey-level steps 4^-k, k < this, that rbf_weights recognises (the first four pyramid
+#: levels of an 8-bit image: 2x2 means of 2x2 means of integers).
+GREY_STEPS = 4
+
+
 @njit(cache=True, error_model="numpy")
-def _is_grey8(img):
-    """True when every grey level is an integer in 0..255."""
-    for v in range(img.shape[0]):
-        for u in range(img.shape[1]):
-            g = img[v, u]
-            if not (g >= 0 and g <= 255 and g == np.floor(g)):
-                return False
-    return True
+def _grey_scale(img):
+    """``s`` in {1, 4, 16, 64} when every grey level is in [0, 255] and a multiple of
+    1 / s (the smallest such s), else 0.
+
+    Level k of the pyramid of an 8-bit image holds exact multiples of 4^-(k-1) (2x2
+    means, exact in float32), so a pixel and its neighbour differ by one of 255 s + 1
+    values.
+    """
+    scale = 1
+    for k in range(GREY_STEPS):
+        ok = True
+        for v in range(img.shape[0]):
+            for u in range(img.shape[1]):
+                g = np.float64(img[v, u]) * scale
+                if not (g >= 0 and g <= 255 * scale and g == np.floor(g)):
+                    ok = False
+                    break
+            if not ok:
+                break
+        if ok:
+            return scale
+        scale *= 4
+    return 0
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -580,15 +600,21 @@ def rbf_weights(img, sigma_space, sigma_color):
     # Per block of rows, so that the float64 scratch stays small (rows of the block and
     # the one above it).
     centre = _rbf_weight(0, 0, 0.0, 0.0, inv_ss2, inv_sc2)
-    # Grey levels that are all integers 0..255 (a full-resolution 8-bit image: the
-    # largest level) have only 256 differences |i_p - i_q|: the kernel is read from a
-    # table made with the same expression, so the values are the same, without an exp
-    # per neighbour.  Coarser (smoothed) levels compute it.
-    lut = np.empty((2, 256), np.float64)  # row 0: axis neighbours, row 1: diagonal ones
-    for i in range(256):
-        lut[0, i] = _rbf_weight(0, 1, np.float64(i), 0.0, inv_ss2, inv_sc2)
-        lut[1, i] = _rbf_weight(1, 1, np.float64(i), 0.0, inv_ss2, inv_sc2)
-    grey8 = _is_grey8(img)
+    # Grey levels that are all multiples of 1/s in 0..255 (an 8-bit image: s = 1 at full
+    # resolution, 4, 16, 64 at the next levels) have only 255 s + 1 differences
+    # |i_p - i_q|: the kernel is read from a table made with the same expression (the
+    # difference and the table's argument are the same float64), so the values are the
+    # same, without an exp per neighbour.  The table is built when it needs fewer exp
+    # calls than the image (level 2 of a 720p pair: 2042 instead of 921,600); other
+    # images compute the kernel.
+    scale = _grey_scale(img)
+    n_lut = 255 * scale + 1
+    grey8 = scale > 0 and 2 * n_lut < 4 * h * w
+    lut = np.empty((2, n_lut if grey8 else 1), np.float64)  # row 0: axis neighbours, row 1: diagonal ones
+    if grey8:
+        for i in range(n_lut):
+            lut[0, i] = _rbf_weight(0, 1, np.float64(i) / scale, 0.0, inv_ss2, inv_sc2)
+            lut[1, i] = _rbf_weight(1, 1, np.float64(i) / scale, 0.0, inv_ss2, inv_sc2)
     weights = np.empty((h, w, 9), np.float32)  # every slot is written below
     block = 32
     n_blocks = (h + block - 1) // block
@@ -607,7 +633,8 @@ def rbf_weights(img, sigma_space, sigma_color):
                     x = u + dx
                     if 0 <= y < h and 0 <= x < w:
                         if grey8:
-                            fwd[v - y0, u, j] = lut[dy * dx * dx, abs(int(img[v, u]) - int(img[y, x]))]
+                            diff = abs(np.float64(img[v, u]) - np.float64(img[y, x])) * scale  # exact
+                            fwd[v - y0, u, j] = lut[dy * dx * dx, int(diff)]
                         else:
                             fwd[v - y0, u, j] = _rbf_weight(dy, dx, np.float64(img[v, u]), np.float64(img[y, x]),
                                                             inv_ss2, inv_sc2)

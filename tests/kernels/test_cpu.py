@@ -106,6 +106,35 @@ def test_rbf_weights_match_reference(shape):
     assert (got[0, :, :3] == 0).all() and (got[:, 0, ::3] == 0).all()  # outside the image
 
 
+@pytest.mark.parametrize("scale", [4, 16, 64])
+def test_rbf_weights_of_coarse_pyramid_levels_equal_the_computed_kernel(scale):
+    # Levels 2-4 of an 8-bit image hold multiples of 1/4, 1/16, 1/64 (2x2 means): their
+    # kernel comes from a table of 255 scale + 1 differences when that is smaller than
+    # the image, bit for bit the exp per neighbour.
+    rng = np.random.default_rng(scale)
+    side = 8 * int(np.sqrt(scale)) + 8  # enough pixels for the table to pay
+    img = (rng.integers(0, 255 * scale + 1, (side, side + 3)) / scale).astype(np.float32)
+    img[0, 0], img[-1, -1] = 0.0, 255.0
+    assert cpu._grey_scale(img) == scale
+    other = img.copy()
+    other[0, 0] = 0.3  # forces the exp path
+    assert cpu._grey_scale(other) == 0
+    got = cpu.rbf_weights(img, 1.5, 12.0)
+    computed = cpu.rbf_weights(other, 1.5, 12.0)
+    np.testing.assert_array_equal(got[2:], computed[2:])
+    np.testing.assert_array_equal(got[:, 2:], computed[:, 2:])
+    np.testing.assert_allclose(got, ref.ref_rbf_weights(img, 1.5, 12.0), rtol=0, atol=1e-6)
+
+
+def test_grey_scale_of_an_8bit_pyramid():
+    from d3cli.method.pyramid import build_pyramid
+
+    img = np.random.default_rng(5).integers(0, 256, (64, 80)).astype(np.float32)
+    assert [cpu._grey_scale(level) for level in build_pyramid(img, 5)] == [1, 4, 16, 64, 0]
+    assert cpu._grey_scale(img / 257.0) == 0
+    assert cpu._grey_scale(img + 256.0) == 0  # above 255
+
+
 @pytest.mark.parametrize("shape", SHAPES)
 def test_rbf_weights_of_8bit_images_equal_the_computed_kernel(shape):
     # Integer grey levels read the kernel from a table; one non-integer pixel makes the
@@ -116,7 +145,7 @@ def test_rbf_weights_of_8bit_images_equal_the_computed_kernel(shape):
     img[0, 0] = 0.0
     img[-1, -1] = 255.0  # both ends of the table
     other = img.copy()
-    other[0, 0] = 0.5
+    other[0, 0] = 0.3  # not a multiple of 1/64 either
     got = cpu.rbf_weights(img, 1.5, 12.0)
     computed = cpu.rbf_weights(other, 1.5, 12.0)
     np.testing.assert_array_equal(got[2:], computed[2:])
