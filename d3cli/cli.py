@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import os
 import platform
+import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -33,10 +34,27 @@ CONFIG_ENV = "D3STEREO_CONFIG"
 LOCAL_CONFIG = "d3stereo.yaml"
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM outside a batch (before it began or after it ended) in the command's own
+    process: stops it like Ctrl-C, with exit 143."""
+
+    terminated = True
+
+
+def _raise_terminated(signum, frame):
+    raise _Terminated
+
+
 class _Group(click.Group):
     """A click group that turns every D3Error into ``Error: <message>`` and exit code 1."""
 
     def invoke(self, ctx):
+        if _own_process():
+            # The batch turns SIGTERM into an interrupt while it runs and puts the previous
+            # handler back at its end; with the default one there, a SIGTERM between the
+            # end of the batch and the exit (the summary lines) killed the process by the
+            # signal, status -15 instead of 143 or 0 (issue 12; seen on a fast machine).
+            signal.signal(signal.SIGTERM, _raise_terminated)
         try:
             result = super().invoke(ctx)
             _end_of_command()
@@ -108,9 +126,8 @@ def _end_of_command() -> None:
     Only in the command's own process, never when the CLI runs inside another program.
     """
     if _own_process():
-        import signal
-
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # the status is decided: exit with it
         exec("pass")  # noqa: S102 - clears the flag, see above
 
 

@@ -92,3 +92,34 @@ def test_ctrl_c_inside_a_kernel_during_the_jit_warm_up_is_an_interrupt(tmp_path,
     assert done.returncode == 130, done.stderr
     assert done.stderr == "Interrupted: 0 of 1 pairs done; rerun the same command to resume\n"
     assert (tmp_path / "out" / "run.json").is_file() and not (tmp_path / "out" / ".d3stereo.lock").exists()
+
+
+
+def test_sigterm_after_the_batch_exits_143_not_by_the_signal(tmp_path, make_pair_folder):
+    """SIGTERM between the end of the batch and the exit (the summary lines): the batch's
+    handler is gone, the command's own stops it like Ctrl-C (143, one line) instead of
+    death by the signal (-15, seen on a fast machine in test_adversarial)."""
+    import json
+
+    make_pair_folder(tmp_path / "pairs", "a")
+    code = """
+        import os, signal, sys
+        import click
+
+        echo = click.echo
+
+        def echo_then_sigterm(message=None, *args, **kwargs):
+            if message is not None and str(message).startswith("sgbm:"):  # the counts: the batch has ended
+                os.kill(os.getpid(), signal.SIGTERM)
+            return echo(message, *args, **kwargs)
+
+        click.echo = echo_then_sigterm
+        sys.argv = ["d3stereo", "run", "pairs", "-o", "out", "--method", "sgbm"]
+        from d3cli.__main__ import entry
+        entry()
+        """
+    done = _run_python(code, tmp_path)
+    assert done.returncode == 143, (done.returncode, done.stderr)
+    assert done.stderr.strip().splitlines()[-1] == RESUME
+    run = json.loads((tmp_path / "out" / "run.json").read_text())
+    assert run["interrupted"] is False and run["n_failed"] == 0
