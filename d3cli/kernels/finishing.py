@@ -30,7 +30,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 
 # cpu.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
 # when it is imported; the decorators below read that setting, so it must run first.
@@ -397,6 +399,106 @@ def keep_valid(filled, valid, other):
     run_tasks(_keep_valid_task, row_tasks(filled.shape[0]), filled, valid, other)
 
 
+# ----------------------------------------------------------------------------- NumPy's float32 exp
+@intrinsic
+def _fma_f32(typingctx, a, b, c):
+    """``a * b + c`` rounded once (``llvm.fma.f32``: the FMA instruction of the CPU)."""
+    sig = types.float32(types.float32, types.float32, types.float32)
+
+    def codegen(context, builder, signature, args):
+        f32 = ir.FloatType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [f32], ir.FunctionType(f32, [f32, f32, f32]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+@intrinsic
+def _int64_as_float64(typingctx, a):
+    """The float64 whose bits are the int64 ``a``."""
+    sig = types.float64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return sig, codegen
+
+
+def _f32(bits: int) -> np.float32:
+    return np.array([bits], np.uint32).view(np.float32)[0]
+
+
+# Constants of NumPy's SIMD float32 exp (numpy/_core/src/umath/npy_simd_data.h and the
+# limits of simd_exp_FLOAT in loops_exponent_log.dispatch.c.src), as bit patterns
+_EXP_LN2_HI = _f32(0xBF317200)  # NPY_CODY_WAITE_LOGE_2_HIGHf, -ln 2 high part
+_EXP_LN2_LO = _f32(0xB5BFBE8E)  # NPY_CODY_WAITE_LOGE_2_LOWf
+_EXP_MAGIC = _f32(0x4B400000)  # NPY_RINT_CVT_MAGICf, 1.5 * 2^23: adding it rounds to an integer
+_EXP_LOG2E = _f32(0x3FB8AA3B)  # NPY_LOG2Ef
+_EXP_P0, _EXP_P1, _EXP_P2, _EXP_P3, _EXP_P4, _EXP_P5 = (
+    _f32(b) for b in (0x3F800000, 0x3F39CBD5, 0x3E7D4C58, 0x3D517D8C, 0x3BDD7159, 0x3A053DD8))
+_EXP_Q0, _EXP_Q1, _EXP_Q2 = (_f32(b) for b in (0x3F800000, 0xBE8C6857, 0x3CB0E832))
+_EXP_XMAX = _f32(0x42B17218)  # 88.72283935546875: inf at and above
+_EXP_XMIN = _f32(0xC2CFF1B5)  # -103.97208404541015625: 0 at and below
+_F32_NAN = np.float32(np.nan)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def numpy_expf(x):
+    """``np.exp`` of a float32, bit for bit, as NumPy computes it on x86 with AVX2+FMA3 or
+    AVX512F (``simd_exp_FLOAT``): Cody-Waite reduction ``r = x - k ln 2`` with
+    ``k = rint(x log2 e)``, the rational minimax ``P5(r) / Q2(r)`` by FMA (Horner), times
+    ``2^k`` rounded once (AVX512's ``scalef``; the AVX2 path's integer exponent add and
+    its division for subnormal results round the same).  Checked equal to ``np.exp`` on
+    all 2^32 float32 values, NaN payloads included (``tests/kernels/test_finishing.py``
+    checks a sample of every range).  Branch-free (selects), so that loops over it
+    vectorise.
+
+    Why not numba's ``math.exp``: it calls the C library's ``expf``, which differs from
+    NumPy's in the last bit for about a third of the arguments, and the smoothing's
+    reference (and so the maps this package produced so far) used ``np.exp``.
+    """
+    nan = x != x
+    big = x >= _EXP_XMAX
+    small = x <= _EXP_XMIN
+    x = _F32_ZERO if (nan or big or small) else x
+    k = x * _EXP_LOG2E
+    k = k + _EXP_MAGIC
+    k = k - _EXP_MAGIC
+    r = _fma_f32(k, _EXP_LN2_HI, x)
+    r = _fma_f32(k, _EXP_LN2_LO, r)
+    r = _fma_f32(k, _F32_ZERO, r)  # NumPy's third Cody-Waite step (c3 = 0); kept for -0
+    num = _fma_f32(_EXP_P5, r, _EXP_P4)
+    num = _fma_f32(num, r, _EXP_P3)
+    num = _fma_f32(num, r, _EXP_P2)
+    num = _fma_f32(num, r, _EXP_P1)
+    num = _fma_f32(num, r, _EXP_P0)
+    den = _fma_f32(_EXP_Q2, r, _EXP_Q1)
+    den = _fma_f32(den, r, _EXP_Q0)
+    poly = num / den
+    # poly * 2^k, k in [-150, 128]: exact in float64 (2^k built from its exponent bits),
+    # then one rounding to float32, subnormal results included
+    out = np.float32(np.float64(poly) * _int64_as_float64((np.int64(k) + np.int64(1023)) << np.int64(52)))
+    out = _F32_NAN if nan else out
+    out = _F32_INF if big else out
+    return _F32_ZERO if small else out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _exp_task(task, tasks, values, out):
+    n = values.shape[0]
+    i0, i1 = (task * n) // tasks, ((task + 1) * n) // tasks
+    for i in range(i0, i1):
+        out[i] = numpy_expf(values[i])
+
+
+def numpy_exp(values):
+    """:func:`numpy_expf` of a flat float32 array (a new array); the test hook of the kernel."""
+    values = np.ascontiguousarray(values, np.float32).reshape(-1)
+    out = np.empty_like(values)
+    _exp_task(0, 1, values, out)
+    return out
+
+
 # ----------------------------------------------------------------------------- smoothing
 @njit(cache=True, nogil=True)
 def _residual_task(task, tasks, disp, base, valid, resid, use, row_lo, row_hi, row_use):
@@ -712,9 +814,284 @@ def add_base(acc, base, disp):
     return acc
 
 
+# ----------------------------------------------------------------------------- fused smoothing
+@njit(cache=True, inline="always", error_model="numpy")
+def _level_weights(resid, use, y, level, neg_inv2s2, radius, pad_n, pad_d, tmp):
+    """Row y of a level's range weights ``w = exp(neg_inv2s2 (r - level)^2)`` (+0 where not
+    used; NumPy's float32 ``exp``) and of ``w r`` (float32 product) into the float64 pad
+    rows, as ``range_exponents`` + ``np.exp`` + ``cv2.boxFilter``'s row pass read them.
+    Two loops (float32 weights into ``tmp``, then the float64 rows): one loop that mixes
+    the float32 exp with float64 stores did not vectorise (2.3 vs 1.0 ms per level of a
+    1280x720 map)."""
+    r_row = resid[y]
+    u_row = use[y]
+    w = r_row.shape[0]
+    for u in range(w):
+        a = r_row[u] - level
+        x = neg_inv2s2 * (a * a)
+        # -inf where not used (exp gives +0), NaN stays NaN: the reference's use * exp(x)
+        tmp[u] = numpy_expf(x if (u_row[u] or x != x) else -_F32_INF)
+    dst_n = pad_n[radius:radius + w]
+    dst_d = pad_d[radius:radius + w]
+    for u in range(w):
+        e = tmp[u]
+        dst_d[u] = e
+        dst_n[u] = e * r_row[u]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _direct_sums(pad, dst, k):
+    """3- and 5-tap box sums of a padded row, left to right (``cv2.boxFilter``'s small kernels)."""
+    w = dst.shape[0]
+    if k == 3:
+        for i in range(w):
+            dst[i] = pad[i] + pad[i + 1] + pad[i + 2]
+    else:
+        for i in range(w):
+            dst[i] = pad[i] + pad[i + 1] + pad[i + 2] + pad[i + 3] + pad[i + 4]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _running_sums_2(pa, pb, da, db, k):
+    """Running box sums (window k) of two padded rows: add the entering element minus the
+    leaving one, as ``cv2.boxFilter``'s row pass; two independent chains."""
+    w = da.shape[0]
+    sa = 0.0
+    sb = 0.0
+    for j in range(k):
+        sa += pa[j]
+        sb += pb[j]
+    da[0] = sa
+    db[0] = sb
+    for i in range(w - 1):
+        sa += pa[i + k] - pa[i]
+        sb += pb[i + k] - pb[i]
+        da[i + 1] = sa
+        db[i + 1] = sb
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _running_sums_4(pa, pb, pc, pd, da, db, dc, dd, k):
+    """:func:`_running_sums_2` of four rows at once: four independent chains hide the
+    latency of the float64 adds (each chain is serial, element after element)."""
+    w = da.shape[0]
+    sa = 0.0
+    sb = 0.0
+    sc = 0.0
+    sd = 0.0
+    for j in range(k):
+        sa += pa[j]
+        sb += pb[j]
+        sc += pc[j]
+        sd += pd[j]
+    da[0] = sa
+    db[0] = sb
+    dc[0] = sc
+    dd[0] = sd
+    for i in range(w - 1):
+        sa += pa[i + k] - pa[i]
+        sb += pb[i + k] - pb[i]
+        sc += pc[i + k] - pc[i]
+        sd += pd[i + k] - pd[i]
+        da[i + 1] = sa
+        db[i + 1] = sb
+        dc[i + 1] = sc
+        dd[i + 1] = sd
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _group_row_sums(resid, use, y, values, neg_inv2s2, radius, pad, ring, tmp):
+    """Box sums along row y of ``w r`` and ``w`` of every level of a group into the ring
+    slot of row y."""
+    k = 2 * radius + 1
+    slot = y % k
+    ng = values.shape[0]
+    for g in range(ng):
+        _level_weights(resid, use, y, values[g], neg_inv2s2, radius, pad[g, 0], pad[g, 1], tmp)
+    if k == 3 or k == 5:
+        for g in range(ng):
+            _direct_sums(pad[g, 0], ring[g, 0, slot], k)
+            _direct_sums(pad[g, 1], ring[g, 1, slot], k)
+        return
+    g = 0
+    while g + 1 < ng:  # levels in pairs: four chains
+        _running_sums_4(pad[g, 0], pad[g, 1], pad[g + 1, 0], pad[g + 1, 1],
+                        ring[g, 0, slot], ring[g, 1, slot], ring[g + 1, 0, slot], ring[g + 1, 1, slot], k)
+        g += 2
+    if g < ng:
+        _running_sums_2(pad[g, 0], pad[g, 1], ring[g, 0, slot], ring[g, 1, slot], k)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, bounds, neg_inv2s2, radius,
+                       low, up):
+    h, w = resid.shape
+    g0, g1 = bounds[task], bounds[task + 1]
+    ng = g1 - g0
+    if ng <= 0:
+        return
+    values = level_values[g0:g1]
+    k = 2 * radius + 1
+    eps = np.float32(1e-6)
+    ring = np.empty((ng, 2, k, w))
+    pad = np.zeros((ng, 2, w + 2 * radius))
+    sums = np.zeros((ng, 2, w))
+    zero = np.zeros(w)
+    tmp = np.empty(w, np.float32)
+    for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
+        y = j - radius
+        if 0 <= y < h:
+            _group_row_sums(resid, use, y, values, neg_inv2s2, radius, pad, ring, tmp)
+        for g in range(ng):
+            rn = ring[g, 0, y % k] if 0 <= y < h else zero
+            rd = ring[g, 1, y % k] if 0 <= y < h else zero
+            sum_n = sums[g, 0]
+            sum_d = sums[g, 1]
+            for u in range(w):
+                sum_n[u] += rn[u]
+                sum_d[u] += rd[u]
+    for y in range(h):
+        yp = y + radius  # entering row
+        ym = y - radius  # leaving row
+        if yp < h:
+            _group_row_sums(resid, use, yp, values, neg_inv2s2, radius, pad, ring, tmp)
+        r_row = resid[y]
+        k_row = k0[y]
+        t_row = t[y]
+        low_row = low[y]
+        up_row = up[y]
+        for g in range(ng):
+            level = np.int32(level_ids[g0 + g])
+            pn = ring[g, 0, yp % k] if yp < h else zero
+            pd = ring[g, 1, yp % k] if yp < h else zero
+            mn = ring[g, 0, ym % k] if ym >= 0 else zero
+            md = ring[g, 1, ym % k] if ym >= 0 else zero
+            sum_n = sums[g, 0]
+            sum_d = sums[g, 1]
+            for u in range(w):
+                s0n = sum_n[u] + pn[u]
+                s0d = sum_d[u] + pd[u]
+                sum_n[u] = s0n - mn[u]
+                sum_d[u] = s0d - md[u]
+                num = np.float32(s0n)
+                den = np.float32(s0d)
+                # the reference's np.maximum(den, 1e-6) is den where it is used
+                tmp[u] = num / den if den > eps else r_row[u]
+            # the shares where this level is the pixel's lower (upper) one; selects, not
+            # conditional stores, so that the loop vectorises
+            for u in range(w):
+                est = tmp[u]
+                kk = k_row[u]
+                low_row[u] = (_F32_ONE - t_row[u]) * est if kk == level else low_row[u]
+                up_row[u] = t_row[u] * est if kk == level - 1 else up_row[u]
+
+
+def smooth_groups(resid, use, k0, t, level_ids, level_values, neg_inv2s2, radius, max_group=4):
+    """The box-filtered range levels of the piecewise-linear bilateral filter and each
+    pixel's shares of its two levels, all in one pass per group of levels.
+
+    A task takes a group of consecutive used levels (at most ``max_group``; at least one
+    group per thread) and streams the rows through it: per entering row the range weights
+    of its levels (:func:`numpy_expf`) and their row box sums (the float64 row pass of
+    ``cv2.boxFilter(..., normalize=False, borderType=cv2.BORDER_CONSTANT)``, two levels'
+    running sums interleaved), per output row the float64 running column sums, the
+    estimate ``num / den`` (``resid`` where ``den <= 1e-6``) and, where the level is the
+    pixel's lower (upper) level, the share ``(1 - t) est`` (``t est``).  No weight or
+    estimate maps: a pixel's shares go to ``low`` and ``up`` (each pixel has one lower and
+    one upper level, so the tasks write disjoint cells).  The values are those of
+    ``range_exponents`` + ``np.exp`` + ``smooth_levels`` + ``blend_levels`` bit for bit.
+
+    Parameters
+    ----------
+    resid : ndarray, float32, (H, W)
+    use : ndarray, bool, (H, W)
+    k0 : ndarray, int32, (H, W)
+    t : ndarray, float32, (H, W)
+        From :func:`range_levels`.
+    level_ids : ndarray, int64, (L,)
+        The used levels, increasing.
+    level_values : ndarray, float32, (L,)
+        Their residual values ``lo + k step``.
+    neg_inv2s2 : float32
+    radius : int (>= 1)
+    max_group : int
+
+    Returns
+    -------
+    low, up : ndarray, float32, (H, W)
+        The shares of each pixel's lower and upper level (0 where it has none).
+    """
+    h, w = resid.shape
+    low = np.zeros((h, w), np.float32)
+    up = np.zeros((h, w), np.float32)
+    n = level_ids.shape[0]
+    if n == 0:
+        return low, up
+    tasks = min(n, max(threads(), -(-n // int(max_group))))
+    bounds = (np.arange(tasks + 1, dtype=np.int64) * n) // tasks
+    run_tasks(_smooth_group_task, tasks, resid, use, k0, t, np.ascontiguousarray(level_ids, np.int64),
+              np.ascontiguousarray(level_values, np.float32), bounds, np.float32(neg_inv2s2), int(radius), low, up)
+    return low, up
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _combine_task(task, tasks, low, up, base, disp, out):
+    h, w = low.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            d = disp[y, u]
+            if np.isfinite(d):
+                out[y, u] = ((_F32_ZERO + low[y, u]) + up[y, u]) + base[y, u]
+            else:
+                out[y, u] = d
+
+
+def combine_shares(low, up, base, disp):
+    """The smoothed map: ``(0 + low) + up + base`` where ``disp`` is finite (the blend's
+    float32 sum started at zero, lower share first), else ``disp``; float32 (H, W)."""
+    out = np.empty(disp.shape, np.float32)
+    run_tasks(_combine_task, row_tasks(disp.shape[0]), low, up, base, disp, out)
+    return out
+
+
+# ----------------------------------------------------------------------------- road model fit (step 6)
+@njit(cache=True, nogil=True, error_model="numpy")
+def ransac_inlier_counts(sols, us, vs, ds, threshold):
+    """Inliers of every RANSAC hypothesis of ``d = a0 + b1 v + b2 u`` (the host fit of
+    :func:`d3cli.method.perspective.fit_road_model`).
+
+    Parameters
+    ----------
+    sols : ndarray, float64, (N, 3)
+        Hypotheses (a0, b1, b2).
+    us, vs, ds : ndarray, float64, (M,)
+        Scored points.
+    threshold : float
+
+    Returns
+    -------
+    ndarray, int64, (N,)
+        ``count_nonzero(|ds - (a0 + b1 vs + b2 us)| <= threshold)`` per hypothesis: the
+        same float64 expression, in the same order, as the NumPy broadcast it replaced
+        (which built 50 x M temporaries per chunk), so the same counts.
+    """
+    out = np.empty(sols.shape[0], np.int64)
+    for j in range(sols.shape[0]):
+        a0 = sols[j, 0]
+        b1 = sols[j, 1]
+        b2 = sols[j, 2]
+        count = 0
+        for i in range(ds.shape[0]):
+            if abs(ds[i] - (a0 + b1 * vs[i] + b2 * us[i])) <= threshold:
+                count += 1
+        out[j] = count
+    return out
+
+
 #: The compiled kernels of this module (nogil, cached on disk), run by :func:`run_tasks`.
 KERNELS = (
     _uniqueness_task, _out_of_view_task, _fill_rows_task, _nearest_task, _fill_inside_task,
     copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _range_exponents_task,
-    _smooth_level_task, _blend_task, _add_base_task,
+    _smooth_level_task, _blend_task, _add_base_task, _exp_task, _smooth_group_task, _combine_task,
 )

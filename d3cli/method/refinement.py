@@ -254,29 +254,8 @@ def smooth_disparity(
     n_levels = int(np.floor((hi - lo) / step)) + 2
     # NumPy float32 arithmetic with Python floats: the scalars act as float32
     k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
-    radius = int(radius)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
-    h, w = disp.shape
     levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
-    # levels filtered together, one per parallel task: each takes H x W float32 of weights;
-    # a group's estimates are blended in one pass
-    group = max(1, min(len(levels), max(finishing.threads(), _MIN_LEVEL_GROUP), _MAX_LEVEL_GROUP))
-    weights = np.empty((group, h, w), np.float32)
-    ring = np.empty((group, 2, 2 * radius + 1, w), np.float64)
-    pad = np.zeros((group, 2, w + 2 * radius), np.float64)
-    sums = np.empty((group, 2, w), np.float64)
-    zero = np.zeros(w, np.float64)
-    slot = np.empty(n_levels + 1, np.int64)
-    acc = np.zeros(disp.shape, np.float32)
-    for g in range(0, len(levels), group):
-        ids = levels[g:g + group]
-        part = weights[: len(ids)]
-        values = np.array([lo + int(k) * step for k in ids], np.float64).astype(np.float32)
-        finishing.range_exponents(resid, use, values, neg_inv2s2, part)
-        # NumPy's float32 exp, not numba's: they differ in the last bit (see the kernels)
-        finishing.parallel_exp(part.reshape(-1))
-        finishing.smooth_levels(part, resid, radius, ring, pad, sums, zero)
-        slot[:] = -1
-        slot[ids] = np.arange(len(ids))
-        finishing.blend_levels(part, slot, k0, t, acc)
-    return finishing.add_base(acc, base, disp)
+    values = np.array([lo + int(k) * step for k in levels], np.float64).astype(np.float32)
+    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, neg_inv2s2, int(radius))
+    return finishing.combine_shares(low, up, base, disp)
