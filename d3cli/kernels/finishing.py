@@ -268,15 +268,15 @@ def _nearest_task(task, tasks, disp, valid, left, right):
     h, w = disp.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
+        # selects, not branches: the valid pattern of a map with many holes is random, and
+        # a mispredicted branch per pixel cost twice the whole scan
         value = _F32_INF
         for u in range(w):
-            if valid[y, u]:
-                value = disp[y, u]
+            value = disp[y, u] if valid[y, u] else value
             left[y, u] = value
         value = _F32_INF
         for u in range(w - 1, -1, -1):
-            if valid[y, u]:
-                value = disp[y, u]
+            value = disp[y, u] if valid[y, u] else value
             right[y, u] = value
 
 
@@ -298,6 +298,52 @@ def nearest_along_rows(disp, valid):
     right = np.empty((h, w), np.float32)
     run_tasks(_nearest_task, row_tasks(h), disp, valid, left, right)
     return left, right
+
+
+@njit(cache=True, nogil=True)
+def _nearest_columns_task(task, tasks, disp, valid, up, down):
+    h, w = disp.shape
+    u0, u1 = (task * w) // tasks, ((task + 1) * w) // tasks
+    if u1 <= u0:
+        return
+    last = np.full(u1 - u0, _F32_INF, np.float32)
+    n = u1 - u0
+    for y in range(h):  # top down: the nearest valid value at or above
+        d_row = disp[y, u0:u1]
+        v_row = valid[y, u0:u1]
+        o_row = up[y, u0:u1]
+        for i in range(n):  # selects: vectorised across the columns
+            value = d_row[i] if v_row[i] else last[i]
+            last[i] = value
+            o_row[i] = value
+    last[:] = _F32_INF
+    for y in range(h - 1, -1, -1):  # bottom up: at or below
+        d_row = disp[y, u0:u1]
+        v_row = valid[y, u0:u1]
+        o_row = down[y, u0:u1]
+        for i in range(n):
+            value = d_row[i] if v_row[i] else last[i]
+            last[i] = value
+            o_row[i] = value
+
+
+def nearest_along_columns(disp, valid):
+    """Values of the nearest valid pixel above and below in each column, in the map's own
+    (H, W) layout: :func:`nearest_along_rows` of the transposed map, transposed back,
+    without the four transposed copies (tasks over blocks of columns, rows streamed).
+
+    Returns
+    -------
+    up, down : ndarray, float32, (H, W)
+        The nearest valid value at or above (below) each pixel; inf where there is none.
+    """
+    h, w = disp.shape
+    up = np.empty((h, w), np.float32)
+    down = np.empty((h, w), np.float32)
+    n = threads()
+    tasks = 1 if n == 1 else max(1, min(w // 64, 4 * n))
+    run_tasks(_nearest_columns_task, tasks, disp, valid, up, down)
+    return up, down
 
 
 @njit(cache=True, nogil=True)
@@ -554,26 +600,29 @@ def residual_and_range(disp, base, valid):
     return resid, use, row_lo, row_hi, row_use
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _range_levels_task(task, tasks, resid, lo, step, n_levels, k0, t, row_used):
     h, w = resid.shape
     top = np.float32(n_levels - 2)
     top_plus_1 = np.float32(n_levels - 1)
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
+        r_row = resid[y]
+        k_row = k0[y]
+        t_row = t[y]
+        # np.clip(np.floor(pos), 0, top).astype(np.int32); NaN casts to INT32_MIN.  Selects
+        # only (the cast of a clamped value), so that the loop vectorises.
+        for u in range(w):
+            pos = (r_row[u] - lo) / step
+            inside = pos if pos < top_plus_1 else top
+            k = np.int32(inside if pos >= _F32_ZERO else _F32_ZERO)
+            k = k if pos == pos else np.int32(-2147483648)
+            k_row[u] = k
+            t_row[u] = np.float32(np.float64(pos) - np.float64(k))
         flags = row_used[y]
         flags[:] = False
         for u in range(w):
-            pos = (resid[y, u] - lo) / step
-            # np.clip(np.floor(pos), 0, top).astype(np.int32); NaN casts to INT32_MIN
-            if pos >= _F32_ZERO:
-                k = np.int32(pos) if pos < top_plus_1 else np.int32(top)
-            elif pos < _F32_ZERO:
-                k = np.int32(0)
-            else:
-                k = np.int32(-2147483648)
-            k0[y, u] = k
-            t[y, u] = np.float32(np.float64(pos) - np.float64(k))
+            k = k_row[u]
             if k >= 0:
                 flags[k] = True
 
@@ -1094,4 +1143,5 @@ KERNELS = (
     _uniqueness_task, _out_of_view_task, _fill_rows_task, _nearest_task, _fill_inside_task,
     copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _range_exponents_task,
     _smooth_level_task, _blend_task, _add_base_task, _exp_task, _smooth_group_task, _combine_task,
+    _nearest_columns_task,
 )

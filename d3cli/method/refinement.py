@@ -163,9 +163,8 @@ def fill_holes(
         # inside a surface: the median of the nearest valid values in the four directions
         # estimates it better than the background side.
         left, right = finishing.nearest_along_rows(disp, valid)
-        up, down = finishing.nearest_along_rows(np.ascontiguousarray(disp.T), np.ascontiguousarray(valid.T))
-        filled = finishing.fill_inside(disp, valid, _like(occluded, disp, bool), left, right,
-                                       np.ascontiguousarray(up.T), np.ascontiguousarray(down.T))
+        up, down = finishing.nearest_along_columns(disp, valid)
+        filled = finishing.fill_inside(disp, valid, _like(occluded, disp, bool), left, right, up, down)
         row_has = valid.any(axis=1)
     if not row_has.all():
         finishing.copy_nearest_rows(filled, row_has)
