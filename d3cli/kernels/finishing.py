@@ -1026,13 +1026,15 @@ def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, 
                 den = np.float32(s0d)
                 # the reference's np.maximum(den, 1e-6) is den where it is used
                 tmp[u] = num / den if den > eps else r_row[u]
-            # the shares where this level is the pixel's lower (upper) one; selects, not
-            # conditional stores, so that the loop vectorises
+            # the shares where this level is the pixel's lower (upper) one: conditional
+            # stores (a select that wrote the old value back elsewhere would race with the
+            # task of the pixel's other level)
             for u in range(w):
-                est = tmp[u]
                 kk = k_row[u]
-                low_row[u] = (_F32_ONE - t_row[u]) * est if kk == level else low_row[u]
-                up_row[u] = t_row[u] * est if kk == level - 1 else up_row[u]
+                if kk == level:
+                    low_row[u] = (_F32_ONE - t_row[u]) * tmp[u]
+                elif kk == level - 1:
+                    up_row[u] = t_row[u] * tmp[u]
 
 
 def smooth_groups(resid, use, k0, t, level_ids, level_values, neg_inv2s2, radius, max_group=4):
