@@ -212,6 +212,46 @@ def out_of_view_mask(disparity, valid, start):
     return out
 
 
+# ----------------------------------------------------------------------------- speckle filter
+_F32_RINT_MAGIC = np.float32(12582912.0)  # 1.5 * 2^23: adding and subtracting it rounds half to even
+_F32_16 = np.float32(16.0)
+_F32_INT16_MAX = np.float32(32767.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _fixed_task(task, tasks, disp, valid, out):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            x = disp[y, u] * _F32_16
+            # clipped before the rounding: the same integer as np.clip(np.round(x), 0, 32767)
+            x = _F32_ZERO if not x > _F32_ZERO else (x if x < _F32_INT16_MAX else _F32_INT16_MAX)
+            x = (x + _F32_RINT_MAGIC) - _F32_RINT_MAGIC
+            out[y, u] = np.int16(x) if valid[y, u] else np.int16(-1)
+
+
+def fixed_point_16(disp, valid):
+    """Disparities in OpenCV's 1/16 px fixed point, -1 on the holes.
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
+        Finite estimates only.
+
+    Returns
+    -------
+    ndarray, int16, (H, W)
+        ``np.where(valid, np.clip(np.round(disp * 16), 0, 32767), -1).astype(np.int16)``
+        (float32 product, rounding half to even), in one pass.
+    """
+    h, w = disp.shape
+    out = np.empty((h, w), np.int16)
+    run_tasks(_fixed_task, row_tasks(h), disp, valid, out)
+    return out
+
+
 # ----------------------------------------------------------------------------- hole filling
 @njit(cache=True, inline="always")
 def _np_minimum(a, b):
@@ -1145,5 +1185,5 @@ KERNELS = (
     _uniqueness_task, _out_of_view_task, _fill_rows_task, _nearest_task, _fill_inside_task,
     copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _range_exponents_task,
     _smooth_level_task, _blend_task, _add_base_task, _exp_task, _smooth_group_task, _combine_task,
-    _nearest_columns_task,
+    _nearest_columns_task, _fixed_task,
 )

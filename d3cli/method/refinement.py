@@ -124,7 +124,7 @@ def speckles(disparity: np.ndarray, valid: np.ndarray, *, max_size: int, max_dif
         return np.zeros(disp.shape, bool)
     # 1/16 px fixed point as OpenCV's own disparities; -1 marks the holes, which
     # filterSpeckles leaves out of every region (its newVal)
-    fixed = np.where(valid, np.clip(np.round(disp * 16.0), 0, 32767), -1).astype(np.int16)
+    fixed = finishing.fixed_point_16(disp, valid)
     cv2.filterSpeckles(fixed, -1, int(max_size), max(1, int(round(float(max_diff) * 16.0))))
     return valid & (fixed == -1)
 

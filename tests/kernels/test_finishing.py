@@ -191,6 +191,19 @@ def test_out_of_view_matches_reference(shape):
             np.testing.assert_array_equal(got, want, err_msg=f"{shape} {share} {max_disparity}")
 
 
+def test_fixed_point_16_matches_the_numpy_formulation():
+    """The speckle filter's 1/16 px fixed point: ties of the rounding (half to even), both
+    ends of the int16 range, negative and huge estimates, holes."""
+    rng = np.random.default_rng(8)
+    disp = np.concatenate([rng.random(50_000) * 2100, np.arange(-64, 64) / 32.0, np.arange(0, 2100, 1 / 32),
+                           [2047.96875, 2047.97, 2048.0, 1e30, 3e38, -5.0, -0.0, 1e-40]]).astype(np.float32)
+    valid = rng.random(disp.size) < 0.9
+    with np.errstate(over="ignore"):
+        want = np.where(valid, np.clip(np.round(disp * 16.0), 0, 32767), -1).astype(np.int16)
+    got = finishing.fixed_point_16(disp.reshape(1, -1), valid.reshape(1, -1))
+    np.testing.assert_array_equal(got.ravel(), want)
+
+
 # ----------------------------------------------------------------------------- hole filling
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("smooth", [False, True])
