@@ -308,15 +308,15 @@ def _nearest_task(task, tasks, disp, valid, left, right):
     h, w = disp.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        # selects, not branches: the valid pattern of a map with many holes is random, and
-        # a mispredicted branch per pixel cost twice the whole scan
         value = _F32_INF
         for u in range(w):
-            value = disp[y, u] if valid[y, u] else value
+            if valid[y, u]:
+                value = disp[y, u]
             left[y, u] = value
         value = _F32_INF
         for u in range(w - 1, -1, -1):
-            value = disp[y, u] if valid[y, u] else value
+            if valid[y, u]:
+                value = disp[y, u]
             right[y, u] = value
 
 
@@ -386,36 +386,39 @@ def nearest_along_columns(disp, valid):
     return up, down
 
 
+@njit(cache=True, inline="always")
+def _order(a, b):
+    """``(a, b)`` in increasing order, swapped only when ``a > b`` (equal values keep their
+    order: a network of such adjacent exchanges sorts stably, as an insertion sort)."""
+    swap = a > b
+    return (b if swap else a), (a if swap else b)
+
+
 @njit(cache=True, nogil=True)
 def _fill_inside_task(task, tasks, disp, valid, occluded, left, right, up, down, out):
     h, w = disp.shape
-    buf = np.empty(4, np.float32)  # sort buffer of the task
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
         for u in range(w):
-            if valid[y, u]:
-                out[y, u] = disp[y, u]
-                continue
-            side = _np_minimum(left[y, u], right[y, u])
-            if occluded[y, u]:
-                out[y, u] = side
-                continue
-            n = 0
-            for v in (left[y, u], right[y, u], up[y, u], down[y, u]):
-                if np.isfinite(v):
-                    # insertion sort of at most four values
-                    i = n
-                    while i > 0 and buf[i - 1] > v:
-                        buf[i] = buf[i - 1]
-                        i -= 1
-                    buf[i] = v
-                    n += 1
-            if n == 0:
-                out[y, u] = side
-            elif n % 2 == 1:
-                out[y, u] = buf[n // 2]
-            else:
-                out[y, u] = (buf[n // 2 - 1] + buf[n // 2]) / _F32_TWO
+            l_v = left[y, u]
+            r_v = right[y, u]
+            side = _np_minimum(l_v, r_v)
+            # The nearest values are finite or +inf (none): sorting all four with +inf
+            # last gives the finite ones in the order of the reference's insertion sort
+            # of the finite values alone (left, right, up, down; stable on ties).  Selects
+            # only: the pattern of holes is random, and branches mispredicted.
+            a0, a1 = _order(l_v, r_v)
+            a1, a2 = _order(a1, up[y, u])
+            a0, a1 = _order(a0, a1)
+            a2, a3 = _order(a2, down[y, u])
+            a1, a2 = _order(a1, a2)
+            a0, a1 = _order(a0, a1)
+            n = ((l_v != _F32_INF) + (r_v != _F32_INF) + (up[y, u] != _F32_INF)
+                 + (down[y, u] != _F32_INF))
+            # median of the n finite ones: the middle one, or the float32 mean of the two
+            median = a0 if n == 1 else ((a0 + a1) / _F32_TWO if n == 2 else (a1 if n == 3 else (a1 + a2) / _F32_TWO))
+            fill = side if (occluded[y, u] or n == 0) else median
+            out[y, u] = disp[y, u] if valid[y, u] else fill
 
 
 def fill_inside(disp, valid, occluded, left, right, up, down):
@@ -427,7 +430,8 @@ def fill_inside(disp, valid, occluded, left, right, up, down):
     disp : ndarray, float32, (H, W)
     valid, occluded : ndarray, bool, (H, W)
     left, right, up, down : ndarray, float32, (H, W)
-        Nearest valid values in the four directions (inf: none).
+        Nearest valid values in the four directions: finite, or +inf where there is none
+        (what :func:`nearest_along_rows` and :func:`nearest_along_columns` give).
 
     Returns
     -------

@@ -218,6 +218,42 @@ def test_fill_holes_matches_reference(shape, smooth, inside):
         assert_same_bytes(got, want, f"{shape} {share} smooth={smooth} inside={inside}")
 
 
+def test_fill_inside_on_ties_and_signed_zeros_equals_the_insertion_sort():
+    """The branch-free sorting network of ``fill_inside`` against the formulation it
+    replaced (an insertion sort of the finite values in the order left, right, up, down):
+    many equal values and both signed zeros, so that the order of equals shows in the bits."""
+    rng = np.random.default_rng(4)
+    shape = (40, 50)
+    choices = np.array([-0.0, 0.0, 1.0, 2.0, np.inf], np.float32)
+    left, right, up, down = (choices[rng.integers(0, 5, shape)] for _ in range(4))
+    disp = rng.random(shape).astype(np.float32)
+    valid = rng.random(shape) < 0.2
+    occluded = (rng.random(shape) < 0.2) & ~valid
+    want = np.empty(shape, np.float32)
+    for y in range(shape[0]):
+        for u in range(shape[1]):
+            if valid[y, u]:
+                want[y, u] = disp[y, u]
+                continue
+            side = left[y, u] if left[y, u] < right[y, u] else right[y, u]
+            buf = []
+            for v in (left[y, u], right[y, u], up[y, u], down[y, u]):
+                if np.isfinite(v):
+                    i = len(buf)
+                    while i > 0 and buf[i - 1] > v:
+                        i -= 1
+                    buf.insert(i, v)
+            n = len(buf)
+            if occluded[y, u] or n == 0:
+                want[y, u] = side
+            elif n % 2:
+                want[y, u] = buf[n // 2]
+            else:
+                want[y, u] = (buf[n // 2 - 1] + buf[n // 2]) / np.float32(2.0)
+    got = finishing.fill_inside(disp, valid, occluded, left, right, up, down)
+    assert_same_bytes(got, want, "fill_inside")
+
+
 def test_fill_holes_empty_rows_copy_the_nearest_row_upper_on_a_tie():
     disp = np.full((7, 4), np.inf, np.float32)
     valid = np.zeros((7, 4), bool)
