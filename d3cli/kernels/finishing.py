@@ -18,9 +18,10 @@ machine was shared (smoothing of the road pair: 128 ms CPU with two threads agai
 The box sums of the smoothing reproduce ``cv2.boxFilter(..., normalize=False,
 borderType=cv2.BORDER_CONSTANT)`` on float32 as OpenCV 5.0 computes them (float64 running
 sums along the rows, then down the columns; direct 3- and 5-tap sums for radius 1 and 2).
-The range weights are computed by ``np.exp`` between the kernels: NumPy's float32 ``exp``
-and the C library's ``expf`` (what numba calls) differ in the last bit for about a third
-of the arguments.
+The range weights are NumPy's float32 ``exp`` computed inside the kernel
+(:func:`numpy_expf`, NumPy's SIMD algorithm transcribed, equal on all 2^32 arguments): the
+C library's ``expf`` (what numba's ``math.exp`` calls) differs in the last bit for about a
+third of the arguments.
 """
 
 from __future__ import annotations
@@ -87,23 +88,6 @@ def row_tasks(h: int) -> int:
     shared machine holds up little."""
     n = threads()
     return 1 if n == 1 else max(1, min(h, 4 * n))
-
-
-def parallel_exp(values: np.ndarray) -> None:
-    """``np.exp(values, out=values)`` on a flat float32 array, in slices on the pool
-    (NumPy releases the GIL in the loop; an elementwise function gives the same bytes
-    however the array is sliced)."""
-    n = threads()
-    if n == 1 or values.size < 1 << 16:
-        np.exp(values, out=values)
-        return
-    bounds = np.linspace(0, values.size, 4 * n + 1).astype(np.int64)
-
-    def part(i, _n):
-        chunk = values[bounds[i]:bounds[i + 1]]
-        np.exp(chunk, out=chunk)
-
-    run_tasks(part, 4 * n)
 
 
 _F32_ONE = np.float32(1.0)
@@ -703,211 +687,6 @@ def range_levels(resid, lo, step, n_levels):
     return k0, t, used
 
 
-@njit(cache=True, nogil=True)
-def _range_exponents_task(task, tasks, resid, use, levels, neg_inv2s2, out):
-    h, w = resid.shape
-    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    for y in range(y0, y1):
-        for i in range(levels.shape[0]):
-            level = levels[i]
-            for u in range(w):
-                a = resid[y, u] - level
-                x = neg_inv2s2 * (a * a)
-                if not use[y, u] and x == x:
-                    x = -_F32_INF
-                out[i, y, u] = x
-
-
-def range_exponents(resid, use, levels, neg_inv2s2, out):
-    """The arguments of the range weights of a group of levels, float32:
-    ``out[i] = neg_inv2s2 * (resid - levels[i]) ** 2`` where ``use``, else -inf (the caller
-    takes ``np.exp``: the weight is then exactly the reference's ``use * exp(...)``, +0
-    where not used, and NaN stays NaN).
-
-    Parameters
-    ----------
-    resid : ndarray, float32, (H, W)
-    use : ndarray, bool, (H, W)
-    levels : ndarray, float32, (L,)
-    neg_inv2s2 : float32
-        ``-1 / (2 sigma^2)``.
-    out : ndarray, float32, (>= L, H, W), written
-    """
-    run_tasks(_range_exponents_task, row_tasks(resid.shape[0]), resid, use, levels, np.float32(neg_inv2s2), out)
-
-
-@njit(cache=True, inline="always")
-def _row_sums(weight, resid, y, radius, pad_n, pad_d, dst_n, dst_d):
-    """Box sums along row y of ``w r`` and ``w`` (float32 product) as
-    ``cv2.boxFilter``'s float32 row pass computes them: float64 sums over the row padded by
-    ``radius`` zeros, 3 and 5 taps summed directly, wider windows as running sums (add
-    the entering element minus the leaving one)."""
-    w = resid.shape[1]
-    k = 2 * radius + 1
-    for u in range(w):
-        wv = weight[y, u]
-        pad_d[radius + u] = wv
-        pad_n[radius + u] = wv * resid[y, u]
-    if k == 3:
-        for i in range(w):
-            dst_n[i] = pad_n[i] + pad_n[i + 1] + pad_n[i + 2]
-            dst_d[i] = pad_d[i] + pad_d[i + 1] + pad_d[i + 2]
-    elif k == 5:
-        for i in range(w):
-            dst_n[i] = pad_n[i] + pad_n[i + 1] + pad_n[i + 2] + pad_n[i + 3] + pad_n[i + 4]
-            dst_d[i] = pad_d[i] + pad_d[i + 1] + pad_d[i + 2] + pad_d[i + 3] + pad_d[i + 4]
-    else:
-        sn = 0.0
-        sd = 0.0
-        for j in range(k):
-            sn += pad_n[j]
-            sd += pad_d[j]
-        dst_n[0] = sn
-        dst_d[0] = sd
-        for i in range(w - 1):
-            sn += pad_n[i + k] - pad_n[i]
-            sd += pad_d[i + k] - pad_d[i]
-            dst_n[i + 1] = sn
-            dst_d[i + 1] = sd
-
-
-@njit(cache=True, nogil=True)
-def _smooth_level_task(task, tasks, weights, resid, radius, ring, pad, sums, zero):
-    h, w = resid.shape
-    k = 2 * radius + 1
-    eps = np.float32(1e-6)
-    for i in range(task, task + 1):
-        wl = weights[i]
-        ring_n = ring[i, 0]
-        ring_d = ring[i, 1]
-        pad_n = pad[i, 0]
-        pad_d = pad[i, 1]
-        sum_n = sums[i, 0]
-        sum_d = sums[i, 1]
-        for u in range(w):
-            sum_n[u] = 0.0
-            sum_d[u] = 0.0
-        for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
-            y = j - radius
-            if 0 <= y < h:
-                _row_sums(wl, resid, y, radius, pad_n, pad_d, ring_n[y % k], ring_d[y % k])
-                rn = ring_n[y % k]
-                rd = ring_d[y % k]
-            else:
-                rn = zero
-                rd = zero
-            for u in range(w):
-                sum_n[u] += rn[u]
-                sum_d[u] += rd[u]
-        for y in range(h):
-            yp = y + radius  # entering row
-            ym = y - radius  # leaving row
-            if yp < h:
-                _row_sums(wl, resid, yp, radius, pad_n, pad_d, ring_n[yp % k], ring_d[yp % k])
-                pn = ring_n[yp % k]
-                pd = ring_d[yp % k]
-            else:
-                pn = zero
-                pd = zero
-            mn = ring_n[ym % k] if ym >= 0 else zero
-            md = ring_d[ym % k] if ym >= 0 else zero
-            est_row = wl[y]
-            r_row = resid[y]
-            for u in range(w):
-                s0n = sum_n[u] + pn[u]
-                s0d = sum_d[u] + pd[u]
-                sum_n[u] = s0n - mn[u]
-                sum_d[u] = s0d - md[u]
-                num = np.float32(s0n)
-                den = np.float32(s0d)
-                # the reference's np.maximum(den, 1e-6) is den where it is used
-                est_row[u] = num / den if den > eps else r_row[u]
-
-
-def smooth_levels(weights, resid, radius, ring, pad, sums, zero):
-    """Box-filtered range levels of the piecewise-linear bilateral filter, one level per
-    task; each level's estimate replaces its weights.
-
-    For level i with weights ``w = weights[i]``: the box sums (window
-    ``2 radius + 1``, zero padding) of ``w r`` and ``w`` exactly as ``cv2.boxFilter(...,
-    normalize=False, borderType=cv2.BORDER_CONSTANT)`` gives them on float32 (the row pass,
-    then float64 running sums down the columns rounded to float32), streamed through a
-    ring buffer of ``2 radius + 1`` row sums, and the estimate ``num / den`` (``resid``
-    where ``den <= 1e-6``), written over ``weights[i]`` (row y of the weights is read when
-    it enters the window, before row y of the estimate is written).
-
-    Parameters
-    ----------
-    weights : ndarray, float32, (L, H, W), overwritten by the estimates
-        ``exp(-(r - level)^2 / (2 sigma^2))`` of each level, 0 where a pixel may not be
-        averaged into others.
-    resid : ndarray, float32, (H, W)
-    radius : int (>= 1)
-    ring : ndarray, float64, (>= L, 2, 2 radius + 1, W)
-    pad : ndarray, float64, (>= L, 2, W + 2 radius), zero at both ends
-    sums : ndarray, float64, (>= L, 2, W)
-    zero : ndarray, float64, (W,), all zero
-    """
-    run_tasks(_smooth_level_task, weights.shape[0], weights, resid, int(radius), ring, pad, sums, zero)
-
-
-@njit(cache=True, nogil=True)
-def _blend_task(task, tasks, estimates, slot, k0, t, acc):
-    h, w = k0.shape
-    n = slot.shape[0] - 1
-    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    for y in range(y0, y1):
-        for u in range(w):
-            kk = k0[y, u]
-            if 0 <= kk < n:
-                i = slot[kk]
-                if i >= 0:
-                    acc[y, u] += (_F32_ONE - t[y, u]) * estimates[i, y, u]
-                i = slot[kk + 1]
-                if i >= 0:
-                    acc[y, u] += t[y, u] * estimates[i, y, u]
-
-
-def blend_levels(estimates, slot, k0, t, acc):
-    """Add the shares of a group of levels: ``(1 - t) est[k0]`` where the pixel's lower
-    level ``k0`` is in the group, then ``t est[k0 + 1]`` where its upper level is.
-
-    The reference adds every level in increasing order to a zero-initialised sum, the
-    levels other than a pixel's two adding ``0 * est``: that changes nothing (the sum never
-    holds -0), so ``acc = (0 + lower share) + upper share`` is the same float32 sum.
-
-    Parameters
-    ----------
-    estimates : ndarray, float32, (L, H, W)
-    slot : ndarray, int64, (n_levels + 1,)
-        Index into ``estimates`` of each level, -1 where not in this group.
-    k0 : ndarray, int32, (H, W)
-    t : ndarray, float32, (H, W)
-    acc : ndarray, float32, (H, W), zero before the first group, updated
-    """
-    run_tasks(_blend_task, row_tasks(k0.shape[0]), estimates, slot, k0, t, acc)
-
-
-@njit(cache=True, nogil=True)
-def _add_base_task(task, tasks, acc, base, disp):
-    h, w = acc.shape
-    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    for y in range(y0, y1):
-        for u in range(w):
-            if np.isfinite(disp[y, u]):
-                acc[y, u] = acc[y, u] + base[y, u]
-            else:
-                acc[y, u] = disp[y, u]
-
-
-def add_base(acc, base, disp):
-    """``acc + base`` where ``disp`` is finite, else ``disp``, in place in ``acc``
-    (float32 (H, W)); returns ``acc``."""
-    run_tasks(_add_base_task, row_tasks(acc.shape[0]), acc, base, disp)
-    return acc
-
-
-# ----------------------------------------------------------------------------- fused smoothing
 @njit(cache=True, inline="always", error_model="numpy")
 def _level_weights(resid, use, y, level, neg_inv2s2, radius, pad_n, pad_d, tmp):
     """Row y of a level's range weights ``w = exp(neg_inv2s2 (r - level)^2)`` (+0 where not
@@ -1017,7 +796,7 @@ def _group_row_sums(resid, use, y, values, neg_inv2s2, radius, pad, ring, tmp):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, bounds, neg_inv2s2, radius,
-                       low, up):
+                       low, up, rings, pads, all_sums, zero, tmps):
     h, w = resid.shape
     g0, g1 = bounds[task], bounds[task + 1]
     ng = g1 - g0
@@ -1026,11 +805,10 @@ def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, 
     values = level_values[g0:g1]
     k = 2 * radius + 1
     eps = np.float32(1e-6)
-    ring = np.empty((ng, 2, k, w))
-    pad = np.zeros((ng, 2, w + 2 * radius))
-    sums = np.zeros((ng, 2, w))
-    zero = np.zeros(w)
-    tmp = np.empty(w, np.float32)
+    ring = rings[g0:g1]
+    pad = pads[g0:g1]
+    sums = all_sums[g0:g1]
+    tmp = tmps[task]
     for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
         y = j - radius
         if 0 <= y < h:
@@ -1081,6 +859,14 @@ def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, 
                     up_row[u] = t_row[u] * tmp[u]
 
 
+@njit(cache=True, nogil=True)
+def _zero_task(task, tasks, a, b):
+    h = a.shape[0]
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    a[y0:y1] = _F32_ZERO
+    b[y0:y1] = _F32_ZERO
+
+
 def smooth_groups(resid, use, k0, t, level_ids, level_values, neg_inv2s2, radius, max_group=4):
     """The box-filtered range levels of the piecewise-linear bilateral filter and each
     pixel's shares of its two levels, all in one pass per group of levels.
@@ -1093,8 +879,11 @@ def smooth_groups(resid, use, k0, t, level_ids, level_values, neg_inv2s2, radius
     estimate ``num / den`` (``resid`` where ``den <= 1e-6``) and, where the level is the
     pixel's lower (upper) level, the share ``(1 - t) est`` (``t est``).  No weight or
     estimate maps: a pixel's shares go to ``low`` and ``up`` (each pixel has one lower and
-    one upper level, so the tasks write disjoint cells).  The values are those of
-    ``range_exponents`` + ``np.exp`` + ``smooth_levels`` + ``blend_levels`` bit for bit.
+    one upper level, so the tasks write disjoint cells).  The values are those of the
+    reference (``np.exp`` of the float32 exponents, one pair of ``cv2.boxFilter`` calls per
+    level, the blend) bit for bit.  Before (issue 10, first round) the weights of a group
+    of levels were maps, their ``np.exp`` a pass of its own and the estimates maps
+    blended in a further pass.
 
     Parameters
     ----------
@@ -1117,15 +906,28 @@ def smooth_groups(resid, use, k0, t, level_ids, level_values, neg_inv2s2, radius
         The shares of each pixel's lower and upper level (0 where it has none).
     """
     h, w = resid.shape
-    low = np.zeros((h, w), np.float32)
-    up = np.zeros((h, w), np.float32)
+    # np.empty and a zeroing pass, not np.zeros: calloc hands out fresh pages for maps this
+    # large, and their first-touch page faults cost more than the pass
+    low = np.empty((h, w), np.float32)
+    up = np.empty((h, w), np.float32)
+    run_tasks(_zero_task, row_tasks(h), low, up)
     n = level_ids.shape[0]
     if n == 0:
         return low, up
     tasks = min(n, max(threads(), -(-n // int(max_group))))
     bounds = (np.arange(tasks + 1, dtype=np.int64) * n) // tasks
+    radius = int(radius)
+    # the scratch of every level, allocated here (NumPy reuses freed heap memory; the same
+    # buffers allocated inside the tasks came as fresh pages: with np.zeros for low/up too,
+    # 2218 page faults per call for the road pair in compute, 19.5 ms; now none, 14.2 ms):
+    # per level a ring of 2 radius + 1 row sums (w r and w), a zero-padded weight row,
+    # the column sums
+    rings = np.empty((n, 2, 2 * radius + 1, w))
+    pads = np.zeros((n, 2, w + 2 * radius))
+    sums = np.zeros((n, 2, w))
     run_tasks(_smooth_group_task, tasks, resid, use, k0, t, np.ascontiguousarray(level_ids, np.int64),
-              np.ascontiguousarray(level_values, np.float32), bounds, np.float32(neg_inv2s2), int(radius), low, up)
+              np.ascontiguousarray(level_values, np.float32), bounds, np.float32(neg_inv2s2), radius, low, up,
+              rings, pads, sums, np.zeros(w), np.empty((tasks, w), np.float32))
     return low, up
 
 
@@ -1144,10 +946,11 @@ def _combine_task(task, tasks, low, up, base, disp, out):
 
 def combine_shares(low, up, base, disp):
     """The smoothed map: ``(0 + low) + up + base`` where ``disp`` is finite (the blend's
-    float32 sum started at zero, lower share first), else ``disp``; float32 (H, W)."""
-    out = np.empty(disp.shape, np.float32)
-    run_tasks(_combine_task, row_tasks(disp.shape[0]), low, up, base, disp, out)
-    return out
+    float32 sum started at zero, lower share first), else ``disp``; float32 (H, W),
+    written over ``low`` (no new map: its first-touch page faults cost 1.5 ms on the road
+    pair) and returned."""
+    run_tasks(_combine_task, row_tasks(disp.shape[0]), low, up, base, disp, low)
+    return low
 
 
 # ----------------------------------------------------------------------------- road model fit (step 6)
@@ -1187,7 +990,7 @@ def ransac_inlier_counts(sols, us, vs, ds, threshold):
 #: The compiled kernels of this module (nogil, cached on disk), run by :func:`run_tasks`.
 KERNELS = (
     _uniqueness_task, _out_of_view_task, _fill_rows_task, _nearest_task, _fill_inside_task,
-    copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _range_exponents_task,
-    _smooth_level_task, _blend_task, _add_base_task, _exp_task, _smooth_group_task, _combine_task,
-    _nearest_columns_task, _fixed_task,
+    copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _exp_task, _smooth_group_task,
+    _combine_task,
+    _nearest_columns_task, _fixed_task, _zero_task,
 )

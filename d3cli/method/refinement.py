@@ -173,11 +173,6 @@ def fill_holes(
     return filled
 
 
-# range levels of the smoothing filtered at a time: at least 4 (fewer blending passes),
-# at most 8 (memory), else one per thread
-_MIN_LEVEL_GROUP = 4
-_MAX_LEVEL_GROUP = 8
-
 # The piecewise-linear bilateral filter needs one pair of box filters per range level;
 # beyond this many levels the level spacing grows instead (wide-range maps without a plane).
 _MAX_RANGE_LEVELS = 256
@@ -207,9 +202,10 @@ def smooth_disparity(
     range levels ``sigma`` apart (wider when there would be more than 256), per level two
     box sums, the result linearly interpolated between the two levels that bracket
     ``r_p``; levels no pixel interpolates from are skipped.  The box sums are those of
-    ``cv2.boxFilter(..., normalize=False, borderType=cv2.BORDER_CONSTANT)``, bit for bit
-    (:func:`d3cli.kernels.finishing.smooth_levels`, one level per thread), and the range
-    weights NumPy's float32 ``exp``.
+    ``cv2.boxFilter(..., normalize=False, borderType=cv2.BORDER_CONSTANT)``, bit for bit,
+    and the range weights NumPy's float32 ``exp``: one pass per group of levels
+    (:func:`d3cli.kernels.finishing.smooth_groups`, a group per task) computes the
+    weights of each entering row, its box sums and each pixel's shares of its two levels.
 
     Parameters
     ----------
