@@ -773,30 +773,33 @@ def _running_sums_4(pa, pb, pc, pd, da, db, dc, dd, k):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _group_row_sums(resid, use, y, values, g0, g1, neg_inv2s2, radius, pad, ring, tmp):
-    """Box sums along row y of ``w r`` and ``w`` of levels g0 .. g1-1 into the ring slot of
-    row y.  The levels' buffers are indexed ``pad[g]``, never sliced ``pad[g0:g1]``: numba
-    types a slice as of unknown layout, and the loops over it stopped vectorising."""
+    """Box sums along row y of ``w r`` and ``w`` of levels g0 .. g1-1 (``values[g]``) into
+    the ring slot of row y; level g uses ``pad[g - g0]`` and ``ring[g - g0]``.  The task's
+    buffers are indexed, never sliced: numba types a slice as of unknown layout, and the
+    loops over it stopped vectorising (20.9 against 16.5 ms for the road pair)."""
     k = 2 * radius + 1
     slot = y % k
     for g in range(g0, g1):
-        _level_weights(resid, use, y, values[g], neg_inv2s2, radius, pad[g, 0], pad[g, 1], tmp)
+        i = g - g0
+        _level_weights(resid, use, y, values[g], neg_inv2s2, radius, pad[i, 0], pad[i, 1], tmp)
     if k == 3 or k == 5:
-        for g in range(g0, g1):
-            _direct_sums(pad[g, 0], ring[g, 0, slot], k)
-            _direct_sums(pad[g, 1], ring[g, 1, slot], k)
+        for i in range(g1 - g0):
+            _direct_sums(pad[i, 0], ring[i, 0, slot], k)
+            _direct_sums(pad[i, 1], ring[i, 1, slot], k)
         return
-    g = g0
-    while g + 1 < g1:  # levels in pairs: four chains
-        _running_sums_4(pad[g, 0], pad[g, 1], pad[g + 1, 0], pad[g + 1, 1],
-                        ring[g, 0, slot], ring[g, 1, slot], ring[g + 1, 0, slot], ring[g + 1, 1, slot], k)
-        g += 2
-    if g < g1:
-        _running_sums_2(pad[g, 0], pad[g, 1], ring[g, 0, slot], ring[g, 1, slot], k)
+    ng = g1 - g0
+    i = 0
+    while i + 1 < ng:  # levels in pairs: four chains
+        _running_sums_4(pad[i, 0], pad[i, 1], pad[i + 1, 0], pad[i + 1, 1],
+                        ring[i, 0, slot], ring[i, 1, slot], ring[i + 1, 0, slot], ring[i + 1, 1, slot], k)
+        i += 2
+    if i < ng:
+        _running_sums_2(pad[i, 0], pad[i, 1], ring[i, 0, slot], ring[i, 1, slot], k)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, bounds, neg_inv2s2, radius,
-                       low, up, rings, pads, all_sums, zero, tmps):
+                       low, up):
     h, w = resid.shape
     g0, g1 = bounds[task], bounds[task + 1]
     ng = g1 - g0
@@ -804,16 +807,23 @@ def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, 
         return
     k = 2 * radius + 1
     eps = np.float32(1e-6)
-    tmp = tmps[task]
+    # the group's scratch, allocated per task (a few levels at a time: all levels' rings at
+    # once would take 256 x 2 (2 radius + 1) W float64 on a wide-range map): per level a
+    # ring of 2 radius + 1 row sums (w r and w), a zero-padded weight row, the column sums
+    rings = np.empty((ng, 2, k, w))
+    pads = np.zeros((ng, 2, w + 2 * radius))
+    all_sums = np.zeros((ng, 2, w))
+    zero = np.zeros(w)
+    tmp = np.empty(w, np.float32)
     for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
         y = j - radius
         if 0 <= y < h:
             _group_row_sums(resid, use, y, level_values, g0, g1, neg_inv2s2, radius, pads, rings, tmp)
         for g in range(g0, g1):
-            rn = rings[g, 0, y % k] if 0 <= y < h else zero
-            rd = rings[g, 1, y % k] if 0 <= y < h else zero
-            sum_n = all_sums[g, 0]
-            sum_d = all_sums[g, 1]
+            rn = rings[g - g0, 0, y % k] if 0 <= y < h else zero
+            rd = rings[g - g0, 1, y % k] if 0 <= y < h else zero
+            sum_n = all_sums[g - g0, 0]
+            sum_d = all_sums[g - g0, 1]
             for u in range(w):
                 sum_n[u] += rn[u]
                 sum_d[u] += rd[u]
@@ -829,12 +839,12 @@ def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, 
         up_row = up[y]
         for g in range(g0, g1):
             level = np.int32(level_ids[g])
-            pn = rings[g, 0, yp % k] if yp < h else zero
-            pd = rings[g, 1, yp % k] if yp < h else zero
-            mn = rings[g, 0, ym % k] if ym >= 0 else zero
-            md = rings[g, 1, ym % k] if ym >= 0 else zero
-            sum_n = all_sums[g, 0]
-            sum_d = all_sums[g, 1]
+            pn = rings[g - g0, 0, yp % k] if yp < h else zero
+            pd = rings[g - g0, 1, yp % k] if yp < h else zero
+            mn = rings[g - g0, 0, ym % k] if ym >= 0 else zero
+            md = rings[g - g0, 1, ym % k] if ym >= 0 else zero
+            sum_n = all_sums[g - g0, 0]
+            sum_d = all_sums[g - g0, 1]
             for u in range(w):
                 s0n = sum_n[u] + pn[u]
                 s0d = sum_d[u] + pd[u]
@@ -912,18 +922,8 @@ def smooth_groups(resid, use, k0, t, level_ids, level_values, neg_inv2s2, radius
         return low, up
     tasks = min(n, max(threads(), -(-n // int(max_group))))
     bounds = (np.arange(tasks + 1, dtype=np.int64) * n) // tasks
-    radius = int(radius)
-    # the scratch of every level, allocated here (NumPy reuses freed heap memory; the same
-    # buffers allocated inside the tasks came as fresh pages: with np.zeros for low/up too,
-    # 2218 page faults per call for the road pair in compute, none after; an A/B of the
-    # finish step in one process showed no time difference, 35.6 vs 36.5 ms): per level a
-    # ring of 2 radius + 1 row sums (w r and w), a zero-padded weight row, the column sums
-    rings = np.empty((n, 2, 2 * radius + 1, w))
-    pads = np.zeros((n, 2, w + 2 * radius))
-    sums = np.zeros((n, 2, w))
     run_tasks(_smooth_group_task, tasks, resid, use, k0, t, np.ascontiguousarray(level_ids, np.int64),
-              np.ascontiguousarray(level_values, np.float32), bounds, np.float32(neg_inv2s2), radius, low, up,
-              rings, pads, sums, np.zeros(w), np.empty((tasks, w), np.float32))
+              np.ascontiguousarray(level_values, np.float32), bounds, np.float32(neg_inv2s2), int(radius), low, up)
     return low, up
 
 
