@@ -476,7 +476,8 @@ def keep_valid(filled, valid, other):
 # ----------------------------------------------------------------------------- NumPy's float32 exp
 @intrinsic
 def _fma_f32(typingctx, a, b, c):
-    """``a * b + c`` rounded once (``llvm.fma.f32``: the FMA instruction of the CPU)."""
+    """``a * b + c`` rounded once (``llvm.fma.f32``: the CPU's FMA instruction, or a correctly
+    rounded library call where there is none)."""
     sig = types.float32(types.float32, types.float32, types.float32)
 
     def codegen(context, builder, signature, args):
@@ -499,6 +500,7 @@ def _int64_as_float64(typingctx, a):
 
 
 def _f32(bits: int) -> np.float32:
+    """The float32 with these bits."""
     return np.array([bits], np.uint32).view(np.float32)[0]
 
 
