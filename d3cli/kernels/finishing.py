@@ -18,9 +18,10 @@ machine was shared (smoothing of the road pair: 128 ms CPU with two threads agai
 The box sums of the smoothing reproduce ``cv2.boxFilter(..., normalize=False,
 borderType=cv2.BORDER_CONSTANT)`` on float32 as OpenCV 5.0 computes them (float64 running
 sums along the rows, then down the columns; direct 3- and 5-tap sums for radius 1 and 2).
-The range weights are computed by ``np.exp`` between the kernels: NumPy's float32 ``exp``
-and the C library's ``expf`` (what numba calls) differ in the last bit for about a third
-of the arguments.
+The range weights are NumPy's float32 ``exp`` computed inside the kernel
+(:func:`numpy_expf`, NumPy's SIMD algorithm transcribed, equal on all 2^32 arguments): the
+C library's ``expf`` (what numba's ``math.exp`` calls) differs in the last bit for about a
+third of the arguments.
 """
 
 from __future__ import annotations
@@ -30,7 +31,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 
 # cpu.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
 # when it is imported; the decorators below read that setting, so it must run first.
@@ -85,23 +88,6 @@ def row_tasks(h: int) -> int:
     shared machine holds up little."""
     n = threads()
     return 1 if n == 1 else max(1, min(h, 4 * n))
-
-
-def parallel_exp(values: np.ndarray) -> None:
-    """``np.exp(values, out=values)`` on a flat float32 array, in slices on the pool
-    (NumPy releases the GIL in the loop; an elementwise function gives the same bytes
-    however the array is sliced)."""
-    n = threads()
-    if n == 1 or values.size < 1 << 16:
-        np.exp(values, out=values)
-        return
-    bounds = np.linspace(0, values.size, 4 * n + 1).astype(np.int64)
-
-    def part(i, _n):
-        chunk = values[bounds[i]:bounds[i + 1]]
-        np.exp(chunk, out=chunk)
-
-    run_tasks(part, 4 * n)
 
 
 _F32_ONE = np.float32(1.0)
@@ -210,6 +196,46 @@ def out_of_view_mask(disparity, valid, start):
     return out
 
 
+# ----------------------------------------------------------------------------- speckle filter
+_F32_RINT_MAGIC = np.float32(12582912.0)  # 1.5 * 2^23: adding and subtracting it rounds half to even
+_F32_16 = np.float32(16.0)
+_F32_INT16_MAX = np.float32(32767.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _fixed_task(task, tasks, disp, valid, out):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            x = disp[y, u] * _F32_16
+            # clipped before the rounding: the same integer as np.clip(np.round(x), 0, 32767)
+            x = _F32_ZERO if not x > _F32_ZERO else (x if x < _F32_INT16_MAX else _F32_INT16_MAX)
+            x = (x + _F32_RINT_MAGIC) - _F32_RINT_MAGIC
+            out[y, u] = np.int16(x) if valid[y, u] else np.int16(-1)
+
+
+def fixed_point_16(disp, valid):
+    """Disparities in OpenCV's 1/16 px fixed point, -1 on the holes.
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
+        Finite estimates only.
+
+    Returns
+    -------
+    ndarray, int16, (H, W)
+        ``np.where(valid, np.clip(np.round(disp * 16), 0, 32767), -1).astype(np.int16)``
+        (float32 product, rounding half to even), in one pass.
+    """
+    h, w = disp.shape
+    out = np.empty((h, w), np.int16)
+    run_tasks(_fixed_task, row_tasks(h), disp, valid, out)
+    return out
+
+
 # ----------------------------------------------------------------------------- hole filling
 @njit(cache=True, inline="always")
 def _np_minimum(a, b):
@@ -299,35 +325,84 @@ def nearest_along_rows(disp, valid):
 
 
 @njit(cache=True, nogil=True)
+def _nearest_columns_task(task, tasks, disp, valid, up, down):
+    h, w = disp.shape
+    u0, u1 = (task * w) // tasks, ((task + 1) * w) // tasks
+    if u1 <= u0:
+        return
+    last = np.full(u1 - u0, _F32_INF, np.float32)
+    n = u1 - u0
+    for y in range(h):  # top down: the nearest valid value at or above
+        d_row = disp[y, u0:u1]
+        v_row = valid[y, u0:u1]
+        o_row = up[y, u0:u1]
+        for i in range(n):  # selects: vectorised across the columns
+            value = d_row[i] if v_row[i] else last[i]
+            last[i] = value
+            o_row[i] = value
+    last[:] = _F32_INF
+    for y in range(h - 1, -1, -1):  # bottom up: at or below
+        d_row = disp[y, u0:u1]
+        v_row = valid[y, u0:u1]
+        o_row = down[y, u0:u1]
+        for i in range(n):
+            value = d_row[i] if v_row[i] else last[i]
+            last[i] = value
+            o_row[i] = value
+
+
+def nearest_along_columns(disp, valid):
+    """Values of the nearest valid pixel above and below in each column, in the map's own
+    (H, W) layout: :func:`nearest_along_rows` of the transposed map, transposed back,
+    without the four transposed copies (tasks over blocks of columns, rows streamed).
+
+    Returns
+    -------
+    up, down : ndarray, float32, (H, W)
+        The nearest valid value at or above (below) each pixel; inf where there is none.
+    """
+    h, w = disp.shape
+    up = np.empty((h, w), np.float32)
+    down = np.empty((h, w), np.float32)
+    n = threads()
+    tasks = 1 if n == 1 else max(1, min(w // 64, 4 * n))
+    run_tasks(_nearest_columns_task, tasks, disp, valid, up, down)
+    return up, down
+
+
+@njit(cache=True, inline="always")
+def _order(a, b):
+    """``(a, b)`` in increasing order, swapped only when ``a > b`` (equal values keep their
+    order: a network of such adjacent exchanges sorts stably, as an insertion sort)."""
+    swap = a > b
+    return (b if swap else a), (a if swap else b)
+
+
+@njit(cache=True, nogil=True)
 def _fill_inside_task(task, tasks, disp, valid, occluded, left, right, up, down, out):
     h, w = disp.shape
-    buf = np.empty(4, np.float32)  # sort buffer of the task
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
         for u in range(w):
-            if valid[y, u]:
-                out[y, u] = disp[y, u]
-                continue
-            side = _np_minimum(left[y, u], right[y, u])
-            if occluded[y, u]:
-                out[y, u] = side
-                continue
-            n = 0
-            for v in (left[y, u], right[y, u], up[y, u], down[y, u]):
-                if np.isfinite(v):
-                    # insertion sort of at most four values
-                    i = n
-                    while i > 0 and buf[i - 1] > v:
-                        buf[i] = buf[i - 1]
-                        i -= 1
-                    buf[i] = v
-                    n += 1
-            if n == 0:
-                out[y, u] = side
-            elif n % 2 == 1:
-                out[y, u] = buf[n // 2]
-            else:
-                out[y, u] = (buf[n // 2 - 1] + buf[n // 2]) / _F32_TWO
+            l_v = left[y, u]
+            r_v = right[y, u]
+            side = _np_minimum(l_v, r_v)
+            # The nearest values are finite or +inf (none): sorting all four with +inf
+            # last gives the finite ones in the order of the reference's insertion sort
+            # of the finite values alone (left, right, up, down; stable on ties).  Selects
+            # only: the pattern of holes is random, and branches mispredicted.
+            a0, a1 = _order(l_v, r_v)
+            a1, a2 = _order(a1, up[y, u])
+            a0, a1 = _order(a0, a1)
+            a2, a3 = _order(a2, down[y, u])
+            a1, a2 = _order(a1, a2)
+            a0, a1 = _order(a0, a1)
+            n = ((l_v != _F32_INF) + (r_v != _F32_INF) + (up[y, u] != _F32_INF)
+                 + (down[y, u] != _F32_INF))
+            # median of the n finite ones: the middle one, or the float32 mean of the two
+            median = a0 if n == 1 else ((a0 + a1) / _F32_TWO if n == 2 else (a1 if n == 3 else (a1 + a2) / _F32_TWO))
+            fill = side if (occluded[y, u] or n == 0) else median
+            out[y, u] = disp[y, u] if valid[y, u] else fill
 
 
 def fill_inside(disp, valid, occluded, left, right, up, down):
@@ -339,7 +414,8 @@ def fill_inside(disp, valid, occluded, left, right, up, down):
     disp : ndarray, float32, (H, W)
     valid, occluded : ndarray, bool, (H, W)
     left, right, up, down : ndarray, float32, (H, W)
-        Nearest valid values in the four directions (inf: none).
+        Nearest valid values in the four directions: finite, or +inf where there is none
+        (what :func:`nearest_along_rows` and :func:`nearest_along_columns` give).
 
     Returns
     -------
@@ -397,6 +473,108 @@ def keep_valid(filled, valid, other):
     run_tasks(_keep_valid_task, row_tasks(filled.shape[0]), filled, valid, other)
 
 
+# ----------------------------------------------------------------------------- NumPy's float32 exp
+@intrinsic
+def _fma_f32(typingctx, a, b, c):
+    """``a * b + c`` rounded once (``llvm.fma.f32``: the CPU's FMA instruction, or a correctly
+    rounded library call where there is none)."""
+    sig = types.float32(types.float32, types.float32, types.float32)
+
+    def codegen(context, builder, signature, args):
+        f32 = ir.FloatType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [f32], ir.FunctionType(f32, [f32, f32, f32]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+@intrinsic
+def _int64_as_float64(typingctx, a):
+    """The float64 whose bits are the int64 ``a``."""
+    sig = types.float64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return sig, codegen
+
+
+def _f32(bits: int) -> np.float32:
+    """The float32 with these bits."""
+    return np.array([bits], np.uint32).view(np.float32)[0]
+
+
+# Constants of NumPy's SIMD float32 exp (numpy/_core/src/umath/npy_simd_data.h and the
+# limits of simd_exp_FLOAT in loops_exponent_log.dispatch.c.src), as bit patterns
+_EXP_LN2_HI = _f32(0xBF317200)  # NPY_CODY_WAITE_LOGE_2_HIGHf, -ln 2 high part
+_EXP_LN2_LO = _f32(0xB5BFBE8E)  # NPY_CODY_WAITE_LOGE_2_LOWf
+_EXP_MAGIC = _f32(0x4B400000)  # NPY_RINT_CVT_MAGICf, 1.5 * 2^23: adding it rounds to an integer
+_EXP_LOG2E = _f32(0x3FB8AA3B)  # NPY_LOG2Ef
+_EXP_P0, _EXP_P1, _EXP_P2, _EXP_P3, _EXP_P4, _EXP_P5 = (
+    _f32(b) for b in (0x3F800000, 0x3F39CBD5, 0x3E7D4C58, 0x3D517D8C, 0x3BDD7159, 0x3A053DD8))
+_EXP_Q0, _EXP_Q1, _EXP_Q2 = (_f32(b) for b in (0x3F800000, 0xBE8C6857, 0x3CB0E832))
+_EXP_XMAX = _f32(0x42B17218)  # 88.72283935546875: inf at and above
+_EXP_XMIN = _f32(0xC2CFF1B5)  # -103.97208404541015625: 0 at and below
+_F32_NAN = np.float32(np.nan)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def numpy_expf(x):
+    """``np.exp`` of a float32, bit for bit, as NumPy computes it on x86 with AVX2+FMA3 or
+    AVX512F (``simd_exp_FLOAT``): Cody-Waite reduction ``r = x - k ln 2`` with
+    ``k = rint(x log2 e)``, the rational minimax ``P5(r) / Q2(r)`` by FMA (Horner), times
+    ``2^k`` rounded once (AVX512's ``scalef``; the AVX2 path's integer exponent add and
+    its division for subnormal results round the same).  Checked equal to ``np.exp`` on
+    all 2^32 float32 values, NaN payloads included (``tests/kernels/test_finishing.py``
+    checks a sample of every range).  Branch-free (selects), so that loops over it
+    vectorise.
+
+    Why not numba's ``math.exp``: it calls the C library's ``expf``, which differs from
+    NumPy's in the last bit for about a third of the arguments, and the smoothing's
+    reference (and so the maps this package produced so far) used ``np.exp``.
+    """
+    nan = x != x
+    big = x >= _EXP_XMAX
+    small = x <= _EXP_XMIN
+    x = _F32_ZERO if (nan or big or small) else x
+    k = x * _EXP_LOG2E
+    k = k + _EXP_MAGIC
+    k = k - _EXP_MAGIC
+    r = _fma_f32(k, _EXP_LN2_HI, x)
+    r = _fma_f32(k, _EXP_LN2_LO, r)
+    r = _fma_f32(k, _F32_ZERO, r)  # NumPy's third Cody-Waite step (c3 = 0); kept for -0
+    num = _fma_f32(_EXP_P5, r, _EXP_P4)
+    num = _fma_f32(num, r, _EXP_P3)
+    num = _fma_f32(num, r, _EXP_P2)
+    num = _fma_f32(num, r, _EXP_P1)
+    num = _fma_f32(num, r, _EXP_P0)
+    den = _fma_f32(_EXP_Q2, r, _EXP_Q1)
+    den = _fma_f32(den, r, _EXP_Q0)
+    poly = num / den
+    # poly * 2^k, k in [-150, 128]: exact in float64 (2^k built from its exponent bits),
+    # then one rounding to float32, subnormal results included
+    out = np.float32(np.float64(poly) * _int64_as_float64((np.int64(k) + np.int64(1023)) << np.int64(52)))
+    out = _F32_NAN if nan else out
+    out = _F32_INF if big else out
+    return _F32_ZERO if small else out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _exp_task(task, tasks, values, out):
+    n = values.shape[0]
+    i0, i1 = (task * n) // tasks, ((task + 1) * n) // tasks
+    for i in range(i0, i1):
+        out[i] = numpy_expf(values[i])
+
+
+def numpy_exp(values):
+    """:func:`numpy_expf` of a flat float32 array (a new array); the test hook of the kernel."""
+    values = np.ascontiguousarray(values, np.float32).reshape(-1)
+    out = np.empty_like(values)
+    _exp_task(0, 1, values, out)
+    return out
+
+
 # ----------------------------------------------------------------------------- smoothing
 @njit(cache=True, nogil=True)
 def _residual_task(task, tasks, disp, base, valid, resid, use, row_lo, row_hi, row_use):
@@ -452,26 +630,29 @@ def residual_and_range(disp, base, valid):
     return resid, use, row_lo, row_hi, row_use
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _range_levels_task(task, tasks, resid, lo, step, n_levels, k0, t, row_used):
     h, w = resid.shape
     top = np.float32(n_levels - 2)
     top_plus_1 = np.float32(n_levels - 1)
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
+        r_row = resid[y]
+        k_row = k0[y]
+        t_row = t[y]
+        # np.clip(np.floor(pos), 0, top).astype(np.int32); NaN casts to INT32_MIN.  Selects
+        # only (the cast of a clamped value), so that the loop vectorises.
+        for u in range(w):
+            pos = (r_row[u] - lo) / step
+            inside = pos if pos < top_plus_1 else top
+            k = np.int32(inside if pos >= _F32_ZERO else _F32_ZERO)
+            k = k if pos == pos else np.int32(-2147483648)
+            k_row[u] = k
+            t_row[u] = np.float32(np.float64(pos) - np.float64(k))
         flags = row_used[y]
         flags[:] = False
         for u in range(w):
-            pos = (resid[y, u] - lo) / step
-            # np.clip(np.floor(pos), 0, top).astype(np.int32); NaN casts to INT32_MIN
-            if pos >= _F32_ZERO:
-                k = np.int32(pos) if pos < top_plus_1 else np.int32(top)
-            elif pos < _F32_ZERO:
-                k = np.int32(0)
-            else:
-                k = np.int32(-2147483648)
-            k0[y, u] = k
-            t[y, u] = np.float32(np.float64(pos) - np.float64(k))
+            k = k_row[u]
             if k >= 0:
                 flags[k] = True
 
@@ -508,116 +689,164 @@ def range_levels(resid, lo, step, n_levels):
     return k0, t, used
 
 
-@njit(cache=True, nogil=True)
-def _range_exponents_task(task, tasks, resid, use, levels, neg_inv2s2, out):
-    h, w = resid.shape
-    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    for y in range(y0, y1):
-        for i in range(levels.shape[0]):
-            level = levels[i]
-            for u in range(w):
-                a = resid[y, u] - level
-                x = neg_inv2s2 * (a * a)
-                if not use[y, u] and x == x:
-                    x = -_F32_INF
-                out[i, y, u] = x
-
-
-def range_exponents(resid, use, levels, neg_inv2s2, out):
-    """The arguments of the range weights of a group of levels, float32:
-    ``out[i] = neg_inv2s2 * (resid - levels[i]) ** 2`` where ``use``, else -inf (the caller
-    takes ``np.exp``: the weight is then exactly the reference's ``use * exp(...)``, +0
-    where not used, and NaN stays NaN).
-
-    Parameters
-    ----------
-    resid : ndarray, float32, (H, W)
-    use : ndarray, bool, (H, W)
-    levels : ndarray, float32, (L,)
-    neg_inv2s2 : float32
-        ``-1 / (2 sigma^2)``.
-    out : ndarray, float32, (>= L, H, W), written
-    """
-    run_tasks(_range_exponents_task, row_tasks(resid.shape[0]), resid, use, levels, np.float32(neg_inv2s2), out)
-
-
-@njit(cache=True, inline="always")
-def _row_sums(weight, resid, y, radius, pad_n, pad_d, dst_n, dst_d):
-    """Box sums along row y of ``w r`` and ``w`` (float32 product) as
-    ``cv2.boxFilter``'s float32 row pass computes them: float64 sums over the row padded by
-    ``radius`` zeros, 3 and 5 taps summed directly, wider windows as running sums (add
-    the entering element minus the leaving one)."""
-    w = resid.shape[1]
-    k = 2 * radius + 1
+@njit(cache=True, inline="always", error_model="numpy")
+def _level_weights(resid, use, y, level, neg_inv2s2, radius, pad_n, pad_d, tmp):
+    """Row y of a level's range weights ``w = exp(neg_inv2s2 (r - level)^2)`` (+0 where not
+    used; NumPy's float32 ``exp``) and of ``w r`` (float32 product) into the float64 pad
+    rows, as ``range_exponents`` + ``np.exp`` + ``cv2.boxFilter``'s row pass read them.
+    Two loops (float32 weights into ``tmp``, then the float64 rows): one loop that mixes
+    the float32 exp with float64 stores did not vectorise (2.3 vs 1.0 ms per level of a
+    1280x720 map)."""
+    r_row = resid[y]
+    u_row = use[y]
+    w = r_row.shape[0]
     for u in range(w):
-        wv = weight[y, u]
-        pad_d[radius + u] = wv
-        pad_n[radius + u] = wv * resid[y, u]
+        a = r_row[u] - level
+        x = neg_inv2s2 * (a * a)
+        # -inf where not used (exp gives +0), NaN stays NaN: the reference's use * exp(x)
+        tmp[u] = numpy_expf(x if (u_row[u] or x != x) else -_F32_INF)
+    dst_n = pad_n[radius:radius + w]
+    dst_d = pad_d[radius:radius + w]
+    for u in range(w):
+        e = tmp[u]
+        dst_d[u] = e
+        dst_n[u] = e * r_row[u]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _direct_sums(pad, dst, k):
+    """3- and 5-tap box sums of a padded row, left to right (``cv2.boxFilter``'s small kernels)."""
+    w = dst.shape[0]
     if k == 3:
         for i in range(w):
-            dst_n[i] = pad_n[i] + pad_n[i + 1] + pad_n[i + 2]
-            dst_d[i] = pad_d[i] + pad_d[i + 1] + pad_d[i + 2]
-    elif k == 5:
-        for i in range(w):
-            dst_n[i] = pad_n[i] + pad_n[i + 1] + pad_n[i + 2] + pad_n[i + 3] + pad_n[i + 4]
-            dst_d[i] = pad_d[i] + pad_d[i + 1] + pad_d[i + 2] + pad_d[i + 3] + pad_d[i + 4]
+            dst[i] = pad[i] + pad[i + 1] + pad[i + 2]
     else:
-        sn = 0.0
-        sd = 0.0
-        for j in range(k):
-            sn += pad_n[j]
-            sd += pad_d[j]
-        dst_n[0] = sn
-        dst_d[0] = sd
-        for i in range(w - 1):
-            sn += pad_n[i + k] - pad_n[i]
-            sd += pad_d[i + k] - pad_d[i]
-            dst_n[i + 1] = sn
-            dst_d[i + 1] = sd
+        for i in range(w):
+            dst[i] = pad[i] + pad[i + 1] + pad[i + 2] + pad[i + 3] + pad[i + 4]
 
 
-@njit(cache=True, nogil=True)
-def _smooth_level_task(task, tasks, weights, resid, radius, ring, pad, sums, zero):
+@njit(cache=True, inline="always", error_model="numpy")
+def _running_sums_2(pa, pb, da, db, k):
+    """Running box sums (window k) of two padded rows: add the entering element minus the
+    leaving one, as ``cv2.boxFilter``'s row pass; two independent chains."""
+    w = da.shape[0]
+    sa = 0.0
+    sb = 0.0
+    for j in range(k):
+        sa += pa[j]
+        sb += pb[j]
+    da[0] = sa
+    db[0] = sb
+    for i in range(w - 1):
+        sa += pa[i + k] - pa[i]
+        sb += pb[i + k] - pb[i]
+        da[i + 1] = sa
+        db[i + 1] = sb
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _running_sums_4(pa, pb, pc, pd, da, db, dc, dd, k):
+    """:func:`_running_sums_2` of four rows at once: four independent chains hide the
+    latency of the float64 adds (each chain is serial, element after element)."""
+    w = da.shape[0]
+    sa = 0.0
+    sb = 0.0
+    sc = 0.0
+    sd = 0.0
+    for j in range(k):
+        sa += pa[j]
+        sb += pb[j]
+        sc += pc[j]
+        sd += pd[j]
+    da[0] = sa
+    db[0] = sb
+    dc[0] = sc
+    dd[0] = sd
+    for i in range(w - 1):
+        sa += pa[i + k] - pa[i]
+        sb += pb[i + k] - pb[i]
+        sc += pc[i + k] - pc[i]
+        sd += pd[i + k] - pd[i]
+        da[i + 1] = sa
+        db[i + 1] = sb
+        dc[i + 1] = sc
+        dd[i + 1] = sd
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _group_row_sums(resid, use, y, values, g0, g1, neg_inv2s2, radius, pad, ring, tmp):
+    """Box sums along row y of ``w r`` and ``w`` of levels g0 .. g1-1 (``values[g]``) into
+    the ring slot of row y; level g uses ``pad[g - g0]`` and ``ring[g - g0]``.  The task's
+    buffers are indexed, never sliced: numba types a slice as of unknown layout, and the
+    loops over it stopped vectorising (20.9 against 16.5 ms for the road pair)."""
+    k = 2 * radius + 1
+    slot = y % k
+    for g in range(g0, g1):
+        i = g - g0
+        _level_weights(resid, use, y, values[g], neg_inv2s2, radius, pad[i, 0], pad[i, 1], tmp)
+    if k == 3 or k == 5:
+        for i in range(g1 - g0):
+            _direct_sums(pad[i, 0], ring[i, 0, slot], k)
+            _direct_sums(pad[i, 1], ring[i, 1, slot], k)
+        return
+    ng = g1 - g0
+    i = 0
+    while i + 1 < ng:  # levels in pairs: four chains
+        _running_sums_4(pad[i, 0], pad[i, 1], pad[i + 1, 0], pad[i + 1, 1],
+                        ring[i, 0, slot], ring[i, 1, slot], ring[i + 1, 0, slot], ring[i + 1, 1, slot], k)
+        i += 2
+    if i < ng:
+        _running_sums_2(pad[i, 0], pad[i, 1], ring[i, 0, slot], ring[i, 1, slot], k)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, bounds, neg_inv2s2, radius,
+                       low, up):
     h, w = resid.shape
+    g0, g1 = bounds[task], bounds[task + 1]
+    ng = g1 - g0
+    if ng <= 0:
+        return
     k = 2 * radius + 1
     eps = np.float32(1e-6)
-    for i in range(task, task + 1):
-        wl = weights[i]
-        ring_n = ring[i, 0]
-        ring_d = ring[i, 1]
-        pad_n = pad[i, 0]
-        pad_d = pad[i, 1]
-        sum_n = sums[i, 0]
-        sum_d = sums[i, 1]
-        for u in range(w):
-            sum_n[u] = 0.0
-            sum_d[u] = 0.0
-        for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
-            y = j - radius
-            if 0 <= y < h:
-                _row_sums(wl, resid, y, radius, pad_n, pad_d, ring_n[y % k], ring_d[y % k])
-                rn = ring_n[y % k]
-                rd = ring_d[y % k]
-            else:
-                rn = zero
-                rd = zero
+    # the group's scratch, allocated per task (a few levels at a time: all levels' rings at
+    # once would take 256 x 2 (2 radius + 1) W float64 on a wide-range map): per level a
+    # ring of 2 radius + 1 row sums (w r and w), a zero-padded weight row, the column sums
+    rings = np.empty((ng, 2, k, w))
+    pads = np.zeros((ng, 2, w + 2 * radius))
+    all_sums = np.zeros((ng, 2, w))
+    zero = np.zeros(w)
+    tmp = np.empty(w, np.float32)
+    for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
+        y = j - radius
+        if 0 <= y < h:
+            _group_row_sums(resid, use, y, level_values, g0, g1, neg_inv2s2, radius, pads, rings, tmp)
+        for g in range(g0, g1):
+            rn = rings[g - g0, 0, y % k] if 0 <= y < h else zero
+            rd = rings[g - g0, 1, y % k] if 0 <= y < h else zero
+            sum_n = all_sums[g - g0, 0]
+            sum_d = all_sums[g - g0, 1]
             for u in range(w):
                 sum_n[u] += rn[u]
                 sum_d[u] += rd[u]
-        for y in range(h):
-            yp = y + radius  # entering row
-            ym = y - radius  # leaving row
-            if yp < h:
-                _row_sums(wl, resid, yp, radius, pad_n, pad_d, ring_n[yp % k], ring_d[yp % k])
-                pn = ring_n[yp % k]
-                pd = ring_d[yp % k]
-            else:
-                pn = zero
-                pd = zero
-            mn = ring_n[ym % k] if ym >= 0 else zero
-            md = ring_d[ym % k] if ym >= 0 else zero
-            est_row = wl[y]
-            r_row = resid[y]
+    for y in range(h):
+        yp = y + radius  # entering row
+        ym = y - radius  # leaving row
+        if yp < h:
+            _group_row_sums(resid, use, yp, level_values, g0, g1, neg_inv2s2, radius, pads, rings, tmp)
+        r_row = resid[y]
+        k_row = k0[y]
+        t_row = t[y]
+        low_row = low[y]
+        up_row = up[y]
+        for g in range(g0, g1):
+            level = np.int32(level_ids[g])
+            pn = rings[g - g0, 0, yp % k] if yp < h else zero
+            pd = rings[g - g0, 1, yp % k] if yp < h else zero
+            mn = rings[g - g0, 0, ym % k] if ym >= 0 else zero
+            md = rings[g - g0, 1, ym % k] if ym >= 0 else zero
+            sum_n = all_sums[g - g0, 0]
+            sum_d = all_sums[g - g0, 1]
             for u in range(w):
                 s0n = sum_n[u] + pn[u]
                 s0d = sum_d[u] + pd[u]
@@ -626,95 +855,141 @@ def _smooth_level_task(task, tasks, weights, resid, radius, ring, pad, sums, zer
                 num = np.float32(s0n)
                 den = np.float32(s0d)
                 # the reference's np.maximum(den, 1e-6) is den where it is used
-                est_row[u] = num / den if den > eps else r_row[u]
-
-
-def smooth_levels(weights, resid, radius, ring, pad, sums, zero):
-    """Box-filtered range levels of the piecewise-linear bilateral filter, one level per
-    task; each level's estimate replaces its weights.
-
-    For level i with weights ``w = weights[i]``: the box sums (window
-    ``2 radius + 1``, zero padding) of ``w r`` and ``w`` exactly as ``cv2.boxFilter(...,
-    normalize=False, borderType=cv2.BORDER_CONSTANT)`` gives them on float32 (the row pass,
-    then float64 running sums down the columns rounded to float32), streamed through a
-    ring buffer of ``2 radius + 1`` row sums, and the estimate ``num / den`` (``resid``
-    where ``den <= 1e-6``), written over ``weights[i]`` (row y of the weights is read when
-    it enters the window, before row y of the estimate is written).
-
-    Parameters
-    ----------
-    weights : ndarray, float32, (L, H, W), overwritten by the estimates
-        ``exp(-(r - level)^2 / (2 sigma^2))`` of each level, 0 where a pixel may not be
-        averaged into others.
-    resid : ndarray, float32, (H, W)
-    radius : int (>= 1)
-    ring : ndarray, float64, (>= L, 2, 2 radius + 1, W)
-    pad : ndarray, float64, (>= L, 2, W + 2 radius), zero at both ends
-    sums : ndarray, float64, (>= L, 2, W)
-    zero : ndarray, float64, (W,), all zero
-    """
-    run_tasks(_smooth_level_task, weights.shape[0], weights, resid, int(radius), ring, pad, sums, zero)
+                tmp[u] = num / den if den > eps else r_row[u]
+            # the shares where this level is the pixel's lower (upper) one: conditional
+            # stores (a select that wrote the old value back elsewhere would race with the
+            # task of the pixel's other level)
+            for u in range(w):
+                kk = k_row[u]
+                if kk == level:
+                    low_row[u] = (_F32_ONE - t_row[u]) * tmp[u]
+                elif kk == level - 1:
+                    up_row[u] = t_row[u] * tmp[u]
 
 
 @njit(cache=True, nogil=True)
-def _blend_task(task, tasks, estimates, slot, k0, t, acc):
-    h, w = k0.shape
-    n = slot.shape[0] - 1
+def _zero_task(task, tasks, a, b):
+    h = a.shape[0]
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    for y in range(y0, y1):
-        for u in range(w):
-            kk = k0[y, u]
-            if 0 <= kk < n:
-                i = slot[kk]
-                if i >= 0:
-                    acc[y, u] += (_F32_ONE - t[y, u]) * estimates[i, y, u]
-                i = slot[kk + 1]
-                if i >= 0:
-                    acc[y, u] += t[y, u] * estimates[i, y, u]
+    a[y0:y1] = _F32_ZERO
+    b[y0:y1] = _F32_ZERO
 
 
-def blend_levels(estimates, slot, k0, t, acc):
-    """Add the shares of a group of levels: ``(1 - t) est[k0]`` where the pixel's lower
-    level ``k0`` is in the group, then ``t est[k0 + 1]`` where its upper level is.
+def smooth_groups(resid, use, k0, t, level_ids, level_values, neg_inv2s2, radius, max_group=4):
+    """The box-filtered range levels of the piecewise-linear bilateral filter and each
+    pixel's shares of its two levels, all in one pass per group of levels.
 
-    The reference adds every level in increasing order to a zero-initialised sum, the
-    levels other than a pixel's two adding ``0 * est``: that changes nothing (the sum never
-    holds -0), so ``acc = (0 + lower share) + upper share`` is the same float32 sum.
+    A task takes a group of consecutive used levels (at most ``max_group``; at least one
+    group per thread) and streams the rows through it: per entering row the range weights
+    of its levels (:func:`numpy_expf`) and their row box sums (the float64 row pass of
+    ``cv2.boxFilter(..., normalize=False, borderType=cv2.BORDER_CONSTANT)``, two levels'
+    running sums interleaved), per output row the float64 running column sums, the
+    estimate ``num / den`` (``resid`` where ``den <= 1e-6``) and, where the level is the
+    pixel's lower (upper) level, the share ``(1 - t) est`` (``t est``).  No weight or
+    estimate maps: a pixel's shares go to ``low`` and ``up`` (each pixel has one lower and
+    one upper level, so the tasks write disjoint cells).  The values are those of the
+    reference (``np.exp`` of the float32 exponents, one pair of ``cv2.boxFilter`` calls per
+    level, the blend) bit for bit.  Before (issue 10, first round) the weights of a group
+    of levels were maps, their ``np.exp`` a pass of its own and the estimates maps
+    blended in a further pass.
 
     Parameters
     ----------
-    estimates : ndarray, float32, (L, H, W)
-    slot : ndarray, int64, (n_levels + 1,)
-        Index into ``estimates`` of each level, -1 where not in this group.
+    resid : ndarray, float32, (H, W)
+    use : ndarray, bool, (H, W)
     k0 : ndarray, int32, (H, W)
     t : ndarray, float32, (H, W)
-    acc : ndarray, float32, (H, W), zero before the first group, updated
+        From :func:`range_levels`.
+    level_ids : ndarray, int64, (L,)
+        The used levels, increasing.
+    level_values : ndarray, float32, (L,)
+        Their residual values ``lo + k step``.
+    neg_inv2s2 : float32
+    radius : int (>= 1)
+    max_group : int
+
+    Returns
+    -------
+    low, up : ndarray, float32, (H, W)
+        The shares of each pixel's lower and upper level (0 where it has none).
     """
-    run_tasks(_blend_task, row_tasks(k0.shape[0]), estimates, slot, k0, t, acc)
+    h, w = resid.shape
+    # np.empty and a zeroing pass, not np.zeros: calloc hands out fresh pages for maps this
+    # large (inside compute the smoothing took 2218 first-touch page faults per call of the
+    # road pair with np.zeros, the scratch allocated in the tasks and a new result map;
+    # an A/B of the finish step in one process showed no time difference either way)
+    low = np.empty((h, w), np.float32)
+    up = np.empty((h, w), np.float32)
+    run_tasks(_zero_task, row_tasks(h), low, up)
+    n = level_ids.shape[0]
+    if n == 0:
+        return low, up
+    tasks = min(n, max(threads(), -(-n // int(max_group))))
+    bounds = (np.arange(tasks + 1, dtype=np.int64) * n) // tasks
+    run_tasks(_smooth_group_task, tasks, resid, use, k0, t, np.ascontiguousarray(level_ids, np.int64),
+              np.ascontiguousarray(level_values, np.float32), bounds, np.float32(neg_inv2s2), int(radius), low, up)
+    return low, up
 
 
-@njit(cache=True, nogil=True)
-def _add_base_task(task, tasks, acc, base, disp):
-    h, w = acc.shape
+@njit(cache=True, nogil=True, error_model="numpy")
+def _combine_task(task, tasks, low, up, base, disp, out):
+    h, w = low.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
         for u in range(w):
-            if np.isfinite(disp[y, u]):
-                acc[y, u] = acc[y, u] + base[y, u]
+            d = disp[y, u]
+            if np.isfinite(d):
+                out[y, u] = ((_F32_ZERO + low[y, u]) + up[y, u]) + base[y, u]
             else:
-                acc[y, u] = disp[y, u]
+                out[y, u] = d
 
 
-def add_base(acc, base, disp):
-    """``acc + base`` where ``disp`` is finite, else ``disp``, in place in ``acc``
-    (float32 (H, W)); returns ``acc``."""
-    run_tasks(_add_base_task, row_tasks(acc.shape[0]), acc, base, disp)
-    return acc
+def combine_shares(low, up, base, disp):
+    """The smoothed map: ``(0 + low) + up + base`` where ``disp`` is finite (the blend's
+    float32 sum started at zero, lower share first), else ``disp``; float32 (H, W),
+    written over ``low`` (no new map, no fresh pages) and returned."""
+    run_tasks(_combine_task, row_tasks(disp.shape[0]), low, up, base, disp, low)
+    return low
+
+
+# ----------------------------------------------------------------------------- road model fit (step 6)
+@njit(cache=True, nogil=True, error_model="numpy")
+def ransac_inlier_counts(sols, us, vs, ds, threshold):
+    """Inliers of every RANSAC hypothesis of ``d = a0 + b1 v + b2 u`` (the host fit of
+    :func:`d3cli.method.perspective.fit_road_model`).
+
+    Parameters
+    ----------
+    sols : ndarray, float64, (N, 3)
+        Hypotheses (a0, b1, b2).
+    us, vs, ds : ndarray, float64, (M,)
+        Scored points.
+    threshold : float
+
+    Returns
+    -------
+    ndarray, int64, (N,)
+        ``count_nonzero(|ds - (a0 + b1 vs + b2 us)| <= threshold)`` per hypothesis: the
+        same float64 expression, in the same order, as the NumPy broadcast it replaced
+        (which built 50 x M temporaries per chunk), so the same counts.
+    """
+    out = np.empty(sols.shape[0], np.int64)
+    for j in range(sols.shape[0]):
+        a0 = sols[j, 0]
+        b1 = sols[j, 1]
+        b2 = sols[j, 2]
+        count = 0
+        for i in range(ds.shape[0]):
+            if abs(ds[i] - (a0 + b1 * vs[i] + b2 * us[i])) <= threshold:
+                count += 1
+        out[j] = count
+    return out
 
 
 #: The compiled kernels of this module (nogil, cached on disk), run by :func:`run_tasks`.
 KERNELS = (
     _uniqueness_task, _out_of_view_task, _fill_rows_task, _nearest_task, _fill_inside_task,
-    copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _range_exponents_task,
-    _smooth_level_task, _blend_task, _add_base_task,
+    copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _exp_task, _smooth_group_task,
+    _combine_task,
+    _nearest_columns_task, _fixed_task, _zero_task,
 )

@@ -31,7 +31,6 @@ log = logging.getLogger(__name__)
 MIN_POINTS = 50
 _RANSAC_HYPOTHESES = 200
 _RANSAC_SAMPLE = 5000  # points scored per hypothesis (a seeded subsample)
-_RANSAC_CHUNK = 50  # hypotheses scored per array operation (50 x 5000 float64: 2 MB)
 _TUKEY_C = 4.685  # Tukey biweight constant (95 % efficiency for Gaussian residuals)
 
 
@@ -143,11 +142,11 @@ def _ransac(u, v, d, threshold, rng):
     if not usable.any():
         return None
     sols = np.linalg.solve(a[usable], ds[picks[usable]][:, :, None])[:, :, 0]
-    counts = np.empty(sols.shape[0], np.int64)
-    for start in range(0, sols.shape[0], _RANSAC_CHUNK):  # bounded temporaries
-        sol = sols[start:start + _RANSAC_CHUNK, :, None]
-        counts[start:start + _RANSAC_CHUNK] = np.count_nonzero(
-            np.abs(ds - (sol[:, 0] + sol[:, 1] * vs + sol[:, 2] * us)) <= threshold, axis=1)
+    # numba loaded here, not at import: the PT-SGM baseline imports this module too
+    from ..kernels.finishing import ransac_inlier_counts
+
+    counts = ransac_inlier_counts(np.ascontiguousarray(sols), np.ascontiguousarray(us), np.ascontiguousarray(vs),
+                                  np.ascontiguousarray(ds), float(threshold))
     best = sols[int(np.argmax(counts))]
     # Refit on the hypothesis' inliers: a 3-point model is noisy.
     inl = np.abs(d - (best[0] + best[1] * v + best[2] * u)) <= threshold

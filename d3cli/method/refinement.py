@@ -124,7 +124,7 @@ def speckles(disparity: np.ndarray, valid: np.ndarray, *, max_size: int, max_dif
         return np.zeros(disp.shape, bool)
     # 1/16 px fixed point as OpenCV's own disparities; -1 marks the holes, which
     # filterSpeckles leaves out of every region (its newVal)
-    fixed = np.where(valid, np.clip(np.round(disp * 16.0), 0, 32767), -1).astype(np.int16)
+    fixed = finishing.fixed_point_16(disp, valid)
     cv2.filterSpeckles(fixed, -1, int(max_size), max(1, int(round(float(max_diff) * 16.0))))
     return valid & (fixed == -1)
 
@@ -163,9 +163,8 @@ def fill_holes(
         # inside a surface: the median of the nearest valid values in the four directions
         # estimates it better than the background side.
         left, right = finishing.nearest_along_rows(disp, valid)
-        up, down = finishing.nearest_along_rows(np.ascontiguousarray(disp.T), np.ascontiguousarray(valid.T))
-        filled = finishing.fill_inside(disp, valid, _like(occluded, disp, bool), left, right,
-                                       np.ascontiguousarray(up.T), np.ascontiguousarray(down.T))
+        up, down = finishing.nearest_along_columns(disp, valid)
+        filled = finishing.fill_inside(disp, valid, _like(occluded, disp, bool), left, right, up, down)
         row_has = valid.any(axis=1)
     if not row_has.all():
         finishing.copy_nearest_rows(filled, row_has)
@@ -173,11 +172,6 @@ def fill_holes(
         finishing.keep_valid(filled, valid, cv2.medianBlur(filled, 5))
     return filled
 
-
-# range levels of the smoothing filtered at a time: at least 4 (fewer blending passes),
-# at most 8 (memory), else one per thread
-_MIN_LEVEL_GROUP = 4
-_MAX_LEVEL_GROUP = 8
 
 # The piecewise-linear bilateral filter needs one pair of box filters per range level;
 # beyond this many levels the level spacing grows instead (wide-range maps without a plane).
@@ -208,9 +202,10 @@ def smooth_disparity(
     range levels ``sigma`` apart (wider when there would be more than 256), per level two
     box sums, the result linearly interpolated between the two levels that bracket
     ``r_p``; levels no pixel interpolates from are skipped.  The box sums are those of
-    ``cv2.boxFilter(..., normalize=False, borderType=cv2.BORDER_CONSTANT)``, bit for bit
-    (:func:`d3cli.kernels.finishing.smooth_levels`, one level per thread), and the range
-    weights NumPy's float32 ``exp``.
+    ``cv2.boxFilter(..., normalize=False, borderType=cv2.BORDER_CONSTANT)``, bit for bit,
+    and the range weights NumPy's float32 ``exp``: one pass per group of levels
+    (:func:`d3cli.kernels.finishing.smooth_groups`, a group per task) computes the
+    weights of each entering row, its box sums and each pixel's shares of its two levels.
 
     Parameters
     ----------
@@ -254,29 +249,8 @@ def smooth_disparity(
     n_levels = int(np.floor((hi - lo) / step)) + 2
     # NumPy float32 arithmetic with Python floats: the scalars act as float32
     k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
-    radius = int(radius)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
-    h, w = disp.shape
     levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
-    # levels filtered together, one per parallel task: each takes H x W float32 of weights;
-    # a group's estimates are blended in one pass
-    group = max(1, min(len(levels), max(finishing.threads(), _MIN_LEVEL_GROUP), _MAX_LEVEL_GROUP))
-    weights = np.empty((group, h, w), np.float32)
-    ring = np.empty((group, 2, 2 * radius + 1, w), np.float64)
-    pad = np.zeros((group, 2, w + 2 * radius), np.float64)
-    sums = np.empty((group, 2, w), np.float64)
-    zero = np.zeros(w, np.float64)
-    slot = np.empty(n_levels + 1, np.int64)
-    acc = np.zeros(disp.shape, np.float32)
-    for g in range(0, len(levels), group):
-        ids = levels[g:g + group]
-        part = weights[: len(ids)]
-        values = np.array([lo + int(k) * step for k in ids], np.float64).astype(np.float32)
-        finishing.range_exponents(resid, use, values, neg_inv2s2, part)
-        # NumPy's float32 exp, not numba's: they differ in the last bit (see the kernels)
-        finishing.parallel_exp(part.reshape(-1))
-        finishing.smooth_levels(part, resid, radius, ring, pad, sums, zero)
-        slot[:] = -1
-        slot[ids] = np.arange(len(ids))
-        finishing.blend_levels(part, slot, k0, t, acc)
-    return finishing.add_base(acc, base, disp)
+    values = np.array([lo + int(k) * step for k in levels], np.float64).astype(np.float32)
+    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, neg_inv2s2, int(radius))
+    return finishing.combine_shares(low, up, base, disp)

@@ -191,6 +191,19 @@ def test_out_of_view_matches_reference(shape):
             np.testing.assert_array_equal(got, want, err_msg=f"{shape} {share} {max_disparity}")
 
 
+def test_fixed_point_16_matches_the_numpy_formulation():
+    """The speckle filter's 1/16 px fixed point: ties of the rounding (half to even), both
+    ends of the int16 range, negative and huge estimates, holes."""
+    rng = np.random.default_rng(8)
+    disp = np.concatenate([rng.random(50_000) * 2100, np.arange(-64, 64) / 32.0, np.arange(0, 2100, 1 / 32),
+                           [2047.96875, 2047.97, 2048.0, 1e30, 3e38, -5.0, -0.0, 1e-40]]).astype(np.float32)
+    valid = rng.random(disp.size) < 0.9
+    with np.errstate(over="ignore"):
+        want = np.where(valid, np.clip(np.round(disp * 16.0), 0, 32767), -1).astype(np.int16)
+    got = finishing.fixed_point_16(disp.reshape(1, -1), valid.reshape(1, -1))
+    np.testing.assert_array_equal(got.ravel(), want)
+
+
 # ----------------------------------------------------------------------------- hole filling
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("smooth", [False, True])
@@ -203,6 +216,42 @@ def test_fill_holes_matches_reference(shape, smooth, inside):
         got = fill_holes(disp, valid, smooth=smooth, occluded=occluded)
         want = ref_fill_holes(disp, valid, smooth=smooth, occluded=occluded)
         assert_same_bytes(got, want, f"{shape} {share} smooth={smooth} inside={inside}")
+
+
+def test_fill_inside_on_ties_and_signed_zeros_equals_the_insertion_sort():
+    """The branch-free sorting network of ``fill_inside`` against the formulation it
+    replaced (an insertion sort of the finite values in the order left, right, up, down):
+    many equal values and both signed zeros, so that the order of equals shows in the bits."""
+    rng = np.random.default_rng(4)
+    shape = (40, 50)
+    choices = np.array([-0.0, 0.0, 1.0, 2.0, np.inf], np.float32)
+    left, right, up, down = (choices[rng.integers(0, 5, shape)] for _ in range(4))
+    disp = rng.random(shape).astype(np.float32)
+    valid = rng.random(shape) < 0.2
+    occluded = (rng.random(shape) < 0.2) & ~valid
+    want = np.empty(shape, np.float32)
+    for y in range(shape[0]):
+        for u in range(shape[1]):
+            if valid[y, u]:
+                want[y, u] = disp[y, u]
+                continue
+            side = left[y, u] if left[y, u] < right[y, u] else right[y, u]
+            buf = []
+            for v in (left[y, u], right[y, u], up[y, u], down[y, u]):
+                if np.isfinite(v):
+                    i = len(buf)
+                    while i > 0 and buf[i - 1] > v:
+                        i -= 1
+                    buf.insert(i, v)
+            n = len(buf)
+            if occluded[y, u] or n == 0:
+                want[y, u] = side
+            elif n % 2:
+                want[y, u] = buf[n // 2]
+            else:
+                want[y, u] = (buf[n // 2 - 1] + buf[n // 2]) / np.float32(2.0)
+    got = finishing.fill_inside(disp, valid, occluded, left, right, up, down)
+    assert_same_bytes(got, want, "fill_inside")
 
 
 def test_fill_holes_empty_rows_copy_the_nearest_row_upper_on_a_tie():
@@ -257,6 +306,62 @@ def test_smooth_disparity_on_a_road_like_map_matches_reference():
     valid = np.isfinite(disp)
     got = smooth_disparity(disp, valid, radius=15, sigma=1.5, plane=plane)
     assert_same_bytes(got, ref_smooth_disparity(disp, valid, radius=15, sigma=1.5, plane=plane))
+
+
+def _numpy_exp_is_simd():
+    """NumPy's float32 exp is its AVX2+FMA3 / AVX512F kernel (what numpy_expf reproduces)."""
+    try:
+        from numpy._core import _multiarray_umath as umath
+    except ImportError:  # NumPy 1.x
+        from numpy.core import _multiarray_umath as umath
+    features = getattr(umath, "__cpu_features__", {})
+    return bool(features.get("AVX512F") or (features.get("AVX2") and features.get("FMA3")))
+
+
+@pytest.mark.skipif(not _numpy_exp_is_simd(), reason="NumPy's float32 exp is the C library's here")
+def test_numpy_expf_equals_np_exp_bit_for_bit():
+    """All float32 values were checked once (2^32, equal, NaN payloads included); here
+    every 4099th bit pattern, the arguments of the smoothing (-100..0), the ends of the
+    range (overflow, subnormal and zero results) and the special values."""
+    rng = np.random.default_rng(0)
+    sweep = np.arange(0, 2**32, 4099, dtype=np.uint64).astype(np.uint32).view(np.float32)
+    weights = -(rng.random(500_000) ** 2 * 100).astype(np.float32)
+    ends = []
+    for edge in (-103.97208404541015625, -87.33654, -0.0, 88.72283935546875):
+        centre = np.array([edge], np.float32).view(np.uint32)[0].astype(np.int64)
+        ends.append((centre + np.arange(-3000, 3001)).astype(np.uint32).view(np.float32))
+    special = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, -np.nan, 1e-45, -1e-45, 3.4e38, -3.4e38], np.float32)
+    payloads = np.array([0x7FC00001, 0xFFC12345, 0x7F800001], np.uint32).view(np.float32)
+    x = np.concatenate([sweep, weights, *ends, special, payloads])
+    with np.errstate(all="ignore"):
+        want = np.exp(x)
+    got = finishing.numpy_exp(x)
+    assert_same_bytes(got, want, "numpy_expf")
+
+
+@pytest.mark.parametrize("max_group", [1, 2, 3, 5])
+@pytest.mark.parametrize("radius", [1, 2, 6])
+def test_smooth_groups_of_any_size_match_the_reference(max_group, radius):
+    """Levels grouped one, two (one pair of running sums), three (a pair and a single) or
+    five to a task give the reference's bytes; so does every thread count (below)."""
+    rng = np.random.default_rng(100 * max_group + radius)
+    yy, xx = np.mgrid[0:41, 0:67]
+    plane = (5.0 + 0.2 * yy + 0.03 * xx).astype(np.float32)
+    disp = (plane + rng.normal(0, 2.0, plane.shape) + 5 * (xx > 30)).astype(np.float32)
+    valid = rng.random(disp.shape) < 0.85
+    disp[rng.random(disp.shape) < 0.05] = np.inf
+    want = ref_smooth_disparity(disp, valid, radius=radius, sigma=1.0, plane=plane)
+    base = plane
+    resid, use, row_lo, row_hi, _ = finishing.residual_and_range(disp, base, valid)
+    lo, hi = float(row_lo.min()), float(row_hi.max())
+    n_levels = int(np.floor(hi - lo)) + 2
+    k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels)
+    levels = np.flatnonzero(used)
+    assert len(levels) >= 6
+    values = np.array([lo + int(k) * 1.0 for k in levels], np.float64).astype(np.float32)
+    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, np.float32(-0.5), radius,
+                                      max_group=max_group)
+    assert_same_bytes(finishing.combine_shares(low, up, base, disp), want, f"group {max_group}")
 
 
 # ----------------------------------------------------------------------------- threads

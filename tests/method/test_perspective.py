@@ -98,6 +98,20 @@ def test_ransac_start_equals_the_loop_over_hypotheses_bit_for_bit(seed, outliers
     assert (got.a0, got.b1, got.b2) == tuple(float(x) for x in want)
 
 
+def test_ransac_inlier_counts_equal_the_numpy_expression_ties_included():
+    from d3cli.kernels.finishing import ransac_inlier_counts
+
+    rng = np.random.default_rng(2)
+    us, vs = rng.uniform(0, 1000, 3000), rng.uniform(0, 500, 3000)
+    sols = np.column_stack([rng.uniform(0, 50, 40), rng.uniform(0, 0.2, 40), rng.uniform(-0.01, 0.01, 40)])
+    ds = sols[0, 0] + sols[0, 1] * vs + sols[0, 2] * us + rng.normal(0, 2, 3000)
+    ds[:100] = (sols[0, 0] + sols[0, 1] * vs[:100] + sols[0, 2] * us[:100]) + 1.5  # on the threshold
+    for threshold in (1.5, 8.0):
+        want = np.count_nonzero(np.abs(ds - (sols[:, 0, None] + sols[:, 1, None] * vs + sols[:, 2, None] * us))
+                                <= threshold, axis=1)
+        np.testing.assert_array_equal(ransac_inlier_counts(sols, us, vs, ds, threshold), want)
+
+
 def test_fit_of_collinear_points_is_not_road_like():
     coarse = np.full((45, 80), -1.0)
     coarse[20, :] = np.linspace(2, 12, 80)  # one row: every sample is collinear
