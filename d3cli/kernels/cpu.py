@@ -76,8 +76,7 @@ _box_sum = ops.box_sum
 _rbf_weight = ops.rbf_weight
 _seed_at = ops.seed_at
 _diffuse_at = ops.diffuse_at
-_inherit_patch = ops.inherit_patch
-_inherit_pixel = ops.inherit_pixel
+_inherit_quad = ops.inherit_quad
 _subpixel_at = ops.subpixel_at
 
 #: Rows per parallel task of the NCC driver (one running window sum per task).
@@ -1130,22 +1129,34 @@ def _inherit(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates):
     h, w, _ = index.shape
     out = np.empty((h, w), np.int32)
     for pv in prange((h + 1) // 2):
-        for pu in range((w + 1) // 2):
-            d, least_l, least_r = _inherit_patch(cost, index, coarse, pv, pu, prc, candidates)
-            for b in range(2):
-                v = 2 * pv + b
-                if v >= h:
-                    continue
-                for a in range(2):
-                    u = 2 * pu + a
-                    if u >= w:
-                        continue
-                    if d < 0:
-                        out[v, u] = UNDECIDED
-                    else:
-                        out[v, u] = _inherit_pixel(cost, index, v, u, d, least_l, least_r, prc, dfm_pkrn_min,
-                                                   epsilon, candidates)
+        # The test variant as constants in each branch: the compiler specialises the
+        # inlined tests (road pair, level 1: 63 -> 49 ms CPU against one generic call).
+        if prc and candidates == 0:
+            _inherit_row(cost, index, coarse, pv, out, True, dfm_pkrn_min, epsilon, 0)
+        elif prc:
+            _inherit_row(cost, index, coarse, pv, out, True, dfm_pkrn_min, epsilon, 1)
+        elif candidates == 0:
+            _inherit_row(cost, index, coarse, pv, out, False, dfm_pkrn_min, epsilon, 0)
+        else:
+            _inherit_row(cost, index, coarse, pv, out, False, dfm_pkrn_min, epsilon, 1)
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def _inherit_row(cost, index, coarse, pv, out, prc, dfm_pkrn_min, epsilon, candidates):
+    """The fine rows 2 pv, 2 pv + 1 of :func:`_inherit` (one patch row)."""
+    h, w = out.shape
+    v = 2 * pv
+    for pu in range((w + 1) // 2):
+        u = 2 * pu
+        o00, o01, o10, o11 = _inherit_quad(cost, index, coarse, pv, pu, prc, dfm_pkrn_min, epsilon, candidates)
+        out[v, u] = o00
+        if u + 1 < w:
+            out[v, u + 1] = o01
+        if v + 1 < h:
+            out[v + 1, u] = o10
+            if u + 1 < w:
+                out[v + 1, u + 1] = o11
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)

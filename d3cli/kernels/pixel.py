@@ -420,6 +420,206 @@ def build_ops(jit):
             return UNDECIDED
         return dl
 
+    # ------------------------------------------------------------------ inheritance, fast form
+    # Every cell the tests above read for one pixel lies in d-2..d+2 (in-patch d-1..d+1,
+    # outside d-2 and d+2, the best's neighbours best +- 1).  The functions below read those
+    # five cells once per pixel and view (one index entry and one band test for the left
+    # view) and decide from them, with the same comparisons in the same order as the
+    # functions above, so the decisions are the same (tests/kernels/test_inheritance.py
+    # holds them to each other on random banded volumes).  Issue 10: the per-pixel form
+    # re-read every cell up to three times (road pair, level 1: 90 ms CPU).
+
+    @jit
+    def window5(cost, index, v, u, d):
+        """``C(u, v, d - 2 + k)`` for k = 0..4 as five float64 (inf where a cell is missing)."""
+        if v < 0 or v >= index.shape[0] or u < 0 or u >= index.shape[1]:
+            return INF, INF, INF, INF, INF
+        vu = UINT(v)
+        uu = UINT(u)
+        off = index[vu, uu, 0]
+        lo = index[vu, uu, 1]
+        hi = index[vu, uu, 2]
+        s0 = d - 2
+        if s0 >= lo and s0 + 5 <= hi:  # the whole window inside the band: one test
+            b = UINT(off + s0)
+            return float(cost[b]), float(cost[b + 1]), float(cost[b + 2]), float(cost[b + 3]), float(cost[b + 4])
+        c0 = float(cost[UINT(off + s0)]) if lo <= s0 < hi else INF
+        c1 = float(cost[UINT(off + s0 + 1)]) if lo <= s0 + 1 < hi else INF
+        c2 = float(cost[UINT(off + s0 + 2)]) if lo <= s0 + 2 < hi else INF
+        c3 = float(cost[UINT(off + s0 + 3)]) if lo <= s0 + 3 < hi else INF
+        c4 = float(cost[UINT(off + s0 + 4)]) if lo <= s0 + 4 < hi else INF
+        return c0, c1, c2, c3, c4
+
+    @jit
+    def band_cell(cost, index, vu, uu, s):
+        """``C(u, v, s)`` of a pixel known to be in the image (unsigned subscripts), inf
+        outside its band."""
+        if s < index[vu, uu, 1] or s >= index[vu, uu, 2]:
+            return INF
+        return float(cost[UINT(index[vu, uu, 0] + s)])
+
+    @jit
+    def right_window5(cost, index, v, x, d):
+        """Right-view ``C_R(x, v, d - 2 + k) = C_L(x + d - 2 + k, v, d - 2 + k)``, k = 0..4."""
+        u = x + d - 2
+        if 0 <= v < index.shape[0] and u >= 0 and u + 4 < index.shape[1]:
+            # the five left pixels are in the image: one test for all of them
+            vu = UINT(v)
+            uu = UINT(u)
+            return (band_cell(cost, index, vu, uu, d - 2), band_cell(cost, index, vu, uu + UINT(1), d - 1),
+                    band_cell(cost, index, vu, uu + UINT(2), d), band_cell(cost, index, vu, uu + UINT(3), d + 1),
+                    band_cell(cost, index, vu, uu + UINT(4), d + 2))
+        return (
+            float(cost_or_inf(cost, index, v, u, d - 2)),
+            float(cost_or_inf(cost, index, v, u + 1, d - 1)),
+            float(cost_or_inf(cost, index, v, u + 2, d)),
+            float(cost_or_inf(cost, index, v, u + 3, d + 1)),
+            float(cost_or_inf(cost, index, v, u + 4, d + 2)),
+        )
+
+    @jit
+    def pick5(c, k):
+        """``c[k]`` of a five-cell window (constant subscripts only: every backend compiles them)."""
+        if k == 0:
+            return c[0]
+        if k == 1:
+            return c[1]
+        if k == 2:
+            return c[2]
+        if k == 3:
+            return c[3]
+        return c[4]
+
+    @jit
+    def window_best(c, lo_k, hi_k):
+        """Least of ``c[lo_k:hi_k]``, the first on ties: (k, cost), or (-1, inf) when all are inf."""
+        best_k = -1
+        best_c = INF
+        for k in range(lo_k, hi_k):
+            ck = pick5(c, k)
+            if ck < best_c:
+                best_c = ck
+                best_k = k
+        return best_k, best_c
+
+    @jit
+    def patch_reliable5(c00, c01, c10, c11, x0, d, right_view, candidates):
+        """:func:`patch_reliable` from the windows of the patch pixels (row b, column a: ``c_ba``)."""
+        sum_in = 0.0
+        least_out = INF
+        for i in range(4):
+            a = i & 1
+            c = c00
+            if i == 1:
+                c = c01
+            elif i == 2:
+                c = c10
+            elif i == 3:
+                c = c11
+            lo, hi = candidate_range(x0 + a, d, right_view, candidates)
+            lo_k = lo - d + 2
+            hi_k = hi - d + 2
+            sum_in += window_best(c, lo_k, hi_k)[1]
+            least_out = min(least_out, min(pick5(c, lo_k - 1), pick5(c, hi_k)))
+        if sum_in * 0.25 < least_out:
+            return least_out
+        return -1.0
+
+    @jit
+    def pixel_decisive5(c, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon, candidates):
+        """:func:`pixel_decisive` from the pixel's window ``c`` (:func:`window5` or
+        :func:`right_window5` at (x, d))."""
+        lo, hi = candidate_range(x, d, right_view, candidates)
+        lo_k = lo - d + 2
+        hi_k = hi - d + 2
+        best_k, best_c = window_best(c, lo_k, hi_k)
+        if best_k < 0 or best_c >= 1.0:
+            return UNDECIDED
+        if prc:
+            # C(d*) < C(d* - 1), C(d* + 1): tested at every candidate and the best's result
+            # kept, with & instead of branches (the best is data: its branches mispredict)
+            local_min = False
+            for k in range(lo_k, hi_k):
+                ck = pick5(c, k)
+                local_min |= (k == best_k) & (ck < pick5(c, k - 1)) & (ck < pick5(c, k + 1))
+            if local_min and best_c < least_out:
+                return d - 2 + best_k
+            return UNDECIDED
+        second = INF
+        for k in range(lo_k, hi_k):
+            if k != best_k:
+                second = min(second, pick5(c, k))
+        if second + epsilon >= dfm_pkrn_min * (best_c + epsilon):
+            return d - 2 + best_k
+        return UNDECIDED
+
+    @jit
+    def inherit_pixel5(cost, index, v, u, d, x0, left, right0, right1, least_out_l, least_out_r, prc,
+                       dfm_pkrn_min, epsilon, candidates):
+        """:func:`inherit_pixel` for fine pixel (u, v) from its left window ``left`` and the
+        right windows of the patch row (columns x0 and x0 + 1); a matched right pixel
+        outside those two columns reads its own window."""
+        dl = pixel_decisive5(left, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon, candidates)
+        if dl < 0:
+            return UNDECIDED
+        x = u - dl
+        if x == x0:
+            right = right0
+        elif x == x0 + 1:
+            right = right1
+        else:
+            right = right_window5(cost, index, v, x, d)
+        dr = pixel_decisive5(right, x, d, True, prc, least_out_r, dfm_pkrn_min, epsilon, candidates)
+        if dr != dl:
+            return UNDECIDED
+        return dl
+
+    @jit
+    def inherit_quad(cost, index, coarse, pv, pu, prc, dfm_pkrn_min, epsilon, candidates):
+        """Inherited disparities of the four fine pixels of coarse pixel (pu, pv).
+
+        :func:`inherit_patch` and :func:`inherit_pixel` for the 2x2 patch, each cell read
+        once.  Returns ``(o00, o01, o10, o11)``, ``o_ba`` for the fine pixel
+        (2 pu + a, 2 pv + b); a pixel outside the image gets a value too (the drivers do
+        not store it).
+        """
+        if pv >= coarse.shape[0] or pu >= coarse.shape[1]:
+            return UNDECIDED, UNDECIDED, UNDECIDED, UNDECIDED
+        dc = coarse[pv, pu]
+        if dc < 0:
+            return UNDECIDED, UNDECIDED, UNDECIDED, UNDECIDED
+        d = 2 * dc
+        y0 = 2 * pv
+        u0 = 2 * pu
+        x0 = u0 - d
+        l00 = window5(cost, index, y0, u0, d)
+        l01 = window5(cost, index, y0, u0 + 1, d)
+        l10 = window5(cost, index, y0 + 1, u0, d)
+        l11 = window5(cost, index, y0 + 1, u0 + 1, d)
+        least_out_l = INF
+        least_out_r = INF
+        if prc:
+            least_out_l = patch_reliable5(l00, l01, l10, l11, u0, d, False, candidates)
+            if least_out_l < 0.0:
+                return UNDECIDED, UNDECIDED, UNDECIDED, UNDECIDED
+        r00 = right_window5(cost, index, y0, x0, d)
+        r01 = right_window5(cost, index, y0, x0 + 1, d)
+        r10 = right_window5(cost, index, y0 + 1, x0, d)
+        r11 = right_window5(cost, index, y0 + 1, x0 + 1, d)
+        if prc:
+            least_out_r = patch_reliable5(r00, r01, r10, r11, x0, d, True, candidates)
+            if least_out_r < 0.0:
+                return UNDECIDED, UNDECIDED, UNDECIDED, UNDECIDED
+        o00 = inherit_pixel5(cost, index, y0, u0, d, x0, l00, r00, r01, least_out_l, least_out_r, prc,
+                             dfm_pkrn_min, epsilon, candidates)
+        o01 = inherit_pixel5(cost, index, y0, u0 + 1, d, x0, l01, r00, r01, least_out_l, least_out_r, prc,
+                             dfm_pkrn_min, epsilon, candidates)
+        o10 = inherit_pixel5(cost, index, y0 + 1, u0, d, x0, l10, r10, r11, least_out_l, least_out_r, prc,
+                             dfm_pkrn_min, epsilon, candidates)
+        o11 = inherit_pixel5(cost, index, y0 + 1, u0 + 1, d, x0, l11, r10, r11, least_out_l, least_out_r, prc,
+                             dfm_pkrn_min, epsilon, candidates)
+        return o00, o01, o10, o11
+
     @jit
     def inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon, candidates):
         """Inherited disparity of fine pixel (u, v) from the coarser map, or UNDECIDED.
@@ -521,6 +721,15 @@ def build_ops(jit):
         inherit_patch=inherit_patch,
         inherit_pixel=inherit_pixel,
         inherit_at=inherit_at,
+        window5=window5,
+        band_cell=band_cell,
+        right_window5=right_window5,
+        pick5=pick5,
+        window_best=window_best,
+        patch_reliable5=patch_reliable5,
+        pixel_decisive5=pixel_decisive5,
+        inherit_pixel5=inherit_pixel5,
+        inherit_quad=inherit_quad,
         subpixel_at=subpixel_at,
         pt_shift=pt_shift,
         bilinear_at=bilinear_at,
