@@ -223,6 +223,21 @@ def test_seed_whose_right_pixel_is_outside_is_rejected():
     assert verdicts == {-1}
 
 
+@pytest.mark.parametrize("curve, pkrn_min, want", [
+    ([0.9, 0.2, 0.5, 0.1], 1.9, 3),   # c2 is the minimum the last cell displaced: 0.2 / 0.1
+    ([0.9, 0.2, 0.5, 0.1], 2.1, -1),  # (c2 = 0.5 would pass)
+    ([0.2, 0.5, 0.2, 0.9], 1.05, -1),  # two equal minima: c2 = c1, PKRN 1
+    ([0.5, 0.2, 0.9, 0.9], 2.4, 1),    # c2 = 0.5, ahead of the minimum
+    ([0.5, 0.2, 0.9, 0.9], 2.6, -1),
+])
+def test_seed_pkrn_second_cost_known_answers(curve, pkrn_min, want):
+    # Naive PKRN (exclusion 0) keeps c2 in the same pass as the minimum (issue 10): the
+    # second cost is the least of the other cells, wherever it lies.
+    cost = np.ones((1, 8, 4), np.float32)
+    cost[0, 5] = curve
+    assert cpu.decisive_seeds(cost, pkrn_min, 0.0, 0, 0)[0, 5] == want
+
+
 # ----------------------------------------------------------------------------- min cost
 def test_min_cost_matches_reference():
     rng = np.random.default_rng(14)
