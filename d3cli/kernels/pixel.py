@@ -519,50 +519,60 @@ def build_ops(jit):
         return best_k, best_c
 
     @jit
-    def patch_reliable5(c00, c01, c10, c11, x0, d, right_view, candidates):
-        """:func:`patch_reliable` from the windows of the patch pixels (row b, column a: ``c_ba``)."""
+    def window_summary(c, x, d, right_view, candidates):
+        """What the tests need of one pixel's window ``c`` (at (x, d), either view), in
+        one go: ``(best_k, best_c, out_c, local_min)``.
+
+        ``best_k, best_c``: the least in-patch cell (:func:`window_best`; the disparity
+        is d - 2 + best_k); ``out_c``: the least outside cell (:func:`outside_cost`);
+        ``local_min``: C(best) < C(best - 1) and C(best) < C(best + 1) (eq. 9).  The
+        patch test and the pixel test of the same pixel share it.
+        """
+        lo, hi = candidate_range(x, d, right_view, candidates)
+        lo_k = lo - d + 2
+        hi_k = hi - d + 2
+        best_k, best_c = window_best(c, lo_k, hi_k)
+        out_c = min(pick5(c, lo_k - 1), pick5(c, hi_k))
+        # tested at every candidate and the best's result kept (& instead of branches:
+        # which candidate is best is data)
+        local_min = False
+        for k in range(lo_k, hi_k):
+            ck = pick5(c, k)
+            local_min |= (k == best_k) & (ck < pick5(c, k - 1)) & (ck < pick5(c, k + 1))
+        return best_k, best_c, out_c, local_min
+
+    @jit
+    def patch_reliable4(s00, s01, s10, s11):
+        """:func:`patch_reliable` from the four pixels' :func:`window_summary` (row b,
+        column a: ``s_ba``), summed and compared in the same order."""
         sum_in = 0.0
-        least_out = INF
-        for i in range(4):
-            a = i & 1
-            c = c00
-            if i == 1:
-                c = c01
-            elif i == 2:
-                c = c10
-            elif i == 3:
-                c = c11
-            lo, hi = candidate_range(x0 + a, d, right_view, candidates)
-            lo_k = lo - d + 2
-            hi_k = hi - d + 2
-            sum_in += window_best(c, lo_k, hi_k)[1]
-            least_out = min(least_out, min(pick5(c, lo_k - 1), pick5(c, hi_k)))
+        sum_in += s00[1]
+        sum_in += s01[1]
+        sum_in += s10[1]
+        sum_in += s11[1]
+        least_out = min(INF, s00[2])
+        least_out = min(least_out, s01[2])
+        least_out = min(least_out, s10[2])
+        least_out = min(least_out, s11[2])
         if sum_in * 0.25 < least_out:
             return least_out
         return -1.0
 
     @jit
-    def pixel_decisive5(c, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon, candidates):
+    def pixel_decisive5(c, summary, x, d, right_view, prc, least_out, dfm_pkrn_min, epsilon, candidates):
         """:func:`pixel_decisive` from the pixel's window ``c`` (:func:`window5` or
-        :func:`right_window5` at (x, d))."""
-        lo, hi = candidate_range(x, d, right_view, candidates)
-        lo_k = lo - d + 2
-        hi_k = hi - d + 2
-        best_k, best_c = window_best(c, lo_k, hi_k)
+        :func:`right_window5` at (x, d)) and its :func:`window_summary`."""
+        best_k = summary[0]
+        best_c = summary[1]
         if best_k < 0 or best_c >= 1.0:
             return UNDECIDED
         if prc:
-            # C(d*) < C(d* - 1), C(d* + 1): tested at every candidate and the best's result
-            # kept, with & instead of branches (the best is data: its branches mispredict)
-            local_min = False
-            for k in range(lo_k, hi_k):
-                ck = pick5(c, k)
-                local_min |= (k == best_k) & (ck < pick5(c, k - 1)) & (ck < pick5(c, k + 1))
-            if local_min and best_c < least_out:
+            if summary[3] and best_c < least_out:
                 return d - 2 + best_k
             return UNDECIDED
+        lo, hi = candidate_range(x, d, right_view, candidates)
         second = INF
-        for k in range(lo_k, hi_k):
+        for k in range(lo - d + 2, hi - d + 2):
             if k != best_k:
                 second = min(second, pick5(c, k))
         if second + epsilon >= dfm_pkrn_min * (best_c + epsilon):
@@ -570,22 +580,25 @@ def build_ops(jit):
         return UNDECIDED
 
     @jit
-    def inherit_pixel5(cost, index, v, u, d, x0, left, right0, right1, least_out_l, least_out_r, prc,
-                       dfm_pkrn_min, epsilon, candidates):
-        """:func:`inherit_pixel` for fine pixel (u, v) from its left window ``left`` and the
-        right windows of the patch row (columns x0 and x0 + 1); a matched right pixel
-        outside those two columns reads its own window."""
-        dl = pixel_decisive5(left, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon, candidates)
+    def inherit_pixel5(cost, index, v, u, d, x0, left, left_s, right0, right0_s, right1, right1_s, least_out_l,
+                       least_out_r, prc, dfm_pkrn_min, epsilon, candidates):
+        """:func:`inherit_pixel` for fine pixel (u, v) from its left window and summary and
+        those of the right pixels x0, x0 + 1 of the patch row; a matched right pixel outside
+        those two columns reads its own window."""
+        dl = pixel_decisive5(left, left_s, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon, candidates)
         if dl < 0:
             return UNDECIDED
         x = u - dl
         if x == x0:
             right = right0
+            right_s = right0_s
         elif x == x0 + 1:
             right = right1
+            right_s = right1_s
         else:
             right = right_window5(cost, index, v, x, d)
-        dr = pixel_decisive5(right, x, d, True, prc, least_out_r, dfm_pkrn_min, epsilon, candidates)
+            right_s = window_summary(right, x, d, True, candidates)
+        dr = pixel_decisive5(right, right_s, x, d, True, prc, least_out_r, dfm_pkrn_min, epsilon, candidates)
         if dr != dl:
             return UNDECIDED
         return dl
@@ -595,7 +608,8 @@ def build_ops(jit):
         """Inherited disparities of the four fine pixels of coarse pixel (pu, pv).
 
         :func:`inherit_patch` and :func:`inherit_pixel` for the 2x2 patch, each cell read
-        once.  Returns ``(o00, o01, o10, o11)``, ``o_ba`` for the fine pixel
+        once and each window summarised once (:func:`window_summary`) for the patch and
+        the pixel tests.  Returns ``(o00, o01, o10, o11)``, ``o_ba`` for the fine pixel
         (2 pu + a, 2 pv + b); a pixel outside the image gets a value too (the drivers do
         not store it).
         """
@@ -612,28 +626,36 @@ def build_ops(jit):
         l01 = window5(cost, index, y0, u0 + 1, d)
         l10 = window5(cost, index, y0 + 1, u0, d)
         l11 = window5(cost, index, y0 + 1, u0 + 1, d)
+        sl00 = window_summary(l00, u0, d, False, candidates)
+        sl01 = window_summary(l01, u0 + 1, d, False, candidates)
+        sl10 = window_summary(l10, u0, d, False, candidates)
+        sl11 = window_summary(l11, u0 + 1, d, False, candidates)
         least_out_l = INF
         least_out_r = INF
         if prc:
-            least_out_l = patch_reliable5(l00, l01, l10, l11, u0, d, False, candidates)
+            least_out_l = patch_reliable4(sl00, sl01, sl10, sl11)
             if least_out_l < 0.0:
                 return UNDECIDED, UNDECIDED, UNDECIDED, UNDECIDED
         r00 = right_window5(cost, index, y0, x0, d)
         r01 = right_window5(cost, index, y0, x0 + 1, d)
         r10 = right_window5(cost, index, y0 + 1, x0, d)
         r11 = right_window5(cost, index, y0 + 1, x0 + 1, d)
+        sr00 = window_summary(r00, x0, d, True, candidates)
+        sr01 = window_summary(r01, x0 + 1, d, True, candidates)
+        sr10 = window_summary(r10, x0, d, True, candidates)
+        sr11 = window_summary(r11, x0 + 1, d, True, candidates)
         if prc:
-            least_out_r = patch_reliable5(r00, r01, r10, r11, x0, d, True, candidates)
+            least_out_r = patch_reliable4(sr00, sr01, sr10, sr11)
             if least_out_r < 0.0:
                 return UNDECIDED, UNDECIDED, UNDECIDED, UNDECIDED
-        o00 = inherit_pixel5(cost, index, y0, u0, d, x0, l00, r00, r01, least_out_l, least_out_r, prc,
-                             dfm_pkrn_min, epsilon, candidates)
-        o01 = inherit_pixel5(cost, index, y0, u0 + 1, d, x0, l01, r00, r01, least_out_l, least_out_r, prc,
-                             dfm_pkrn_min, epsilon, candidates)
-        o10 = inherit_pixel5(cost, index, y0 + 1, u0, d, x0, l10, r10, r11, least_out_l, least_out_r, prc,
-                             dfm_pkrn_min, epsilon, candidates)
-        o11 = inherit_pixel5(cost, index, y0 + 1, u0 + 1, d, x0, l11, r10, r11, least_out_l, least_out_r, prc,
-                             dfm_pkrn_min, epsilon, candidates)
+        o00 = inherit_pixel5(cost, index, y0, u0, d, x0, l00, sl00, r00, sr00, r01, sr01, least_out_l, least_out_r,
+                             prc, dfm_pkrn_min, epsilon, candidates)
+        o01 = inherit_pixel5(cost, index, y0, u0 + 1, d, x0, l01, sl01, r00, sr00, r01, sr01, least_out_l,
+                             least_out_r, prc, dfm_pkrn_min, epsilon, candidates)
+        o10 = inherit_pixel5(cost, index, y0 + 1, u0, d, x0, l10, sl10, r10, sr10, r11, sr11, least_out_l,
+                             least_out_r, prc, dfm_pkrn_min, epsilon, candidates)
+        o11 = inherit_pixel5(cost, index, y0 + 1, u0 + 1, d, x0, l11, sl11, r10, sr10, r11, sr11, least_out_l,
+                             least_out_r, prc, dfm_pkrn_min, epsilon, candidates)
         return o00, o01, o10, o11
 
     @jit
@@ -742,7 +764,8 @@ def build_ops(jit):
         right_window5=right_window5,
         pick5=pick5,
         window_best=window_best,
-        patch_reliable5=patch_reliable5,
+        window_summary=window_summary,
+        patch_reliable4=patch_reliable4,
         pixel_decisive5=pixel_decisive5,
         inherit_pixel5=inherit_pixel5,
         inherit_quad=inherit_quad,
