@@ -54,8 +54,11 @@ def build_ops(jit):
     -------
     types.SimpleNamespace
         ``ncc_cost, cosine_cost, box_sum, cost_or_inf, right_cost_or_inf, rbf_weight, seed_at,
-        diffuse_at, inherit_patch, inherit_pixel, inherit_at, subpixel_at, pt_shift,
-        bilinear_at, pt_restore_at`` and the helpers they use.
+        diffuse_at, inherit_patch, inherit_pixel, inherit_at, inherit_quad, subpixel_at,
+        pt_shift, bilinear_at, pt_restore_at`` and the helpers they use.  The drivers
+        inherit with :func:`inherit_quad` (one 2x2 patch, each cell read once); the
+        per-pixel form :func:`inherit_at` states eq. 7-9 literally and the tests hold
+        the two to each other.
     """
 
     @jit
@@ -668,9 +671,10 @@ def build_ops(jit):
         {2dc - 1, 2dc, 2dc + 1} and the pixels just beside the partner patch the outside
         disparities {2dc - 2, 2dc + 2}.  With ``prc`` the patch must pass the patch
         reliability constraint in both views and the pixel the local-minimum constraint
-        (:func:`pixel_decisive`); without, the DFM-style PKRN test.  The drivers evaluate
-        :func:`inherit_patch` once per patch and :func:`inherit_pixel` per pixel; this is
-        the two composed for one pixel.  ``candidates`` 1 replaces the symmetric sets by
+        (:func:`pixel_decisive`); without, the DFM-style PKRN test.  This is
+        :func:`inherit_patch` and :func:`inherit_pixel` composed for one pixel, the
+        literal form; the drivers run :func:`inherit_quad`, which decides the same per
+        patch with each cell read once (tests/kernels/test_inheritance.py).  ``candidates`` 1 replaces the symmetric sets by
         the per-pixel sets of eq. 6-7 read literally (:func:`candidate_range`).
         """
         d, least_out_l, least_out_r = inherit_patch(cost, index, coarse, v // 2, u // 2, prc, candidates)
