@@ -42,7 +42,7 @@ _cosine_cost = ops.cosine_cost
 _rbf_weight = ops.rbf_weight
 _seed_at = ops.seed_at
 _diffuse_at = ops.diffuse_at
-_inherit_at = ops.inherit_at
+_inherit_quad = ops.inherit_quad
 _subpixel_at = ops.subpixel_at
 _pt_shift = ops.pt_shift
 _bilinear_at = ops.bilinear_at
@@ -651,9 +651,21 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
 # ----------------------------------------------------------------------------- inheritance (step 7)
 @cuda.jit
 def _inherit_kernel(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates, out):
-    u, v = cuda.grid(2)
-    if v < index.shape[0] and u < index.shape[1]:
-        out[v, u] = _inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon, candidates)
+    """One thread per 2x2 patch: the patch tests once for its four fine pixels."""
+    pu, pv = cuda.grid(2)
+    h = index.shape[0]
+    w = index.shape[1]
+    v = 2 * pv
+    u = 2 * pu
+    if v < h and u < w:
+        o00, o01, o10, o11 = _inherit_quad(cost, index, coarse, pv, pu, prc, dfm_pkrn_min, epsilon, candidates)
+        out[v, u] = o00
+        if u + 1 < w:
+            out[v, u + 1] = o01
+        if v + 1 < h:
+            out[v + 1, u] = o10
+            if u + 1 < w:
+                out[v + 1, u + 1] = o11
 
 
 def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
@@ -662,8 +674,8 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
     Parameters
     ----------
     cost : Volume or float32 (H, W, D), device or host
-        Cost volume of the finer level i (the patch tests run per pixel here; the CPU
-        shares them between the four pixels of a patch: the same values).
+        Cost volume of the finer level i (one thread per 2x2 patch, as the CPU's
+        ``pixel.inherit_quad``: the patch tests once for its four pixels).
     coarse : int32 (>= H // 2, >= W // 2), device or host
         Disparity map of level i + 1 (-1 undecided).
     candidates : int
@@ -675,10 +687,12 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
         Sparse map D_i^S.
     """
     flat, index, _, _ = _unpack(cost)
-    return _per_pixel(
-        _inherit_kernel, index.shape, np.int32, flat, index, _dev(coarse), bool(prc), _f64(dfm_pkrn_min),
-        _f64(epsilon), np.int32(candidates),
-    )
+    h, w = int(index.shape[0]), int(index.shape[1])
+    out = cuda.device_array((h, w), np.int32)
+    blocks, threads = _grid_2d((w + 1) // 2, (h + 1) // 2)
+    _inherit_kernel[blocks, threads](flat, index, _dev(coarse), bool(prc), _f64(dfm_pkrn_min), _f64(epsilon),
+                                     np.int32(candidates), out)
+    return out
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)

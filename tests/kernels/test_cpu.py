@@ -252,6 +252,21 @@ def test_seed_whose_right_pixel_is_outside_is_rejected():
     assert verdicts == {-1}
 
 
+@pytest.mark.parametrize("curve, pkrn_min, want", [
+    ([0.9, 0.2, 0.5, 0.1], 1.9, 3),   # c2 is the minimum the last cell displaced: 0.2 / 0.1
+    ([0.9, 0.2, 0.5, 0.1], 2.1, -1),  # (c2 = 0.5 would pass)
+    ([0.2, 0.5, 0.2, 0.9], 1.05, -1),  # two equal minima: c2 = c1, PKRN 1
+    ([0.5, 0.2, 0.9, 0.9], 2.4, 1),    # c2 = 0.5, ahead of the minimum
+    ([0.5, 0.2, 0.9, 0.9], 2.6, -1),
+])
+def test_seed_pkrn_second_cost_known_answers(curve, pkrn_min, want):
+    # Naive PKRN (exclusion 0) keeps c2 in the same pass as the minimum (issue 10): the
+    # second cost is the least of the other cells, wherever it lies.
+    cost = np.ones((1, 8, 4), np.float32)
+    cost[0, 5] = curve
+    assert cpu.decisive_seeds(cost, pkrn_min, 0.0, 0, 0)[0, 5] == want
+
+
 # ----------------------------------------------------------------------------- min cost
 def test_min_cost_matches_reference():
     rng = np.random.default_rng(14)
@@ -332,6 +347,54 @@ def test_diffusion_max_sweeps_safeguard_matches_truncated_reference():
         want, _ = ref.ref_diffuse(cost, seeds, -1.0, 1, 1, True, max_sweeps=limit)
         assert sweeps == limit
         np.testing.assert_array_equal(got, want)
+
+
+_diffuse_at = cpu.ops.diffuse_at
+
+
+@numba.njit(cache=False)
+def whole_image_jacobi(cost, index, disp0, least, max_gap, tau, kappa_d, adversarial):
+    """Every pixel every sweep with ``pixel.diffuse_at`` (no frontier, no first-sweep
+    special case), sweeps counted as the driver counts them."""
+    disp = disp0.copy()
+    h, w = disp.shape
+    if not (disp >= 0).any():
+        return disp, 0
+    sweeps = 0
+    while True:
+        sweeps += 1
+        new = disp.copy()
+        for v in range(h):
+            for u in range(w):
+                new[v, u] = _diffuse_at(cost, index, disp, least, max_gap, v, u, tau, kappa_d, adversarial)
+        changed = (new != disp).any()
+        disp = new
+        if not changed:
+            return disp, sweeps
+
+
+@pytest.mark.parametrize("settings", DIFFUSION_SETTINGS, ids=lambda s: "-".join(f"{k}{v}" for k, v in s.items()))
+def test_diffusion_with_large_frontiers_matches_whole_image_jacobi(settings):
+    """Frontiers above ``SERIAL_FRONTIER`` (parallel, in chunks), rows of several 64-pixel
+    bitmap words plus a partial one: the frontier driver as whole-image Jacobi sweeps."""
+    from d3cli.kernels.volume import dense_index
+
+    rng = np.random.default_rng(23)
+    h, w, n_disp = 96, 203, 9
+    blocks = rng.integers(1, n_disp, (h // 8 + 1, w // 8 + 1))
+    true = np.repeat(np.repeat(blocks, 8, 0), 8, 1)[:h, :w]
+    cost = structured_volume(rng, true, n_disp, noise=0.1)
+    seeds = sparse_map(rng, (h, w), n_disp, share=0.03)
+    seeds[seeds >= 0] = np.where(rng.random((seeds >= 0).sum()) < 0.8, true[seeds >= 0], seeds[seeds >= 0])
+    least = cpu.min_cost(cost)
+    got, sweeps = cpu.diffuse(cost, seeds, least, max_sweeps=100000, **settings)
+    index = dense_index(h, w, n_disp)
+    args = (float(settings["max_gap"]), settings["tau"], settings["kappa_d"], settings["adversarial"])
+    want, want_sweeps = whole_image_jacobi(cost.ravel(), index, seeds, least, *args)
+    np.testing.assert_array_equal(got, want)
+    assert sweeps == want_sweeps > 3
+    first, _ = cpu.diffuse(cost, seeds, least, max_sweeps=1, **settings)
+    assert (first != seeds).sum() * 3 > cpu.SERIAL_FRONTIER  # a parallel frontier follows
 
 
 # ----------------------------------------------------------------------------- inheritance

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from tests import reference as ref
-from tests.volumes import mark_missing_cells, random_volume
+from tests.volumes import mark_missing_cells, random_volume, structured_volume
 
 from d3cli.kernels import cpu
 from d3cli.kernels.pixel import build_ops
@@ -150,3 +150,62 @@ def test_symmetric_is_the_default_of_the_driver():
                                   cpu.inherit(cost, coarse, True, 1.05, 1e-3, SYMMETRIC))
     np.testing.assert_array_equal(cpu.inherit(cost, coarse, True, 1.05, 1e-3),
                                   ref.ref_inherit(cost, coarse, True, 1.05, 1e-3))
+
+
+# ----------------------------------------------------------------------------- fast form (issue 10)
+def narrow_banded_volume(rng, h, w, n_disp, *, levels=None):
+    """A Volume with bands 1-7 disparities wide around a random true disparity (the fine
+    levels' bands; patch windows d-2..d+2 often cross a band end), cost curves with a
+    noisy minimum there; ``levels`` quantises the costs to force ties.  Returns the
+    volume and the true disparities."""
+    from d3cli.kernels.volume import Volume, banded_index
+
+    blocks = rng.integers(0, n_disp, (h // 4 + 1, w // 6 + 1))  # constant over 4x6 blocks
+    true = np.minimum(np.repeat(np.repeat(blocks, 4, 0), 6, 1)[:h, :w], np.arange(w)[None, :])
+    cube = structured_volume(rng, true, n_disp, noise=0.15)
+    if levels:
+        cube = (np.floor(cube * levels) / levels).astype(np.float32)
+    lo = np.clip(true - rng.integers(0, 4, (h, w)), 0, n_disp - 1)
+    hi = np.clip(true + rng.integers(1, 5, (h, w)), lo + 1, n_disp)
+    index, n_cells = banded_index(lo, hi)
+    flat = np.empty(n_cells, np.float32)
+    for v in range(h):
+        for u in range(w):
+            flat[index[v, u, 0] + lo[v, u]:index[v, u, 0] + hi[v, u]] = cube[v, u, lo[v, u]:hi[v, u]]
+    return Volume(flat, index, n_disp), true
+
+
+def test_windows_hold_the_cells_of_cost_or_inf():
+    ops = build_ops(identity)
+    rng = np.random.default_rng(41)
+    vol, _ = narrow_banded_volume(rng, 5, 9, 8)
+    for v in range(-1, 6):
+        for x in range(-3, 12):
+            for d in range(-1, 10):
+                want = [ops.cost_or_inf(vol.cost, vol.index, v, x, d - 2 + k) for k in range(5)]
+                assert list(ops.window5(vol.cost, vol.index, v, x, d)) == want
+                want = [ops.right_cost_or_inf(vol.cost, vol.index, v, x, d - 2 + k) for k in range(5)]
+                assert list(ops.right_window5(vol.cost, vol.index, v, x, d)) == want
+
+
+@pytest.mark.parametrize("candidates", [SYMMETRIC, PAPER])
+@pytest.mark.parametrize("prc", [True, False])
+def test_driver_equals_the_per_pixel_functions_on_banded_volumes(prc, candidates):
+    """The drivers' per-patch form (``inherit_quad``: each cell read once) decides as the
+    per-pixel composition ``inherit_at`` of eq. 7-9 (best_of_three, outside_cost, ...)."""
+    ops = build_ops(identity)
+    rng = np.random.default_rng(50 + 2 * prc + candidates)
+    n_decided = 0
+    for h, w, n_disp in [(10, 17, 9), (7, 12, 6), (12, 9, 13)]:
+        for levels in (None, 6):
+            vol, true = narrow_banded_volume(rng, h, w, n_disp, levels=levels)
+            # coarse disparities near the true ones: many patches reach the pixel test
+            coarse = np.clip(true[::2, ::2] // 2 + rng.integers(-1, 2, true[::2, ::2].shape), 0, None)
+            coarse = coarse.astype(np.int32)
+            coarse[rng.random(coarse.shape) < 0.1] = -1
+            got = cpu.inherit(vol, coarse, prc, 1.05, 1e-3, candidates)
+            want = np.array([[ops.inherit_at(vol.cost, vol.index, coarse, v, u, prc, 1.05, 1e-3, candidates)
+                              for u in range(w)] for v in range(h)], np.int32)
+            np.testing.assert_array_equal(got, want)
+            n_decided += int((want >= 0).sum())
+    assert n_decided > 20  # the comparison covers decided pixels, not only -1
