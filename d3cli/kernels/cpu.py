@@ -78,7 +78,7 @@ _box_sum = ops.box_sum
 _rbf_weight = ops.rbf_weight
 _seed_at = ops.seed_at
 _diffuse_at = ops.diffuse_at
-_inherit_quad = ops.inherit_quad
+_inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
 
 #: Rows per parallel task of the NCC driver (one running window sum per task).
@@ -1380,18 +1380,8 @@ def _inherit(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates):
 @njit(cache=True, error_model="numpy")
 def _inherit_row(cost, index, coarse, pv, out, prc, dfm_pkrn_min, epsilon, candidates):
     """The fine rows 2 pv, 2 pv + 1 of :func:`_inherit` (one patch row)."""
-    h, w = out.shape
-    v = 2 * pv
-    for pu in range((w + 1) // 2):
-        u = 2 * pu
-        o00, o01, o10, o11 = _inherit_quad(cost, index, coarse, pv, pu, prc, dfm_pkrn_min, epsilon, candidates)
-        out[v, u] = o00
-        if u + 1 < w:
-            out[v, u + 1] = o01
-        if v + 1 < h:
-            out[v + 1, u] = o10
-            if u + 1 < w:
-                out[v + 1, u + 1] = o11
+    for pu in range((out.shape[1] + 1) // 2):
+        _inherit_patch_into(out, cost, index, coarse, pv, pu, prc, dfm_pkrn_min, epsilon, candidates)
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)

@@ -42,7 +42,7 @@ _cosine_cost = ops.cosine_cost
 _rbf_weight = ops.rbf_weight
 _seed_at = ops.seed_at
 _diffuse_at = ops.diffuse_at
-_inherit_quad = ops.inherit_quad
+_inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
 _pt_shift = ops.pt_shift
 _bilinear_at = ops.bilinear_at
@@ -653,19 +653,8 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
 def _inherit_kernel(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates, out):
     """One thread per 2x2 patch: the patch tests once for its four fine pixels."""
     pu, pv = cuda.grid(2)
-    h = index.shape[0]
-    w = index.shape[1]
-    v = 2 * pv
-    u = 2 * pu
-    if v < h and u < w:
-        o00, o01, o10, o11 = _inherit_quad(cost, index, coarse, pv, pu, prc, dfm_pkrn_min, epsilon, candidates)
-        out[v, u] = o00
-        if u + 1 < w:
-            out[v, u + 1] = o01
-        if v + 1 < h:
-            out[v + 1, u] = o10
-            if u + 1 < w:
-                out[v + 1, u + 1] = o11
+    if 2 * pv < index.shape[0] and 2 * pu < index.shape[1]:
+        _inherit_patch_into(out, cost, index, coarse, pv, pu, prc, dfm_pkrn_min, epsilon, candidates)
 
 
 def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):

@@ -662,6 +662,24 @@ def build_ops(jit):
         return o00, o01, o10, o11
 
     @jit
+    def inherit_patch_into(out, cost, index, coarse, pv, pu, prc, dfm_pkrn_min, epsilon, candidates):
+        """:func:`inherit_quad` of the coarse pixel (pu, pv) written to the (up to four)
+        fine pixels of its patch in ``out`` (int32 (H, W)): the one write the CPU and the
+        CUDA drivers share (a patch of the last row or column may be cut by the border)."""
+        h = out.shape[0]
+        w = out.shape[1]
+        v = 2 * pv
+        u = 2 * pu
+        o00, o01, o10, o11 = inherit_quad(cost, index, coarse, pv, pu, prc, dfm_pkrn_min, epsilon, candidates)
+        out[v, u] = o00
+        if u + 1 < w:
+            out[v, u + 1] = o01
+        if v + 1 < h:
+            out[v + 1, u] = o10
+            if u + 1 < w:
+                out[v + 1, u + 1] = o11
+
+    @jit
     def inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon, candidates):
         """Inherited disparity of fine pixel (u, v) from the coarser map, or UNDECIDED.
 
@@ -773,6 +791,7 @@ def build_ops(jit):
         pixel_decisive5=pixel_decisive5,
         inherit_pixel5=inherit_pixel5,
         inherit_quad=inherit_quad,
+        inherit_patch_into=inherit_patch_into,
         subpixel_at=subpixel_at,
         pt_shift=pt_shift,
         bilinear_at=bilinear_at,
