@@ -107,11 +107,14 @@ def match_potholes(ids: np.ndarray, pits: list, *, min_inside: float, min_cover:
 
 
 def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_inside: float = 0.5,
-               min_cover: float = 0.3, bump_margin_px: float = 10.0) -> dict:
+               min_cover: float = 0.3, bump_margin_px: float = 10.0, min_decided_share: float = 0.0) -> dict:
     gt = json.loads((gt_dir / "defects_gt.json").read_text())["potholes"]
     ids = cv2.imread(str(gt_dir / "potholes_gt.png"), cv2.IMREAD_UNCHANGED)
     pred_path = out_dir / "defects.json"
     preds = json.loads(pred_path.read_text())["defects"] if pred_path.is_file() else []
+    # What-if filter: score as if defects with a smaller decided share had been dropped
+    # (find_defects measures each region independently, so dropping one changes no other).
+    preds = [d for d in preds if d.get("decided_share", 1.0) >= min_decided_share]
     pits = [d for d in preds if d["kind"] == "pothole"]
     by_id = {g["id"]: g for g in gt}
     counted = {g["id"] for g in gt if g["depth_mm"] > min_gt_depth_mm and g["visible_px"] > 0}
@@ -150,6 +153,8 @@ def main(argv=None) -> int:
     ap.add_argument("--min-cover", type=float, default=0.3,
                     help="share of a pothole's visible pixels its matching detection must cover")
     ap.add_argument("--bump-margin-px", type=float, default=10.0)
+    ap.add_argument("--min-decided-share", type=float, default=0.0,
+                    help="what-if: ignore defects whose decided_share is below this (0: score all)")
     ap.add_argument("--json", type=Path, help="also write the per-pair scores here")
     args = ap.parse_args(argv)
     pairs = sorted(p for p in args.gt_root.iterdir() if (p / "defects_gt.json").is_file())
@@ -158,7 +163,8 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 1
     rows = [score_pair(p, args.out_root / p.name, min_gt_depth_mm=args.min_gt_depth_mm,
-                       min_inside=args.min_inside, min_cover=args.min_cover, bump_margin_px=args.bump_margin_px) for p in pairs]
+                       min_inside=args.min_inside, min_cover=args.min_cover, bump_margin_px=args.bump_margin_px,
+                       min_decided_share=args.min_decided_share) for p in pairs]
     for r in rows:
         errs = ", ".join(f"#{e['id']} {e['gt_depth_mm']:.0f}mm d{100 * e['signed_depth']:+.0f}% "
                          f"a{100 * e['signed_area']:+.0f}% v{100 * e['volume']:.0f}%" for e in r["errors"])
