@@ -1,8 +1,8 @@
 """Compute kernels.  ``pixel.py`` holds the per-pixel math; ``cpu.py`` and ``cuda.py``
 compile it for their target and drive it.  :func:`get_backend` picks one.
 ``volume.py`` is the banded volume layout, ``finishing.py`` and ``range_box.py`` the
-host-side step-8 kernels, ``allocator.py`` the process's malloc settings (applied on
-import, below).  May import: ``errors`` only (``tests/test_architecture.py``)."""
+host-side step-8 kernels, ``road_fit.py`` the RANSAC scoring of step 6, ``allocator.py``
+the process's malloc settings (applied on import, below).  May import: ``errors`` only (``tests/test_architecture.py``)."""
 
 from __future__ import annotations
 
