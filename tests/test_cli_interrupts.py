@@ -123,3 +123,29 @@ def test_sigterm_after_the_batch_exits_143_not_by_the_signal(tmp_path, make_pair
     assert done.stderr.strip().splitlines()[-1] == RESUME
     run = json.loads((tmp_path / "out" / "run.json").read_text())
     assert run["interrupted"] is False and run["n_failed"] == 0
+
+
+def test_ctrl_c_during_the_kernel_warm_up_waits_for_it_then_exits_130(tmp_path, make_pair_folder):
+    """A Ctrl-C while the kernels load (numba's cache is read through llvmlite ctypes
+    callbacks: an interrupt raised inside one crashed the process, SIGSEGV) is held until
+    the warm-up ends, then stops the batch with 130."""
+    make_pair_folder(tmp_path / "pairs", "a")
+    code = """
+        import os, signal, sys, time
+        import d3cli.batch.executors as executors
+
+        def warm_jit(cfg, method):  # the warm-up, interrupted in its middle
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.3)
+            open("warm-finished", "w").close()
+            return 0.0
+
+        executors.warm_jit = warm_jit
+        sys.argv = ["d3stereo", "run", "pairs", "-o", "out", "--method", "d3stereo", "-q"]
+        from d3cli.__main__ import entry
+        entry()
+        """
+    done = _run_python(code, tmp_path)
+    assert done.returncode == 130, (done.returncode, done.stderr)
+    assert (tmp_path / "warm-finished").exists()
+    assert done.stderr.strip().splitlines()[-1].endswith("rerun the same command to resume")

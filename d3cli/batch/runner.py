@@ -531,7 +531,12 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
         with _interrupts_unwrapped(), executor:
             meta["execution"] = executor.describe()
             # Compile before the first pair (and before a pool fans out): no pair's time includes it.
-            meta["compile_s"] = round(executor.warm(cfg, method), 3) if pairs else 0.0
+            # Ctrl-C/SIGTERM are held until the kernels are loaded: numba loads a cached
+            # kernel through a ctypes callback of llvmlite, and a KeyboardInterrupt raised
+            # inside it crashed the process (SIGSEGV, exit -11 instead of 130; seen once in
+            # tests/batch/test_interrupts.py).  The interrupt is delivered right after.
+            with _signals_deferred():
+                meta["compile_s"] = round(executor.warm(cfg, method), 3) if pairs else 0.0
             bar = progress_bar(None, progress, method)
             bar.reset(total=len(pairs))
             try:
