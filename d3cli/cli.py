@@ -20,7 +20,7 @@ import click
 
 from . import __version__
 from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, load_config
-from .errors import D3Error
+from .errors import D3Error, interrupt_behind, raise_terminated
 
 log = logging.getLogger("d3cli")
 
@@ -34,17 +34,6 @@ CONFIG_ENV = "D3STEREO_CONFIG"
 LOCAL_CONFIG = "d3stereo.yaml"
 
 
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM outside a batch (before it began or after it ended) in the command's own
-    process: stops it like Ctrl-C, with exit 143."""
-
-    terminated = True
-
-
-def _raise_terminated(signum, frame):
-    raise _Terminated
-
-
 class _Group(click.Group):
     """A click group that turns every D3Error into ``Error: <message>`` and exit code 1."""
 
@@ -54,7 +43,7 @@ class _Group(click.Group):
             # handler back at its end; with the default one there, a SIGTERM between the
             # end of the batch and the exit (the summary lines) killed the process by the
             # signal, status -15 instead of 143 or 0 (issue 12; seen on a fast machine).
-            signal.signal(signal.SIGTERM, _raise_terminated)
+            signal.signal(signal.SIGTERM, raise_terminated)
         try:
             result = super().invoke(ctx)
             _end_of_command()
@@ -67,19 +56,10 @@ class _Group(click.Group):
             # A Ctrl-C that lands inside a numba kernel comes out as "SystemError: ...
             # returned a result with an exception set" with the KeyboardInterrupt as its
             # cause: an interrupt, not a crash (issue 12 item 8).
-            interrupt = _interrupt_behind(exc)
+            interrupt = interrupt_behind(exc)
             if interrupt is None:
                 raise
             _interrupted(ctx, interrupt)
-
-
-def _interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:
-    """The KeyboardInterrupt in ``exc``'s chain of causes and contexts (8 links at most), if any."""
-    for _ in range(8):
-        if exc is None or isinstance(exc, KeyboardInterrupt):
-            return exc
-        exc = exc.__cause__ or exc.__context__
-    return None
 
 
 def _interrupted(ctx, exc: KeyboardInterrupt):

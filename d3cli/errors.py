@@ -4,6 +4,9 @@ Every error a user can cause is a :class:`D3Error`.  Its message names *where*
 (file, pair, dotted config key), *what* (expected vs got) and *the fix*, in the form
 ``<where>: <what>; <fix>``.  Only ``d3cli.cli`` turns a D3Error into the one-line
 ``Error: ...`` and an exit code; library code raises, never prints.
+
+Also the interrupts: :class:`Terminated` (SIGTERM turned into a KeyboardInterrupt) and
+:func:`interrupt_behind`, shared by the CLI and the batch runner, which must agree on them.
 """
 
 
@@ -30,3 +33,36 @@ class OutputError(D3Error):
 def where_what_fix(where: str, what: str, fix: str) -> str:
     """Format a message as ``<where>: <what>; <fix>`` (the house style)."""
     return f"{where}: {what}; {fix}"
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, ``timeout``, a job scheduler's preemption), raised by a signal handler.
+
+    A KeyboardInterrupt, so every path that stops cleanly on Ctrl-C stops the same way;
+    ``terminated`` tells the CLI to exit with 143 (128 + SIGTERM) instead of 130.  One
+    class for the batch runner (SIGTERM during a batch) and the CLI (before or after it):
+    with two, a SIGTERM that stopped the batch before its pairs began (taking the lock,
+    starting the workers) came out as exit 130 (``tests/test_cli_interrupts.py``).
+    """
+
+    terminated = True
+
+
+def raise_terminated(signum, frame):
+    """SIGTERM handler: raise :class:`Terminated` (``signal.signal(SIGTERM, raise_terminated)``)."""
+    raise Terminated
+
+
+def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:
+    """The Ctrl-C/SIGTERM behind ``exc`` (itself, or in its chain of causes and contexts,
+    8 links at most), or None.
+
+    A signal that arrives while numba runs a compiled kernel surfaces as ``SystemError:
+    ... returned a result with an exception set`` with the KeyboardInterrupt as its
+    context: that is an interrupt, not a failure.
+    """
+    for _ in range(8):
+        if exc is None or isinstance(exc, KeyboardInterrupt):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+    return None

@@ -125,6 +125,33 @@ def test_sigterm_after_the_batch_exits_143_not_by_the_signal(tmp_path, make_pair
     assert run["interrupted"] is False and run["n_failed"] == 0
 
 
+def test_sigterm_before_the_pairs_begin_exits_143(tmp_path, make_pair_folder):
+    """SIGTERM while the batch takes its lock or starts its workers (after its SIGTERM
+    handler is in place, before the pairs' loop wraps interrupts into BatchInterrupted).
+    Failed before the CLI and the runner shared one Terminated class: the runner's had no
+    ``terminated`` flag, so the command exited 130, as after Ctrl-C."""
+    make_pair_folder(tmp_path / "pairs", "a")
+    code = """
+        import os, signal, sys
+        import d3cli.batch.runner as runner
+
+        make_executor = runner.make_executor
+
+        def make_executor_then_sigterm(*args, **kwargs):
+            os.kill(os.getpid(), signal.SIGTERM)  # lands in the runner's own handler
+            return make_executor(*args, **kwargs)
+
+        runner.make_executor = make_executor_then_sigterm
+        sys.argv = ["d3stereo", "run", "pairs", "-o", "out", "--method", "sgbm"]
+        from d3cli.__main__ import entry
+        entry()
+        """
+    done = _run_python(code, tmp_path)
+    assert done.returncode == 143, (done.returncode, done.stderr)
+    assert done.stderr.strip().splitlines()[-1] == RESUME
+    assert not (tmp_path / "out" / ".d3stereo.lock").exists()
+
+
 def test_ctrl_c_during_the_kernel_warm_up_waits_for_it_then_exits_130(tmp_path, make_pair_folder):
     """A Ctrl-C while the kernels load (numba's cache is read through llvmlite ctypes
     callbacks: an interrupt raised inside one crashed the process, SIGSEGV) is held until

@@ -43,7 +43,7 @@ from typing import Sequence
 from .. import __version__
 from ..config import Config
 from ..data import datasets, io
-from ..errors import D3Error, InputError, OutputError
+from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind, raise_terminated
 from ..evaluation import diagnostics, report
 from ..road.pointcloud import camera_from, save_pair_cloud
 from ..road.report import DEFECTS_CSV, road_report, write_defects_csv
@@ -72,29 +72,6 @@ from .outputs import (
 )
 
 log = logging.getLogger(__name__)
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM (``kill``, ``timeout``, a job scheduler's preemption) during a batch.
-
-    A KeyboardInterrupt, so every path that stops cleanly on Ctrl-C stops the same way.
-    """
-
-
-def _interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
-    """The Ctrl-C/SIGTERM behind ``exc``, if any.
-
-    A signal that arrives while numba runs a compiled kernel surfaces as ``SystemError:
-    ... returned a result with an exception set`` with the KeyboardInterrupt as its
-    context: that is an interrupt of the batch, not a failure of the pair.
-    """
-    seen = 0
-    while exc is not None and seen < 8:
-        if isinstance(exc, KeyboardInterrupt):
-            return exc
-        exc = exc.__cause__ or exc.__context__
-        seen += 1
-    return None
 
 
 class BatchInterrupted(KeyboardInterrupt):
@@ -251,7 +228,7 @@ def _score(pair, left, right, disparity, pair_dir: Path) -> tuple[dict | None, s
             raise
         message = str(exc)
     except Exception as exc:  # noqa: BLE001 - a broken ground truth fails the evaluation only
-        interrupt = _interrupt_behind(exc)
+        interrupt = interrupt_behind(exc)
         if interrupt is not None:
             raise interrupt from None
         message = f"{type(exc).__name__}: {exc}"
@@ -436,7 +413,7 @@ def _interrupts_unwrapped():
     except KeyboardInterrupt:
         raise
     except Exception as exc:
-        interrupt = _interrupt_behind(exc)
+        interrupt = interrupt_behind(exc)
         if interrupt is None:
             raise
         raise interrupt from None
@@ -488,10 +465,6 @@ def _signals_deferred():
         held[pending[0]](pending[0], None)
 
 
-def _raise_interrupt(signum, frame):
-    raise Terminated
-
-
 def _sigterm_as_interrupt():
     """Make SIGTERM (a scheduler cancelling the job, ``kill``) end the batch like Ctrl-C.
 
@@ -499,7 +472,7 @@ def _sigterm_as_interrupt():
     """
     if threading.current_thread() is not threading.main_thread():
         return None
-    return signal.signal(signal.SIGTERM, _raise_interrupt)
+    return signal.signal(signal.SIGTERM, raise_terminated)
 
 
 def _absolute(pair):
@@ -625,7 +598,7 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
             raise  # every later pair would fail the same way: the batch stops
         return failed_row(pair, str(exc), time.perf_counter() - t0)
     except Exception as exc:  # noqa: BLE001 - one broken pair must not end the batch
-        interrupt = _interrupt_behind(exc)
+        interrupt = interrupt_behind(exc)
         if interrupt is not None:
             raise interrupt from None  # Ctrl-C inside a numba kernel: stop the batch
         log.debug("%s: unexpected error", pair.name, exc_info=True)
