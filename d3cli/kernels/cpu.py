@@ -76,7 +76,8 @@ _ncc_window_cost = ops.ncc_window_cost
 _cosine_cost = ops.cosine_cost
 _box_sum = ops.box_sum
 _rbf_weight = ops.rbf_weight
-_seed_at = ops.seed_at
+_seed_candidate = ops.seed_candidate
+_right_wta = ops.right_wta
 _diffuse_at = ops.diffuse_at
 _inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
@@ -1095,15 +1096,71 @@ def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None):
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _seeds(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip, has_skip):
+    """:func:`pixel.seed_at` for every pixel, row by row: first test (a) (the PKRN of the
+    pixel's own band) for the whole row, then test (b), the right view's WTA at u - d1,
+    for the candidates.  Where the candidates are many, (b) reads the row's right-view WTA
+    from a table made in one pass over the row's cells (:func:`_right_wta_row`) instead
+    of scanning ``n_disp`` pixels per candidate; the same winners, so the same seeds."""
     h, w, _ = index.shape
     out = np.empty((h, w), np.int32)
     for v in prange(h):
+        row = out[v]
+        n_cand = 0
         for u in range(w):
-            if has_skip and skip[v, u] >= 0:
-                out[v, u] = UNDECIDED
-            else:
-                out[v, u] = _seed_at(cost, index, n_disp, v, u, pkrn_min, epsilon, lr_tolerance, exclusion)
+            d1 = UNDECIDED
+            if not (has_skip and skip[v, u] >= 0):
+                d1 = _seed_candidate(cost, index, v, u, pkrn_min, epsilon, exclusion)
+            row[u] = d1
+            n_cand += d1 != UNDECIDED
+        if n_cand == 0:
+            continue
+        # the row's cells are packed (kernels.volume): its first and last pixel bound them
+        n_cells = index[v, w - 1, 0] + index[v, w - 1, 2] - index[v, 0, 0] - index[v, 0, 1]
+        if n_cand * n_disp > n_cells:  # the table reads each cell once: cheaper
+            wta = _right_wta_row(cost, index, v)
+            for u in range(w):
+                d1 = row[u]
+                if d1 != UNDECIDED and abs(wta[u - d1] - d1) > lr_tolerance:
+                    row[u] = UNDECIDED
+        else:
+            for u in range(w):
+                d1 = row[u]
+                if d1 != UNDECIDED and abs(_right_wta(cost, index, n_disp, v, u - d1) - d1) > lr_tolerance:
+                    row[u] = UNDECIDED
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def _right_wta_row(cost, index, v):
+    """:func:`pixel.right_wta` of every column x of row v: int32 (W,).
+
+    One pass over the row's cells: cell (u, d) is a candidate of the right pixel x = u - d.
+    Pixels are taken in increasing u, so each x sees its candidates in increasing d, and
+    a strict ``<`` keeps the smallest d on ties, as ``right_wta``'s scan does; x without
+    a cell gets 0, as there.  Issue 10: the scan read up to ``n_disp`` pixels' index and
+    cost per candidate seed.
+    """
+    w = index.shape[1]
+    best = np.full(w, np.inf, np.float32)
+    wta = np.zeros(w, np.int32)
+    for u in range(w):
+        off = index[v, u, 0]
+        lo = index[v, u, 1]
+        end = min(index[v, u, 2], u + 1)  # x = u - d >= 0
+        n = end - lo
+        if n <= 0:
+            continue
+        # x = u - d runs backwards: reversed slices (non-negative indices: the loop vectorises)
+        cells = cost[off + lo:off + end]
+        best_x = best[u - end + 1:u - lo + 1]
+        wta_x = wta[u - end + 1:u - lo + 1]
+        for i in range(n):
+            j = n - 1 - i
+            c = cells[i]
+            better = c < best_x[j]
+            best_x[j] = c if better else best_x[j]
+            wta_x[j] = lo + i if better else wta_x[j]
+    return wta
 
 
 # ----------------------------------------------------------------------------- diffusion (step 5)

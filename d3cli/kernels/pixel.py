@@ -149,17 +149,9 @@ def build_ops(jit):
         return math.exp(-(dy * dy + dx * dx) * inv_sigma_space2 - di * di * inv_sigma_color2)
 
     @jit
-    def seed_at(cost, index, n_disp, v, u, pkrn_min, epsilon, lr_tolerance, exclusion):
-        """Decisive seed at (u, v) of the coarsest level, or UNDECIDED (DESIGN step 4).
-
-        Winner-take-all ``d1`` (smallest disparity on ties) is kept when
-        (a) PKRN = (c2 + eps) / (c1 + eps) >= pkrn_min, where c2 is the least cost at any
-        disparity farther than ``exclusion`` from d1 (``exclusion = 0``: the naive peak
-        ratio), and (b) the right view's WTA at (u - d1, v) is within ``lr_tolerance``.
-        A cost of 1 (invalid or flat) never yields a seed.  Only the pixel's band is
-        searched; the right view looks at every disparity below ``n_disp`` (the level's
-        range) whose cell exists.
-        """
+    def seed_candidate(cost, index, v, u, pkrn_min, epsilon, exclusion):
+        """Test (a) of :func:`seed_at`: the WTA disparity d1 of (u, v) when its PKRN passes
+        and its match u - d1 lies in the image, else UNDECIDED."""
         off = index[v, u, 0]
         lo = index[v, u, 1]
         hi = index[v, u, 2]
@@ -198,11 +190,16 @@ def build_ops(jit):
             return UNDECIDED
         if c2 + epsilon < pkrn_min * (c1 + epsilon):
             return UNDECIDED
-        x = u - d1
-        if x < 0:
+        if u - d1 < 0:
             return UNDECIDED  # the match lies outside the right image
-        # right view's WTA: C_L(x + d, v, d) over the d whose cell exists; x + d stays in
-        # the image (d < width - x), so no bounds test per cell (cost_or_inf's)
+        return d1
+
+    @jit
+    def right_wta(cost, index, n_disp, v, x):
+        """The right view's winner-take-all at (x, v): the d of least ``C_L(x + d, v, d)``
+        over the disparities below ``n_disp`` whose cell exists (the smallest on ties; 0
+        when there is none)."""
+        # x + d stays in the image (d < width - x), so no bounds test per cell (cost_or_inf's)
         vu = UINT(v)
         dr = 0
         cr = INF
@@ -213,7 +210,24 @@ def build_ops(jit):
                 better = c < cr
                 dr = d if better else dr
                 cr = c if better else cr
-        if abs(dr - d1) > lr_tolerance:
+        return dr
+
+    @jit
+    def seed_at(cost, index, n_disp, v, u, pkrn_min, epsilon, lr_tolerance, exclusion):
+        """Decisive seed at (u, v) of the coarsest level, or UNDECIDED (DESIGN step 4).
+
+        Winner-take-all ``d1`` (smallest disparity on ties) is kept when
+        (a) PKRN = (c2 + eps) / (c1 + eps) >= pkrn_min, where c2 is the least cost at any
+        disparity farther than ``exclusion`` from d1 (``exclusion = 0``: the naive peak
+        ratio), and (b) the right view's WTA at (u - d1, v) is within ``lr_tolerance``.
+        A cost of 1 (invalid or flat) never yields a seed.  Only the pixel's band is
+        searched; the right view looks at every disparity below ``n_disp`` (the level's
+        range) whose cell exists.  (a) is :func:`seed_candidate`, (b) :func:`right_wta`.
+        """
+        d1 = seed_candidate(cost, index, v, u, pkrn_min, epsilon, exclusion)
+        if d1 == UNDECIDED:
+            return UNDECIDED
+        if abs(right_wta(cost, index, n_disp, v, u - d1) - d1) > lr_tolerance:
             return UNDECIDED
         return d1
 
@@ -771,6 +785,8 @@ def build_ops(jit):
         right_cost_or_inf=right_cost_or_inf,
         rbf_weight=rbf_weight,
         seed_at=seed_at,
+        seed_candidate=seed_candidate,
+        right_wta=right_wta,
         accept_state=accept_state,
         diffuse_at=diffuse_at,
         candidate_range=candidate_range,

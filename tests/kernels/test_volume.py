@@ -96,6 +96,33 @@ def test_seeds_skip_the_pixels_already_decided(case):
     np.testing.assert_array_equal(got, np.where(skip >= 0, -1, full))
 
 
+def test_right_view_wta_table_of_a_row_equals_the_scan_of_each_column(case):
+    """The seeds' row table (one pass over the cells, issue 10) against pixel.right_wta,
+    which scans the disparities of one right pixel; ties and columns without a cell included."""
+    _, vol, _ = case
+    flat, index, n_disp = vol.cost, vol.index, vol.n_disp
+    flat = np.round(flat * 4) / 4  # coarse values: many ties
+    h, w = vol.shape
+    for v in range(h):
+        want = [cpu.ops.right_wta(flat, index, n_disp, v, x) for x in range(w)]
+        np.testing.assert_array_equal(cpu._right_wta_row(flat, index, v), want)
+
+
+@pytest.mark.parametrize("share", [0.0, 0.5, 0.95])
+def test_seeds_with_few_or_many_candidates_per_row_equal_the_reference(case, share):
+    """Rows with many candidate seeds take the right view's WTA from the row table, rows
+    with few scan it per candidate: both give the per-pixel seed_at's seeds."""
+    rng, vol, _ = case
+    skip = sparse_map(rng, vol.shape, vol.n_disp, share=share)
+    h, w = vol.shape
+    for exclusion in (0, 1):
+        want = np.array([[-1 if skip[v, u] >= 0 else
+                          cpu.ops.seed_at(vol.cost, vol.index, vol.n_disp, v, u, 1.05, 1e-3, 1, exclusion)
+                          for u in range(w)] for v in range(h)])
+        got = cpu.decisive_seeds(vol, 1.05, 1e-3, 1, exclusion, skip=skip)
+        np.testing.assert_array_equal(got, want)
+
+
 @pytest.mark.parametrize("settings", DIFFUSION_SETTINGS)
 def test_banded_diffusion_equals_the_full_range_with_inf(case, settings):
     rng, vol, with_inf = case
