@@ -249,6 +249,16 @@ def build_ops(jit):
         return True
 
     @jit
+    def band_min(cost, index, v, u):
+        """Least cost of pixel (u, v) over its band, which is not empty."""
+        off = index[v, u, 0]
+        best = cost[UINT(off + index[v, u, 1])]
+        for d in range(index[v, u, 1] + 1, index[v, u, 2]):
+            c = cost[UINT(off + d)]
+            best = c if c < best else best  # a select, not a branch
+        return best
+
+    @jit
     def diffuse_at(cost, index, disp, min_cost, max_gap, v, u, tau, kappa_d, adversarial):
         """New state of pixel (u, v) in one Jacobi diffusion sweep (paper eq. 5-6).
 
@@ -262,7 +272,7 @@ def build_ops(jit):
         Near-optimality (``max_gap >= 0``; an addition to the paper, see
         ``DiffusionConfig.max_gap``): the accepted state must also cost at most
         ``min_cost[v, u] + max_gap``, ``min_cost`` being the pixel's least cost over all
-        disparities.  On noisy NCC cost curves almost every disparity is some local
+        disparities (an empty ``min_cost``: :func:`band_min`, here).  On noisy NCC cost curves almost every disparity is some local
         minimum, and without this test diffusion walks from a foreground edge deep into
         the background one +-1 step at a time.
         """
@@ -301,8 +311,13 @@ def build_ops(jit):
             return cur
         if not accept_state(cost, index, v, u, best_s, best_c):
             return cur
-        if max_gap >= 0.0 and best_c > min_cost[v, u] + max_gap:
-            return cur
+        if max_gap >= 0.0:
+            # an empty min_cost (the CPU driver's): the least cost is found here, only
+            # for the pixels that get this far (issue 10: KITTI finest level, 13 % of
+            # the first sweep's; the min_cost pass over the whole volume, 7 ms, is gone)
+            least = min_cost[v, u] if min_cost.shape[0] > 0 else band_min(cost, index, v, u)
+            if best_c > least + max_gap:
+                return cur
         if cur < 0:
             return best_s
         if adversarial and best_c < cost_or_inf(cost, index, v, u, cur):
@@ -788,6 +803,7 @@ def build_ops(jit):
         seed_candidate=seed_candidate,
         right_wta=right_wta,
         accept_state=accept_state,
+        band_min=band_min,
         diffuse_at=diffuse_at,
         candidate_range=candidate_range,
         best_of_three=best_of_three,

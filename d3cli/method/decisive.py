@@ -69,10 +69,12 @@ def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, a
     disparity : ndarray, int32, (H, W)
     sweeps : int
     """
-    if max_gap >= 0:
-        least = backend.min_cost(cost)
-    else:
+    if max_gap < 0:
         least = backend.to_device(np.zeros((1, 1), np.float32))  # never read
+    elif getattr(backend, "DIFFUSE_FINDS_MIN_COST", False):
+        least = None  # the backend finds the least cost of the few pixels that need one
+    else:
+        least = backend.min_cost(cost)
     return backend.diffuse(cost, disparity, least, float(max_gap), int(tau), int(kappa_d), bool(adversarial), int(max_sweeps))
 
 

@@ -302,6 +302,22 @@ def test_diffusion_matches_whole_image_jacobi_reference(settings):
             assert (got[before >= 0] == before[before >= 0]).all()
 
 
+@pytest.mark.parametrize("settings", DIFFUSION_SETTINGS, ids=lambda s: "-".join(f"{k}{v}" for k, v in s.items()))
+def test_diffusion_finding_the_least_costs_itself_matches_reference(settings):
+    # min_cost None (the pipeline's call, issue 10): pixel.diffuse_at finds the least
+    # cost of a pixel whose candidate reaches the gap test; the maps of the reference
+    rng = np.random.default_rng(27)
+    for h, w in SHAPES:
+        for n_disp in (1, 3, 7):
+            cost = random_volume(rng, h, w, n_disp, levels=6)
+            disp = sparse_map(rng, (h, w), n_disp)
+            got, sweeps = cpu.diffuse(cost, disp, None, float(settings["max_gap"]), settings["tau"],
+                                      settings["kappa_d"], settings["adversarial"], 100000)
+            want, want_sweeps = ref.ref_diffuse(cost, disp, **settings)
+            np.testing.assert_array_equal(got, want, err_msg=f"{cost.shape}")
+            assert sweeps == want_sweeps
+
+
 def test_diffusion_from_one_seed_fills_the_known_minimum_map():
     rng = np.random.default_rng(16)
     h, w, n_disp = 13, 17, 8

@@ -134,6 +134,18 @@ def test_banded_diffusion_equals_the_full_range_with_inf(case, settings):
     assert sweeps == want_sweeps
 
 
+@pytest.mark.parametrize("settings", DIFFUSION_SETTINGS)
+def test_banded_diffusion_finding_the_least_costs_itself_equals_them_given(case, settings):
+    # min_cost None: pixel.diffuse_at finds the least cost over the band where it needs it
+    rng, vol, _ = case
+    disp = sparse_map(rng, vol.shape, vol.n_disp, share=0.2)
+    disp[disp >= 0] = np.clip(disp[disp >= 0], 0, vol.n_disp - 1)
+    got, sweeps = cpu.diffuse(vol, disp, None, max_sweeps=1000, **settings)
+    want, want_sweeps = cpu.diffuse(vol, disp, cpu.min_cost(vol), max_sweeps=1000, **settings)
+    np.testing.assert_array_equal(got, want)
+    assert sweeps == want_sweeps
+
+
 @pytest.mark.parametrize("prc", [True, False])
 def test_banded_inheritance_equals_the_full_range_with_inf(case, prc):
     rng, vol, with_inf = case
