@@ -659,7 +659,7 @@ def _invalidate(cost, index, n_disp):
         for u in range(min(w, n_disp)):  # d > u only where u < n_disp - 1
             off = index[v, u, 0]
             for d in range(max(index[v, u, 1], u + 1), index[v, u, 2]):
-                cost[off + d] = 1.0
+                cost[UINT(off + d)] = 1.0  # unsigned: no wraparound test, the loop vectorises
 
 
 # ----------------------------------------------------------------------------- aggregation (step 3)
