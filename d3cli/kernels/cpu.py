@@ -86,6 +86,9 @@ _subpixel_at = ops.subpixel_at
 
 #: Rows per parallel task of the NCC driver (one running window sum per task).
 NCC_BLOCK_ROWS = 32
+#: Bands of at most this many unclipped cells take the NCC row's one-loop slide (below a
+#: vector's few steps, one loop over the cells beats two).
+NCC_NARROW = 8
 
 
 # ----------------------------------------------------------------------------- volumes
@@ -109,24 +112,59 @@ def _pack(flat, index, n_disp, dense_shape):
 def integral_image(img, power):
     """(H+1, W+1) float64 integral image of ``img ** power`` (power 1 or 2)."""
     h, w = img.shape
-    ii = np.zeros((h + 1, w + 1), np.float64)
+    ii = np.empty((h + 1, w + 1), np.float64)
+    _integral_into(img, power, ii)
+    return ii
+
+
+@njit(cache=True, error_model="numpy")
+def _integral_into(img, power, ii):
+    """Write :func:`integral_image` of ``img ** power`` into ``ii`` (H+1, W+1)."""
+    h, w = img.shape
+    for x in range(w + 1):
+        ii[0, x] = 0.0
     for y in range(h):
+        ii[y + 1, 0] = 0.0
         row = 0.0
         for x in range(w):
             val = np.float64(img[y, x])
             row += val if power == 1 else val * val
             ii[y + 1, x + 1] = ii[y, x + 1] + row
-    return ii
+
+
+@njit(cache=True, error_model="numpy")
+def _integral_pair_into(img, ii, ii2):
+    """:func:`_integral_into` of ``img`` (into ``ii``) and of ``img ** 2`` (into ``ii2``)
+    in one scan: two independent chains of adds, so each waits less on the other's
+    latency (the same operations per image)."""
+    h, w = img.shape
+    for x in range(w + 1):
+        ii[0, x] = 0.0
+        ii2[0, x] = 0.0
+    for y in range(h):
+        ii[y + 1, 0] = 0.0
+        ii2[y + 1, 0] = 0.0
+        row = 0.0
+        row2 = 0.0
+        for x in range(w):
+            val = np.float64(img[y, x])
+            row += val
+            row2 += val * val
+            ii[y + 1, x + 1] = ii[y, x + 1] + row
+            ii2[y + 1, x + 1] = ii2[y, x + 1] + row2
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _integral_images(left, right):
     """The four integral images of the NCC (L, L^2, R, R^2), two at a time: each is a
-    serial scan, and four in a row were 4 ms of one thread at 1280x720."""
+    serial scan, and four in a row were 4 ms of one thread at 1280x720.  Each is written
+    in place into its slice of one array (issue 10: a zeroed temporary per image and a
+    copy of it were 6.4 -> 3.9 ms of one thread at 1280x720, 2.7 -> 1.5 ms on KITTI),
+    an image's two in one scan (2.6 -> 1.7 ms CPU at 1280x720, 1.3 -> 0.7 ms on KITTI)."""
     h, w = left.shape
     out = np.empty((4, h + 1, w + 1), np.float64)
-    for k in prange(4):
-        out[k] = integral_image(left if k < 2 else right, 1 if k % 2 == 0 else 2)
+    for k in prange(2):
+        _integral_pair_into(left if k == 0 else right, out[2 * k], out[2 * k + 1])
     return out[0], out[1], out[2], out[3]
 
 
@@ -300,17 +338,15 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
     for b in prange(n_blocks):
         vb0 = b * block
         vb1 = min(h, vb0 + block)
-        col_lo = np.empty(w, np.int64)
-        col_hi = np.empty(w, np.int64)
-        for u in range(w):
-            lo = n_disp
-            hi = 0
-            for v in range(vb0, vb1):
-                if index[v, u, 2] > index[v, u, 1]:
-                    lo = min(lo, index[v, u, 1])
-                    hi = max(hi, index[v, u, 2])
-            col_lo[u] = lo
-            col_hi[u] = hi
+        col_lo = np.full(w, n_disp, np.int64)
+        col_hi = np.zeros(w, np.int64)
+        for v in range(vb0, vb1):  # row by row, index in memory order (column by column: 0.9 -> 0.6 ms, road)
+            for u in range(w):
+                lo = index[v, u, 1]
+                hi = index[v, u, 2]
+                if hi > lo:
+                    col_lo[u] = min(col_lo[u], lo)
+                    col_hi[u] = max(col_hi[u], hi)
         acc_lo = np.empty(w, np.int64)
         acc_hi = np.empty(w, np.int64)
         for u in range(w):
@@ -330,32 +366,70 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
         vr = np.zeros(w, np.float64)
         num = np.zeros(max_row, np.float64)  # per cell of a row: NCC numerator, denominator^2
         den = np.zeros(max_row, np.float64)
+        r_in = np.empty(w, np.float64)  # a right row reversed, float64 (_add_row_products)
+        r_out = np.empty(w, np.float64)
         for y in range(max(0, vb0 - r), min(h - 1, vb0 + r) + 1):
-            _add_row_products(acc, acc_lo, acc_hi, left, right, y, 1.0)
+            _add_row_products(acc, acc_lo, acc_hi, left, right, y, -1, r_in, r_out)
         for v in range(vb0, vb1):
             if v > vb0:
-                if v + r <= h - 1:
-                    _add_row_products(acc, acc_lo, acc_hi, left, right, v + r, 1.0)
-                if v - r - 1 >= 0:
-                    _add_row_products(acc, acc_lo, acc_hi, left, right, v - r - 1, -1.0)
+                y_in = v + r if v + r <= h - 1 else -1
+                y_out = v - r - 1 if v - r - 1 >= 0 else -1
+                if y_in >= 0 or y_out >= 0:
+                    _add_row_products(acc, acc_lo, acc_hi, left, right, y_in, y_out, r_in, r_out)
             _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii_r, ii_rr, h, w, r,
                      min_variance)
     return cost
 
 
 @njit(cache=True, error_model="numpy")
-def _add_row_products(acc, acc_lo, acc_hi, left, right, y, sign):
-    """acc[u, d] += sign * L(y, u) R(y, u - d) for every u and acc_lo[u] <= d < acc_hi[u]."""
+def _reversed_row(img, y, out):
+    """``out[k] = img[y, w - 1 - k]`` as float64."""
+    w = out.shape[0]
+    src = img[y]
+    for k in range(w):
+        out[k] = np.float64(src[w - 1 - k])
+
+
+@njit(cache=True, error_model="numpy")
+def _add_row_products(acc, acc_lo, acc_hi, left, right, y_in, y_out, r_in, r_out):
+    """acc[u, d] += L(y_in, u) R(y_in, u - d), then acc[u, d] -= L(y_out, u) R(y_out, u - d),
+    for every u and acc_lo[u] <= d < acc_hi[u]; a row < 0 is left out.
+
+    One pass over acc for the row entering the window and the row leaving it, each cell
+    rounded after each of the two terms as two passes would (``(a + x) + (-y)``, no
+    fused multiply-add), so the sums are the same bits.  The right rows are read
+    reversed (``R(y, u - d)`` with d rising), so they are first copied reversed into
+    ``r_in``, ``r_out`` and both operands run forward (vectorises).  Issue 10: with the
+    in-place integral images, NCC CPU time (2 threads, captured inputs) at level 0 of
+    KITTI 74 -> 59 ms, Middlebury-Q 51 -> 41 ms, the 720p road pair 64 -> 52 ms.
+    """
     w = acc.shape[0]
+    if y_in >= 0:
+        _reversed_row(right, y_in, r_in)
+    if y_out >= 0:
+        _reversed_row(right, y_out, r_out)
+    acc_w = acc.shape[1]
+    accf = acc.reshape(-1)  # flat, unsigned subscripts: as in _ncc_row
     for u in range(w):
-        lv = sign * np.float64(left[y, u])
         lo = acc_lo[u]
         n = acc_hi[u] - lo
         if n <= 0:
             continue
-        row = acc[u, lo:lo + n]
-        for i in range(n):
-            row[i] += lv * np.float64(right[y, u - lo - i])
+        o = u * acc_w + lo  # acc[u, lo] in accf
+        k = w - 1 - u + lo  # R(y, u - lo - i) = r_in[k + i]
+        if y_out < 0:
+            a = np.float64(left[y_in, u])
+            for i in range(n):
+                accf[UINT(o + i)] += a * r_in[UINT(k + i)]
+        elif y_in < 0:
+            b = -np.float64(left[y_out, u])
+            for i in range(n):
+                accf[UINT(o + i)] += b * r_out[UINT(k + i)]
+        else:
+            a = np.float64(left[y_in, u])
+            b = -np.float64(left[y_out, u])
+            for i in range(n):
+                accf[UINT(o + i)] = (accf[UINT(o + i)] + a * r_in[UINT(k + i)]) + b * r_out[UINT(k + i)]
 
 
 @njit(cache=True, error_model="numpy")
@@ -412,8 +486,8 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
     takes the square root and the division (a band of 5-7 cells is shorter than a
     vector; a row of cells is not: NCC at level 1 of the 720p road pair 0.071 -> 0.062 s
     CPU).  Operation for operation this is :func:`pixel.ncc_cost`, so the values are the
-    same bits.  Cells of clipped windows (the image borders) are computed afterwards,
-    each from its own box sums.
+    same bits.  Cells of clipped windows (the image borders) get their ``num``, ``den``
+    from their own box sums (:func:`_clipped_terms`) before that second pass.
     """
     v0 = max(0, v - r)
     v1 = min(h - 1, v + r)
@@ -426,6 +500,8 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
     clipped = False
     run_lo = 0
     run_hi = -1  # no running window sum yet
+    acc_w = acc.shape[1]
+    accf = acc.reshape(-1)
     for u in range(w):
         off = index[v, u, 0]
         lo = index[v, u, 1]
@@ -435,40 +511,54 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
         if d_fast < hi:
             clipped = True
         if d_fast > lo:
-            # slices: indices from range(n) are known >= 0, so the loops vectorise
+            # flat subscripts cast to unsigned (known >= 0): no negative-index wraparound,
+            # so the loops vectorise, and no slice objects per pixel, whose set-up cost
+            # more than the 5-40 cells of a band (issue 10: NCC at level 0 of the road
+            # pair 52.0 -> 47.7 ms of one thread, KITTI 59.0 -> 57.3 ms)
             n = d_fast - lo
-            run = win[lo:d_fast]
-            if run_lo == lo and run_hi == d_fast and u > r:
-                enter = acc[u + r, lo:d_fast]
-                leave = acc[u - r - 1, lo:d_fast]
+            ea = (u + r) * acc_w + lo  # acc[u + r, lo] in accf
+            la = (u - r - 1) * acc_w + lo
+            o = off + lo - start
+            if run_lo == lo and run_hi == d_fast and u > r and n <= NCC_NARROW:
+                # a narrow band: slide and the cell's terms in one loop, the same operations
+                # (issue 10: two loops over 5-8 cells barely vectorise, and one costs less;
+                # NCC at level 0 of the road pair 51.9 -> 46.9 ms of one thread; on wide
+                # bands one loop is slower, KITTI's 37 cells 56.7 -> 60.0 ms)
+                ml_u = ml[u]
+                vl_u = vl[u]
                 for i in range(n):  # slide by one column
-                    run[i] += enter[i] - leave[i]
+                    t = win[UINT(lo + i)] + (accf[UINT(ea + i)] - accf[UINT(la + i)])
+                    win[UINT(lo + i)] = t
+                    x = UINT(u - lo - i)  # the right window of d = lo + i sits at column u - d
+                    vr_x = vr[x]
+                    num[UINT(o + i)] = t * inv - ml_u * mr[x]
+                    den[UINT(o + i)] = vl_u * vr_x if (vl_u > min_variance and vr_x > min_variance) else -1.0
+                continue
+            if run_lo == lo and run_hi == d_fast and u > r:
+                for i in range(n):  # slide by one column
+                    win[UINT(lo + i)] += accf[UINT(ea + i)] - accf[UINT(la + i)]
             else:
                 for i in range(n):
-                    run[i] = 0.0
+                    win[UINT(lo + i)] = 0.0
                 for c in range(u - r, u + r + 1):
-                    col = acc[c, lo:d_fast]
+                    ca = c * acc_w + lo
                     for i in range(n):
-                        run[i] += col[i]
+                        win[UINT(lo + i)] += accf[UINT(ca + i)]
             run_lo = lo
             run_hi = d_fast
-            o = off + lo - start
-            num_u = num[o:o + n]
-            den_u = den[o:o + n]
             ml_u = ml[u]
             vl_u = vl[u]
-            # the right windows of d = lo .. d_fast - 1 sit at columns u - d: a reversed slice
-            mrs = mr[u - d_fast + 1:u - lo + 1]
-            vrs = vr[u - d_fast + 1:u - lo + 1]
             for i in range(n):
-                j = n - 1 - i
-                vr_x = vrs[j]
-                num_u[i] = run[i] * inv - ml_u * mrs[j]
-                den_u[i] = vl_u * vr_x if (vl_u > min_variance and vr_x > min_variance) else -1.0
+                x = UINT(u - lo - i)  # the right window of d = lo + i sits at column u - d
+                vr_x = vr[x]
+                num[UINT(o + i)] = win[UINT(lo + i)] * inv - ml_u * mr[x]
+                den[UINT(o + i)] = vl_u * vr_x if (vl_u > min_variance and vr_x > min_variance) else -1.0
         else:
             run_hi = -1
+    if clipped:
+        _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0, v1, w, r, min_variance)
     out = cost[start:start + n_row]
-    for j in range(n_row):  # cells of clipped windows get garbage here, replaced below
+    for j in range(n_row):
         den_j = den[j]
         ncc = num[j] / np.sqrt(den_j)
         if ncc > 1.0:
@@ -476,22 +566,40 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
         elif ncc < -1.0:
             ncc = -1.0
         out[j] = 0.5 * (1.0 - ncc) if den_j >= 0.0 else 1.0  # a flat window: NCC undefined
-    if not clipped:
-        return
+
+
+@njit(cache=True, error_model="numpy")
+def _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0, v1, w, r, min_variance):
+    """``num``, ``den`` of row v's cells of clipped windows (the image borders), for
+    :func:`_ncc_row`'s pass over the row: den -1 where u - d < 0 or a window is flat.
+
+    Operation for operation :func:`pixel.ncc_window_cost` up to the square root and the
+    division, which the row's pass does for them too (issue 10: done per cell, serially,
+    after that pass, these cells took 7.3 ms of one thread at level 0 of the road pair,
+    window 25; now 4.8 ms).  Each window sum of L*R is summed up from 0 over its columns
+    as before: summing column by column over a pixel's cells (one vector loop per
+    column) measured slower on these 5-20 cell bands.
+    """
     for u in range(w):
-        off = index[v, u, 0]
+        off = index[v, u, 0] - start
         lo = index[v, u, 1]
         hi = index[v, u, 2]
+        c1 = min(u + r, w - 1)
         for d in range(_unclipped_end(u, lo, hi, r, w), hi):
             if u - d < 0:
-                cost[off + d] = 1.0
+                den[off + d] = -1.0
                 continue
             c0 = max(u - r, d)
-            c1 = min(u + r, w - 1)
             slr = 0.0
             for c in range(c0, c1 + 1):
                 slr += acc[c, d]
-            cost[off + d] = _ncc_window_cost(ii_l, ii_ll, ii_r, ii_rr, v0, v1, c0, c1, d, slr, min_variance)
+            inv = 1.0 / ((v1 - v0 + 1) * (c1 - c0 + 1))
+            ml = _box_sum(ii_l, v0, c0, v1, c1) * inv
+            mr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d) * inv
+            vl = _box_sum(ii_ll, v0, c0, v1, c1) * inv - ml * ml
+            vr = _box_sum(ii_rr, v0, c0 - d, v1, c1 - d) * inv - mr * mr
+            num[off + d] = slr * inv - ml * mr
+            den[off + d] = vl * vr if (vl > min_variance and vr > min_variance) else -1.0
 
 
 def cosine_cost_volume(fl, fr, nl, nr, max_disparity, index=None):
@@ -554,7 +662,7 @@ def _invalidate(cost, index, n_disp):
         for u in range(min(w, n_disp)):  # d > u only where u < n_disp - 1
             off = index[v, u, 0]
             for d in range(max(index[v, u, 1], u + 1), index[v, u, 2]):
-                cost[off + d] = 1.0
+                cost[UINT(off + d)] = 1.0  # unsigned: no wraparound test, the loop vectorises
 
 
 # ----------------------------------------------------------------------------- aggregation (step 3)

@@ -17,6 +17,7 @@ from tests import reference as ref
 from tests.volumes import DIFFUSION_SETTINGS, mark_missing_cells, random_images, random_volume, sparse_map, structured_volume
 
 from d3cli.kernels import cpu
+from d3cli.kernels.volume import banded_index, to_dense
 from d3cli.method.pyramid import build_pyramid, downsample, level_max_disparity
 from d3cli.method.refinement import fill_holes
 
@@ -58,6 +59,36 @@ def test_ncc_cost_volume_with_flat_regions_matches_reference():
     want = ref.ref_ncc_cost_volume(left, right, 5, 3, 0.5)
     np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
     assert (got[4:7, 2:5, :] == 1.0).all()
+
+
+@pytest.mark.parametrize("window", [3, 9])
+def test_banded_ncc_cost_volume_matches_reference(window):
+    # Bands constant over runs of columns (as the tiles of d3cli.method.band make them),
+    # narrow (<= cpu.NCC_NARROW unclipped cells: the row's one-loop slide) and wide (two
+    # loops) in turn along a row, empty ones, and bands clipped at both image borders:
+    # every stored cell equals the per-window reference.
+    rng = np.random.default_rng(window)
+    h, w, n_disp = 40, 70, 31
+    left, right = random_images(rng, (h, w))
+    lo = np.zeros((h, w), np.int64)
+    hi = np.zeros((h, w), np.int64)
+    for v in range(h):
+        u = 0
+        while u < w:
+            run = int(rng.integers(1, 12))
+            a = int(rng.integers(0, n_disp))
+            width = int(rng.choice([0, 1, 3, cpu.NCC_NARROW, cpu.NCC_NARROW + 1, 20]))
+            lo[v, u:u + run] = a
+            hi[v, u:u + run] = min(a + width, n_disp)
+            u += run
+    index, _ = banded_index(lo, hi)
+    got = cpu.ncc_cost_volume(left, right, n_disp - 1, window, 1e-2, index=index)
+    want = ref.ref_ncc_cost_volume(left, right, n_disp - 1, window, 1e-2)
+    dense = to_dense(got.cost, got.index, n_disp)
+    band = np.arange(n_disp)[None, None, :]
+    inside = (band >= lo[:, :, None]) & (band < hi[:, :, None])
+    assert np.isnan(dense[~inside]).all()
+    np.testing.assert_allclose(dense[inside], want[inside], rtol=0, atol=COST_ATOL)
 
 
 def test_ncc_identical_windows_cost_zero():
