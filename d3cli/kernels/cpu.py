@@ -73,8 +73,6 @@ from .volume import Volume, dense_index  # noqa: E402
 # have raised before), so the results are the same (issue 10; checked with the md5 that
 # scripts/bench_speed.py prints per case, before and after).
 ops = build_ops(njit(cache=True, error_model="numpy"))
-_ncc_cost = ops.ncc_cost
-_ncc_window_cost = ops.ncc_window_cost
 _cosine_cost = ops.cosine_cost
 _box_sum = ops.box_sum
 _rbf_weight = ops.rbf_weight
