@@ -198,6 +198,35 @@ def test_rbf_filter_matches_reference(shape, t_max):
     assert got is not cost
 
 
+def rbf_filter_float32(cost, weights, t_max):
+    """ref_rbf_filter in float32 with the kernel's order of operations (a = 0, then
+    a += w_k q_k for k = 0..8; neighbours outside the image: weight 0, a clamped cell)."""
+    cur = np.asarray(cost, np.float32)
+    h, w, _ = cur.shape
+    for _ in range(t_max):
+        nxt = np.zeros_like(cur)
+        for k in range(9):
+            ys = np.clip(np.arange(h) + k // 3 - 1, 0, h - 1)
+            xs = np.clip(np.arange(w) + k % 3 - 1, 0, w - 1)
+            nxt += weights[:, :, k, None] * cur[ys][:, xs]
+        cur = nxt
+    return cur
+
+
+@pytest.mark.parametrize("n_disp", [4, 5, 15, 16, 17, 24, 25, 33, 40, 41, 48, 50, 64, 65, 96, 97, 130])
+def test_rbf_filter_is_exact_for_every_band_width(n_disp):
+    # each band width takes its own block size in _rbf_run (16 ... 96 cells, or the
+    # plain loop), runs as long as a row and as short as a few pixels (the last pixels
+    # of a run take the plain loop): bit-identical to the same sums done in NumPy
+    rng = np.random.default_rng(n_disp)
+    for shape in [(9, 40), (5, 4), (4, 3)]:
+        img = rng.uniform(0, 255, shape).astype(np.float32)
+        cost = random_volume(rng, *shape, n_disp)
+        weights = cpu.rbf_weights(img, 1.5, 12.0)
+        for t_max in (1, 3):
+            np.testing.assert_array_equal(cpu.rbf_filter(cost, weights, t_max), rbf_filter_float32(cost, weights, t_max))
+
+
 @pytest.mark.parametrize("t_max", [0, 1, 2, 3])
 def test_rbf_filter_overwriting_its_input_gives_the_same_result(t_max):
     rng = np.random.default_rng(t_max)
