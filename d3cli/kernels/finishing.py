@@ -99,6 +99,68 @@ _F32_INF = np.float32(np.inf)
 _INT64_LIMIT = 9.223372036854775807e18
 
 
+# ----------------------------------------------------------------------------- restore of step 6
+@njit(cache=True, nogil=True)
+def _restored_task(task, tasks, valid, narrow, restored, hi, masked, keep_out, counts):
+    h, w = valid.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    n_ends = 0
+    n_outside = 0
+    n_negative = 0
+    for y in range(y0, y1):
+        for u in range(w):
+            r = restored[y, u]
+            keep = valid[y, u]
+            if keep:
+                q = narrow[y, u]
+                ends = q <= 0 or q >= hi
+                outside = not (np.float32(u) - r >= -0.5)
+                negative = not (r >= 0)
+                n_ends += ends
+                n_outside += outside
+                n_negative += negative and not ends and not outside
+                keep = not (ends or outside or negative)
+            keep_out[y, u] = keep
+            if masked.shape[0] == h:
+                masked[y, u] = r if keep else _F32_INF
+    counts[task, 0] = n_ends
+    counts[task, 1] = n_outside
+    counts[task, 2] = n_negative
+
+
+def restored_validity(valid, narrow, restored, hi, masked=None):
+    """The estimates that survive the restore of step 6, in one pass (issue 10).
+
+    Parameters
+    ----------
+    valid : ndarray, bool, (H, W), C-contiguous
+    narrow : ndarray, (H, W), C-contiguous
+        Narrow-range disparities (any real dtype).
+    restored : ndarray, float32, (H, W), C-contiguous
+    hi : scalar
+        Upper end of the narrow range, already of the type NumPy compares ``narrow`` with
+        it in (``narrow >= hi``).
+    masked : ndarray, float32, (H, W), optional
+        Receives ``np.where(kept, restored, inf)`` (may be ``restored`` itself).
+
+    Returns
+    -------
+    kept : ndarray, bool, (H, W)
+        ``valid & ~ends & ~outside & ~negative`` with ``ends = (narrow <= 0) | (narrow >=
+        hi)``, ``outside = ~(float32(u) - restored >= -0.5)``, ``negative = ~(restored >= 0)``.
+    counts : ndarray, int64, (3,)
+        Valid pixels at the range ends, outside, and negative but neither of the others.
+    """
+    h, w = valid.shape
+    kept = np.empty((h, w), np.bool_)
+    tasks = row_tasks(h)
+    counts = np.zeros((tasks, 3), np.int64)
+    if masked is None:
+        masked = np.empty((0, 0), np.float32)
+    run_tasks(_restored_task, tasks, valid, narrow, restored, hi, masked, kept, counts)
+    return kept, counts.sum(axis=0)
+
+
 # ----------------------------------------------------------------------------- occlusion tests
 @njit(cache=True, inline="always")
 def _right_column(u, d, w):
@@ -196,6 +258,77 @@ def out_of_view_mask(disparity, valid, start):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _drop_occluded_task(task, tasks, disparity, valid, tolerance, start, best, target, out, occluded, counts):
+    h, w = disparity.shape
+    row_best = best[task]
+    row_target = target[task]
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    n = 0
+    for y in range(y0, y1):
+        # both tests read the row's validity before any of it is dropped
+        row_best[:] = -np.inf
+        for u in range(w):
+            if valid[y, u]:
+                d = np.float64(disparity[y, u])
+                xr = _right_column(u, d, w)
+                row_target[u] = xr
+                if d > row_best[xr] or d != d:
+                    row_best[xr] = d
+        b = -_F32_INF
+        for u in range(start, w):
+            if valid[y, u]:
+                b = disparity[y, u]
+                break
+        b_minus_1 = b - _F32_ONE
+        for u in range(w):
+            d32 = disparity[y, u]
+            keep = valid[y, u]
+            occ = keep and (np.float64(d32) < row_best[row_target[u]] - tolerance or (u < b and d32 < b_minus_1))
+            occluded[y, u] = occ
+            keep = keep and not occ
+            valid[y, u] = keep
+            out[y, u] = d32 if keep else _F32_INF
+            n += occ
+    counts[task] = n
+
+
+def drop_occluded(disparity, valid, tolerance, start, out):
+    """Both occlusion tests, their holes and the masked map, in one pass over the rows.
+
+    ``occluded = uniqueness_occluded(...) | out_of_view_mask(...)`` (the tests read
+    ``valid`` as it comes in), then ``valid &= ~occluded`` in place and
+    ``out = np.where(valid, disparity, inf)``: issue 10, what the pipeline did in six
+    passes over the map (two tests, or, and-not, where, astype).
+
+    Parameters
+    ----------
+    disparity : ndarray, float32, (H, W), C-contiguous
+    valid : ndarray, bool, (H, W), C-contiguous; updated in place
+    tolerance : float
+    start : int
+        As :func:`out_of_view_mask` (0 <= start < W).
+    out : ndarray, float32, (H, W)
+        Receives the masked map; may be ``disparity`` itself (each pixel is read before
+        it is written, and the tests of a row finish before its first write).
+
+    Returns
+    -------
+    occluded : ndarray, bool, (H, W)
+    count : int
+        Number of occluded pixels.
+    """
+    h, w = disparity.shape
+    occluded = np.empty((h, w), np.bool_)
+    tasks = row_tasks(h)
+    best = np.empty((tasks, max(w, 1)), np.float64)
+    target = np.empty((tasks, max(w, 1)), np.int64)
+    counts = np.zeros(tasks, np.int64)
+    run_tasks(_drop_occluded_task, tasks, disparity, valid, float(tolerance), int(start), best, target, out,
+              occluded, counts)
+    return occluded, int(counts.sum())
+
+
 # ----------------------------------------------------------------------------- speckle filter
 _F32_RINT_MAGIC = np.float32(12582912.0)  # 1.5 * 2^23: adding and subtracting it rounds half to even
 _F32_16 = np.float32(16.0)
@@ -234,6 +367,66 @@ def fixed_point_16(disp, valid):
     out = np.empty((h, w), np.int16)
     run_tasks(_fixed_task, row_tasks(h), disp, valid, out)
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _fixed_finite_task(task, tasks, disp, valid, out, counts):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    n = 0
+    for y in range(y0, y1):
+        for u in range(w):
+            d = disp[y, u]
+            if valid[y, u] and np.isfinite(d):
+                x = d * _F32_16
+                x = _F32_ZERO if not x > _F32_ZERO else (x if x < _F32_INT16_MAX else _F32_INT16_MAX)
+                x = (x + _F32_RINT_MAGIC) - _F32_RINT_MAGIC
+                out[y, u] = np.int16(x)
+                n += 1
+            else:
+                out[y, u] = np.int16(-1)
+    counts[task] = n
+
+
+def fixed_point_16_finite(disp, valid):
+    """:func:`fixed_point_16` of ``valid & np.isfinite(disp)``, and how many pixels that is
+    (one pass instead of three)."""
+    h, w = disp.shape
+    out = np.empty((h, w), np.int16)
+    tasks = row_tasks(h)
+    counts = np.zeros(tasks, np.int64)
+    run_tasks(_fixed_finite_task, tasks, disp, valid, out, counts)
+    return out, int(counts.sum())
+
+
+@njit(cache=True, nogil=True)
+def _drop_marked_task(task, tasks, disp, valid, fixed, out, counts):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    n = 0
+    for y in range(y0, y1):
+        for u in range(w):
+            d = disp[y, u]
+            keep = valid[y, u]
+            if keep and np.isfinite(d) and fixed[y, u] == -1:
+                keep = False
+                valid[y, u] = False
+                n += 1
+            out[y, u] = d if keep else _F32_INF
+    counts[task] = n
+
+
+def drop_marked(disp, valid, fixed, out):
+    """Drop the finite valid pixels that ``cv2.filterSpeckles`` marked (-1 in ``fixed``).
+
+    ``speck = valid & isfinite(disp) & (fixed == -1)``; ``valid &= ~speck`` in place and
+    ``out = np.where(valid, disp, inf)`` (``out`` may be ``disp``); returns the number of
+    speckle pixels.
+    """
+    tasks = row_tasks(disp.shape[0])
+    counts = np.zeros(tasks, np.int64)
+    run_tasks(_drop_marked_task, tasks, disp, valid, fixed, out, counts)
+    return int(counts.sum())
 
 
 # ----------------------------------------------------------------------------- hole filling
@@ -952,10 +1145,96 @@ def combine_shares(low, up, base, disp):
     return low
 
 
+@njit(cache=True, nogil=True)
+def _plane_task(task, tasks, a0, b1, b2, margin, out):
+    h, w = out.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        row = a0 + b1 * np.float64(y)
+        for u in range(w):
+            out[y, u] = np.float32((row + b2 * np.float64(u)) - margin)
+
+
+def shift_plane_f32(a0, b1, b2, margin, shape):
+    """``shift_map(...).astype(np.float32)`` in one pass: ``((a0 + b1 v) + b2 u) - margin``
+    in float64, rounded once to float32."""
+    h, w = shape
+    out = np.empty((h, w), np.float32)
+    run_tasks(_plane_task, row_tasks(h), float(a0), float(b1), float(b2), float(margin), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _box_residual_task(task, tasks, disp, base, valid, resid, use):
+    h, w = disp.shape
+    has_base = base.shape[0] == h
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            d = disp[y, u]
+            if np.isfinite(d):
+                resid[y, u] = d - (base[y, u] if has_base else _F32_ZERO)
+                use[y, u] = valid[y, u]
+            else:
+                resid[y, u] = _F32_INF
+                use[y, u] = False
+
+
+def box_residual(disp, base, valid):
+    """Residual ``np.where(isfinite(disp), disp - base, inf)`` and ``valid & isfinite(disp)``
+    of the box-range smoothing, one pass; ``base`` None is a zero plane (``disp - 0``)."""
+    h, w = disp.shape
+    resid = np.empty((h, w), np.float32)
+    use = np.empty((h, w), np.bool_)
+    if base is None:
+        base = np.empty((0, 0), np.float32)
+    run_tasks(_box_residual_task, row_tasks(h), disp, base, valid, resid, use)
+    return resid, use
+
+
+@njit(cache=True, nogil=True)
+def _box_combine_task(task, tasks, smoothed, base, disp, out):
+    h, w = disp.shape
+    has_base = base.shape[0] == h
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            d = disp[y, u]
+            out[y, u] = smoothed[y, u] + (base[y, u] if has_base else _F32_ZERO) if np.isfinite(d) else d
+
+
+def box_combine(smoothed, base, disp):
+    """``np.where(isfinite(disp), smoothed + base, disp)`` (float32), written over
+    ``smoothed`` and returned; ``base`` None is a zero plane (``+ 0`` still applied: it
+    turns -0 into +0 as the NumPy sum did)."""
+    if base is None:
+        base = np.empty((0, 0), np.float32)
+    run_tasks(_box_combine_task, row_tasks(disp.shape[0]), smoothed, base, disp, smoothed)
+    return smoothed
+
+
+@njit(cache=True, nogil=True)
+def _clamp_task(task, tasks, a):
+    h, w = a.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            if a[y, u] < _F32_ZERO:
+                a[y, u] = _F32_ZERO
+
+
+def clamp_negative(a):
+    """``a[a < 0] = 0`` in place (NaN and -0 stay), one pass; float32 (H, W)."""
+    run_tasks(_clamp_task, row_tasks(a.shape[0]), a)
+    return a
+
+
 #: The compiled kernels of this module (nogil, cached on disk), run by :func:`run_tasks`.
 KERNELS = (
     _uniqueness_task, _out_of_view_task, _fill_rows_task, _nearest_task, _fill_inside_task,
     copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _exp_task, _smooth_group_task,
     _combine_task,
     _nearest_columns_task, _fixed_task, _zero_task,
+    _restored_task, _drop_occluded_task, _fixed_finite_task, _drop_marked_task, _plane_task, _box_residual_task,
+    _box_combine_task, _clamp_task,
 )

@@ -11,14 +11,14 @@ import numpy as np
 from ..config import Config
 from ..data.io import to_grey
 from ..errors import InputError
-from ..kernels import get_backend
+from ..kernels import finishing, get_backend
 from .band import band_indexes
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
-from .perspective import RoadModel, fit_road_model, restored_validity, shift_map
+from .perspective import RoadModel, fit_road_model, restored_shares, restored_validity, restored_validity_counts
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
-from .refinement import fill_holes, occluded_by_uniqueness, out_of_view, refine_subpixel, smooth_disparity, speckles
+from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel, smooth_disparity
 
 log = logging.getLogger(__name__)
 
@@ -411,20 +411,22 @@ class D3Stereo:
             if road is not None:
                 out = backend.to_host(self._pt_restore(backend.to_device(out), road))
         valid = disp >= 0
+        # Issue 10: each test below makes its holes in one pass (valid in place, the map
+        # masked into ``out``); ``owned``: ``out`` is this method's own map, written in place.
+        owned = False
         if road is not None:
-            valid = self._pt_valid(valid, disp, out, info)
-            out = np.where(valid, out, np.inf).astype(np.float32)
+            valid, out = self._pt_valid(valid, disp, out, info, masked=True)
+            owned = True
         occluded = None
         if cfg.refine.occlusion_check:
-            occluded = occluded_by_uniqueness(out, valid) | out_of_view(out, valid, max_disparity=dmax)
-            valid = valid & ~occluded
-            out = np.where(valid, out, np.inf).astype(np.float32)
-            info["occluded_share"] = float(occluded.mean())
+            occluded, count, out = drop_occluded(out, valid, max_disparity=dmax, out=out if owned else None)
+            owned = True
+            info["occluded_share"] = count / valid.size
         if cfg.refine.speckle_size > 0:
-            speck = speckles(out, valid, max_size=cfg.refine.speckle_size, max_diff=cfg.refine.speckle_range)
-            valid = valid & ~speck
-            out = np.where(valid, out, np.inf).astype(np.float32)
-            info["speckle_share"] = float(speck.mean())
+            count, out = drop_speckles(out, valid, max_size=cfg.refine.speckle_size,
+                                       max_diff=cfg.refine.speckle_range, out=out if owned else None)
+            owned = True
+            info["speckle_share"] = count / valid.size
         if cfg.refine.fill:
             out = fill_holes(
                 out, valid, smooth=cfg.refine.smooth_filled, occluded=occluded if cfg.refine.fill_inside else None
@@ -432,19 +434,27 @@ class D3Stereo:
         if cfg.refine.smooth_radius > 0:
             # edge-preserving smoothing of the finished map; the range weight compares
             # residuals from the road plane when there is one (a slanted road is no edge)
-            plane = None if road is None else shift_map(road, out.shape, margin=0.0)
+            plane = None if road is None else finishing.shift_plane_f32(road.a0, road.b1, road.b2, 0.0, out.shape)
             out = smooth_disparity(out, np.isfinite(out), radius=cfg.refine.smooth_radius,
                                    sigma=cfg.refine.smooth_sigma, plane=plane,
                                    kernel=cfg.refine.smooth_kernel)
             # averaging residuals to a plane that dips below zero (far road, sky) can end
-            # a hair below 0; disparities are >= 0 by contract
-            with np.errstate(invalid="ignore"):
-                out = np.where(out < 0, np.float32(0.0), out)
-        info["decided_share"] = float(valid.mean())
+            # a hair below 0; disparities are >= 0 by contract (a new map: in place)
+            finishing.clamp_negative(out)
+        info["decided_share"] = int(np.count_nonzero(valid)) / valid.size
         return np.ascontiguousarray(out, dtype=np.float32), valid
 
-    def _pt_valid(self, valid: np.ndarray, disp: np.ndarray, out: np.ndarray, info: dict) -> np.ndarray:
-        """Validity after PT (:func:`restored_validity`); its shares go to ``info['pt']``."""
-        valid, shares = restored_validity(valid, disp, out, narrow_range=self.cfg.pt.narrow_range)
-        info["pt"].update(shares)
-        return valid
+    def _pt_valid(self, valid: np.ndarray, disp: np.ndarray, out: np.ndarray, info: dict, *, masked: bool = False):
+        """Validity after PT (:func:`restored_validity`); its shares go to ``info['pt']``.
+
+        With ``masked`` also ``np.where(valid, out, inf)``, from the same single pass
+        (issue 10): returns ``(valid, masked_map)``.
+        """
+        if not masked:
+            valid, shares = restored_validity(valid, disp, out, narrow_range=self.cfg.pt.narrow_range)
+            info["pt"].update(shares)
+            return valid
+        valid, counts, out = restored_validity_counts(valid, disp, out, narrow_range=self.cfg.pt.narrow_range,
+                                                     masked=True)
+        info["pt"].update(restored_shares(counts, valid.size))
+        return valid, out

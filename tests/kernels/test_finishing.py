@@ -20,8 +20,11 @@ import numba
 import numpy as np
 import pytest
 
-from d3cli.kernels import finishing
-from d3cli.method.refinement import fill_holes, occluded_by_uniqueness, out_of_view, smooth_disparity
+from d3cli.kernels import finishing, range_box
+from d3cli.method.perspective import (RoadModel, match_in_right_image, restored_shares, restored_validity,
+                                      restored_validity_counts, shift_map)
+from d3cli.method.refinement import (drop_occluded, drop_speckles, fill_holes, occluded_by_uniqueness, out_of_view,
+                                     smooth_disparity)
 
 
 # ----------------------------------------------------------------------------- references
@@ -122,6 +125,49 @@ def ref_smooth_disparity(disparity, valid, *, radius, sigma, plane=None):
         est = np.where(den > 1e-6, num / np.maximum(den, 1e-6), resid)
         acc += np.where(lower, 1.0 - t, 0.0) * est + np.where(upper, t, 0.0) * est
     return np.where(finite, acc + base, disp).astype(np.float32)
+
+
+def ref_drop_occluded(disparity, valid, *, max_disparity):
+    """What ``D3Stereo._finish`` did before the fused pass (issue 10)."""
+    occluded = ref_occluded_by_uniqueness(disparity, valid) | ref_out_of_view(disparity, valid,
+                                                                              max_disparity=max_disparity)
+    valid = valid & ~occluded
+    return occluded, valid, np.where(valid, disparity, np.inf).astype(np.float32), float(occluded.mean())
+
+
+def ref_drop_speckles(disparity, valid, *, max_size, max_diff):
+    """``speckles`` and the masking of ``D3Stereo._finish`` before the fused passes."""
+    use = valid & np.isfinite(disparity)
+    if max_size <= 0 or not use.any():
+        speck = np.zeros(disparity.shape, bool)
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):
+            fixed = np.where(use, np.clip(np.round(disparity * 16.0), 0, 32767), -1).astype(np.int16)
+        cv2.filterSpeckles(fixed, -1, int(max_size), max(1, int(round(float(max_diff) * 16.0))))
+        speck = use & (fixed == -1)
+    valid = valid & ~speck
+    return valid, np.where(valid, disparity, np.inf).astype(np.float32), float(speck.mean())
+
+
+def ref_restored_validity(valid, narrow, restored, *, narrow_range):
+    """``restored_validity`` before its kernel (issue 10), and the pipeline's masking."""
+    with np.errstate(invalid="ignore"):
+        ends = valid & ((narrow <= 0) | (narrow >= narrow_range))
+        negative = valid & ~(restored >= 0)
+    outside = valid & ~match_in_right_image(restored)
+    shares = {"range_end_share": float(ends.mean()), "outside_share": float(outside.mean()),
+              "negative_share": float((negative & ~ends & ~outside).mean())}
+    kept = valid & ~ends & ~outside & ~negative
+    return kept, shares, np.where(kept, restored, np.inf).astype(np.float32)
+
+
+def ref_box_smoothing_glue(disparity, valid, plane, smooth):
+    """The box kernel's residual and sum back as NumPy did them (``smooth`` the kernel)."""
+    base = np.zeros(disparity.shape, np.float32) if plane is None else np.asarray(plane, np.float32)
+    finite = np.isfinite(disparity)
+    resid = np.where(finite, disparity - base, np.float32(np.inf)).astype(np.float32)
+    smoothed = smooth(resid, valid & finite)
+    return np.where(finite, smoothed + base, disparity).astype(np.float32)
 
 
 def assert_same_bytes(got, want, msg=""):
@@ -372,6 +418,117 @@ def test_smooth_groups_of_any_size_match_the_reference(max_group, radius):
     low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, np.float32(-0.5), radius,
                                       max_group=max_group)
     assert_same_smoothing(finishing.combine_shares(low, up, base, disp), want, f"group {max_group}")
+
+
+# ----------------------------------------------------------------------------- fused passes of the pipeline
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("in_place", [False, True])
+def test_drop_occluded_matches_the_two_tests_and_the_masking(shape, in_place):
+    rng = np.random.default_rng(hash((shape, in_place, 1)) % 2**32)
+    for share in (0.0, 0.5, 1.0):
+        for integers in (False, True):
+            disp, valid = random_map(rng, shape, valid_share=share, spread=min(shape[1], 8), integers=integers)
+            for max_disparity in (0, 1, shape[1] // 2, shape[1] + 2):
+                occ, want_valid, want_out, share_want = ref_drop_occluded(disp, valid, max_disparity=max_disparity)
+                got_valid = valid.copy()
+                src = disp.copy()
+                got_occ, count, got_out = drop_occluded(src, got_valid, max_disparity=max_disparity,
+                                                        out=src if in_place else None)
+                msg = f"{shape} {share} {max_disparity}"
+                np.testing.assert_array_equal(got_occ, occ, err_msg=msg)
+                np.testing.assert_array_equal(got_valid, want_valid, err_msg=msg)
+                assert_same_bytes(got_out, want_out, msg)
+                assert count / disp.size == share_want and (got_out is src) == in_place
+
+
+def test_drop_occluded_with_inf_and_nan_marked_valid_matches_reference():
+    rng = np.random.default_rng(4)
+    disp, _ = random_map(rng, (9, 17), spread=6)
+    valid = np.ones(disp.shape, bool)
+    disp[2, 5], disp[3, 0], disp[4, 7], disp[5, 2], disp[5, 3] = np.inf, -np.inf, np.nan, 1e30, -1e30
+    occ, want_valid, want_out, _ = ref_drop_occluded(disp, valid, max_disparity=4)
+    got_occ, _, got_out = drop_occluded(disp, valid, max_disparity=4)
+    np.testing.assert_array_equal(got_occ, occ)
+    np.testing.assert_array_equal(valid, want_valid)
+    assert_same_bytes(got_out, want_out)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (5, 5), (23, 31), (40, 64)])
+@pytest.mark.parametrize("max_size", [0, 1, 4, 30])
+def test_drop_speckles_matches_the_speckle_filter_and_the_masking(shape, max_size):
+    rng = np.random.default_rng(hash((shape, max_size)) % 2**32)
+    for share in (0.0, 0.6, 1.0):
+        disp, valid = random_map(rng, shape, valid_share=share, spread=6)
+        disp = np.where(rng.random(shape) < 0.5, np.round(disp), disp).astype(np.float32)  # plateaus
+        valid |= ~np.isfinite(disp) & (rng.random(shape) < 0.3)  # valid but inf/NaN: never a speckle
+        for max_diff in (0.5, 2.0):
+            want_valid, want_out, share_want = ref_drop_speckles(disp, valid, max_size=max_size, max_diff=max_diff)
+            got_valid = valid.copy()
+            src = disp.copy()
+            count, got_out = drop_speckles(src, got_valid, max_size=max_size, max_diff=max_diff, out=src)
+            np.testing.assert_array_equal(got_valid, want_valid)
+            assert_same_bytes(got_out, want_out, f"{shape} {share} {max_diff}")
+            assert count / disp.size == share_want and got_out is src
+
+
+@pytest.mark.parametrize("narrow_dtype", [np.int32, np.float32, np.float64])
+@pytest.mark.parametrize("narrow_range", [18, 18.0, 17.3, np.float64(17.3)])
+def test_restored_validity_kernel_matches_the_numpy_formulation(narrow_dtype, narrow_range):
+    rng = np.random.default_rng(11)
+    h, w = 37, 53
+    narrow = (rng.random((h, w)) * 21 - 1).astype(np.float32)
+    narrow[rng.random((h, w)) < 0.3] = 17.3
+    narrow = narrow.astype(narrow_dtype)
+    restored = (rng.random((h, w)) * 70 - 10).astype(np.float32)
+    cols = np.arange(w, dtype=np.float32)
+    restored[:, 5] = cols[5] + 0.5  # exactly half a pixel left of the image: kept
+    restored[:, 6] = np.nextafter(cols[6] + np.float32(0.5), np.float32(np.inf))
+    restored[1, :] = np.inf
+    restored[2, :] = -np.inf
+    restored[3, :] = np.nan
+    restored[4, :] = -0.0
+    valid = rng.random((h, w)) < 0.8
+    want_valid, want_shares, want_masked = ref_restored_validity(valid, narrow, restored, narrow_range=narrow_range)
+    got_valid, got_shares = restored_validity(valid, narrow, restored, narrow_range=narrow_range)
+    np.testing.assert_array_equal(got_valid, want_valid)
+    assert got_shares == want_shares and all(type(v) is float for v in got_shares.values())
+    kept, counts, masked = restored_validity_counts(valid, narrow, restored, narrow_range=narrow_range, masked=True)
+    np.testing.assert_array_equal(kept, want_valid)
+    assert restored_shares(counts, kept.size) == want_shares
+    assert_same_bytes(masked, want_masked)
+    # other dtypes of the restored map keep the NumPy formulation
+    restored64 = restored.astype(np.float64)
+    got64, shares64 = restored_validity(valid, narrow, restored64, narrow_range=narrow_range)
+    want64, want_shares64, _ = ref_restored_validity(valid, narrow, restored64, narrow_range=narrow_range)
+    np.testing.assert_array_equal(got64, want64)
+    assert shares64 == want_shares64
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (5, 7), (40, 64)])
+@pytest.mark.parametrize("with_plane", [False, True])
+def test_box_smoothing_glue_matches_the_numpy_formulation(shape, with_plane):
+    rng = np.random.default_rng(hash((shape, with_plane)) % 2**32)
+    disp, valid = random_map(rng, shape, spread=10)
+    disp[rng.random(shape) < 0.1] = -0.0  # -0 + 0 is +0: the sum back keeps the NumPy order
+    disp[rng.random(shape) < 0.05] = -np.inf
+    plane = (rng.random(shape) * 4 - 2).astype(np.float32) if with_plane else None
+    for radius in (1, 3):
+        want = ref_box_smoothing_glue(disp, valid, plane,
+                                      lambda r, u: range_box.box_range_smooth(r, u, radius, 1.5))
+        got = smooth_disparity(disp, valid, radius=radius, sigma=1.5, plane=plane, kernel="box")
+        assert_same_bytes(got, want, f"{shape} {radius}")
+
+
+def test_shift_plane_and_clamp_match_the_numpy_formulation():
+    for a0, b1, b2 in ((3.25, 0.0137, -0.00211), (-40.1, 0.1, 0.3), (0.0, 1e-7, -1e-9)):
+        model = RoadModel(a0=a0, b1=b1, b2=b2, a1=0.0, theta=0.0, inlier_share=1.0, n_points=0)
+        for margin in (0.0, 8.0):
+            want = shift_map(model, (31, 47), margin=margin).astype(np.float32)
+            assert_same_bytes(finishing.shift_plane_f32(a0, b1, b2, margin, (31, 47)), want)
+    a = np.array([[-1.0, -0.0, 0.0, np.nan, -np.inf, np.inf, 2.5, -1e-30]], np.float32)
+    with np.errstate(invalid="ignore"):
+        want = np.where(a < 0, np.float32(0.0), a)
+    assert_same_bytes(finishing.clamp_negative(a.copy()), want)
 
 
 # ----------------------------------------------------------------------------- threads
