@@ -435,7 +435,7 @@ class D3Stereo:
             # edge-preserving smoothing of the finished map; the range weight compares
             # residuals from the road plane when there is one (a slanted road is no edge)
             plane = None if road is None else finishing.shift_plane_f32(road.a0, road.b1, road.b2, 0.0, out.shape)
-            out = smooth_disparity(out, np.isfinite(out), radius=cfg.refine.smooth_radius,
+            out = smooth_disparity(out, None, radius=cfg.refine.smooth_radius,  # None: every finite pixel
                                    sigma=cfg.refine.smooth_sigma, plane=plane,
                                    kernel=cfg.refine.smooth_kernel)
             # averaging residuals to a plane that dips below zero (far road, sky) can end

@@ -300,6 +300,27 @@ def test_fill_inside_on_ties_and_signed_zeros_equals_the_insertion_sort():
     assert_same_bytes(got, want, "fill_inside")
 
 
+@pytest.mark.parametrize("shape", SHAPES)
+def test_fill_inside_rows_equals_fill_inside_with_the_row_neighbour_maps(shape):
+    """The fused filling (row neighbours found in row buffers) against ``fill_inside`` fed
+    with the reference's nearest values: ties and both signed zeros, so that which
+    neighbour a value came from shows in the bits."""
+    rng = np.random.default_rng(hash(shape) % 2**32)
+    choices = np.array([-0.0, 0.0, 1.0, 2.0, 2.5], np.float32)
+    for share in (0.0, 0.2, 0.7, 1.0):
+        disp = choices[rng.integers(0, 5, shape)]
+        valid = rng.random(shape) < share
+        occluded = (rng.random(shape) < 0.3) & ~valid
+        left, right = ref_nearest_along_rows(disp, valid)
+        up, down = (x.T for x in ref_nearest_along_rows(disp.T, valid.T))
+        want = finishing.fill_inside(disp, valid, occluded, left.astype(np.float32), right.astype(np.float32),
+                                     np.ascontiguousarray(up, np.float32), np.ascontiguousarray(down, np.float32))
+        up_k, down_k = finishing.nearest_along_columns(disp, valid)
+        assert_same_bytes(up_k, np.ascontiguousarray(up, np.float32), f"up {shape} {share}")
+        assert_same_bytes(down_k, np.ascontiguousarray(down, np.float32), f"down {shape} {share}")
+        assert_same_bytes(finishing.fill_inside_rows(disp, valid, occluded, up_k, down_k), want, f"{shape} {share}")
+
+
 def test_fill_holes_empty_rows_copy_the_nearest_row_upper_on_a_tie():
     disp = np.full((7, 4), np.inf, np.float32)
     valid = np.zeros((7, 4), bool)
@@ -519,6 +540,16 @@ def test_box_smoothing_glue_matches_the_numpy_formulation(shape, with_plane):
         assert_same_bytes(got, want, f"{shape} {radius}")
 
 
+@pytest.mark.parametrize("kernel", ["gaussian", "box"])
+def test_smoothing_without_a_validity_map_uses_every_finite_pixel(kernel):
+    rng = np.random.default_rng(12)
+    disp, _ = random_map(rng, (31, 45), spread=10)
+    plane = (rng.random(disp.shape) * 4 - 2).astype(np.float32)
+    for p in (None, plane):
+        want = smooth_disparity(disp, np.isfinite(disp), radius=3, sigma=1.5, plane=p, kernel=kernel)
+        assert_same_bytes(smooth_disparity(disp, None, radius=3, sigma=1.5, plane=p, kernel=kernel), want, kernel)
+
+
 def test_shift_plane_and_clamp_match_the_numpy_formulation():
     for a0, b1, b2 in ((3.25, 0.0137, -0.00211), (-40.1, 0.1, 0.3), (0.0, 1e-7, -1e-9)):
         model = RoadModel(a0=a0, b1=b1, b2=b2, a1=0.0, theta=0.0, inlier_share=1.0, n_points=0)
@@ -543,6 +574,8 @@ def test_kernels_give_the_same_bytes_with_one_thread_and_with_all():
         return [
             occluded_by_uniqueness(disp, valid),
             out_of_view(disp, valid, max_disparity=20),
+            *drop_occluded(disp, valid.copy(), max_disparity=20)[::2],
+            drop_speckles(disp, valid.copy(), max_size=20, max_diff=1.0)[1],
             fill_holes(disp, valid, smooth=True),
             fill_holes(disp, valid, smooth=True, occluded=occluded),
             smooth_disparity(fill_holes(disp, valid), valid, radius=5, sigma=1.5, plane=plane),
