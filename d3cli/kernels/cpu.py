@@ -780,7 +780,8 @@ def _rbf_forward_row(fwd, img, v, j0, j1, lut, scale, inv_ss2, inv_sc2):
                 dst[UINT(u)] = table[UINT(np.int32(diff))]
         else:
             for u in range(lo, hi):
-                dst[UINT(u)] = _rbf_weight(dy, dx, np.float64(ip[UINT(u)]), np.float64(iq[UINT(u + dx)]), inv_ss2, inv_sc2)
+                dst[UINT(u)] = _rbf_weight(dy, dx, np.float64(ip[UINT(u)]), np.float64(iq[UINT(u + dx)]),
+                                           inv_ss2, inv_sc2)
 
 
 @njit(cache=True, error_model="numpy")
