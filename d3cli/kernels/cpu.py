@@ -678,16 +678,19 @@ def _grey_scale(img):
     means, exact in float32), so a pixel and its neighbour differ by one of 255 s + 1
     values.
     """
+    # Row by row, branch-free within a row (vectorised; issue 10: 0.95 -> 0.25 ms for
+    # the 720p road image), stopping after the first row that fails.
     scale = 1
     for k in range(GREY_STEPS):
         ok = True
         for v in range(img.shape[0]):
+            row = img[v]
+            bad = 0
             for u in range(img.shape[1]):
-                g = np.float64(img[v, u]) * scale
-                if not (g >= 0 and g <= 255 * scale and g == np.floor(g)):
-                    ok = False
-                    break
-            if not ok:
+                g = np.float64(row[u]) * scale
+                bad += not ((g >= 0) & (g <= 255 * scale) & (g == np.floor(g)))
+            if bad:
+                ok = False
                 break
         if ok:
             return scale
@@ -708,8 +711,14 @@ def rbf_weights(img, sigma_space, sigma_color):
     # K(p, q) = K(q, p): the kernel towards the four "forward" neighbours (slots 5..8:
     # right, below-left, below, below-right) is computed once and read back from the
     # neighbour for the mirrored slot (8 - k): half the exp calls, the same values.
-    # Per block of rows, so that the float64 scratch stays small (rows of the block and
-    # the one above it).
+    # Row by row within a block of rows, the forward kernels of a row and of the row
+    # above in a two-row ring (nothing zero-filled: the kernels towards neighbours
+    # outside the image are never read).  Issue 10: a row's sum, its quotients (through
+    # the reciprocal, checked exact) and its float32 staging in one vectorised pass
+    # instead of copies of the kernels, nine exact divisions per pixel and a staging
+    # pass per slot, and the table index from float32 differences: level 0, 2 threads,
+    # 720p road 7.7 -> 5.0 ms, KITTI 6.9 -> 5.6 ms, Middlebury-Q 5.6 -> 4.5 ms; the same
+    # bits.
     centre = _rbf_weight(0, 0, 0.0, 0.0, inv_ss2, inv_sc2)
     # Grey levels that are all multiples of 1/s in 0..255 (an 8-bit image: s = 1 at full
     # resolution, 4, 16, 64 at the next levels) have only 255 s + 1 differences
@@ -732,76 +741,164 @@ def rbf_weights(img, sigma_space, sigma_color):
     for b in prange(n_blocks):
         vb0 = b * block
         vb1 = min(h, vb0 + block)
-        y0 = max(vb0 - 1, 0)
-        # slot-major scratch (a row of one slot is contiguous); zero where the neighbour
-        # is outside the image
-        fwd = np.zeros((vb1 - y0, 4, w), np.float64)
-        for v in range(y0, vb1):
-            for j in range(4):
-                k = 5 + j
-                dy = k // 3 - 1
-                dx = k % 3 - 1
-                y = v + dy
-                if not (0 <= y < h):
-                    continue
-                for u in range(w):
-                    x = u + dx
-                    if 0 <= x < w:
-                        if grey8:
-                            diff = abs(np.float64(img[v, u]) - np.float64(img[y, x])) * scale  # exact
-                            fwd[v - y0, j, u] = lut[dy * dx * dx, int(diff)]
-                        else:
-                            fwd[v - y0, j, u] = _rbf_weight(dy, dx, np.float64(img[v, u]), np.float64(img[y, x]),
-                                                            inv_ss2, inv_sc2)
-        # Normalised row by row, slot-major: the nine kernels of a row (the mirrored
-        # slots read from the neighbour), their sums in slot order, then each slot's
-        # division as one loop over the row (vectorised; per pixel it was nine scalar
-        # divisions: 16.4 -> 13.2 ms CPU at 1280x720), then the (W, 9) layout.
-        raw = np.zeros((9, w), np.float64)
-        total = np.empty(w, np.float64)
-        out = np.empty((9, w), np.float32)
+        # forward kernels of two rows (slot-major: a row of one slot is contiguous), the
+        # row above the block first (its slots towards the block only)
+        ring = np.empty((2, 4, w), np.float64)
+        stage = np.empty((9, w), np.float32)
+        if vb0 > 0:
+            _rbf_forward_row(ring[(vb0 - 1) & 1], img, vb0 - 1, 1, 4, lut, scale if grey8 else 0, inv_ss2, inv_sc2)
         for v in range(vb0, vb1):
-            for k in range(9):
-                dy = k // 3 - 1
-                dx = k % 3 - 1
-                y = v + dy
-                rk = raw[k]
-                if k == 4:
-                    rk[:] = centre
-                    continue
-                if not (0 <= y < h):
-                    rk[:] = 0.0
-                    continue
-                if k > 4:
-                    src = fwd[v - y0, k - 5]
-                    for u in range(w):
-                        rk[u] = src[u]
-                else:
-                    src = fwd[y - y0, 3 - k]  # the neighbour's slot 8 - k, seen from it
-                    for u in range(w):
-                        x = u + dx
-                        rk[u] = src[x] if 0 <= x < w else 0.0
-            for u in range(w):
-                t = 0.0
-                t += raw[0, u]
-                t += raw[1, u]
-                t += raw[2, u]
-                t += raw[3, u]
-                t += raw[4, u]
-                t += raw[5, u]
-                t += raw[6, u]
-                t += raw[7, u]
-                t += raw[8, u]
-                total[u] = t
-            for k in range(9):
-                rk = raw[k]
-                ok = out[k]
-                for u in range(w):
-                    ok[u] = np.float32(rk[u]) / total[u]
-            for u in range(w):
-                for k in range(9):
-                    weights[v, u, k] = out[k, u]
+            cur = ring[v & 1]
+            _rbf_forward_row(cur, img, v, 0, 4 if v + 1 < h else 1, lut, scale if grey8 else 0, inv_ss2, inv_sc2)
+            _rbf_normalise_row(weights[v], ring[(v - 1) & 1], cur, centre, v > 0, v + 1 < h, stage)
     return weights
+
+
+@njit(cache=True, error_model="numpy")
+def _rbf_forward_row(fwd, img, v, j0, j1, lut, scale, inv_ss2, inv_sc2):
+    """``fwd[j, u]``, j0 <= j < j1: the kernel from pixel (u, v) towards its forward
+    neighbour (slot 5 + j: right, below-left, below, below-right), for the u whose
+    neighbour is in the image (the others are never read).  From the table ``lut`` when
+    ``scale`` > 0 (grey levels multiples of 1 / scale), else from the exp."""
+    w = img.shape[1]
+    ip = img[v]
+    for j in range(j0, j1):
+        k = 5 + j
+        dy = k // 3 - 1
+        dx = k % 3 - 1
+        iq = img[v + dy]
+        dst = fwd[j]
+        lo = max(0, -dx)
+        hi = min(w, w - dx)
+        if scale > 0:
+            table = lut[dy * dx * dx]
+            # float32 is exact here too (multiples of 1 / scale up to 255: 14 bits), the
+            # same index as the float64 difference, on twice the lanes
+            sc = np.float32(scale)
+            for u in range(lo, hi):
+                diff = abs(ip[UINT(u)] - iq[UINT(u + dx)]) * sc
+                dst[UINT(u)] = table[UINT(np.int32(diff))]
+        else:
+            for u in range(lo, hi):
+                dst[UINT(u)] = _rbf_weight(dy, dx, np.float64(ip[UINT(u)]), np.float64(iq[UINT(u + dx)]),
+                                           inv_ss2, inv_sc2)
+
+
+@njit(cache=True, error_model="numpy")
+def _rbf_pixel(stage, up, cur, centre, has_up, has_down, u):
+    """``stage[k, u]``, k < 9: pixel u's normalised weights, the exact expressions (for
+    the border pixels and the rare rows that :func:`_rbf_interior` leaves)."""
+    w = stage.shape[1]
+    left = u >= 1
+    right = u + 1 < w
+    r0 = up[3, u - 1] if has_up and left else 0.0
+    r1 = up[2, u] if has_up else 0.0
+    r2 = up[1, u + 1] if has_up and right else 0.0
+    r3 = cur[0, u - 1] if left else 0.0
+    r5 = cur[0, u] if right else 0.0
+    r6 = cur[1, u] if has_down and left else 0.0
+    r7 = cur[2, u] if has_down else 0.0
+    r8 = cur[3, u] if has_down and right else 0.0
+    t = 0.0
+    t += r0
+    t += r1
+    t += r2
+    t += r3
+    t += centre
+    t += r5
+    t += r6
+    t += r7
+    t += r8
+    stage[0, u] = np.float32(r0) / t
+    stage[1, u] = np.float32(r1) / t
+    stage[2, u] = np.float32(r2) / t
+    stage[3, u] = np.float32(r3) / t
+    stage[4, u] = np.float32(centre) / t
+    stage[5, u] = np.float32(r5) / t
+    stage[6, u] = np.float32(r6) / t
+    stage[7, u] = np.float32(r7) / t
+    stage[8, u] = np.float32(r8) / t
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _rbf_quotient(dst, u, r, rc):
+    """``dst[u] = float32(float32(r) / t)`` from ``rc = 1 / t``; True where that is not
+    certain (then ``dst[u]`` may differ by one float32 step).
+
+    ``q = a rc`` is within 3 2^-53 q of the float64 quotient ``a / t`` (three roundings
+    of 2^-53), so ``q (1 - 2^-50)`` and ``q (1 + 2^-50)`` (rounded) bracket it; float32
+    rounding is monotonic, so when both round to the same float32, ``a / t`` rounds to
+    it too.  The others (about 2^-26 of the weights: q within 2^-50 q of a float32
+    rounding boundary) are reported.
+    """
+    q = np.float64(np.float32(r)) * rc
+    lo = np.float32(q * (1.0 - 2.0 ** -50))
+    hi = np.float32(q * (1.0 + 2.0 ** -50))
+    dst[u] = hi
+    return lo != hi
+
+
+@njit(cache=True, error_model="numpy")
+def _rbf_interior(stage, up, cur, centre, w):
+    """The weights of pixels 1..W-2 of a row with rows above and below, into ``stage``;
+    the number of uncertain quotients (:func:`_rbf_quotient`): the row must then be
+    redone exactly.  One division per pixel (the reciprocal of the sum) instead of nine:
+    the divider was the bottleneck (two cycles per float64 lane)."""
+    a0 = up[3]
+    a1 = up[2]
+    a2 = up[1]
+    c0 = cur[0]
+    b6 = cur[1]
+    b7 = cur[2]
+    b8 = cur[3]
+    bad = 0
+    for u in range(1, w - 1):
+        uu = UINT(u)
+        r0 = a0[uu - 1]
+        r1 = a1[uu]
+        r2 = a2[uu + 1]
+        r3 = c0[uu - 1]
+        r5 = c0[uu]
+        r6 = b6[uu]
+        r7 = b7[uu]
+        r8 = b8[uu]
+        t = r0  # 0.0 + r0: the same (r0 >= 0)
+        t += r1
+        t += r2
+        t += r3
+        t += centre
+        t += r5
+        t += r6
+        t += r7
+        t += r8
+        rc = 1.0 / t
+        bad += _rbf_quotient(stage[0], uu, r0, rc)
+        bad += _rbf_quotient(stage[1], uu, r1, rc)
+        bad += _rbf_quotient(stage[2], uu, r2, rc)
+        bad += _rbf_quotient(stage[3], uu, r3, rc)
+        bad += _rbf_quotient(stage[4], uu, centre, rc)
+        bad += _rbf_quotient(stage[5], uu, r5, rc)
+        bad += _rbf_quotient(stage[6], uu, r6, rc)
+        bad += _rbf_quotient(stage[7], uu, r7, rc)
+        bad += _rbf_quotient(stage[8], uu, r8, rc)
+    return bad
+
+
+@njit(cache=True, error_model="numpy")
+def _rbf_normalise_row(out, up, cur, centre, has_up, has_down, stage):
+    """Row ``out`` (W, 9) of the normalised weights from the forward kernels of its own
+    row (``cur``) and of the row above (``up``; ``has_up`` / ``has_down``: whether the
+    rows above / below are in the image), through the slot-major ``stage`` (9, W)."""
+    w = out.shape[0]
+    if has_up and has_down and _rbf_interior(stage, up, cur, centre, w) == 0:
+        _rbf_pixel(stage, up, cur, centre, has_up, has_down, 0)
+        _rbf_pixel(stage, up, cur, centre, has_up, has_down, w - 1)
+    else:
+        for u in range(w):
+            _rbf_pixel(stage, up, cur, centre, has_up, has_down, u)
+    for u in range(w):
+        for k in range(9):
+            out[u, k] = stage[k, u]
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -837,29 +934,43 @@ def _covered_bands(index):
     border) all have the pixel's band, 1 where their bands contain it (every cell a pass
     reads exists), 0 elsewhere."""
     h, w, _ = index.shape
-    out = np.zeros((h, w), np.uint8)
+    out = np.empty((h, w), np.uint8)
     # Most pixels have the band of all eight neighbours.  Whether a pixel has the band of
-    # both row neighbours is found once per pixel (two comparisons) and reused by the
-    # rows above and below, instead of eight comparisons per pixel (3.8 -> 1.5 ms at
-    # level 1 of the 720p road pair, 2 threads; the same map).
-    same_row = np.zeros((h, w), np.bool_)
+    # both row neighbours is found once per pixel and reused by the rows above and below
+    # (3.8 -> 1.5 ms at level 1 of the 720p road pair, 2 threads; the same map).  The
+    # band (lo, hi) as one int64 key, so that both tests are branch-free loops over
+    # contiguous rows (vectorised); only the pixels that fail them (the border columns,
+    # and about 2 % at level 0) take the test of every neighbour (issue 10: 1.58 -> 0.92 ms
+    # at level 0 of the 720p road pair, 2 threads; the same map).
+    key = np.empty((h, w), np.int64)
+    same_row = np.empty((h, w), np.bool_)
     for y in prange(h):
+        ky = key[y]
+        sy = same_row[y]
+        for u in range(w):
+            ky[u] = (np.int64(index[y, u, 2]) << 32) | (np.int64(index[y, u, 1]) & 0xFFFFFFFF)
+        if w > 0:
+            sy[0] = False
+            sy[w - 1] = False
         for u in range(1, w - 1):
-            lo = index[y, u, 1]
-            hi = index[y, u, 2]
-            same_row[y, u] = (index[y, u - 1, 1] == lo and index[y, u - 1, 2] == hi
-                              and index[y, u + 1, 1] == lo and index[y, u + 1, 2] == hi)
+            sy[u] = (ky[u - 1] == ky[u]) & (ky[u + 1] == ky[u])
     for v in prange(h):
         ym = max(v - 1, 0)
         yp = min(v + 1, h - 1)
+        k0 = key[v]
+        km = key[ym]
+        kp = key[yp]
+        s0 = same_row[v]
+        sm = same_row[ym]
+        sp = same_row[yp]
+        ov = out[v]
         for u in range(w):
+            ov[u] = np.uint8(2) * (s0[u] & sm[u] & sp[u] & (km[u] == k0[u]) & (kp[u] == k0[u]))
+        for u in range(w):
+            if ov[u] == 2:
+                continue
             lo = index[v, u, 1]
             hi = index[v, u, 2]
-            if (same_row[v, u] and same_row[ym, u] and same_row[yp, u]
-                    and index[ym, u, 1] == lo and index[ym, u, 2] == hi
-                    and index[yp, u, 1] == lo and index[yp, u, 2] == hi):
-                out[v, u] = 2
-                continue
             covered = 1
             same = 2
             for y in range(ym, yp + 1):
@@ -868,7 +979,7 @@ def _covered_bands(index):
                         covered = 0
                     if index[y, x, 1] != lo or index[y, x, 2] != hi:
                         same = 1
-            out[v, u] = covered * same
+            ov[u] = covered * same
     return out
 
 

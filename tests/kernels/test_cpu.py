@@ -184,6 +184,38 @@ def test_rbf_weights_of_8bit_images_equal_the_computed_kernel(shape):
     np.testing.assert_allclose(got, ref.ref_rbf_weights(img, 1.5, 12.0), rtol=0, atol=1e-6)
 
 
+def test_rbf_weights_reciprocal_quotients_equal_the_division():
+    # Interior pixels divide by the sum through its reciprocal, checking that the float32
+    # result is certain; the border pixels and uncertain rows take the exact division.
+    # Both must agree bit for bit, tiny (float32 subnormal or zero) weights included.
+    rng = np.random.default_rng(11)
+    w = 5000
+    up = rng.uniform(0, 1, (4, w))
+    cur = rng.uniform(0, 1, (4, w))
+    cur[1, ::7] = 10.0 ** rng.uniform(-60, -30, cur[1, ::7].shape)
+    cur[2, ::5] = 0.0
+    exact = np.empty((9, w), np.float32)
+    for u in range(w):
+        cpu._rbf_pixel(exact, up, cur, 0.4, True, True, u)
+    stage = np.empty_like(exact)
+    assert cpu._rbf_interior(stage, up, cur, 0.4, w) == 0
+    np.testing.assert_array_equal(stage[:, 1:-1], exact[:, 1:-1])
+    # A quotient within a few float64 steps of a float32 rounding boundary (the midpoint
+    # 0.5 + 2^-25): uncertain, so the row is redone exactly.
+    up = np.zeros((4, 3))
+    cur = np.zeros((4, 3))
+    cur[2, 1] = 0.75  # slot 7 of pixel 1
+    centre = 0.75 / (0.5 + 2.0**-25) - 0.75
+    stage = np.empty((9, 3), np.float32)
+    assert cpu._rbf_interior(stage, up, cur, centre, 3) > 0
+    exact = np.empty((9, 3), np.float32)
+    for u in range(3):
+        cpu._rbf_pixel(exact, up, cur, centre, True, True, u)
+    out = np.empty((3, 9), np.float32)
+    cpu._rbf_normalise_row(out, up, cur, centre, True, True, stage)
+    np.testing.assert_array_equal(out, exact.T)
+
+
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("t_max", [0, 1, 3])
 def test_rbf_filter_matches_reference(shape, t_max):
