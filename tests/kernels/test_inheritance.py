@@ -209,3 +209,24 @@ def test_driver_equals_the_per_pixel_functions_on_banded_volumes(prc, candidates
             np.testing.assert_array_equal(got, want)
             n_decided += int((want >= 0).sum())
     assert n_decided > 20  # the comparison covers decided pixels, not only -1
+
+
+@pytest.mark.parametrize("candidates", [SYMMETRIC, PAPER])
+def test_prc_driver_shares_right_windows_along_runs_of_one_coarse_disparity(candidates):
+    """The CPU driver with PRC (``cpu._inherit_row_prc``) takes a patch's right windows
+    x0 - 1, x0 from the patch before it when their coarse disparities are equal: coarse
+    maps in runs (no noise), cut by undecided pixels and steps, decide as ``inherit_at``."""
+    ops = build_ops(identity)
+    rng = np.random.default_rng(70 + candidates)
+    n_decided = 0
+    for h, w, n_disp in [(10, 23, 9), (9, 30, 13)]:
+        for levels in (None, 6):
+            vol, true = narrow_banded_volume(rng, h, w, n_disp, levels=levels)
+            coarse = (true[::2, ::2] // 2).astype(np.int32)
+            coarse[rng.random(coarse.shape) < 0.05] = -1
+            got = cpu.inherit(vol, coarse, True, 1.05, 1e-3, candidates)
+            want = np.array([[ops.inherit_at(vol.cost, vol.index, coarse, v, u, True, 1.05, 1e-3, candidates)
+                              for u in range(w)] for v in range(h)], np.int32)
+            np.testing.assert_array_equal(got, want)
+            n_decided += int((want >= 0).sum())
+    assert n_decided > 20
