@@ -178,20 +178,30 @@ def _right_column(u, d, w):
 
 
 @njit(cache=True, nogil=True)
+def _nearest_claims(disparity, valid, y, row_best, row_target):
+    """The uniqueness test's scatter for row y: ``row_target[u]`` the right column of each
+    valid pixel u, ``row_best[x]`` the largest disparity that claims right column x (-inf
+    where none does; a NaN disparity wins its column); shared by the test alone and by
+    the fused hole-making pass."""
+    w = disparity.shape[1]
+    row_best[:] = -np.inf
+    for u in range(w):
+        if valid[y, u]:
+            d = np.float64(disparity[y, u])
+            xr = _right_column(u, d, w)
+            row_target[u] = xr
+            if d > row_best[xr] or d != d:
+                row_best[xr] = d
+
+
+@njit(cache=True, nogil=True)
 def _uniqueness_task(task, tasks, disparity, valid, tolerance, best, target, out):
     h, w = disparity.shape
     row_best = best[task]
     row_target = target[task]
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        row_best[:] = -np.inf
-        for u in range(w):
-            if valid[y, u]:
-                d = np.float64(disparity[y, u])
-                xr = _right_column(u, d, w)
-                row_target[u] = xr
-                if d > row_best[xr] or d != d:
-                    row_best[xr] = d
+        _nearest_claims(disparity, valid, y, row_best, row_target)
         for u in range(w):
             out[y, u] = valid[y, u] and np.float64(disparity[y, u]) < row_best[row_target[u]] - tolerance
 
@@ -223,15 +233,21 @@ def uniqueness_occluded(disparity, valid, tolerance):
 
 
 @njit(cache=True, nogil=True)
+def _first_valid_from(disparity, valid, y, start):
+    """The left-border test's ``b`` of row y: the first valid disparity at or right of
+    column ``start`` (float32), -inf when the row has none."""
+    for u in range(start, disparity.shape[1]):
+        if valid[y, u]:
+            return disparity[y, u]
+    return -_F32_INF
+
+
+@njit(cache=True, nogil=True)
 def _out_of_view_task(task, tasks, disparity, valid, start, out):
     h, w = disparity.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        b = -_F32_INF
-        for u in range(start, w):
-            if valid[y, u]:
-                b = disparity[y, u]
-                break
+        b = _first_valid_from(disparity, valid, y, start)
         b_minus_1 = b - _F32_ONE
         for u in range(w):
             out[y, u] = valid[y, u] and u < b and disparity[y, u] < b_minus_1
@@ -267,19 +283,8 @@ def _drop_occluded_task(task, tasks, disparity, valid, tolerance, start, best, t
     n = 0
     for y in range(y0, y1):
         # both tests read the row's validity before any of it is dropped
-        row_best[:] = -np.inf
-        for u in range(w):
-            if valid[y, u]:
-                d = np.float64(disparity[y, u])
-                xr = _right_column(u, d, w)
-                row_target[u] = xr
-                if d > row_best[xr] or d != d:
-                    row_best[xr] = d
-        b = -_F32_INF
-        for u in range(start, w):
-            if valid[y, u]:
-                b = disparity[y, u]
-                break
+        _nearest_claims(disparity, valid, y, row_best, row_target)
+        b = _first_valid_from(disparity, valid, y, start)
         b_minus_1 = b - _F32_ONE
         for u in range(w):
             d32 = disparity[y, u]

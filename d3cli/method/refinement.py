@@ -27,6 +27,13 @@ def _like(array, disp: np.ndarray, dtype) -> np.ndarray:
     a ValueError names both shapes when it does not fit)."""
     return np.ascontiguousarray(np.broadcast_to(np.asarray(array, dtype=dtype), disp.shape))
 
+def _check_updatable(valid: np.ndarray, disp: np.ndarray) -> None:
+    """``valid`` is updated in place by the fused hole-making passes: it must be a
+    C-contiguous bool map of the disparity's shape."""
+    if valid.shape != disp.shape or valid.dtype != np.bool_ or not valid.flags.c_contiguous:
+        raise ValueError("valid must be a C-contiguous bool map of the disparity's shape (updated in place)")
+
+
 def refine_subpixel(cost, disparity, *, backend):
     """Parabola sub-pixel refinement at full resolution (DESIGN step 8).
 
@@ -121,8 +128,7 @@ def drop_occluded(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: in
     out : ndarray, float32, (H, W)
     """
     disp = _as_map(disparity)
-    if valid.shape != disp.shape or valid.dtype != np.bool_ or not valid.flags.c_contiguous:
-        raise ValueError("valid must be a C-contiguous bool map of the disparity's shape (updated in place)")
+    _check_updatable(valid, disp)
     w = disp.shape[1]
     start = min(int(max_disparity), w - 1)
     if start < 0:  # a slice start, as out_of_view reads it
@@ -182,8 +188,7 @@ def drop_speckles(disparity: np.ndarray, valid: np.ndarray, *, max_size: int, ma
     out : ndarray, float32, (H, W)
     """
     disp = _as_map(disparity)
-    if valid.shape != disp.shape or valid.dtype != np.bool_ or not valid.flags.c_contiguous:
-        raise ValueError("valid must be a C-contiguous bool map of the disparity's shape (updated in place)")
+    _check_updatable(valid, disp)
     if out is None:
         out = np.empty(disp.shape, np.float32)
     fixed, n_valid = finishing.fixed_point_16_finite(disp, valid)
