@@ -125,6 +125,36 @@ def test_sigterm_after_the_batch_exits_143_not_by_the_signal(tmp_path, make_pair
     assert run["interrupted"] is False and run["n_failed"] == 0
 
 
+def test_ctrl_c_after_the_batch_is_ignored(tmp_path, make_pair_folder):
+    """SIGINT while the summary lines are printed, after run.json recorded the batch as
+    complete: ignored, exit 0 (it gave 130 and "rerun the same command to resume" with
+    nothing to resume; seen once in tests/batch/test_interrupts.py's eight moments)."""
+    import json
+
+    make_pair_folder(tmp_path / "pairs", "a")
+    code = """
+        import os, signal, sys
+        import click
+
+        echo = click.echo
+
+        def echo_then_sigint(message=None, *args, **kwargs):
+            if message is not None and str(message).startswith("sgbm:"):  # the counts: the batch has ended
+                os.kill(os.getpid(), signal.SIGINT)
+            return echo(message, *args, **kwargs)
+
+        click.echo = echo_then_sigint
+        sys.argv = ["d3stereo", "run", "pairs", "-o", "out", "--method", "sgbm"]
+        from d3cli.__main__ import entry
+        entry()
+        """
+    done = _run_python(code, tmp_path)
+    assert done.returncode == 0, (done.returncode, done.stderr)
+    assert "rerun" not in done.stderr
+    run = json.loads((tmp_path / "out" / "run.json").read_text())
+    assert run["interrupted"] is False and run["n_failed"] == 0
+
+
 def test_sigterm_before_the_pairs_begin_exits_143(tmp_path, make_pair_folder):
     """SIGTERM while the batch takes its lock or starts its workers (after its SIGTERM
     handler is in place, before the pairs' loop wraps interrupts into BatchInterrupted).
