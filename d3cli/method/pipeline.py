@@ -16,7 +16,7 @@ from .band import band_indexes
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
-from .perspective import RoadModel, fit_road_model, restored_shares, restored_validity, restored_validity_counts
+from .perspective import RoadModel, fit_road_model, restored_shares, restored_validity_counts
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
 from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel, smooth_disparity
 
@@ -415,7 +415,7 @@ class D3Stereo:
         # masked into ``out``); ``owned``: ``out`` is this method's own map, written in place.
         owned = False
         if road is not None:
-            valid, out = self._pt_valid(valid, disp, out, info, masked=True)
+            valid, out = self._pt_valid(valid, disp, out, info)
             owned = True
         occluded = None
         if cfg.refine.occlusion_check:
@@ -444,16 +444,10 @@ class D3Stereo:
         info["decided_share"] = int(np.count_nonzero(valid)) / valid.size
         return np.ascontiguousarray(out, dtype=np.float32), valid
 
-    def _pt_valid(self, valid: np.ndarray, disp: np.ndarray, out: np.ndarray, info: dict, *, masked: bool = False):
-        """Validity after PT (:func:`restored_validity`); its shares go to ``info['pt']``.
-
-        With ``masked`` also ``np.where(valid, out, inf)``, from the same single pass
-        (issue 10): returns ``(valid, masked_map)``.
-        """
-        if not masked:
-            valid, shares = restored_validity(valid, disp, out, narrow_range=self.cfg.pt.narrow_range)
-            info["pt"].update(shares)
-            return valid
+    def _pt_valid(self, valid: np.ndarray, disp: np.ndarray, out: np.ndarray, info: dict):
+        """Validity after PT (:func:`restored_validity`) and ``np.where(valid, out, inf)``,
+        from one pass (issue 10); the shares go to ``info['pt']``.  Returns ``(valid,
+        masked_map)``."""
         valid, counts, out = restored_validity_counts(valid, disp, out, narrow_range=self.cfg.pt.narrow_range,
                                                      masked=True)
         info["pt"].update(restored_shares(counts, valid.size))

@@ -102,7 +102,7 @@ def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int)
 
 
 def drop_occluded(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int, tolerance: float = 1.0,
-                  out: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                  out: np.ndarray | None = None) -> tuple[np.ndarray, int, np.ndarray]:
     """Both occlusion tests at once, their pixels made holes: what ``D3Stereo._finish`` runs.
 
     ``occluded = occluded_by_uniqueness(...) | out_of_view(...)`` on the incoming
@@ -235,7 +235,7 @@ def fill_holes(
         # estimates it better than the background side (the row neighbours found in the
         # filling pass itself, issue 10: KITTI fill 4.6 -> 2.6 ms with the column scans).
         up, down = finishing.nearest_along_columns(disp, valid)
-        filled = finishing.fill_inside_rows(disp, valid, _like(occluded, disp, bool), up, down)
+        filled = finishing.fill_inside(disp, valid, _like(occluded, disp, bool), up, down)
     if not row_has.all():
         finishing.copy_nearest_rows(filled, row_has)
     if smooth and min(disp.shape) >= 5:

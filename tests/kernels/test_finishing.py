@@ -266,59 +266,57 @@ def test_fill_holes_matches_reference(shape, smooth, inside):
 
 def test_fill_inside_on_ties_and_signed_zeros_equals_the_insertion_sort():
     """The branch-free sorting network of ``fill_inside`` against the formulation it
-    replaced (an insertion sort of the finite values in the order left, right, up, down):
-    many equal values and both signed zeros, so that the order of equals shows in the bits."""
+    replaced (an insertion sort of the finite values in the order left, right, up, down;
+    the row neighbours from the reference's scans): many equal values and both signed
+    zeros, so that the order of equals and which neighbour a value came from show in the
+    bits."""
     rng = np.random.default_rng(4)
     shape = (40, 50)
-    choices = np.array([-0.0, 0.0, 1.0, 2.0, np.inf], np.float32)
-    left, right, up, down = (choices[rng.integers(0, 5, shape)] for _ in range(4))
-    disp = rng.random(shape).astype(np.float32)
-    valid = rng.random(shape) < 0.2
-    occluded = (rng.random(shape) < 0.2) & ~valid
-    want = np.empty(shape, np.float32)
-    for y in range(shape[0]):
-        for u in range(shape[1]):
-            if valid[y, u]:
-                want[y, u] = disp[y, u]
-                continue
-            side = left[y, u] if left[y, u] < right[y, u] else right[y, u]
-            buf = []
-            for v in (left[y, u], right[y, u], up[y, u], down[y, u]):
-                if np.isfinite(v):
-                    i = len(buf)
-                    while i > 0 and buf[i - 1] > v:
-                        i -= 1
-                    buf.insert(i, v)
-            n = len(buf)
-            if occluded[y, u] or n == 0:
-                want[y, u] = side
-            elif n % 2:
-                want[y, u] = buf[n // 2]
-            else:
-                want[y, u] = (buf[n // 2 - 1] + buf[n // 2]) / np.float32(2.0)
-    got = finishing.fill_inside(disp, valid, occluded, left, right, up, down)
-    assert_same_bytes(got, want, "fill_inside")
+    choices = np.array([-0.0, 0.0, 1.0, 2.0, 2.5], np.float32)
+    up_down = np.array([-0.0, 0.0, 1.0, 2.0, np.inf], np.float32)
+    for share in (0.0, 0.2, 0.7, 1.0):
+        disp = choices[rng.integers(0, 5, shape)]
+        valid = rng.random(shape) < share
+        occluded = (rng.random(shape) < 0.2) & ~valid
+        left, right = (x.astype(np.float32) for x in ref_nearest_along_rows(disp, valid))
+        up, down = (up_down[rng.integers(0, 5, shape)] for _ in range(2))
+        want = np.empty(shape, np.float32)
+        for y in range(shape[0]):
+            for u in range(shape[1]):
+                if valid[y, u]:
+                    want[y, u] = disp[y, u]
+                    continue
+                side = left[y, u] if left[y, u] < right[y, u] else right[y, u]
+                buf = []
+                for v in (left[y, u], right[y, u], up[y, u], down[y, u]):
+                    if np.isfinite(v):
+                        i = len(buf)
+                        while i > 0 and buf[i - 1] > v:
+                            i -= 1
+                        buf.insert(i, v)
+                n = len(buf)
+                if occluded[y, u] or n == 0:
+                    want[y, u] = side
+                elif n % 2:
+                    want[y, u] = buf[n // 2]
+                else:
+                    want[y, u] = (buf[n // 2 - 1] + buf[n // 2]) / np.float32(2.0)
+        assert_same_bytes(finishing.fill_inside(disp, valid, occluded, up, down), want, f"fill_inside {share}")
 
 
 @pytest.mark.parametrize("shape", SHAPES)
-def test_fill_inside_rows_equals_fill_inside_with_the_row_neighbour_maps(shape):
-    """The fused filling (row neighbours found in row buffers) against ``fill_inside`` fed
-    with the reference's nearest values: ties and both signed zeros, so that which
-    neighbour a value came from shows in the bits."""
+def test_nearest_along_columns_equals_reference(shape):
+    """The up/down neighbours of ``fill_inside`` against the reference's row scan of the
+    transposed map (ties and both signed zeros)."""
     rng = np.random.default_rng(hash(shape) % 2**32)
     choices = np.array([-0.0, 0.0, 1.0, 2.0, 2.5], np.float32)
     for share in (0.0, 0.2, 0.7, 1.0):
         disp = choices[rng.integers(0, 5, shape)]
         valid = rng.random(shape) < share
-        occluded = (rng.random(shape) < 0.3) & ~valid
-        left, right = ref_nearest_along_rows(disp, valid)
         up, down = (x.T for x in ref_nearest_along_rows(disp.T, valid.T))
-        want = finishing.fill_inside(disp, valid, occluded, left.astype(np.float32), right.astype(np.float32),
-                                     np.ascontiguousarray(up, np.float32), np.ascontiguousarray(down, np.float32))
         up_k, down_k = finishing.nearest_along_columns(disp, valid)
         assert_same_bytes(up_k, np.ascontiguousarray(up, np.float32), f"up {shape} {share}")
         assert_same_bytes(down_k, np.ascontiguousarray(down, np.float32), f"down {shape} {share}")
-        assert_same_bytes(finishing.fill_inside_rows(disp, valid, occluded, up_k, down_k), want, f"{shape} {share}")
 
 
 def test_fill_holes_empty_rows_copy_the_nearest_row_upper_on_a_tie():
