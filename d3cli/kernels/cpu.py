@@ -79,6 +79,7 @@ _rbf_weight = ops.rbf_weight
 _seed_candidate = ops.seed_candidate
 _right_wta = ops.right_wta
 _diffuse_at = ops.diffuse_at
+_band_min = ops.band_min
 _inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
 
@@ -1743,17 +1744,8 @@ def _min_cost(cost, index):
     out = np.empty((h, w), np.float32)
     for v in prange(h):
         for u in range(w):
-            off = index[v, u, 0]
-            lo = index[v, u, 1]
-            hi = index[v, u, 2]
-            best = np.float32(1.0)
-            if hi > lo:
-                cells = cost[off + lo:off + hi]
-                best = cells[0]
-                for i in range(1, hi - lo):
-                    c = cells[i]
-                    best = c if c < best else best  # a select, not a branch (-25 % on wide bands)
-            out[v, u] = best
+            # pixel.band_min, as the diffusion finds it for itself (CPU) and CUDA's min_cost
+            out[v, u] = _band_min(cost, index, v, u) if index[v, u, 2] > index[v, u, 1] else np.float32(1.0)
     return out
 
 

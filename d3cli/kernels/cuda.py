@@ -42,6 +42,7 @@ _cosine_cost = ops.cosine_cost
 _rbf_weight = ops.rbf_weight
 _seed_at = ops.seed_at
 _diffuse_at = ops.diffuse_at
+_band_min = ops.band_min
 _inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
 _pt_shift = ops.pt_shift
@@ -485,16 +486,8 @@ def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None):
 def _min_cost_kernel(cost, index, out):
     u, v = cuda.grid(2)
     if v < index.shape[0] and u < index.shape[1]:
-        off = index[v, u, 0]
-        lo = index[v, u, 1]
-        hi = index[v, u, 2]
-        best = numba.float32(1.0)
-        if hi > lo:
-            best = cost[off + lo]
-            for d in range(lo + 1, hi):
-                if cost[off + d] < best:
-                    best = cost[off + d]
-        out[v, u] = best
+        # pixel.band_min: the least cost the CPU's diffusion finds for itself
+        out[v, u] = _band_min(cost, index, v, u) if index[v, u, 2] > index[v, u, 1] else numba.float32(1.0)
 
 
 def min_cost(cost):
