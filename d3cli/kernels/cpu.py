@@ -1638,11 +1638,6 @@ def _build_frontier(changed, n_changed, listed, row_listed, active, h, w, kappa_
     return n_active
 
 
-#: :func:`diffuse` takes ``min_cost=None`` and finds the least costs it needs itself
-#: (:mod:`d3cli.method.decisive` then skips :func:`min_cost`).
-DIFFUSE_FINDS_MIN_COST = True
-
-
 def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweeps):
     """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 5-6).
 

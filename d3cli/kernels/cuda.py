@@ -493,6 +493,11 @@ def _min_cost_kernel(cost, index, out):
 def min_cost(cost):
     """Least cost of every pixel over its band; float32 (H, W) device array (1 if empty)."""
     flat, index, _, _ = _unpack(cost)
+    return _least_costs(flat, index)
+
+
+def _least_costs(flat, index):
+    """:func:`min_cost` of an unpacked volume (device arrays)."""
     return _per_pixel(_min_cost_kernel, index.shape, np.float32, flat, index)
 
 
@@ -587,8 +592,9 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     cost : Volume or float32 (H, W, D), device or host
     disp0 : int32 (H, W), device or host
         Sparse decisive map D_i^S (-1 undecided); not modified.
-    min_cost : float32 (H, W), device or host
-        Least cost of each pixel (:func:`min_cost`); not read when ``max_gap < 0``.
+    min_cost : float32 (H, W), device or host, or None
+        Least cost of each pixel (:func:`min_cost`); not read when ``max_gap < 0``;
+        None: computed here when the gap test needs it.
     max_gap : float
         Accepted states cost at most min_cost + max_gap; < 0: off.
     tau, kappa_d : int
@@ -606,7 +612,12 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     """
     d_cost, d_index, _, _ = _unpack(cost)
     disp = _copy(disp0) if _is_device(disp0) else _dev(disp0)  # a new map either way
-    d_min = _dev(min_cost)
+    if min_cost is None:
+        # the gap test reads every frontier pixel's least cost: one pass over the volume
+        # (the CPU driver finds it per pixel instead, pixel.band_min)
+        d_min = _least_costs(d_cost, d_index) if max_gap >= 0 else _dev(np.zeros((1, 1), np.float32))
+    else:
+        d_min = _dev(min_cost)
     h, w = disp.shape
     n_pixels = h * w
     tau = int(tau)

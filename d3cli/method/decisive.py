@@ -11,8 +11,6 @@ Each function turns keyword scalars into one kernel call of the backend
 
 from __future__ import annotations
 
-import numpy as np
-
 
 def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, exclusion: int, backend, skip=None):
     """Sparse decisive disparity map D_k^S (paper section III-B, DESIGN step 4).
@@ -69,13 +67,10 @@ def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, a
     disparity : ndarray, int32, (H, W)
     sweeps : int
     """
-    if max_gap < 0:
-        least = backend.to_device(np.zeros((1, 1), np.float32))  # never read
-    elif getattr(backend, "DIFFUSE_FINDS_MIN_COST", False):
-        least = None  # the backend finds the least cost of the few pixels that need one
-    else:
-        least = backend.min_cost(cost)
-    return backend.diffuse(cost, disparity, least, float(max_gap), int(tau), int(kappa_d), bool(adversarial), int(max_sweeps))
+    # min_cost None: each backend finds the least costs the gap test needs (the CPU for the
+    # few pixels that reach it, CUDA in one pass over the volume)
+    return backend.diffuse(cost, disparity, None, float(max_gap), int(tau), int(kappa_d), bool(adversarial),
+                           int(max_sweeps))
 
 
 #: ``inheritance.candidates`` -> the kernels' int argument (``pixel.candidate_range``).
