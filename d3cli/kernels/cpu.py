@@ -79,6 +79,7 @@ _rbf_weight = ops.rbf_weight
 _seed_candidate = ops.seed_candidate
 _right_wta = ops.right_wta
 _diffuse_at = ops.diffuse_at
+_holds_own_disparity = ops.holds_own_disparity
 _band_min = ops.band_min
 _inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
@@ -1558,20 +1559,68 @@ FRONTIER_CHUNK = 1024
 SERIAL_FRONTIER = 4096
 
 
+#: :func:`_plain_neighbourhoods` codes: nothing known; no neighbour decided; all eight
+#: neighbours hold the pixel's own disparity.
+MIXED = 0
+NONE_DECIDED = 1
+UNIFORM = 2
+
+
+@njit(cache=True, error_model="numpy")
+def _plain_neighbourhoods(disp0, v, plain):
+    """``plain[u]`` for the inner pixels of row v (0 < v < H - 1) of ``disp0``:
+    NONE_DECIDED, UNIFORM (the pixel decided, its 8 neighbours at its disparity) or
+    MIXED.  Branch-free, one pass over three rows: the compiler vectorises it."""
+    up = disp0[v - 1]
+    row = disp0[v]
+    down = disp0[v + 1]
+    for u in range(1, disp0.shape[1] - 1):
+        d = row[u]
+        a = up[u - 1]
+        b = up[u]
+        c = up[u + 1]
+        e = row[u - 1]
+        f = row[u + 1]
+        g = down[u - 1]
+        i = down[u]
+        j = down[u + 1]
+        top = max(max(max(a, b), max(c, e)), max(max(f, g), max(i, j)))
+        same = (a == d) & (b == d) & (c == d) & (e == d) & (f == d) & (g == d) & (i == d) & (j == d) & (d >= 0)
+        plain[u] = NONE_DECIDED if top < 0 else (UNIFORM if same else MIXED)
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def _evaluate_all(cost, index, disp0, min_cost, max_gap, disp, tau, kappa_d, adversarial, row_changes):
     """First sweep: the new state of every pixel of ``disp0`` into ``disp``;
-    ``row_changes[v + 1]``: how many pixels of row v changed."""
+    ``row_changes[v + 1]``: how many pixels of row v changed.
+
+    With tau = kappa_d = 1 (the defaults), the plain pixels are settled without
+    :func:`pixel.diffuse_at`: a pixel without a decided neighbour has no candidate, and a
+    decided pixel whose neighbours all hold its disparity d keeps it when d wins its one
+    candidate set (:func:`pixel.holds_own_disparity`); :func:`_plain_neighbourhoods`
+    finds them a row at a time.  Issue 10: most pixels of a first sweep are plain (road
+    pair, finest level: 96 %, KITTI 49 %), and the candidate loop's branches are what a
+    pixel costs; first sweep, 2 threads, A/B on the pipeline's inputs: road finest level
+    7.8 -> 2.7 ms, KITTI 10.4 -> 9.3 ms.
+    """
     h, w = disp0.shape
     for v in prange(h):
         n = 0
         # tau = kappa_d = 1 (the defaults) as constants: the compiler unrolls the
         # neighbour loops (issue 10: 26 -> 22 ms CPU, road pair level 1)
         if tau == 1 and kappa_d == 1:
+            plain = np.zeros(w, np.uint8)  # border pixels stay MIXED
+            if 0 < v < h - 1:
+                _plain_neighbourhoods(disp0, v, plain)
             for u in range(w):
-                s = _diffuse_at(cost, index, disp0, min_cost, max_gap, v, u, 1, 1, adversarial)
+                cur = disp0[v, u]
+                kind = plain[u]
+                if kind == NONE_DECIDED or (kind == UNIFORM and _holds_own_disparity(cost, index, v, u, cur)):
+                    s = cur
+                else:
+                    s = _diffuse_at(cost, index, disp0, min_cost, max_gap, v, u, 1, 1, adversarial)
                 disp[v, u] = s
-                n += s != disp0[v, u]
+                n += s != cur
         else:
             for u in range(w):
                 s = _diffuse_at(cost, index, disp0, min_cost, max_gap, v, u, tau, kappa_d, adversarial)

@@ -259,6 +259,24 @@ def build_ops(jit):
         return best
 
     @jit
+    def holds_own_disparity(cost, index, v, u, d):
+        """True when :func:`diffuse_at` with ``tau = 1`` keeps disparity d at pixel (u, v)
+        whose neighbours all hold d: their one candidate set is d - 1, d, d + 1 (those in
+        the band), and d wins it when it lies in the band, costs less than d - 1 and no
+        more than d + 1 (ties go to the smaller disparity).  False (a neighbouring
+        disparity wins, d outside the band, a NaN cost) says nothing.
+        """
+        off = index[v, u, 0]
+        lo = index[v, u, 1]
+        hi = index[v, u, 2]
+        if d < lo or d >= hi:
+            return False
+        c = cost[UINT(off + d)]
+        below = d - 1 < lo or c < cost[UINT(off + d - 1)]
+        above = d + 1 >= hi or c <= cost[UINT(off + d + 1)]
+        return below and above
+
+    @jit
     def diffuse_at(cost, index, disp, min_cost, max_gap, v, u, tau, kappa_d, adversarial):
         """New state of pixel (u, v) in one Jacobi diffusion sweep (paper eq. 5-6).
 
@@ -805,6 +823,7 @@ def build_ops(jit):
         accept_state=accept_state,
         band_min=band_min,
         diffuse_at=diffuse_at,
+        holds_own_disparity=holds_own_disparity,
         candidate_range=candidate_range,
         best_of_three=best_of_three,
         outside_cost=outside_cost,

@@ -505,6 +505,43 @@ def test_diffusion_with_large_frontiers_matches_whole_image_jacobi(settings):
     assert (first != seeds).sum() * 3 > cpu.SERIAL_FRONTIER  # a parallel frontier follows
 
 
+@numba.njit(cache=False)
+def one_jacobi_sweep(cost, index, disp, max_gap, tau, kappa_d, adversarial):
+    """One sweep of ``pixel.diffuse_at`` over every pixel (least costs found per pixel)."""
+    least = np.empty((0, 0), np.float32)
+    new = np.empty_like(disp)
+    for v in range(disp.shape[0]):
+        for u in range(disp.shape[1]):
+            new[v, u] = _diffuse_at(cost, index, disp, least, max_gap, v, u, tau, kappa_d, adversarial)
+    return new
+
+
+@pytest.mark.parametrize("settings", DIFFUSION_SETTINGS, ids=lambda s: "-".join(f"{k}{v}" for k, v in s.items()))
+def test_first_sweep_on_plain_neighbourhoods_matches_diffuse_at(settings):
+    """The first sweep settles pixels without a decided neighbour and decided pixels in
+    a uniform 3x3 block without ``pixel.diffuse_at`` (issue 10): on maps of uniform and
+    undecided blocks, over bands (the disparity sometimes outside the band), costs with
+    ties and NaN cells, it gives what ``diffuse_at`` gives every pixel."""
+    from d3cli.kernels.volume import Volume, banded_index
+
+    rng = np.random.default_rng(29)
+    h, w, n_disp = 37, 71, 9
+    for trial in range(6):
+        size = (2, 3, 5)[trial % 3]
+        blocks = rng.integers(-1, n_disp, (h // size + 1, w // size + 1))
+        disp = np.repeat(np.repeat(blocks, size, 0), size, 1)[:h, :w].astype(np.int32)
+        disp[rng.random((h, w)) < 0.03] = -1
+        lo = rng.integers(0, n_disp // 2, (h, w))
+        hi = np.minimum(n_disp, lo + rng.integers(1, n_disp + 1, (h, w)))
+        index, n_cells = banded_index(lo, hi)
+        cost = np.floor(rng.random(n_cells) * 4).astype(np.float32) / 4  # many ties
+        cost[rng.random(n_cells) < 0.02] = np.nan
+        args = (float(settings["max_gap"]), settings["tau"], settings["kappa_d"], settings["adversarial"])
+        got, sweeps = cpu.diffuse(Volume(cost, index, n_disp), disp, None, max_sweeps=1, **settings)
+        np.testing.assert_array_equal(got, one_jacobi_sweep(cost, index, disp, *args))
+        assert sweeps == 1
+
+
 # ----------------------------------------------------------------------------- inheritance
 def coarse_map_for(rng, shape, n_disp, share=0.7):
     h, w = shape
