@@ -261,8 +261,8 @@ def build_ops(jit):
     @jit
     def holds_own_disparity(cost, index, v, u, d):
         """True when :func:`diffuse_at` with ``tau = 1`` keeps disparity d at pixel (u, v)
-        whose neighbours all hold d: their one candidate set is d - 1, d, d + 1 (those in
-        the band), and d wins it when it lies in the band, costs less than d - 1 and no
+        whose decided neighbours all hold d: their one candidate set is d - 1, d, d + 1
+        (those in the band), and d wins it when it lies in the band, costs less than d - 1 and no
         more than d + 1 (ties go to the smaller disparity).  False (a neighbouring
         disparity wins, d outside the band, a NaN cost) says nothing.
         """
