@@ -344,6 +344,48 @@ def test_seed_whose_right_pixel_is_outside_is_rejected():
     assert verdicts == {-1}
 
 
+def _in_order_candidate(cells, lo, u, pkrn_min, epsilon, exclusion):
+    """Test (a) of the seeds as the in-order scan with a strict ``<`` (the kernel before
+    issue 10's lanes): the first disparity of least cost, then the second cost."""
+    d1, c1 = lo, cells[0]
+    for k in range(1, len(cells)):
+        if cells[k] < c1:
+            d1, c1 = lo + k, cells[k]
+    if c1 >= 1.0:
+        return -1
+    if exclusion == 0:
+        others = [c for k, c in enumerate(cells) if k != d1 - lo]
+    else:
+        others = [c for k, c in enumerate(cells) if abs(lo + k - d1) > exclusion]
+    c2 = min(others, default=np.inf)
+    if c2 == np.inf or float(c2) + epsilon < pkrn_min * (float(c1) + epsilon):
+        return -1
+    return d1 if u - d1 >= 0 else -1
+
+
+@pytest.mark.parametrize("levels", [None, 3])
+def test_seed_candidate_by_lanes_equals_the_in_order_scan(levels):
+    """pixel.seed_candidate takes the least and second costs by value in four interleaved
+    lanes and d1 as the first disparity holding the least (issue 10): the same verdicts as
+    the in-order scan on bands of 1 to 41 cells (every lane remainder), ties included."""
+    rng = np.random.default_rng(21 if levels else 22)
+    h, w, n_disp = 6, 60, 48
+    lo = rng.integers(0, 8, (h, w))
+    hi = np.minimum(n_disp, lo + 1 + np.arange(h * w).reshape(h, w) % 41)
+    index, n_cells = banded_index(lo, hi)
+    cost = rng.random(n_cells, dtype=np.float32)
+    if levels:
+        cost = np.round(cost * levels) / levels  # coarse values: many ties, some cost 1
+    cost = cost.astype(np.float32)
+    for pkrn_min, exclusion in [(1.0, 0), (1.2, 0), (1.1, 1), (1.05, 3)]:
+        for v in range(h):
+            for u in range(w):
+                cells = cost[index[v, u, 0] + lo[v, u]:index[v, u, 0] + hi[v, u]]
+                want = _in_order_candidate(cells, lo[v, u], u, pkrn_min, 1e-3, exclusion)
+                got = cpu.ops.seed_candidate(cost, index, v, u, pkrn_min, 1e-3, exclusion)
+                assert got == want, (v, u, pkrn_min, exclusion)
+
+
 @pytest.mark.parametrize("curve, pkrn_min, want", [
     ([0.9, 0.2, 0.5, 0.1], 1.9, 3),   # c2 is the minimum the last cell displaced: 0.2 / 0.1
     ([0.9, 0.2, 0.5, 0.1], 2.1, -1),  # (c2 = 0.5 would pass)
