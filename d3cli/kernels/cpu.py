@@ -10,12 +10,13 @@ disparity axis innermost, so inner loops run over contiguous memory.
 from __future__ import annotations
 
 import hashlib
+import platform
 from pathlib import Path
 
 import numba
 import numpy as np
 from llvmlite import ir
-from numba import get_num_threads, njit, prange, types
+from numba import njit, prange, types
 from numba.extending import intrinsic
 from numba.cpython.unsafe.numbers import trailing_zeros
 
@@ -364,12 +365,12 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None
     if dense:
         index = dense_index(h, w, n_disp)
     n_cells = int(index[-1, -1, 0]) + int(index[-1, -1, 2])
-    flat = _ncc_banded(left, right, index, n_disp, n_cells, int(window), float(min_variance))
+    flat = _ncc_banded(left, right, index, n_disp, n_cells, int(window), float(min_variance), numba.get_num_threads())
     return _pack(flat, index, n_disp, (h, w, n_disp) if dense else None)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
+def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance, n_threads):
     h, w = left.shape
     r = window // 2
     ii_l, ii_ll, ii_r, ii_rr, bits = _integral_images(left, right)
@@ -392,7 +393,7 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
         # (issue 10: the 720p road pair, window 25, left 8-bit and right PT-warped, 2
         # threads, A/B on the pipeline's inputs: level 0 32.6 -> 31.0 ms CPU, level 1
         # 7.4 -> 6.6 ms; KITTI's grey levels from colour fail the test in the first row).
-        block = max(block, h // (NCC_EXACT_TASKS * get_num_threads()))
+        block = max(block, h // (NCC_EXACT_TASKS * n_threads))  # (numba's get_num_threads here: no caching)
     n_blocks = (h + block - 1) // block
     for b in prange(n_blocks):
         vb0 = b * block
@@ -846,6 +847,7 @@ def rbf_weights(img, sigma_space, sigma_color):
             cur = ring[v & 1]
             _rbf_forward_row(cur, img, v, 0, 4 if v + 1 < h else 1, lut, scale if grey8 else 0, inv_ss2, inv_sc2)
             _rbf_normalise_row(weights[v], ring[(v - 1) & 1], cur, centre, v > 0, v + 1 < h, stage)
+        _store_fence()  # the block's streaming stores done before the task ends
     return weights
 
 
@@ -979,6 +981,41 @@ def _rbf_interior(stage, up, cur, centre, w):
     return bad
 
 
+@intrinsic
+def _store_nt(typingctx, arr, i, val):
+    """``arr.flat[i] = val`` (a C-contiguous array; val cast to its dtype) as a
+    non-temporal store: LLVM's ``!nontemporal`` hint, the line written around the caches
+    without being read first."""
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.gep(ary.data, [context.cast(builder, args[1], signature.args[1], types.intp)])
+        val = context.cast(builder, args[2], signature.args[2], signature.args[0].dtype)
+        store = builder.store(val, ptr)
+        store.set_metadata("nontemporal", builder.module.add_metadata([ir.Constant(ir.IntType(32), 1)]))
+        return context.get_dummy_value()
+
+    return types.void(arr, i, val), codegen
+
+
+#: Whether this machine is x86 (its non-temporal stores need an sfence).
+_X86 = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686")
+
+
+@intrinsic
+def _store_fence(typingctx):
+    """Order the non-temporal stores before (:func:`_store_nt`) before every later store:
+    x86's ``sfence``, where such stores are weakly ordered (nothing elsewhere)."""
+
+    def codegen(context, builder, signature, args):
+        if _X86:
+            fn = builder.module.declare_intrinsic("llvm.x86.sse.sfence", (), ir.FunctionType(ir.VoidType(), ()))
+            builder.call(fn, ())
+        return context.get_dummy_value()
+
+    return types.void(), codegen
+
+
 @njit(cache=True, error_model="numpy")
 def _rbf_normalise_row(out, up, cur, centre, has_up, has_down, stage):
     """Row ``out`` (W, 9) of the normalised weights from the forward kernels of its own
@@ -991,9 +1028,16 @@ def _rbf_normalise_row(out, up, cur, centre, has_up, has_down, stage):
     else:
         for u in range(w):
             _rbf_pixel(stage, up, cur, centre, has_up, has_down, u)
+    # Streaming stores: the weights (36 bytes a pixel, 33 MB at 720p) are read back by
+    # the filter only after the rest of the level's weights, so caching them only
+    # evicts the cost volume and costs a read of each line first (issue 10: 2 threads,
+    # A/B on the pipeline's inputs, level 0: 720p road pair 7.40 -> 6.25 ms CPU, KITTI
+    # 9.01 -> 8.33 ms; these weights and then rbf_filter on the level's NCC volume:
+    # 45.7 -> 44.5 ms and 61.7 -> 60.7 ms).
+    outf = out.reshape(-1)
     for u in range(w):
         for k in range(9):
-            out[u, k] = stage[k, u]
+            _store_nt(outf, UINT(9 * u + k), stage[k, u])
 
 
 @njit(parallel=True, cache=True, error_model="numpy")

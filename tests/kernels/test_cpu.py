@@ -175,6 +175,23 @@ def test_rbf_weights_match_reference(shape):
     assert (got[0, :, :3] == 0).all() and (got[:, 0, ::3] == 0).all()  # outside the image
 
 
+
+def test_streaming_stores_write_as_assignments():
+    # rbf_weights writes its output with cpu._store_nt (non-temporal stores, then a
+    # fence): the same values, cast to the array's dtype, as plain assignments.
+    @numba.njit
+    def fill(out, vals):
+        flat = out.reshape(-1)
+        for i in range(vals.size):
+            cpu._store_nt(flat, np.uint64(i), vals[i])
+        cpu._store_fence()
+
+    vals = np.random.default_rng(5).standard_normal(3 * 13) * 1e3
+    for dtype in (np.float32, np.float64):
+        out = np.zeros((3, 13), dtype)
+        fill(out, vals)
+        np.testing.assert_array_equal(out.reshape(-1).view(np.uint8), vals.astype(dtype).view(np.uint8))
+
 @pytest.mark.parametrize("scale", [4, 16, 64])
 def test_rbf_weights_of_coarse_pyramid_levels_equal_the_computed_kernel(scale):
     # Levels 2-4 of an 8-bit image hold multiples of 1/4, 1/16, 1/64 (2x2 means): their
