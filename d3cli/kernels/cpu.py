@@ -10,6 +10,7 @@ disparity axis innermost, so inner loops run over contiguous memory.
 from __future__ import annotations
 
 import hashlib
+import platform
 from pathlib import Path
 
 import numba
@@ -86,6 +87,10 @@ _subpixel_at = ops.subpixel_at
 
 #: Rows per parallel task of the NCC driver (one running window sum per task).
 NCC_BLOCK_ROWS = 32
+#: Tasks per thread of the NCC driver when its sums are exact (:func:`_ncc_banded`).
+NCC_EXACT_TASKS = 4
+#: Fractional bits of the grey levels that :func:`_integral_pair_into` tests for.
+GRID_BITS = (6, 20)
 #: Bands of at most this many unclipped cells take the NCC row's one-loop slide (below a
 #: vector's few steps, one loop over the cells beats two).
 NCC_NARROW = 8
@@ -106,6 +111,41 @@ def _pack(flat, index, n_disp, dense_shape):
     if dense_shape is not None:
         return flat.reshape(dense_shape)
     return Volume(flat, index, n_disp)
+
+
+@intrinsic
+def _store_nt(typingctx, arr, i, val):
+    """``arr.flat[i] = val`` (a C-contiguous array; val cast to its dtype) as a
+    non-temporal store: LLVM's ``!nontemporal`` hint, the line written around the caches
+    without being read first."""
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.gep(ary.data, [context.cast(builder, args[1], signature.args[1], types.intp)])
+        val = context.cast(builder, args[2], signature.args[2], signature.args[0].dtype)
+        store = builder.store(val, ptr)
+        store.set_metadata("nontemporal", builder.module.add_metadata([ir.Constant(ir.IntType(32), 1)]))
+        return context.get_dummy_value()
+
+    return types.void(arr, i, val), codegen
+
+
+#: Whether this machine is x86 (its non-temporal stores need an sfence).
+_X86 = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686")
+
+
+@intrinsic
+def _store_fence(typingctx):
+    """Order the non-temporal stores before (:func:`_store_nt`) before every later store:
+    x86's ``sfence``, where such stores are weakly ordered (nothing elsewhere)."""
+
+    def codegen(context, builder, signature, args):
+        if _X86:
+            fn = builder.module.declare_intrinsic("llvm.x86.sse.sfence", (), ir.FunctionType(ir.VoidType(), ()))
+            builder.call(fn, ())
+        return context.get_dummy_value()
+
+    return types.void(), codegen
 
 
 @njit(cache=True, error_model="numpy")
@@ -154,6 +194,30 @@ def _integral_pair_into(img, ii, ii2):
             ii2[y + 1, x + 1] = ii2[y, x + 1] + row2
 
 
+@njit(cache=True, error_model="numpy")
+def _grid_bits(img):
+    """The least k in :data:`GRID_BITS` such that every value of ``img`` is a multiple of
+    2^-k of magnitude <= 255 (6: the first four pyramid levels of an 8-bit image; 20: a
+    warped one), else 64.  Row by row, branch-free within a row (as :func:`_grey_scale`),
+    stopping at the first row that fails."""
+    for k in GRID_BITS:
+        scale = 2.0 ** k
+        ok = True
+        for v in range(img.shape[0]):
+            row = img[v]
+            off = 0
+            for u in range(img.shape[1]):
+                val = np.float64(row[u])
+                g = val * scale
+                off += not ((abs(val) <= 255.0) & (g == np.floor(g)))
+            if off:
+                ok = False
+                break
+        if ok:
+            return k
+    return 64
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def _integral_images(left, right):
     """The four integral images of the NCC (L, L^2, R, R^2), two at a time: each is a
@@ -163,9 +227,12 @@ def _integral_images(left, right):
     an image's two in one scan (2.6 -> 1.7 ms CPU at 1280x720, 1.3 -> 0.7 ms on KITTI)."""
     h, w = left.shape
     out = np.empty((4, h + 1, w + 1), np.float64)
+    bits = np.empty(2, np.int64)
     for k in prange(2):
-        _integral_pair_into(left if k == 0 else right, out[2 * k], out[2 * k + 1])
-    return out[0], out[1], out[2], out[3]
+        img = left if k == 0 else right
+        _integral_pair_into(img, out[2 * k], out[2 * k + 1])
+        bits[k] = _grid_bits(img)
+    return out[0], out[1], out[2], out[3], bits[0] + bits[1]
 
 
 # ----------------------------------------------------------------------------- band search (issue 10)
@@ -237,48 +304,72 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
                 for xx in range(max(tx - 1, 0), min(tx + 1, ntx - 1) + 1):
                     t_lo[ty, tx] = min(t_lo[ty, tx], own_lo[yy, xx])
                     t_hi[ty, tx] = max(t_hi[ty, tx], own_hi[yy, xx])
-    store = np.empty((h, w, 3), np.int32)
-    visible = np.empty((h, w, 3), np.int32)
+    # Runs of columns with the same tiles (own and within the halo) have the same bands
+    # in a row: per row the stored band of each run and the row's cells first, then the
+    # bands and offsets written once per pixel, instead of a second pass over the
+    # stored bands for the offsets (issue 10: 2 threads, A/B on the pipeline's inputs,
+    # finest level: 720p road pair 3.16 -> 2.50 ms CPU, KITTI 1.83 -> 1.49 ms).
+    seg = np.empty(w + 1, np.int64)  # run k: columns seg[k] .. seg[k + 1] - 1
+    n_seg = 0
+    for u in range(w):
+        if u == 0 or col_tx0[u] != col_tx0[u - 1] or col_tx1[u] != col_tx1[u - 1] or col_tx[u] != col_tx[u - 1]:
+            seg[n_seg] = u
+            n_seg += 1
+    seg[n_seg] = w
+    seg_lo = np.empty((h, n_seg), np.int64)
+    seg_hi = np.empty((h, n_seg), np.int64)
     row_cells = np.zeros(h + 1, np.int64)
-    for v in prange(h):  # bands per pixel, cells per row
+    for v in prange(h):
         ty0 = min(max((v - halo) // tile, 0), nty - 1)
         ty1 = min(max((v + halo) // tile, 0), nty - 1)
         ty = v // tile
         total = 0
-        last_tx0 = -1
-        last_tx1 = -1
-        last_tx = -1
-        s_lo = 0
-        s_hi = 0
-        for u in range(w):
-            tx0 = col_tx0[u]
-            tx1 = col_tx1[u]
+        for k in range(n_seg):
+            u = seg[k]
             tx = col_tx[u]
-            if tx0 != last_tx0 or tx1 != last_tx1 or tx != last_tx:  # else the same tiles: the same hull
-                last_tx0 = tx0
-                last_tx1 = tx1
-                last_tx = tx
-                s_lo = t_lo[ty, tx]
-                s_hi = t_hi[ty, tx]
-                for yy in range(ty0, ty1 + 1):
-                    for xx in range(tx0, tx1 + 1):
-                        s_lo = min(s_lo, t_lo[yy, xx])
-                        s_hi = max(s_hi, t_hi[yy, xx])
-            store[v, u, 1] = s_lo
-            store[v, u, 2] = s_hi
-            visible[v, u, 1] = t_lo[ty, tx]
-            visible[v, u, 2] = t_hi[ty, tx]
-            total += s_hi - s_lo
+            s_lo = t_lo[ty, tx]
+            s_hi = t_hi[ty, tx]
+            for yy in range(ty0, ty1 + 1):
+                for xx in range(col_tx0[u], col_tx1[u] + 1):
+                    s_lo = min(s_lo, t_lo[yy, xx])
+                    s_hi = max(s_hi, t_hi[yy, xx])
+            seg_lo[v, k] = s_lo
+            seg_hi[v, k] = s_hi
+            total += (s_hi - s_lo) * (seg[k + 1] - u)
         row_cells[v + 1] = total
     for v in range(h):
         row_cells[v + 1] += row_cells[v]
-    for v in prange(h):  # offsets: the cells are packed pixel after pixel
+    store = np.empty((h, w, 3), np.int32)
+    visible = np.empty((h, w, 3), np.int32)
+    # The visible bands with streaming stores (_store_nt): they are read only after the
+    # level's cost and aggregation, which evict them anyway (issue 10: finest level, 2
+    # threads, A/B on the pipeline's inputs: 720p road pair 2.22 -> 2.02 ms CPU, KITTI
+    # 1.21 -> 1.11 ms); the stored ones go to the NCC next, from the caches.
+    for v in prange(h):  # the cells are packed pixel after pixel
+        ty = v // tile
         base = row_cells[v]
-        for u in range(w):
-            lo = store[v, u, 1]
-            store[v, u, 0] = base - lo
-            visible[v, u, 0] = base - lo
-            base += store[v, u, 2] - lo
+        sv = store[v]
+        vf = visible[v].reshape(-1)
+        for k in range(n_seg):
+            u0 = seg[k]
+            u1 = seg[k + 1]
+            s_lo = seg_lo[v, k]
+            s_hi = seg_hi[v, k]
+            tx = col_tx[u0]
+            v_lo = t_lo[ty, tx]
+            v_hi = t_hi[ty, tx]
+            size = s_hi - s_lo
+            off = base - s_lo - u0 * size  # pixel u's offset: off + u size
+            for u in range(u0, u1):
+                o = off + u * size
+                sv[u, 0] = o
+                sv[u, 1] = s_lo
+                sv[u, 2] = s_hi
+                _store_nt(vf, UINT(3 * u), o)
+                _store_nt(vf, UINT(3 * u + 1), v_lo)
+                _store_nt(vf, UINT(3 * u + 2), v_hi)
+            base += size * (u1 - u0)
+        _store_fence()
     return store, visible, row_cells[h]
 
 
@@ -315,15 +406,15 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None
     if dense:
         index = dense_index(h, w, n_disp)
     n_cells = int(index[-1, -1, 0]) + int(index[-1, -1, 2])
-    flat = _ncc_banded(left, right, index, n_disp, n_cells, int(window), float(min_variance))
+    flat = _ncc_banded(left, right, index, n_disp, n_cells, int(window), float(min_variance), numba.get_num_threads())
     return _pack(flat, index, n_disp, (h, w, n_disp) if dense else None)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
+def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance, n_threads):
     h, w = left.shape
     r = window // 2
-    ii_l, ii_ll, ii_r, ii_rr = _integral_images(left, right)
+    ii_l, ii_ll, ii_r, ii_rr, bits = _integral_images(left, right)
     max_row = _row_layout(index)[2]  # the most cells of a row
     cost = np.empty(n_cells, np.float32)
     # The rows are cut into blocks, one prange task each; inside a block acc is a running
@@ -334,29 +425,21 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
     # float64 keeps the add/subtract drift far below the 1e-5 cost tolerance (values
     # <= 255^2 * window^2; float32 sums drift by more than that: measured, see tests).
     block = NCC_BLOCK_ROWS
+    if bits <= 36 and (2 * r + 2) ** 2 <= 2 ** (36 - bits):
+        # Grey levels up to 255 that are multiples of 2^-kl (left) and 2^-kr (right) have
+        # products that are multiples of 2^-(kl + kr) below 2^16; every sum here (acc,
+        # the window sums, their slides) holds fewer than (2r + 2)^2 of them, so below
+        # 2^53 units of 2^-(kl + kr) all are exact in float64: they do not depend on
+        # where the blocks start, and fewer, taller blocks fill fewer window rows anew
+        # (issue 10: the 720p road pair, window 25, left 8-bit and right PT-warped, 2
+        # threads, A/B on the pipeline's inputs: level 0 32.6 -> 31.0 ms CPU, level 1
+        # 7.4 -> 6.6 ms; KITTI's grey levels from colour fail the test in the first row).
+        block = max(block, h // (NCC_EXACT_TASKS * n_threads))  # (numba's get_num_threads here: no caching)
     n_blocks = (h + block - 1) // block
     for b in prange(n_blocks):
         vb0 = b * block
         vb1 = min(h, vb0 + block)
-        col_lo = np.full(w, n_disp, np.int64)
-        col_hi = np.zeros(w, np.int64)
-        for v in range(vb0, vb1):  # row by row, index in memory order (column by column: 0.9 -> 0.6 ms, road)
-            for u in range(w):
-                lo = index[v, u, 1]
-                hi = index[v, u, 2]
-                if hi > lo:
-                    col_lo[u] = min(col_lo[u], lo)
-                    col_hi[u] = max(col_hi[u], hi)
-        acc_lo = np.empty(w, np.int64)
-        acc_hi = np.empty(w, np.int64)
-        for u in range(w):
-            lo = n_disp
-            hi = 0
-            for c in range(max(0, u - r), min(w - 1, u + r) + 1):
-                lo = min(lo, col_lo[c])
-                hi = max(hi, col_hi[c])
-            acc_lo[u] = lo
-            acc_hi[u] = min(hi, u + 1)  # d > u: the right pixel is outside the image
+        acc_lo, acc_hi = _block_hull(index, vb0, vb1, n_disp, r)
         # acc[u, d]: column sum over the window rows of L(y, u) R(y, u - d)
         acc = np.zeros((w, n_disp), np.float64)
         win = np.zeros(n_disp, np.float64)
@@ -379,6 +462,38 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance):
             _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii_r, ii_rr, h, w, r,
                      min_variance)
     return cost
+
+
+@njit(cache=True, error_model="numpy")
+def _block_hull(index, vb0, vb1, n_disp, r):
+    """``(acc_lo, acc_hi)``, int64 (W,): per column u the hull of the bands of rows
+    vb0 .. vb1 - 1 over the columns within r of u (every disparity some window over u
+    needs), cut at u + 1 (d > u: the right pixel is outside the image).
+
+    Branch-free over the bands, then one pass per column offset over contiguous columns
+    (vectorised) instead of a 2r + 1 loop per column; min and max are exact, so the
+    hull is the same.  Issue 10: all blocks of level 0, one thread, A/B on the
+    pipeline's inputs: 720p road pair 2.70 -> 2.29 ms, KITTI 0.41 -> 0.33 ms.
+    """
+    w = index.shape[1]
+    col_lo = np.full(w, n_disp, np.int64)
+    col_hi = np.zeros(w, np.int64)
+    for v in range(vb0, vb1):  # row by row, index in memory order
+        for u in range(w):
+            lo = np.int64(index[v, u, 1])
+            hi = np.int64(index[v, u, 2])
+            empty = hi <= lo
+            col_lo[u] = min(col_lo[u], n_disp if empty else lo)
+            col_hi[u] = max(col_hi[u], 0 if empty else hi)
+    acc_lo = np.full(w, n_disp, np.int64)
+    acc_hi = np.zeros(w, np.int64)
+    for k in range(-r, r + 1):  # column u + k, for the u that have it
+        for u in range(max(0, -k), min(w, w - k)):
+            acc_lo[UINT(u)] = min(acc_lo[UINT(u)], col_lo[UINT(u + k)])
+            acc_hi[UINT(u)] = max(acc_hi[UINT(u)], col_hi[UINT(u + k)])
+    for u in range(w):
+        acc_hi[u] = min(acc_hi[u], u + 1)
+    return acc_lo, acc_hi
 
 
 @njit(cache=True, error_model="numpy")
@@ -580,6 +695,15 @@ def _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0,
     as before: summing column by column over a pixel's cells (one vector loop per
     column) measured slower on these 5-20 cell bands.
     """
+    n_disp = acc.shape[1]
+    # Where the window starts at column d (c0 = d: clipped by the right image's edge),
+    # the sum over columns d .. c1 is the one over d .. c1' < c1 of a pixel before it
+    # (c1 grows with u) continued: the same additions in the same order, so it is kept
+    # per disparity and continued instead of summed afresh (issue 10: with _block_hull,
+    # NCC at level 0 of the 720p road pair, window 25, 2 threads, A/B on the pipeline's
+    # inputs: 33.4 -> 32.0 ms CPU; KITTI's window 5 gains within noise).
+    run_c1 = np.full(n_disp, -1, np.int64)  # the last column summed into run_slr[d], -1: none
+    run_slr = np.empty(n_disp, np.float64)
     for u in range(w):
         off = index[v, u, 0] - start
         lo = index[v, u, 1]
@@ -590,9 +714,20 @@ def _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0,
                 den[off + d] = -1.0
                 continue
             c0 = max(u - r, d)
-            slr = 0.0
-            for c in range(c0, c1 + 1):
-                slr += acc[c, d]
+            if c0 == d:
+                c = run_c1[d] + 1
+                slr = run_slr[d]
+                if c == 0:
+                    c = d
+                    slr = 0.0
+                for c in range(c, c1 + 1):
+                    slr += acc[c, d]
+                run_c1[d] = c1
+                run_slr[d] = slr
+            else:
+                slr = 0.0
+                for c in range(c0, c1 + 1):
+                    slr += acc[c, d]
             inv = 1.0 / ((v1 - v0 + 1) * (c1 - c0 + 1))
             ml = _box_sum(ii_l, v0, c0, v1, c1) * inv
             mr = _box_sum(ii_r, v0, c0 - d, v1, c1 - d) * inv
@@ -753,6 +888,7 @@ def rbf_weights(img, sigma_space, sigma_color):
             cur = ring[v & 1]
             _rbf_forward_row(cur, img, v, 0, 4 if v + 1 < h else 1, lut, scale if grey8 else 0, inv_ss2, inv_sc2)
             _rbf_normalise_row(weights[v], ring[(v - 1) & 1], cur, centre, v > 0, v + 1 < h, stage)
+        _store_fence()  # the block's streaming stores done before the task ends
     return weights
 
 
@@ -898,9 +1034,16 @@ def _rbf_normalise_row(out, up, cur, centre, has_up, has_down, stage):
     else:
         for u in range(w):
             _rbf_pixel(stage, up, cur, centre, has_up, has_down, u)
+    # Streaming stores: the weights (36 bytes a pixel, 33 MB at 720p) are read back by
+    # the filter only after the rest of the level's weights, so caching them only
+    # evicts the cost volume and costs a read of each line first (issue 10: 2 threads,
+    # A/B on the pipeline's inputs, level 0: 720p road pair 7.40 -> 6.25 ms CPU, KITTI
+    # 9.01 -> 8.33 ms; these weights and then rbf_filter on the level's NCC volume:
+    # 45.7 -> 44.5 ms and 61.7 -> 60.7 ms).
+    outf = out.reshape(-1)
     for u in range(w):
         for k in range(9):
-            out[u, k] = stage[k, u]
+            _store_nt(outf, UINT(9 * u + k), stage[k, u])
 
 
 @njit(parallel=True, cache=True, error_model="numpy")

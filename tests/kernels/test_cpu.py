@@ -50,6 +50,44 @@ def test_ncc_cost_volume_running_row_sums_match_reference_across_row_blocks(wind
     np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
 
 
+
+def test_grid_bits():
+    img = np.full((3, 4), 17.0, np.float32)
+    assert cpu._grid_bits(img) == 6
+    img[2, 3] = 255.0 - 2.0**-6
+    assert cpu._grid_bits(img) == 6
+    img[1, 1] = 3.0 + 2.0**-7
+    assert cpu._grid_bits(img) == 20
+    img[0, 0] = -2.0**-20
+    assert cpu._grid_bits(img) == 20
+    for bad in (2.0**-21, 256.0, -256.0, np.nan, np.inf):
+        off = img.copy()
+        off[2, 0] = bad
+        assert cpu._grid_bits(off) == 64
+
+
+@pytest.mark.parametrize("window", [5, 25])
+def test_ncc_cost_volume_on_grid_images_does_not_depend_on_row_blocks(window):
+    # 8-bit left and 2^-20-grid right images (a warped right image): the driver's sums
+    # are exact, and it takes taller row blocks, as many as the threads allow; the
+    # costs must be the same bits whatever the blocks (one thread: other blocks than
+    # with all threads), and still match the reference.
+    rng = np.random.default_rng(window)
+    h, w = 300, 40
+    left = rng.integers(0, 256, (h, w)).astype(np.float32)
+    right = (rng.integers(0, 255 * 2**20, (h, w)) / 2.0**20).astype(np.float32)
+    assert cpu._grid_bits(left) == 6 and cpu._grid_bits(right) == 20
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = cpu.ncc_cost_volume(left, right, 12, window, 1e-2)
+    finally:
+        numba.set_num_threads(threads)
+    got = cpu.ncc_cost_volume(left, right, 12, window, 1e-2)
+    assert np.array_equal(one.view(np.uint32), got.view(np.uint32))
+    want = ref.ref_ncc_cost_volume(left, right, 12, window, 1e-2)
+    np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
+
 def test_ncc_cost_volume_with_flat_regions_matches_reference():
     rng = np.random.default_rng(3)
     left, right = random_images(rng, (13, 11))
@@ -136,6 +174,23 @@ def test_rbf_weights_match_reference(shape):
     np.testing.assert_allclose(got.sum(axis=2), 1.0, atol=1e-6)
     assert (got[0, :, :3] == 0).all() and (got[:, 0, ::3] == 0).all()  # outside the image
 
+
+
+def test_streaming_stores_write_as_assignments():
+    # rbf_weights writes its output with cpu._store_nt (non-temporal stores, then a
+    # fence): the same values, cast to the array's dtype, as plain assignments.
+    @numba.njit
+    def fill(out, vals):
+        flat = out.reshape(-1)
+        for i in range(vals.size):
+            cpu._store_nt(flat, np.uint64(i), vals[i])
+        cpu._store_fence()
+
+    vals = np.random.default_rng(5).standard_normal(3 * 13) * 1e3
+    for dtype in (np.float32, np.float64):
+        out = np.zeros((3, 13), dtype)
+        fill(out, vals)
+        np.testing.assert_array_equal(out.reshape(-1).view(np.uint8), vals.astype(dtype).view(np.uint8))
 
 @pytest.mark.parametrize("scale", [4, 16, 64])
 def test_rbf_weights_of_coarse_pyramid_levels_equal_the_computed_kernel(scale):
