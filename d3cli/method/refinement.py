@@ -321,9 +321,9 @@ def smooth_disparity(
     step = max(float(sigma), (hi - lo) / (_MAX_RANGE_LEVELS - 1))
     n_levels = int(np.floor((hi - lo) / step)) + 2
     # NumPy float32 arithmetic with Python floats: the scalars act as float32
-    k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
+    k0, t, used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
     levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
     values = np.array([lo + int(k) * step for k in levels], np.float64).astype(np.float32)
-    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, neg_inv2s2, int(radius))
+    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, row_lower, neg_inv2s2, int(radius))
     return finishing.combine_shares(low, up, base, disp)

@@ -430,13 +430,48 @@ def test_smooth_groups_of_any_size_match_the_reference(max_group, radius):
     resid, use, row_lo, row_hi, _ = finishing.residual_and_range(disp, base, valid)
     lo, hi = float(row_lo.min()), float(row_hi.max())
     n_levels = int(np.floor(hi - lo)) + 2
-    k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels)
+    k0, t, used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels)
     levels = np.flatnonzero(used)
     assert len(levels) >= 6
     values = np.array([lo + int(k) * 1.0 for k in levels], np.float64).astype(np.float32)
-    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, np.float32(-0.5), radius,
+    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, row_lower, np.float32(-0.5), radius,
                                       max_group=max_group)
     assert_same_smoothing(finishing.combine_shares(low, up, base, disp), want, f"group {max_group}")
+
+
+@pytest.mark.parametrize("max_group", [1, 2, 4])
+@pytest.mark.parametrize("radius", [2, 7, 15])
+def test_smooth_groups_stop_each_level_after_its_last_row(max_group, radius):
+    """A ramp down the rows: each level is used by a band of rows only, so the levels stop
+    at different rows (the running sums of the rows above still count) and rows outside
+    a level's band store no share; the tasks' groups split the rows unevenly.  The
+    reference's bytes with one thread and with all."""
+    rng = np.random.default_rng(radius)
+    yy, xx = np.mgrid[0:80, 0:45]
+    disp = (2.0 + 0.15 * yy + rng.normal(0, 0.4, yy.shape)).astype(np.float32)
+    disp[30:38, 10:20] += 6.0  # a bump: levels used by a few rows in the middle only
+    disp[rng.random(disp.shape) < 0.05] = np.inf
+    valid = rng.random(disp.shape) < 0.9
+    want = ref_smooth_disparity(disp, valid, radius=radius, sigma=1.0)
+    base = np.zeros(disp.shape, np.float32)
+    resid, use, row_lo, row_hi, _ = finishing.residual_and_range(disp, base, valid)
+    lo, hi = float(row_lo.min()), float(row_hi.max())
+    n_levels = int(np.floor(hi - lo)) + 2
+    k0, t, used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels)
+    levels = np.flatnonzero(used)
+    last = [np.flatnonzero(row_lower[:, k] | (row_lower[:, k - 1] if k else False)).max() for k in levels]
+    assert len(levels) >= 6 and min(last) < 40
+    values = np.array([lo + int(k) * 1.0 for k in levels], np.float64).astype(np.float32)
+    before = numba.get_num_threads()
+    try:
+        for n in sorted({1, before}):
+            numba.set_num_threads(n)
+            low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, row_lower, np.float32(-0.5),
+                                              radius, max_group=max_group)
+            got = finishing.combine_shares(low, up, base, disp)
+            assert_same_smoothing(got, want, f"group {max_group}, {n} threads")
+    finally:
+        numba.set_num_threads(before)
 
 
 # ----------------------------------------------------------------------------- fused passes of the pipeline
