@@ -26,6 +26,7 @@ third of the arguments.
 
 from __future__ import annotations
 
+import itertools
 import os
 from concurrent.futures import ThreadPoolExecutor
 
@@ -52,9 +53,13 @@ def threads() -> int:
 def run_tasks(func, n_tasks, *args):
     """``func(i, n_tasks, *args)`` for every task i, on the pool; returns when all are done.
 
-    With one thread (or one task) everything runs in the calling thread, and so does task 0
-    of the first call of ``func`` in a process (it compiles or loads the kernel).
-    Exceptions of a task are raised here.
+    The calling thread and ``threads() - 1`` pool threads take the tasks in turn from a
+    shared counter: one submission per helping thread, not one per task, and the calling
+    thread works instead of waiting (issue 10: a call of eight empty tasks on two threads
+    150 -> 50 us; the finishing makes about ten such calls per map).  With one thread (or
+    one task) everything runs in the calling thread, and so does task 0 of the first call
+    of ``func`` in a process (it compiles or loads the kernel) before any other.
+    Exceptions of a task are raised here, once every thread has stopped taking tasks.
     """
     global _POOL, _POOL_KEY
     n = threads()
@@ -79,8 +84,20 @@ def run_tasks(func, n_tasks, *args):
         # a forked worker inherits the pool object but not its threads: make a new one
         _POOL = ThreadPoolExecutor(max_workers=n, thread_name_prefix="d3stereo-finish")
         _POOL_KEY = key
-    for future in [_POOL.submit(func, i, n_tasks, *args) for i in range(start, n_tasks)]:
-        future.result()
+    counter = itertools.count(start)  # next() of a count is atomic (one C call under the GIL)
+
+    def take():
+        for i in counter:
+            if i >= n_tasks:
+                return
+            func(i, n_tasks, *args)
+
+    helpers = [_POOL.submit(take) for _ in range(min(n, n_tasks - start) - 1)]
+    try:
+        take()
+    finally:
+        for future in helpers:
+            future.result()
 
 
 def row_tasks(h: int) -> int:
@@ -1263,59 +1280,6 @@ def shift_plane_f32(a0, b1, b2, margin, shape):
 
 
 @njit(cache=True, nogil=True)
-def _box_residual_task(task, tasks, disp, base, valid, resid, use):
-    h, w = disp.shape
-    has_base = base.shape[0] == h
-    all_valid = valid.shape[0] != h  # no map: every finite pixel
-    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    for y in range(y0, y1):
-        for u in range(w):
-            d = disp[y, u]
-            if np.isfinite(d):
-                resid[y, u] = d - (base[y, u] if has_base else _F32_ZERO)
-                use[y, u] = all_valid or valid[y, u]
-            else:
-                resid[y, u] = _F32_INF
-                use[y, u] = False
-
-
-def box_residual(disp, base, valid):
-    """Residual ``np.where(isfinite(disp), disp - base, inf)`` and ``valid & isfinite(disp)``
-    of the box-range smoothing, one pass; ``base`` None is a zero plane (``disp - 0``),
-    ``valid`` None every finite pixel."""
-    h, w = disp.shape
-    resid = np.empty((h, w), np.float32)
-    use = np.empty((h, w), np.bool_)
-    if base is None:
-        base = np.empty((0, 0), np.float32)
-    if valid is None:
-        valid = np.empty((0, 0), np.bool_)
-    run_tasks(_box_residual_task, row_tasks(h), disp, base, valid, resid, use)
-    return resid, use
-
-
-@njit(cache=True, nogil=True)
-def _box_combine_task(task, tasks, smoothed, base, disp, out):
-    h, w = disp.shape
-    has_base = base.shape[0] == h
-    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    for y in range(y0, y1):
-        for u in range(w):
-            d = disp[y, u]
-            out[y, u] = smoothed[y, u] + (base[y, u] if has_base else _F32_ZERO) if np.isfinite(d) else d
-
-
-def box_combine(smoothed, base, disp):
-    """``np.where(isfinite(disp), smoothed + base, disp)`` (float32), written over
-    ``smoothed`` and returned; ``base`` None is a zero plane (``+ 0`` still applied: it
-    turns -0 into +0 as the NumPy sum did)."""
-    if base is None:
-        base = np.empty((0, 0), np.float32)
-    run_tasks(_box_combine_task, row_tasks(disp.shape[0]), smoothed, base, disp, smoothed)
-    return smoothed
-
-
-@njit(cache=True, nogil=True)
 def _clamp_task(task, tasks, a):
     h, w = a.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
@@ -1337,6 +1301,6 @@ KERNELS = (
     copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _exp_task, _smooth_group_task,
     _combine_task,
     _nearest_columns_task, _fixed_task, _zero_task,
-    _restored_task, _drop_occluded_task, _fixed_finite_task, _drop_marked_task, _plane_task, _box_residual_task,
-    _box_combine_task, _clamp_task, _fill_inside_task, _usable_task,
+    _restored_task, _drop_occluded_task, _fixed_finite_task, _drop_marked_task, _plane_task, _clamp_task,
+    _fill_inside_task, _usable_task,
 )

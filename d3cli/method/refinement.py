@@ -305,12 +305,11 @@ def smooth_disparity(
     if radius <= 0 or disp.size == 0:
         return disp.copy()
     if kernel == "box":
-        # residual, use and the sum back in one pass each (issue 10: nine passes before,
-        # about 1 ms less on KITTI); no plane is a zero plane, still subtracted and added
+        # the residual with its masked copy, then the sums with the plane added back: two
+        # passes (issue 10: nine passes before, then five; see box_smooth_disparity);
+        # no plane is a zero plane, still subtracted and added
         base = None if plane is None else _like(plane, disp, np.float32)
-        resid, use = finishing.box_residual(disp, base, valid)
-        smoothed = range_box.box_range_smooth(resid, use, int(radius), float(sigma))
-        return finishing.box_combine(np.ascontiguousarray(smoothed, dtype=np.float32), base, disp)
+        return range_box.box_smooth_disparity(disp, base, valid, int(radius), float(sigma))
     base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
     if kernel != "gaussian":
         raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
