@@ -320,9 +320,14 @@ def smooth_disparity(
     step = max(float(sigma), (hi - lo) / (_MAX_RANGE_LEVELS - 1))
     n_levels = int(np.floor((hi - lo) / step)) + 2
     # NumPy float32 arithmetic with Python floats: the scalars act as float32
-    k0, t, used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
+    # the shares of each pixel's lower and upper level: every cell is written, by
+    # range_levels (0 where the residual is NaN) or by smooth_groups
+    low = np.empty(disp.shape, np.float32)
+    up = np.empty(disp.shape, np.float32)
+    used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels, low, up)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
     levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
     values = np.array([lo + int(k) * step for k in levels], np.float64).astype(np.float32)
-    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, row_lower, neg_inv2s2, int(radius))
+    finishing.smooth_groups(resid, use, np.float32(lo), np.float32(step), n_levels, levels, values, row_lower,
+                            neg_inv2s2, int(radius), low, up)
     return finishing.combine_shares(low, up, base, disp)

@@ -393,6 +393,26 @@ def test_smooth_disparity_on_a_road_like_map_matches_reference():
     assert_same_smoothing(got, ref_smooth_disparity(disp, valid, radius=15, sigma=1.5, plane=plane))
 
 
+def test_range_levels_flags_rows_and_zeroes_the_shares_of_nan_residuals():
+    """The levels of the reference's clip(floor(pos)) per row; a NaN residual has none
+    (INT32_MIN) and its shares, which no level writes, are set to 0; others untouched."""
+    rng = np.random.default_rng(3)
+    resid = (rng.random((9, 14)) * 6).astype(np.float32)
+    resid[4, 5] = np.nan
+    low = np.full(resid.shape, 7.0, np.float32)
+    up = low.copy()
+    used, row_lower = finishing.range_levels(resid, np.float32(0.5), np.float32(1.5), 5, low, up)
+    with np.errstate(invalid="ignore"):
+        k0 = np.clip(np.floor((resid - np.float32(0.5)) / np.float32(1.5)), 0, 3).astype(np.int32)
+    want = np.zeros((9, 5), bool)
+    for y, u in zip(*np.nonzero(~np.isnan(resid))):
+        want[y, k0[y, u]] = True
+    np.testing.assert_array_equal(row_lower, want)
+    np.testing.assert_array_equal(used, want.any(axis=0) | np.r_[False, want.any(axis=0)[:-1]])
+    assert low[4, 5] == 0 and up[4, 5] == 0
+    assert (np.delete(low.ravel(), 4 * 14 + 5) == 7).all() and (np.delete(up.ravel(), 4 * 14 + 5) == 7).all()
+
+
 @pytest.mark.skipif(not _numpy_exp_is_simd(), reason="NumPy's float32 exp is the C library's here")
 def test_numpy_expf_equals_np_exp_bit_for_bit():
     """All float32 values were checked once (2^32, equal, NaN payloads included); here
@@ -430,12 +450,13 @@ def test_smooth_groups_of_any_size_match_the_reference(max_group, radius):
     resid, use, row_lo, row_hi, _ = finishing.residual_and_range(disp, base, valid)
     lo, hi = float(row_lo.min()), float(row_hi.max())
     n_levels = int(np.floor(hi - lo)) + 2
-    k0, t, used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels)
+    low, up = np.empty(disp.shape, np.float32), np.empty(disp.shape, np.float32)
+    used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels, low, up)
     levels = np.flatnonzero(used)
     assert len(levels) >= 6
     values = np.array([lo + int(k) * 1.0 for k in levels], np.float64).astype(np.float32)
-    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, row_lower, np.float32(-0.5), radius,
-                                      max_group=max_group)
+    finishing.smooth_groups(resid, use, np.float32(lo), np.float32(1.0), n_levels, levels, values, row_lower,
+                            np.float32(-0.5), radius, low, up, max_group=max_group)
     assert_same_smoothing(finishing.combine_shares(low, up, base, disp), want, f"group {max_group}")
 
 
@@ -457,7 +478,8 @@ def test_smooth_groups_stop_each_level_after_its_last_row(max_group, radius):
     resid, use, row_lo, row_hi, _ = finishing.residual_and_range(disp, base, valid)
     lo, hi = float(row_lo.min()), float(row_hi.max())
     n_levels = int(np.floor(hi - lo)) + 2
-    k0, t, used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels)
+    low, up = np.empty(disp.shape, np.float32), np.empty(disp.shape, np.float32)
+    used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels, low, up)
     levels = np.flatnonzero(used)
     last = [np.flatnonzero(row_lower[:, k] | (row_lower[:, k - 1] if k else False)).max() for k in levels]
     assert len(levels) >= 6 and min(last) < 40
@@ -466,9 +488,10 @@ def test_smooth_groups_stop_each_level_after_its_last_row(max_group, radius):
     try:
         for n in sorted({1, before}):
             numba.set_num_threads(n)
-            low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, row_lower, np.float32(-0.5),
-                                              radius, max_group=max_group)
-            got = finishing.combine_shares(low, up, base, disp)
+            shares = low.copy(), up.copy()  # each run fills copies of the same maps
+            finishing.smooth_groups(resid, use, np.float32(lo), np.float32(1.0), n_levels, levels, values,
+                                    row_lower, np.float32(-0.5), radius, *shares, max_group=max_group)
+            got = finishing.combine_shares(*shares, base, disp)
             assert_same_smoothing(got, want, f"group {max_group}, {n} threads")
     finally:
         numba.set_num_threads(before)
