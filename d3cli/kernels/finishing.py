@@ -1256,23 +1256,22 @@ def smooth_groups(resid, use, lo, step, n_levels, level_ids, level_values, row_l
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _combine_task(task, tasks, low, up, base, disp, out):
+def _combine_task(task, tasks, low, up, base, disp, non_negative, out):
     h, w = low.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
         for u in range(w):
             d = disp[y, u]
-            if np.isfinite(d):
-                out[y, u] = ((_F32_ZERO + low[y, u]) + up[y, u]) + base[y, u]
-            else:
-                out[y, u] = d
+            x = ((_F32_ZERO + low[y, u]) + up[y, u]) + base[y, u] if np.isfinite(d) else d
+            out[y, u] = _F32_ZERO if (non_negative and x < _F32_ZERO) else x
 
 
-def combine_shares(low, up, base, disp):
+def combine_shares(low, up, base, disp, non_negative=False):
     """The smoothed map: ``(0 + low) + up + base`` where ``disp`` is finite (the blend's
     float32 sum started at zero, lower share first), else ``disp``; float32 (H, W),
-    written over ``low`` (no new map, no fresh pages) and returned."""
-    run_tasks(_combine_task, row_tasks(disp.shape[0]), low, up, base, disp, low)
+    written over ``low`` (no new map, no fresh pages) and returned.  ``non_negative``:
+    then :func:`clamp_negative` of it, in the same pass."""
+    run_tasks(_combine_task, row_tasks(disp.shape[0]), low, up, base, disp, bool(non_negative), low)
     return low
 
 

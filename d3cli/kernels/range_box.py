@@ -55,7 +55,7 @@ def _residual_task(task, tasks, disp, base, valid, resid, masked):
 
 
 @njit(cache=True, nogil=True)
-def _smooth_task(task, tasks, resid, masked, radius, threshold, base, disp, out):
+def _smooth_task(task, tasks, resid, masked, radius, threshold, base, disp, non_negative, out):
     h, w = resid.shape
     combine = disp.shape[0] == h
     has_base = base.shape[0] == h
@@ -93,7 +93,8 @@ def _smooth_task(task, tasks, resid, masked, radius, threshold, base, disp, out)
             if combine:
                 d = disp[v, u]
                 # the residual's sum back (+ 0 without a plane: -0 becomes +0 as in NumPy)
-                out[v, u] = smoothed + (base[v, u] if has_base else _F32_ZERO) if np.isfinite(d) else d
+                x = smoothed + (base[v, u] if has_base else _F32_ZERO) if np.isfinite(d) else d
+                out[v, u] = _F32_ZERO if (non_negative and x < _F32_ZERO) else x
             else:
                 out[v, u] = smoothed
 
@@ -127,11 +128,11 @@ def box_range_smooth(resid, use, radius, threshold):
     run_tasks(_masked_task, row_tasks(h), resid, use, masked)
     out = np.empty((h, w), np.float32)
     none = np.empty((0, 0), np.float32)
-    run_tasks(_smooth_task, row_tasks(h), resid, masked, int(radius), float(threshold), none, none, out)
+    run_tasks(_smooth_task, row_tasks(h), resid, masked, int(radius), float(threshold), none, none, False, out)
     return out
 
 
-def box_smooth_disparity(disp, base, valid, radius, threshold):
+def box_smooth_disparity(disp, base, valid, radius, threshold, non_negative=False):
     """The box range-kernel smoothing of a disparity map in two passes (issue 10).
 
     ``resid = np.where(isfinite(disp), disp - base, inf)``, ``use = valid & isfinite(disp)``,
@@ -140,7 +141,8 @@ def box_smooth_disparity(disp, base, valid, radius, threshold):
     back turns -0 into +0 as the NumPy sum did), ``valid`` None every finite pixel.  The
     residual pass writes the NaN-masked map the sums read, and the sums' pass adds the
     plane back: two passes over the map and two calls of the pool instead of five passes
-    and three calls plus two parallel regions.
+    and three calls plus two parallel regions.  ``non_negative``: negative results become
+    0 in the same pass (:func:`d3cli.kernels.finishing.clamp_negative`).
 
     Parameters
     ----------
@@ -149,6 +151,7 @@ def box_smooth_disparity(disp, base, valid, radius, threshold):
     valid : ndarray, bool, (H, W), C-contiguous, or None
     radius : int
     threshold : float
+    non_negative : bool
 
     Returns
     -------
@@ -163,7 +166,8 @@ def box_smooth_disparity(disp, base, valid, radius, threshold):
     masked = np.empty((h, w), np.float32)
     run_tasks(_residual_task, row_tasks(h), disp, base, valid, resid, masked)
     out = np.empty((h, w), np.float32)
-    run_tasks(_smooth_task, row_tasks(h), resid, masked, int(radius), float(threshold), base, disp, out)
+    run_tasks(_smooth_task, row_tasks(h), resid, masked, int(radius), float(threshold), base, disp,
+              bool(non_negative), out)
     return out
 
 

@@ -606,6 +606,26 @@ def test_smoothing_without_a_validity_map_uses_every_finite_pixel(kernel):
         assert_same_bytes(smooth_disparity(disp, None, radius=3, sigma=1.5, plane=p, kernel=kernel), want, kernel)
 
 
+@pytest.mark.parametrize("kernel", ["gaussian", "box"])
+def test_smoothing_non_negative_is_the_clamp_after_it(kernel):
+    """``non_negative`` clamps in the smoothing's last pass: the bytes of clamp_negative
+    after it (a plane below zero, -0, -inf, NaN and holes included)."""
+    rng = np.random.default_rng(21)
+    disp, valid = random_map(rng, (33, 47), spread=3)
+    plane = (rng.random(disp.shape) * 4 - 3).astype(np.float32)
+    disp = (disp - 2.5).astype(np.float32)
+    disp[rng.random(disp.shape) < 0.05] = -0.0
+    disp[rng.random(disp.shape) < 0.03] = -np.inf
+    disp[rng.random(disp.shape) < 0.03] = np.nan
+    for p in (None, plane):
+        plain = smooth_disparity(disp, valid, radius=3, sigma=1.5, plane=p, kernel=kernel)
+        assert (plain < 0).any()
+        got = smooth_disparity(disp, valid, radius=3, sigma=1.5, plane=p, kernel=kernel, non_negative=True)
+        assert_same_bytes(got, finishing.clamp_negative(plain.copy()), kernel)
+    got = smooth_disparity(disp, valid, radius=0, sigma=1.5, kernel=kernel, non_negative=True)
+    assert_same_bytes(got, finishing.clamp_negative(disp.copy()), "radius 0")
+
+
 def test_shift_plane_and_clamp_match_the_numpy_formulation():
     for a0, b1, b2 in ((3.25, 0.0137, -0.00211), (-40.1, 0.1, 0.3), (0.0, 1e-7, -1e-9)):
         model = RoadModel(a0=a0, b1=b1, b2=b2, a1=0.0, theta=0.0, inlier_share=1.0, n_points=0)
