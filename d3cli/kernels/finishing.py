@@ -490,21 +490,31 @@ def _fill_rows_task(task, tasks, disp, valid, filled, row_has):
     h, w = disp.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        # selects, each value loaded before (a load in a select's arm, or an if, is a
-        # branch, mispredicted on scattered holes): issue 10, KITTI/road ~2x
-        right = _F32_INF
-        for u in range(w - 1, -1, -1):  # pass 1: nearest valid value at or right of u
-            x = disp[y, u]
-            right = x if valid[y, u] else right
-            filled[y, u] = right
+        # One pass: the holes of a run between two valid pixels (or a row end, inf) all
+        # take the same value, the smaller of the two, written when the run ends (issue 10,
+        # instead of a right-to-left scan of the whole row and a second pass: 1 thread,
+        # medians of 41: road 1.00 -> 0.69, Middlebury 0.65 -> 0.51, road-full 1.22 ->
+        # 0.74 ms; random holes, half of the map, 4.3 -> 3.6 ms)
+        d_row = disp[y]
+        v_row = valid[y]
+        f_row = filled[y]
         left = _F32_INF
+        start = 0  # the first hole of the current run
         has = False
-        for u in range(w):  # pass 2: nearest to the left, the smaller of the two
-            if valid[y, u]:
-                left = disp[y, u]
+        for u in range(w):
+            x = d_row[u]
+            f_row[u] = x
+            if v_row[u]:
+                if start < u:
+                    fill = _np_minimum(left, x)
+                    for j in range(start, u):
+                        f_row[j] = fill
+                left = x
                 has = True
-            else:
-                filled[y, u] = _np_minimum(left, filled[y, u])
+                start = u + 1
+        fill = _np_minimum(left, _F32_INF)
+        for j in range(start, w):
+            f_row[j] = fill
         row_has[y] = has
 
 

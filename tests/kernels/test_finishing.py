@@ -264,6 +264,20 @@ def test_fill_holes_matches_reference(shape, smooth, inside):
         assert_same_bytes(got, want, f"{shape} {share} smooth={smooth} inside={inside}")
 
 
+def test_fill_rows_runs_ties_and_signed_zeros_match_reference():
+    """Runs of holes at both row ends, single holes, and ties of -0 and +0 between the two
+    sides (np.minimum's choice), filled by whole runs."""
+    rng = np.random.default_rng(8)
+    disp = rng.choice(np.array([-0.0, 0.0, 1.0, 2.0], np.float32), size=(40, 23))
+    valid = rng.random(disp.shape) < 0.45
+    valid[:, :3] = False  # a run at the left end
+    valid[::2, -4:] = False  # and at the right end
+    valid[5] = False  # a row without a valid pixel
+    disp[~valid & (rng.random(disp.shape) < 0.5)] = np.inf
+    got = fill_holes(disp, valid, smooth=False)
+    assert_same_bytes(got, ref_fill_holes(disp, valid, smooth=False), "ties")
+
+
 def test_fill_inside_on_ties_and_signed_zeros_equals_the_insertion_sort():
     """The branch-free sorting network of ``fill_inside`` against the formulation it
     replaced (an insertion sort of the finite values in the order left, right, up, down;
