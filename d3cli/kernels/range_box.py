@@ -63,30 +63,61 @@ def _smooth_task(task, tasks, resid, masked, radius, threshold, base, disp, non_
     # the task's row buffers: per output row the sums and counts of its pixels
     total = np.empty(w, np.float32)
     count = np.empty(w, np.float32)
+    k = 2 * radius + 1
+    lo_in = min(radius, w)
+    hi_in = max(lo_in, w - radius)  # interior columns: every offset of the row inside the map
+    n = hi_in - lo_in
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for v in range(y0, y1):
-        # per row: the (2 radius + 1)^2 offsets outermost, the columns innermost (long,
-        # contiguous, branch-free: vectorised); each pixel sums its offsets in a fixed order
+        # Per source row, the interior columns take three offsets per pass (in order: each
+        # pixel still sums its (2 radius + 1)^2 terms row after row, offset after offset)
+        # and the border columns their offsets inside the row one by one.  Issue 10: one
+        # load and store of a pixel's sums per three offsets instead of per offset: KITTI
+        # smoothing (radius 4), A/B on the pipeline's inputs, 1 thread, CPU time, medians
+        # of 31: 2.98 -> 1.97, 3.01 -> 1.92 ms.
         total[:] = _F32_ZERO
         count[:] = _F32_ZERO
         centre = resid[v]
+        # slices: indices from range(n) are known >= 0, so the loops vectorise
+        ref = centre[lo_in:hi_in]
+        tot = total[lo_in:hi_in]
+        cnt = count[lo_in:hi_in]
         for y in range(max(0, v - radius), min(h - 1, v + radius) + 1):
             row = masked[y]
-            for dx in range(-radius, radius + 1):
-                u0 = max(0, -dx)
-                n = min(w, w - dx) - u0
-                if n <= 0:
-                    continue
-                # slices: indices from range(n) are known >= 0, so the loop vectorises
-                src = row[u0 + dx:u0 + dx + n]
-                ref = centre[u0:u0 + n]
-                tot = total[u0:u0 + n]
-                cnt = count[u0:u0 + n]
+            g = 0
+            while g + 3 <= k:
+                s0 = row[lo_in + g - radius:hi_in + g - radius]
+                s1 = row[lo_in + g + 1 - radius:hi_in + g + 1 - radius]
+                s2 = row[lo_in + g + 2 - radius:hi_in + g + 2 - radius]
                 for i in range(n):
-                    rq = src[i]
-                    inside = abs(rq - ref[i]) <= thr
-                    tot[i] += rq if inside else _F32_ZERO
-                    cnt[i] += _F32_ONE if inside else _F32_ZERO
+                    r = ref[i]
+                    q0 = s0[i]
+                    q1 = s1[i]
+                    q2 = s2[i]
+                    in0 = abs(q0 - r) <= thr
+                    in1 = abs(q1 - r) <= thr
+                    in2 = abs(q2 - r) <= thr
+                    tot[i] = ((tot[i] + (q0 if in0 else _F32_ZERO)) + (q1 if in1 else _F32_ZERO)) + (
+                        q2 if in2 else _F32_ZERO)
+                    cnt[i] = ((cnt[i] + (_F32_ONE if in0 else _F32_ZERO)) + (_F32_ONE if in1 else _F32_ZERO)) + (
+                        _F32_ONE if in2 else _F32_ZERO)
+                g += 3
+            while g < k:
+                s0 = row[lo_in + g - radius:hi_in + g - radius]
+                for i in range(n):
+                    q0 = s0[i]
+                    in0 = abs(q0 - ref[i]) <= thr
+                    tot[i] += q0 if in0 else _F32_ZERO
+                    cnt[i] += _F32_ONE if in0 else _F32_ZERO
+                g += 1
+            for j in range(w - n):  # the border columns
+                u = j if j < lo_in else hi_in + (j - lo_in)
+                r = centre[u]
+                for dx in range(max(-radius, -u), min(radius, w - 1 - u) + 1):
+                    q = row[u + dx]
+                    inside = abs(q - r) <= thr
+                    total[u] += q if inside else _F32_ZERO
+                    count[u] += _F32_ONE if inside else _F32_ZERO
         for u in range(w):
             rp = centre[u]
             smoothed = rp if (not np.isfinite(rp) or count[u] == _F32_ZERO) else total[u] / count[u]
