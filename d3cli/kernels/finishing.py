@@ -8,9 +8,9 @@ docstrings say what each step means.
 Every kernel gives exactly the values of the NumPy/OpenCV formulation it replaced (kept
 as the reference in ``tests/kernels/test_finishing.py``): the same float32/float64
 operations in the same order, bit for bit.  The kernels release the GIL (``nogil``) and
-run as tasks over blocks of rows (or one task per range level) on a pool of numba's
-thread count of Python threads (:func:`run_tasks`); tasks write disjoint cells, so the
-results do not depend on the thread count.  A thread pool, not ``prange``: OpenMP's
+run as tasks over blocks of rows (or groups of range levels) on the calling thread and a
+pool, numba's thread count of threads in all (:func:`run_tasks`); tasks write disjoint
+cells, so the results do not depend on the thread count.  A thread pool, not ``prange``: OpenMP's
 spin-waiting made the parallel kernels slower than one thread whenever the 2-core test
 machine was shared (smoothing of the road pair: 128 ms CPU with two threads against
 54 ms with one, at a load of 6); idle pool threads block instead of spinning.
