@@ -553,14 +553,16 @@ def test_drop_speckles_matches_the_speckle_filter_and_the_masking(shape, max_siz
         disp, valid = random_map(rng, shape, valid_share=share, spread=6)
         disp = np.where(rng.random(shape) < 0.5, np.round(disp), disp).astype(np.float32)  # plateaus
         valid |= ~np.isfinite(disp) & (rng.random(shape) < 0.3)  # valid but inf/NaN: never a speckle
-        for max_diff in (0.5, 2.0):
+        for max_diff, in_place in ((0.5, True), (2.0, True), (2.0, False)):
             want_valid, want_out, share_want = ref_drop_speckles(disp, valid, max_size=max_size, max_diff=max_diff)
             got_valid = valid.copy()
             src = disp.copy()
-            count, got_out = drop_speckles(src, got_valid, max_size=max_size, max_diff=max_diff, out=src)
+            count, got_out = drop_speckles(src, got_valid, max_size=max_size, max_diff=max_diff,
+                                           out=src if in_place else None)
             np.testing.assert_array_equal(got_valid, want_valid)
             assert_same_bytes(got_out, want_out, f"{shape} {share} {max_diff}")
-            assert count / disp.size == share_want and got_out is src
+            assert count / disp.size == share_want and (got_out is src) == in_place
+            assert_same_bytes(src, disp if not in_place else want_out, "the input map")
 
 
 @pytest.mark.parametrize("narrow_dtype", [np.int32, np.float32, np.float64])
