@@ -331,11 +331,11 @@ def smooth_disparity(
     lo, hi = float(row_lo.min()), float(row_hi.max())
     step = max(float(sigma), (hi - lo) / (_MAX_RANGE_LEVELS - 1))
     n_levels = int(np.floor((hi - lo) / step)) + 2
-    # NumPy float32 arithmetic with Python floats: the scalars act as float32
     # the shares of each pixel's lower and upper level: every cell is written, by
     # range_levels (0 where the residual is NaN) or by smooth_groups
     low = np.empty(disp.shape, np.float32)
     up = np.empty(disp.shape, np.float32)
+    # NumPy float32 arithmetic with Python floats: the scalars act as float32
     used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels, low, up)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
     levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
