@@ -666,16 +666,21 @@ def _fill_inside_task(task, tasks, disp, valid, occluded, up, down, out):
     right = np.empty(w, np.float32)
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
+        d_row = disp[y]
+        v_row = valid[y]
+        # the nearest valid value at or left of u and at or right of j = w - 1 - u: two
+        # independent chains of selects in one loop (issue 10: two scans before; KITTI
+        # _fill_inside_task, 1 thread, CPU time, medians of 41: 0.96 -> 0.61, 0.92 -> 0.59 ms)
         a = _F32_INF
-        for u in range(w - 1, -1, -1):  # nearest valid value at or right of u
-            x = disp[y, u]  # loaded before the select: a load in its arm compiles to a branch
-            a = x if valid[y, u] else a
-            right[u] = a
-        a = _F32_INF
-        for u in range(w):  # at or left of u
-            x = disp[y, u]
-            a = x if valid[y, u] else a
+        b = _F32_INF
+        for u in range(w):
+            j = w - 1 - u
+            x = d_row[u]  # loaded before the select: a load in its arm compiles to a branch
+            z = d_row[j]
+            a = x if v_row[u] else a
+            b = z if v_row[j] else b
             left[u] = a
+            right[j] = b
         for u in range(w):  # no carried value: this loop vectorises
             fill = _inside_value(left[u], right[u], up[y, u], down[y, u], occluded[y, u])
             out[y, u] = disp[y, u] if valid[y, u] else fill
