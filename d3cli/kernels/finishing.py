@@ -8,9 +8,9 @@ docstrings say what each step means.
 Every kernel gives exactly the values of the NumPy/OpenCV formulation it replaced (kept
 as the reference in ``tests/kernels/test_finishing.py``): the same float32/float64
 operations in the same order, bit for bit.  The kernels release the GIL (``nogil``) and
-run as tasks over blocks of rows (or one task per range level) on a pool of numba's
-thread count of Python threads (:func:`run_tasks`); tasks write disjoint cells, so the
-results do not depend on the thread count.  A thread pool, not ``prange``: OpenMP's
+run as tasks over blocks of rows (or groups of range levels) on the calling thread and a
+pool, numba's thread count of threads in all (:func:`run_tasks`); tasks write disjoint
+cells, so the results do not depend on the thread count.  A thread pool, not ``prange``: OpenMP's
 spin-waiting made the parallel kernels slower than one thread whenever the 2-core test
 machine was shared (smoothing of the road pair: 128 ms CPU with two threads against
 54 ms with one, at a load of 6); idle pool threads block instead of spinning.
@@ -26,6 +26,7 @@ third of the arguments.
 
 from __future__ import annotations
 
+import itertools
 import os
 from concurrent.futures import ThreadPoolExecutor
 
@@ -52,9 +53,13 @@ def threads() -> int:
 def run_tasks(func, n_tasks, *args):
     """``func(i, n_tasks, *args)`` for every task i, on the pool; returns when all are done.
 
-    With one thread (or one task) everything runs in the calling thread, and so does task 0
-    of the first call of ``func`` in a process (it compiles or loads the kernel).
-    Exceptions of a task are raised here.
+    The calling thread and ``threads() - 1`` pool threads take the tasks in turn from a
+    shared counter: one submission per helping thread, not one per task, and the calling
+    thread works instead of waiting (issue 10: a call of eight empty tasks on two threads
+    150 -> 50 us; the finishing makes about ten such calls per map).  With one thread (or
+    one task) everything runs in the calling thread, and so does task 0 of the first call
+    of ``func`` in a process (it compiles or loads the kernel) before any other.
+    Exceptions of a task are raised here, once every thread has stopped taking tasks.
     """
     global _POOL, _POOL_KEY
     n = threads()
@@ -79,8 +84,20 @@ def run_tasks(func, n_tasks, *args):
         # a forked worker inherits the pool object but not its threads: make a new one
         _POOL = ThreadPoolExecutor(max_workers=n, thread_name_prefix="d3stereo-finish")
         _POOL_KEY = key
-    for future in [_POOL.submit(func, i, n_tasks, *args) for i in range(start, n_tasks)]:
-        future.result()
+    counter = itertools.count(start)  # next() of a count is atomic (one C call under the GIL)
+
+    def take():
+        for i in counter:
+            if i >= n_tasks:
+                return
+            func(i, n_tasks, *args)
+
+    helpers = [_POOL.submit(take) for _ in range(min(n, n_tasks - start) - 1)]
+    try:
+        take()
+    finally:
+        for future in helpers:
+            future.result()
 
 
 def row_tasks(h: int) -> int:
@@ -164,34 +181,40 @@ def restored_validity(valid, narrow, restored, hi, masked=None):
 # ----------------------------------------------------------------------------- occlusion tests
 @njit(cache=True, inline="always")
 def _right_column(u, d, w):
-    """Column ``round(u - d)`` clipped to [0, w-1], as NumPy computes it (float64, half to even)."""
+    """Column ``round(u - d)`` clipped to [0, w-1], as NumPy computes it (float64, half to
+    even): 0 where ``u - d`` is NaN, infinite or beyond the int64 range (NumPy's cast gives
+    INT64_MIN there, which the clip maps to 0).  Selects only, so that a loop over a row
+    vectorises."""
     x = np.float64(u) - d
-    if not abs(x) < _INT64_LIMIT:
-        return 0
-    if x <= -0.5:  # rounds to 0 or below
-        return 0
-    if x >= w - 0.5:  # rounds to w - 1 or above
-        return w - 1
+    inside = (x > -0.5) & (x < w - 0.5)  # rounds to 0 .. w-1 (False for NaN)
+    beyond = (x >= w - 0.5) & (abs(x) < _INT64_LIMIT)  # rounds to w - 1 or above
     # np.rint (half to even) of |x| < 2^51: adding and subtracting 1.5 * 2^52 rounds to an
     # integer in the current (nearest-even) mode; measured 25 % faster than np.rint here
-    return np.int64((x + 6755399441055744.0) - 6755399441055744.0)
+    r = np.int64(((x if inside else 0.0) + 6755399441055744.0) - 6755399441055744.0)
+    return r if inside else (w - 1 if beyond else 0)
 
 
 @njit(cache=True, nogil=True)
 def _nearest_claims(disparity, valid, y, row_best, row_target):
-    """The uniqueness test's scatter for row y: ``row_target[u]`` the right column of each
-    valid pixel u, ``row_best[x]`` the largest disparity that claims right column x (-inf
+    """The uniqueness test's scatter for row y: ``row_target[u]`` the right column of every
+    pixel u, ``row_best[x]`` the largest valid disparity that claims right column x (-inf
     where none does; a NaN disparity wins its column); shared by the test alone and by
-    the fused hole-making pass."""
+    the fused hole-making pass.  Returns the number of valid pixels of the row."""
     w = disparity.shape[1]
+    d_row = disparity[y]
+    v_row = valid[y]
+    for u in range(w):  # no branch: vectorised (the scatter below is not)
+        row_target[u] = _right_column(u, np.float64(d_row[u]), w)
     row_best[:] = -np.inf
+    n_valid = 0
     for u in range(w):
-        if valid[y, u]:
-            d = np.float64(disparity[y, u])
-            xr = _right_column(u, d, w)
-            row_target[u] = xr
+        if v_row[u]:
+            n_valid += 1
+            d = np.float64(d_row[u])
+            xr = row_target[u]
             if d > row_best[xr] or d != d:
                 row_best[xr] = d
+    return n_valid
 
 
 @njit(cache=True, nogil=True)
@@ -283,18 +306,42 @@ def _drop_occluded_task(task, tasks, disparity, valid, tolerance, start, best, t
     n = 0
     for y in range(y0, y1):
         # both tests read the row's validity before any of it is dropped
-        _nearest_claims(disparity, valid, y, row_best, row_target)
+        n_valid = _nearest_claims(disparity, valid, y, row_best, row_target)
         b = _first_valid_from(disparity, valid, y, start)
         b_minus_1 = b - _F32_ONE
-        for u in range(w):
-            d32 = disparity[y, u]
-            keep = valid[y, u]
-            occ = keep and (np.float64(d32) < row_best[row_target[u]] - tolerance or (u < b and d32 < b_minus_1))
-            occluded[y, u] = occ
-            keep = keep and not occ
-            valid[y, u] = keep
-            out[y, u] = d32 if keep else _F32_INF
-            n += occ
+        d_row = disparity[y]
+        v_row = valid[y]
+        o_row = out[y]
+        c_row = occluded[y]
+        # Issue 10: the loop by the row's share of holes, 1 thread, A/B on the pipeline's
+        # inputs (with the vectorised right columns), medians of 41: road 2.13 -> 1.86,
+        # KITTI 2.20 -> 1.76, Middlebury 1.39 -> 1.16, road-full 2.79 -> 2.56 ms
+        if 8 * (w - n_valid) > w:
+            # many holes: selects (a branch on validity is mispredicted); every pixel has a
+            # right column, so reading row_best there is safe
+            for u in range(w):
+                d32 = d_row[u]
+                keep = v_row[u]
+                claimed = np.float64(d32) < row_best[row_target[u]] - tolerance
+                occ = keep & (claimed | ((u < b) & (d32 < b_minus_1)))
+                c_row[u] = occ
+                keep = keep & (not occ)
+                v_row[u] = keep
+                o_row[u] = d32 if keep else _F32_INF
+                n += occ
+        else:
+            # few holes: branches (predicted; the vectorised loop above gathers row_best,
+            # slower here)
+            for u in range(w):
+                d32 = d_row[u]
+                keep = v_row[u]
+                occ = keep and (np.float64(d32) < row_best[row_target[u]] - tolerance
+                                or (u < b and d32 < b_minus_1))
+                c_row[u] = occ
+                keep = keep and not occ
+                v_row[u] = keep
+                o_row[u] = d32 if keep else _F32_INF
+                n += occ
     counts[task] = n
 
 
@@ -405,6 +452,7 @@ def fixed_point_16_finite(disp, valid):
 @njit(cache=True, nogil=True)
 def _drop_marked_task(task, tasks, disp, valid, fixed, out, counts):
     h, w = disp.shape
+    in_place = out.shape[0] != h  # no output map: write disp
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     n = 0
     for y in range(y0, y1):
@@ -415,7 +463,14 @@ def _drop_marked_task(task, tasks, disp, valid, fixed, out, counts):
             speck = keep & np.isfinite(d) & (fixed[y, u] == -1)
             keep = keep & (not speck)
             valid[y, u] = keep
-            out[y, u] = d if keep else _F32_INF
+            x = d if keep else _F32_INF
+            # in place through disp itself (no output map): a separate output argument
+            # that is disp failed the vectorised loop's overlap check and the scalar loop
+            # ran (issue 10: KITTI, 1 thread, CPU time, medians of 41: 0.46 -> 0.07 ms)
+            if in_place:
+                disp[y, u] = x
+            else:
+                out[y, u] = x
             n += speck
     counts[task] = n
 
@@ -429,6 +484,8 @@ def drop_marked(disp, valid, fixed, out):
     """
     tasks = row_tasks(disp.shape[0])
     counts = np.zeros(tasks, np.int64)
+    if out is disp:
+        out = np.empty((0, 0), np.float32)
     run_tasks(_drop_marked_task, tasks, disp, valid, fixed, out, counts)
     return int(counts.sum())
 
@@ -473,21 +530,31 @@ def _fill_rows_task(task, tasks, disp, valid, filled, row_has):
     h, w = disp.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        # selects, each value loaded before (a load in a select's arm, or an if, is a
-        # branch, mispredicted on scattered holes): issue 10, KITTI/road ~2x
-        right = _F32_INF
-        for u in range(w - 1, -1, -1):  # pass 1: nearest valid value at or right of u
-            x = disp[y, u]
-            right = x if valid[y, u] else right
-            filled[y, u] = right
+        # One pass: the holes of a run between two valid pixels (or a row end, inf) all
+        # take the same value, the smaller of the two, written when the run ends (issue 10,
+        # instead of a right-to-left scan of the whole row and a second pass: 1 thread,
+        # medians of 41: road 1.00 -> 0.69, Middlebury 0.65 -> 0.51, road-full 1.22 ->
+        # 0.74 ms; random holes, half of the map, 4.3 -> 3.6 ms)
+        d_row = disp[y]
+        v_row = valid[y]
+        f_row = filled[y]
         left = _F32_INF
+        start = 0  # the first hole of the current run
         has = False
-        for u in range(w):  # pass 2: nearest to the left, the smaller of the two
-            if valid[y, u]:
-                left = disp[y, u]
+        for u in range(w):
+            x = d_row[u]
+            f_row[u] = x
+            if v_row[u]:
+                if start < u:
+                    fill = _np_minimum(left, x)
+                    for j in range(start, u):
+                        f_row[j] = fill
+                left = x
                 has = True
-            else:
-                filled[y, u] = _np_minimum(left, filled[y, u])
+                start = u + 1
+        fill = _np_minimum(left, _F32_INF)
+        for j in range(start, w):
+            f_row[j] = fill
         row_has[y] = has
 
 
@@ -599,16 +666,21 @@ def _fill_inside_task(task, tasks, disp, valid, occluded, up, down, out):
     right = np.empty(w, np.float32)
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
+        d_row = disp[y]
+        v_row = valid[y]
+        # the nearest valid value at or left of u and at or right of j = w - 1 - u: two
+        # independent chains of selects in one loop (issue 10: two scans before; KITTI
+        # _fill_inside_task, 1 thread, CPU time, medians of 41: 0.96 -> 0.61, 0.92 -> 0.59 ms)
         a = _F32_INF
-        for u in range(w - 1, -1, -1):  # nearest valid value at or right of u
-            x = disp[y, u]  # loaded before the select: a load in its arm compiles to a branch
-            a = x if valid[y, u] else a
-            right[u] = a
-        a = _F32_INF
-        for u in range(w):  # at or left of u
-            x = disp[y, u]
-            a = x if valid[y, u] else a
+        b = _F32_INF
+        for u in range(w):
+            j = w - 1 - u
+            x = d_row[u]  # loaded before the select: a load in its arm compiles to a branch
+            z = d_row[j]
+            a = x if v_row[u] else a
+            b = z if v_row[j] else b
             left[u] = a
+            right[j] = b
         for u in range(w):  # no carried value: this loop vectorises
             fill = _inside_value(left[u], right[u], up[y, u], down[y, u], occluded[y, u])
             out[y, u] = disp[y, u] if valid[y, u] else fill
@@ -848,36 +920,55 @@ def residual_and_range(disp, base, valid):
     return resid, use, row_lo, row_hi, row_use
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _level_position(r, lo, step, top, top_plus_1):
+    """Lower range level ``k = clip(floor((r - lo) / step), 0, top).astype(int32)`` of a
+    residual (float32 arithmetic; NaN casts to INT32_MIN) and its interpolation weight
+    ``t = pos - k`` (float64 difference rounded to float32, as NumPy promotes it).  Selects
+    only (the cast of a clamped value), so that loops over it vectorise."""
+    pos = (r - lo) / step
+    inside = pos if pos < top_plus_1 else top
+    k = np.int32(inside if pos >= _F32_ZERO else _F32_ZERO)
+    k = k if pos == pos else np.int32(-2147483648)
+    return k, np.float32(np.float64(pos) - np.float64(k))
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def _range_levels_task(task, tasks, resid, lo, step, n_levels, k0, t, row_used):
+def _row_levels(r_row, lo, step, top, top_plus_1, k_row, t_row):
+    """:func:`_level_position` of a row of residuals into ``k_row`` and ``t_row``."""
+    for u in range(r_row.shape[0]):
+        k, t = _level_position(r_row[u], lo, step, top, top_plus_1)
+        k_row[u] = k
+        t_row[u] = t
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _range_levels_task(task, tasks, resid, lo, step, n_levels, low, up, row_used, k_row):
     h, w = resid.shape
     top = np.float32(n_levels - 2)
     top_plus_1 = np.float32(n_levels - 1)
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    k_row = k_row[task]
     for y in range(y0, y1):
         r_row = resid[y]
-        k_row = k0[y]
-        t_row = t[y]
-        # np.clip(np.floor(pos), 0, top).astype(np.int32); NaN casts to INT32_MIN.  Selects
-        # only (the cast of a clamped value), so that the loop vectorises.
         for u in range(w):
-            pos = (r_row[u] - lo) / step
-            inside = pos if pos < top_plus_1 else top
-            k = np.int32(inside if pos >= _F32_ZERO else _F32_ZERO)
-            k = k if pos == pos else np.int32(-2147483648)
-            k_row[u] = k
-            t_row[u] = np.float32(np.float64(pos) - np.float64(k))
+            k_row[u] = _level_position(r_row[u], lo, step, top, top_plus_1)[0]
         flags = row_used[y]
         flags[:] = False
         for u in range(w):
             k = k_row[u]
             if k >= 0:
                 flags[k] = True
+            else:  # NaN residual: no level writes its shares
+                low[y, u] = _F32_ZERO
+                up[y, u] = _F32_ZERO
 
 
-def range_levels(resid, lo, step, n_levels):
-    """Lower range level ``k0`` of every pixel, its interpolation weight ``t`` and which
-    levels some pixel interpolates from.
+def range_levels(resid, lo, step, n_levels, low, up):
+    """Which range levels the pixels interpolate from, per row and in all.
+
+    The pixel's lower level is ``k0 = clip(floor((resid - lo) / step), 0, n_levels - 2)``
+    (float32 arithmetic, :func:`_level_position`), its upper one ``k0 + 1``.
 
     Parameters
     ----------
@@ -885,26 +976,26 @@ def range_levels(resid, lo, step, n_levels):
     lo, step : float32
         Level k sits at ``lo + k step``.
     n_levels : int (>= 2)
+    low, up : ndarray, float32, (H, W)
+        The shares maps :func:`smooth_groups` fills: set to 0 here where the residual is
+        NaN (no level, so no share is written there).
 
     Returns
     -------
-    k0 : ndarray, int32, (H, W)
-        ``clip(floor((resid - lo) / step), 0, n_levels - 2)`` (float32 arithmetic).
-    t : ndarray, float32, (H, W)
-        ``pos - k0`` (float64 difference rounded to float32, as NumPy promotes it).
     used : ndarray, bool, (n_levels,)
         Level k is the lower (k0) or the upper (k0 + 1) level of some pixel.
+    row_lower : ndarray, bool, (H, n_levels)
+        Row y has a pixel whose lower level is k (what :func:`smooth_groups` needs).
     """
     h, w = resid.shape
-    k0 = np.empty((h, w), np.int32)
-    t = np.empty((h, w), np.float32)
     row_used = np.empty((h, n_levels), np.bool_)
-    run_tasks(_range_levels_task, row_tasks(h), resid, np.float32(lo), np.float32(step), int(n_levels),
-              k0, t, row_used)
+    tasks = row_tasks(h)
+    run_tasks(_range_levels_task, tasks, resid, np.float32(lo), np.float32(step), int(n_levels), low, up,
+              row_used, np.empty((tasks, w), np.int32))
     lower = row_used.any(axis=0)
     used = lower.copy()
     used[1:] |= lower[:-1]
-    return k0, t, used
+    return used, row_used
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -992,34 +1083,38 @@ def _running_sums_4(pa, pb, pc, pd, da, db, dc, dd, k):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _group_row_sums(resid, use, y, values, g0, g1, neg_inv2s2, radius, pad, ring, tmp):
-    """Box sums along row y of ``w r`` and ``w`` of levels g0 .. g1-1 (``values[g]``) into
-    the ring slot of row y; level g uses ``pad[g - g0]`` and ``ring[g - g0]``.  The task's
-    buffers are indexed, never sliced: numba types a slice as of unknown layout, and the
-    loops over it stopped vectorising (20.9 against 16.5 ms for the road pair)."""
+def _group_row_sums(resid, use, y, values, g0, active, n_active, neg_inv2s2, radius, pad, ring, tmp):
+    """Box sums along row y of ``w r`` and ``w`` of the task's active levels into the ring
+    slot of row y: level ``g0 + i`` (``values[g0 + i]``) for each ``i = active[j]``,
+    j < n_active, in ``pad[i]`` and ``ring[i]``.  The task's buffers are
+    indexed, never sliced: numba types a slice as of unknown layout, and the loops over it
+    stopped vectorising (20.9 against 16.5 ms for the road pair)."""
     k = 2 * radius + 1
     slot = y % k
-    for g in range(g0, g1):
-        i = g - g0
-        _level_weights(resid, use, y, values[g], neg_inv2s2, radius, pad[i, 0], pad[i, 1], tmp)
+    for j in range(n_active):
+        i = active[j]
+        _level_weights(resid, use, y, values[g0 + i], neg_inv2s2, radius, pad[i, 0], pad[i, 1], tmp)
     if k == 3 or k == 5:
-        for i in range(g1 - g0):
+        for j in range(n_active):
+            i = active[j]
             _direct_sums(pad[i, 0], ring[i, 0, slot], k)
             _direct_sums(pad[i, 1], ring[i, 1, slot], k)
         return
-    ng = g1 - g0
-    i = 0
-    while i + 1 < ng:  # levels in pairs: four chains
-        _running_sums_4(pad[i, 0], pad[i, 1], pad[i + 1, 0], pad[i + 1, 1],
-                        ring[i, 0, slot], ring[i, 1, slot], ring[i + 1, 0, slot], ring[i + 1, 1, slot], k)
-        i += 2
-    if i < ng:
+    j = 0
+    while j + 1 < n_active:  # levels in pairs: four chains
+        i = active[j]
+        m = active[j + 1]
+        _running_sums_4(pad[i, 0], pad[i, 1], pad[m, 0], pad[m, 1],
+                        ring[i, 0, slot], ring[i, 1, slot], ring[m, 0, slot], ring[m, 1, slot], k)
+        j += 2
+    if j < n_active:
+        i = active[j]
         _running_sums_2(pad[i, 0], pad[i, 1], ring[i, 0, slot], ring[i, 1, slot], k)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, bounds, neg_inv2s2, radius,
-                       low, up):
+def _smooth_group_task(task, tasks, resid, use, lo, step, n_levels, level_ids, level_values, bounds, last_row,
+                       row_used, neg_inv2s2, radius, low, up):
     h, w = resid.shape
     g0, g1 = bounds[task], bounds[task + 1]
     ng = g1 - g0
@@ -1035,36 +1130,62 @@ def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, 
     all_sums = np.zeros((ng, 2, w))
     zero = np.zeros(w)
     tmp = np.empty(w, np.float32)
+    k_row = np.empty(w, np.int32)  # the output row's lower levels and weights
+    t_row = np.empty(w, np.float32)
+    top = np.float32(n_levels - 2)
+    top_plus_1 = np.float32(n_levels - 1)
+    active = np.arange(ng)
+    y_end = 0
+    for i in range(ng):
+        y_end = max(y_end, last_row[g0 + i] + 1)
     for j in range(k - 1):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
         y = j - radius
         if 0 <= y < h:
-            _group_row_sums(resid, use, y, level_values, g0, g1, neg_inv2s2, radius, pads, rings, tmp)
-        for g in range(g0, g1):
-            rn = rings[g - g0, 0, y % k] if 0 <= y < h else zero
-            rd = rings[g - g0, 1, y % k] if 0 <= y < h else zero
-            sum_n = all_sums[g - g0, 0]
-            sum_d = all_sums[g - g0, 1]
+            _group_row_sums(resid, use, y, level_values, g0, active, ng, neg_inv2s2, radius, pads, rings,
+                            tmp)
+        for i in range(ng):
+            rn = rings[i, 0, y % k] if 0 <= y < h else zero
+            rd = rings[i, 1, y % k] if 0 <= y < h else zero
+            sum_n = all_sums[i, 0]
+            sum_d = all_sums[i, 1]
             for u in range(w):
                 sum_n[u] += rn[u]
                 sum_d[u] += rd[u]
-    for y in range(h):
+    # A level's running column sums carry their float64 rounding from the top row down (as
+    # cv2.boxFilter's), so every level starts at row 0; it stops after the last row that
+    # interpolates from it, and only rows that do divide and store shares.
+    for y in range(y_end):
+        n_active = 0
+        for i in range(ng):
+            if last_row[g0 + i] >= y:
+                active[n_active] = i
+                n_active += 1
         yp = y + radius  # entering row
         ym = y - radius  # leaving row
         if yp < h:
-            _group_row_sums(resid, use, yp, level_values, g0, g1, neg_inv2s2, radius, pads, rings, tmp)
+            _group_row_sums(resid, use, yp, level_values, g0, active, n_active, neg_inv2s2, radius, pads,
+                            rings, tmp)
         r_row = resid[y]
-        k_row = k0[y]
-        t_row = t[y]
         low_row = low[y]
         up_row = up[y]
-        for g in range(g0, g1):
+        # the levels and weights of the row, once for all the task's levels (no maps: issue
+        # 10, they were written by range_levels and read back per level)
+        _row_levels(r_row, lo, step, top, top_plus_1, k_row, t_row)
+        for j in range(n_active):
+            i = active[j]
+            g = g0 + i
+            pn = rings[i, 0, yp % k] if yp < h else zero
+            pd = rings[i, 1, yp % k] if yp < h else zero
+            mn = rings[i, 0, ym % k] if ym >= 0 else zero
+            md = rings[i, 1, ym % k] if ym >= 0 else zero
+            sum_n = all_sums[i, 0]
+            sum_d = all_sums[i, 1]
+            if not row_used[y, g]:
+                for u in range(w):
+                    sum_n[u] = (sum_n[u] + pn[u]) - mn[u]
+                    sum_d[u] = (sum_d[u] + pd[u]) - md[u]
+                continue
             level = np.int32(level_ids[g])
-            pn = rings[g - g0, 0, yp % k] if yp < h else zero
-            pd = rings[g - g0, 1, yp % k] if yp < h else zero
-            mn = rings[g - g0, 0, ym % k] if ym >= 0 else zero
-            md = rings[g - g0, 1, ym % k] if ym >= 0 else zero
-            sum_n = all_sums[g - g0, 0]
-            sum_d = all_sums[g - g0, 1]
             for u in range(w):
                 s0n = sum_n[u] + pn[u]
                 s0d = sum_d[u] + pd[u]
@@ -1085,15 +1206,36 @@ def _smooth_group_task(task, tasks, resid, use, k0, t, level_ids, level_values, 
                     up_row[u] = t_row[u] * tmp[u]
 
 
-@njit(cache=True, nogil=True)
-def _zero_task(task, tasks, a, b):
-    h = a.shape[0]
-    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    a[y0:y1] = _F32_ZERO
-    b[y0:y1] = _F32_ZERO
+def _balanced_groups(cost, tasks, max_group):
+    """Consecutive groups of levels, at most ``tasks`` groups of at most ``max_group`` levels,
+    whose largest total ``cost`` is the least possible; the bounds of the groups (int64)."""
+    n = cost.shape[0]
+    total = int(cost.sum())
+
+    def cuts(cap):
+        out = [0]
+        acc = 0
+        for g in range(n):
+            c = int(cost[g])
+            if g > out[-1] and (acc + c > cap or g - out[-1] == max_group):
+                out.append(g)
+                acc = 0
+            acc += c
+        out.append(n)
+        return out
+
+    lo, hi = int(cost.max()), total
+    while lo < hi:  # the least capacity that needs no more than ``tasks`` groups
+        mid = (lo + hi) // 2
+        if len(cuts(mid)) - 1 <= tasks:
+            hi = mid
+        else:
+            lo = mid + 1
+    return np.array(cuts(lo), np.int64)
 
 
-def smooth_groups(resid, use, k0, t, level_ids, level_values, neg_inv2s2, radius, max_group=4):
+def smooth_groups(resid, use, lo, step, n_levels, level_ids, level_values, row_lower, neg_inv2s2, radius, low, up,
+                  max_group=4):
     """The box-filtered range levels of the piecewise-linear bilateral filter and each
     pixel's shares of its two levels, all in one pass per group of levels.
 
@@ -1111,62 +1253,83 @@ def smooth_groups(resid, use, k0, t, level_ids, level_values, neg_inv2s2, radius
     of levels were maps, their ``np.exp`` a pass of its own and the estimates maps
     blended in a further pass.
 
+    A level is filtered down to the last row that interpolates from it (its running sums
+    still start at the top: their float64 rounding is the reference's), and only rows
+    that interpolate from it divide and store shares; the groups split these rows evenly
+    between the tasks (issue 10: on the road pair the five levels end at rows 343, 365,
+    673, 719, 719 of 720, and the split was two levels against three; road smoothing, A/B
+    in one process on the pipeline's inputs, medians of 21 on the loaded 2-core machine:
+    2 threads 24.7 -> 13.7 ms, 1 thread 33.4 -> 24.9 ms).  Each task finds the levels and
+    weights of an output row itself (:func:`_level_position`), and ``low``, ``up`` come
+    without a zeroing pass (every pixel with a level gets both its shares written): no
+    level, weight or zeroed maps (road smoothing, one thread, CPU time, medians of 21: 12.6
+    -> 11.5, 12.0 -> 11.3 ms).
+
     Parameters
     ----------
     resid : ndarray, float32, (H, W)
     use : ndarray, bool, (H, W)
-    k0 : ndarray, int32, (H, W)
-    t : ndarray, float32, (H, W)
-        From :func:`range_levels`.
+    lo, step : float32
+        Level k sits at ``lo + k step``.
+    n_levels : int
     level_ids : ndarray, int64, (L,)
         The used levels, increasing.
     level_values : ndarray, float32, (L,)
         Their residual values ``lo + k step``.
+    row_lower : ndarray, bool, (H, n_levels)
+        Whether row y has a pixel whose lower level is k (from :func:`range_levels`).
     neg_inv2s2 : float32
     radius : int (>= 1)
+    low, up : ndarray, float32, (H, W)
+        Receive the shares of each pixel's lower and upper level; the pixels without a
+        level (NaN residual) must hold 0 already (what :func:`range_levels` writes).
     max_group : int
 
     Returns
     -------
     low, up : ndarray, float32, (H, W)
-        The shares of each pixel's lower and upper level (0 where it has none).
     """
     h, w = resid.shape
-    # np.empty and a zeroing pass, not np.zeros: calloc hands out fresh pages for maps this
-    # large (inside compute the smoothing took 2218 first-touch page faults per call of the
-    # road pair with np.zeros, the scratch allocated in the tasks and a new result map;
-    # an A/B of the finish step in one process showed no time difference either way)
-    low = np.empty((h, w), np.float32)
-    up = np.empty((h, w), np.float32)
-    run_tasks(_zero_task, row_tasks(h), low, up)
     n = level_ids.shape[0]
     if n == 0:
         return low, up
+    level_ids = np.ascontiguousarray(level_ids, np.int64)
+    # rows that interpolate from each used level: its lower or its upper level there
+    row_used = row_lower[:, level_ids]
+    below = level_ids > 0
+    row_used[:, below] |= row_lower[:, level_ids[below] - 1]
+    row_used = np.ascontiguousarray(row_used)
+    last_row = (h - 1) - np.argmax(row_used[::-1], axis=0).astype(np.int64)  # each level is used somewhere
+    # the work of a level: its row passes (to radius rows past its last row) and column passes
+    cost = np.minimum(last_row + 1 + int(radius), h) + last_row + 1
     tasks = min(n, max(threads(), -(-n // int(max_group))))
-    bounds = (np.arange(tasks + 1, dtype=np.int64) * n) // tasks
-    run_tasks(_smooth_group_task, tasks, resid, use, k0, t, np.ascontiguousarray(level_ids, np.int64),
-              np.ascontiguousarray(level_values, np.float32), bounds, np.float32(neg_inv2s2), int(radius), low, up)
+    bounds = _balanced_groups(cost, tasks, int(max_group))
+    run_tasks(_smooth_group_task, bounds.shape[0] - 1, resid, use, np.float32(lo), np.float32(step), int(n_levels),
+              level_ids, np.ascontiguousarray(level_values, np.float32), bounds, last_row, row_used,
+              np.float32(neg_inv2s2), int(radius), low, up)
     return low, up
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _combine_task(task, tasks, low, up, base, disp, out):
+def _combine_task(task, tasks, low, up, base, disp, non_negative):
     h, w = low.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
         for u in range(w):
             d = disp[y, u]
-            if np.isfinite(d):
-                out[y, u] = ((_F32_ZERO + low[y, u]) + up[y, u]) + base[y, u]
-            else:
-                out[y, u] = d
+            x = ((_F32_ZERO + low[y, u]) + up[y, u]) + base[y, u] if np.isfinite(d) else d
+            # written over low through low itself: with a separate output argument that is
+            # low, the vectorised loop's runtime overlap check failed and the scalar loop ran
+            # (issue 10: road, 1 thread, CPU time, medians of 41: 0.66 -> 0.25 ms)
+            low[y, u] = _F32_ZERO if (non_negative and x < _F32_ZERO) else x
 
 
-def combine_shares(low, up, base, disp):
+def combine_shares(low, up, base, disp, non_negative=False):
     """The smoothed map: ``(0 + low) + up + base`` where ``disp`` is finite (the blend's
     float32 sum started at zero, lower share first), else ``disp``; float32 (H, W),
-    written over ``low`` (no new map, no fresh pages) and returned."""
-    run_tasks(_combine_task, row_tasks(disp.shape[0]), low, up, base, disp, low)
+    written over ``low`` (no new map, no fresh pages) and returned.  ``non_negative``:
+    then :func:`clamp_negative` of it, in the same pass."""
+    run_tasks(_combine_task, row_tasks(disp.shape[0]), low, up, base, disp, bool(non_negative))
     return low
 
 
@@ -1190,59 +1353,6 @@ def shift_plane_f32(a0, b1, b2, margin, shape):
 
 
 @njit(cache=True, nogil=True)
-def _box_residual_task(task, tasks, disp, base, valid, resid, use):
-    h, w = disp.shape
-    has_base = base.shape[0] == h
-    all_valid = valid.shape[0] != h  # no map: every finite pixel
-    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    for y in range(y0, y1):
-        for u in range(w):
-            d = disp[y, u]
-            if np.isfinite(d):
-                resid[y, u] = d - (base[y, u] if has_base else _F32_ZERO)
-                use[y, u] = all_valid or valid[y, u]
-            else:
-                resid[y, u] = _F32_INF
-                use[y, u] = False
-
-
-def box_residual(disp, base, valid):
-    """Residual ``np.where(isfinite(disp), disp - base, inf)`` and ``valid & isfinite(disp)``
-    of the box-range smoothing, one pass; ``base`` None is a zero plane (``disp - 0``),
-    ``valid`` None every finite pixel."""
-    h, w = disp.shape
-    resid = np.empty((h, w), np.float32)
-    use = np.empty((h, w), np.bool_)
-    if base is None:
-        base = np.empty((0, 0), np.float32)
-    if valid is None:
-        valid = np.empty((0, 0), np.bool_)
-    run_tasks(_box_residual_task, row_tasks(h), disp, base, valid, resid, use)
-    return resid, use
-
-
-@njit(cache=True, nogil=True)
-def _box_combine_task(task, tasks, smoothed, base, disp, out):
-    h, w = disp.shape
-    has_base = base.shape[0] == h
-    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
-    for y in range(y0, y1):
-        for u in range(w):
-            d = disp[y, u]
-            out[y, u] = smoothed[y, u] + (base[y, u] if has_base else _F32_ZERO) if np.isfinite(d) else d
-
-
-def box_combine(smoothed, base, disp):
-    """``np.where(isfinite(disp), smoothed + base, disp)`` (float32), written over
-    ``smoothed`` and returned; ``base`` None is a zero plane (``+ 0`` still applied: it
-    turns -0 into +0 as the NumPy sum did)."""
-    if base is None:
-        base = np.empty((0, 0), np.float32)
-    run_tasks(_box_combine_task, row_tasks(disp.shape[0]), smoothed, base, disp, smoothed)
-    return smoothed
-
-
-@njit(cache=True, nogil=True)
 def _clamp_task(task, tasks, a):
     h, w = a.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
@@ -1263,7 +1373,7 @@ KERNELS = (
     _uniqueness_task, _out_of_view_task, _fill_rows_task,
     copy_nearest_rows, _keep_valid_task, _residual_task, _range_levels_task, _exp_task, _smooth_group_task,
     _combine_task,
-    _nearest_columns_task, _fixed_task, _zero_task,
-    _restored_task, _drop_occluded_task, _fixed_finite_task, _drop_marked_task, _plane_task, _box_residual_task,
-    _box_combine_task, _clamp_task, _fill_inside_task, _usable_task,
+    _nearest_columns_task, _fixed_task,
+    _restored_task, _drop_occluded_task, _fixed_finite_task, _drop_marked_task, _plane_task, _clamp_task,
+    _fill_inside_task, _usable_task,
 )

@@ -435,12 +435,12 @@ class D3Stereo:
             # edge-preserving smoothing of the finished map; the range weight compares
             # residuals from the road plane when there is one (a slanted road is no edge)
             plane = None if road is None else finishing.shift_plane_f32(road.a0, road.b1, road.b2, 0.0, out.shape)
+            # averaging residuals to a plane that dips below zero (far road, sky) can end
+            # a hair below 0; disparities are >= 0 by contract (non_negative: set to 0 in
+            # the smoothing's last pass)
             out = smooth_disparity(out, None, radius=cfg.refine.smooth_radius,  # None: every finite pixel
                                    sigma=cfg.refine.smooth_sigma, plane=plane,
-                                   kernel=cfg.refine.smooth_kernel)
-            # averaging residuals to a plane that dips below zero (far road, sky) can end
-            # a hair below 0; disparities are >= 0 by contract (a new map: in place)
-            finishing.clamp_negative(out)
+                                   kernel=cfg.refine.smooth_kernel, non_negative=True)
         info["decided_share"] = int(np.count_nonzero(valid)) / valid.size
         return np.ascontiguousarray(out, dtype=np.float32), valid
 

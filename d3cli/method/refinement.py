@@ -243,6 +243,12 @@ def fill_holes(
     return filled
 
 
+def _unsmoothed(disp: np.ndarray, non_negative: bool) -> np.ndarray:
+    """A copy of the map, its negative values 0 with ``non_negative``."""
+    out = disp.copy()
+    return finishing.clamp_negative(out) if non_negative else out
+
+
 # The piecewise-linear bilateral filter needs one pair of box filters per range level;
 # beyond this many levels the level spacing grows instead (wide-range maps without a plane).
 _MAX_RANGE_LEVELS = 256
@@ -256,6 +262,7 @@ def smooth_disparity(
     sigma: float,
     plane: np.ndarray | None = None,
     kernel: str = "gaussian",
+    non_negative: bool = False,
 ) -> np.ndarray:
     """Edge-preserving smoothing of a disparity map (addition to step 8, measured).
 
@@ -295,6 +302,11 @@ def smooth_disparity(
         valid residuals in its box that lie within ``sigma`` of its own
         (:func:`d3cli.kernels.range_box.box_range_smooth`, direct sums, no ``exp``): the
         same KITTI accuracy as the Gaussian at radius 4, about ten times faster.
+    non_negative : bool, keyword-only
+        Negative results become 0 (NaN and -0 stay; what ``D3Stereo._finish`` wants:
+        averaging residuals to a plane that dips below zero can end a hair below 0), in
+        the pass that adds the plane back (issue 10: one pass less than
+        :func:`d3cli.kernels.finishing.clamp_negative` after it).
 
     Returns
     -------
@@ -303,27 +315,31 @@ def smooth_disparity(
     disp = _as_map(disparity)
     valid = None if valid is None else _like(valid, disp, bool)
     if radius <= 0 or disp.size == 0:
-        return disp.copy()
+        return _unsmoothed(disp, non_negative)
     if kernel == "box":
-        # residual, use and the sum back in one pass each (issue 10: nine passes before,
-        # about 1 ms less on KITTI); no plane is a zero plane, still subtracted and added
+        # the residual with its masked copy, then the sums with the plane added back: two
+        # passes (issue 10: nine passes before, then five; see box_smooth_disparity);
+        # no plane is a zero plane, still subtracted and added
         base = None if plane is None else _like(plane, disp, np.float32)
-        resid, use = finishing.box_residual(disp, base, valid)
-        smoothed = range_box.box_range_smooth(resid, use, int(radius), float(sigma))
-        return finishing.box_combine(np.ascontiguousarray(smoothed, dtype=np.float32), base, disp)
+        return range_box.box_smooth_disparity(disp, base, valid, int(radius), float(sigma), non_negative)
     base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
     if kernel != "gaussian":
         raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
     resid, use, row_lo, row_hi, row_use = finishing.residual_and_range(disp, base, valid)
     if not row_use.any():
-        return disp.copy()
+        return _unsmoothed(disp, non_negative)
     lo, hi = float(row_lo.min()), float(row_hi.max())
     step = max(float(sigma), (hi - lo) / (_MAX_RANGE_LEVELS - 1))
     n_levels = int(np.floor((hi - lo) / step)) + 2
+    # the shares of each pixel's lower and upper level: every cell is written, by
+    # range_levels (0 where the residual is NaN) or by smooth_groups
+    low = np.empty(disp.shape, np.float32)
+    up = np.empty(disp.shape, np.float32)
     # NumPy float32 arithmetic with Python floats: the scalars act as float32
-    k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels)
+    used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels, low, up)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
     levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
     values = np.array([lo + int(k) * step for k in levels], np.float64).astype(np.float32)
-    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, neg_inv2s2, int(radius))
-    return finishing.combine_shares(low, up, base, disp)
+    finishing.smooth_groups(resid, use, np.float32(lo), np.float32(step), n_levels, levels, values, row_lower,
+                            neg_inv2s2, int(radius), low, up)
+    return finishing.combine_shares(low, up, base, disp, non_negative)

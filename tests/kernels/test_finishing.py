@@ -264,6 +264,20 @@ def test_fill_holes_matches_reference(shape, smooth, inside):
         assert_same_bytes(got, want, f"{shape} {share} smooth={smooth} inside={inside}")
 
 
+def test_fill_rows_runs_ties_and_signed_zeros_match_reference():
+    """Runs of holes at both row ends, single holes, and ties of -0 and +0 between the two
+    sides (np.minimum's choice), filled by whole runs."""
+    rng = np.random.default_rng(8)
+    disp = rng.choice(np.array([-0.0, 0.0, 1.0, 2.0], np.float32), size=(40, 23))
+    valid = rng.random(disp.shape) < 0.45
+    valid[:, :3] = False  # a run at the left end
+    valid[::2, -4:] = False  # and at the right end
+    valid[5] = False  # a row without a valid pixel
+    disp[~valid & (rng.random(disp.shape) < 0.5)] = np.inf
+    got = fill_holes(disp, valid, smooth=False)
+    assert_same_bytes(got, ref_fill_holes(disp, valid, smooth=False), "ties")
+
+
 def test_fill_inside_on_ties_and_signed_zeros_equals_the_insertion_sort():
     """The branch-free sorting network of ``fill_inside`` against the formulation it
     replaced (an insertion sort of the finite values in the order left, right, up, down;
@@ -393,6 +407,26 @@ def test_smooth_disparity_on_a_road_like_map_matches_reference():
     assert_same_smoothing(got, ref_smooth_disparity(disp, valid, radius=15, sigma=1.5, plane=plane))
 
 
+def test_range_levels_flags_rows_and_zeroes_the_shares_of_nan_residuals():
+    """The levels of the reference's clip(floor(pos)) per row; a NaN residual has none
+    (INT32_MIN) and its shares, which no level writes, are set to 0; others untouched."""
+    rng = np.random.default_rng(3)
+    resid = (rng.random((9, 14)) * 6).astype(np.float32)
+    resid[4, 5] = np.nan
+    low = np.full(resid.shape, 7.0, np.float32)
+    up = low.copy()
+    used, row_lower = finishing.range_levels(resid, np.float32(0.5), np.float32(1.5), 5, low, up)
+    with np.errstate(invalid="ignore"):
+        k0 = np.clip(np.floor((resid - np.float32(0.5)) / np.float32(1.5)), 0, 3).astype(np.int32)
+    want = np.zeros((9, 5), bool)
+    for y, u in zip(*np.nonzero(~np.isnan(resid))):
+        want[y, k0[y, u]] = True
+    np.testing.assert_array_equal(row_lower, want)
+    np.testing.assert_array_equal(used, want.any(axis=0) | np.r_[False, want.any(axis=0)[:-1]])
+    assert low[4, 5] == 0 and up[4, 5] == 0
+    assert (np.delete(low.ravel(), 4 * 14 + 5) == 7).all() and (np.delete(up.ravel(), 4 * 14 + 5) == 7).all()
+
+
 @pytest.mark.skipif(not _numpy_exp_is_simd(), reason="NumPy's float32 exp is the C library's here")
 def test_numpy_expf_equals_np_exp_bit_for_bit():
     """All float32 values were checked once (2^32, equal, NaN payloads included); here
@@ -430,13 +464,51 @@ def test_smooth_groups_of_any_size_match_the_reference(max_group, radius):
     resid, use, row_lo, row_hi, _ = finishing.residual_and_range(disp, base, valid)
     lo, hi = float(row_lo.min()), float(row_hi.max())
     n_levels = int(np.floor(hi - lo)) + 2
-    k0, t, used = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels)
+    low, up = np.empty(disp.shape, np.float32), np.empty(disp.shape, np.float32)
+    used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels, low, up)
     levels = np.flatnonzero(used)
     assert len(levels) >= 6
     values = np.array([lo + int(k) * 1.0 for k in levels], np.float64).astype(np.float32)
-    low, up = finishing.smooth_groups(resid, use, k0, t, levels, values, np.float32(-0.5), radius,
-                                      max_group=max_group)
+    finishing.smooth_groups(resid, use, np.float32(lo), np.float32(1.0), n_levels, levels, values, row_lower,
+                            np.float32(-0.5), radius, low, up, max_group=max_group)
     assert_same_smoothing(finishing.combine_shares(low, up, base, disp), want, f"group {max_group}")
+
+
+@pytest.mark.parametrize("max_group", [1, 2, 4])
+@pytest.mark.parametrize("radius", [2, 7, 15])
+def test_smooth_groups_stop_each_level_after_its_last_row(max_group, radius):
+    """A ramp down the rows: each level is used by a band of rows only, so the levels stop
+    at different rows (the running sums of the rows above still count) and rows outside
+    a level's band store no share; the tasks' groups split the rows unevenly.  The
+    reference's bytes with one thread and with all."""
+    rng = np.random.default_rng(radius)
+    yy, xx = np.mgrid[0:80, 0:45]
+    disp = (2.0 + 0.15 * yy + rng.normal(0, 0.4, yy.shape)).astype(np.float32)
+    disp[30:38, 10:20] += 6.0  # a bump: levels used by a few rows in the middle only
+    disp[rng.random(disp.shape) < 0.05] = np.inf
+    valid = rng.random(disp.shape) < 0.9
+    want = ref_smooth_disparity(disp, valid, radius=radius, sigma=1.0)
+    base = np.zeros(disp.shape, np.float32)
+    resid, use, row_lo, row_hi, _ = finishing.residual_and_range(disp, base, valid)
+    lo, hi = float(row_lo.min()), float(row_hi.max())
+    n_levels = int(np.floor(hi - lo)) + 2
+    low, up = np.empty(disp.shape, np.float32), np.empty(disp.shape, np.float32)
+    used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels, low, up)
+    levels = np.flatnonzero(used)
+    last = [np.flatnonzero(row_lower[:, k] | (row_lower[:, k - 1] if k else False)).max() for k in levels]
+    assert len(levels) >= 6 and min(last) < 40
+    values = np.array([lo + int(k) * 1.0 for k in levels], np.float64).astype(np.float32)
+    before = numba.get_num_threads()
+    try:
+        for n in sorted({1, before}):
+            numba.set_num_threads(n)
+            shares = low.copy(), up.copy()  # each run fills copies of the same maps
+            finishing.smooth_groups(resid, use, np.float32(lo), np.float32(1.0), n_levels, levels, values,
+                                    row_lower, np.float32(-0.5), radius, *shares, max_group=max_group)
+            got = finishing.combine_shares(*shares, base, disp)
+            assert_same_smoothing(got, want, f"group {max_group}, {n} threads")
+    finally:
+        numba.set_num_threads(before)
 
 
 # ----------------------------------------------------------------------------- fused passes of the pipeline
@@ -444,7 +516,8 @@ def test_smooth_groups_of_any_size_match_the_reference(max_group, radius):
 @pytest.mark.parametrize("in_place", [False, True])
 def test_drop_occluded_matches_the_two_tests_and_the_masking(shape, in_place):
     rng = np.random.default_rng(hash((shape, in_place, 1)) % 2**32)
-    for share in (0.0, 0.5, 1.0):
+    # (rows with more than 1/8 holes take the kernel's select loop, the others its branches)
+    for share in (0.0, 0.5, 0.9, 1.0):
         for integers in (False, True):
             disp, valid = random_map(rng, shape, valid_share=share, spread=min(shape[1], 8), integers=integers)
             for max_disparity in (0, 1, shape[1] // 2, shape[1] + 2):
@@ -480,14 +553,16 @@ def test_drop_speckles_matches_the_speckle_filter_and_the_masking(shape, max_siz
         disp, valid = random_map(rng, shape, valid_share=share, spread=6)
         disp = np.where(rng.random(shape) < 0.5, np.round(disp), disp).astype(np.float32)  # plateaus
         valid |= ~np.isfinite(disp) & (rng.random(shape) < 0.3)  # valid but inf/NaN: never a speckle
-        for max_diff in (0.5, 2.0):
+        for max_diff, in_place in ((0.5, True), (2.0, True), (2.0, False)):
             want_valid, want_out, share_want = ref_drop_speckles(disp, valid, max_size=max_size, max_diff=max_diff)
             got_valid = valid.copy()
             src = disp.copy()
-            count, got_out = drop_speckles(src, got_valid, max_size=max_size, max_diff=max_diff, out=src)
+            count, got_out = drop_speckles(src, got_valid, max_size=max_size, max_diff=max_diff,
+                                           out=src if in_place else None)
             np.testing.assert_array_equal(got_valid, want_valid)
             assert_same_bytes(got_out, want_out, f"{shape} {share} {max_diff}")
-            assert count / disp.size == share_want and got_out is src
+            assert count / disp.size == share_want and (got_out is src) == in_place
+            assert_same_bytes(src, disp if not in_place else want_out, "the input map")
 
 
 @pytest.mark.parametrize("narrow_dtype", [np.int32, np.float32, np.float64])
@@ -548,6 +623,26 @@ def test_smoothing_without_a_validity_map_uses_every_finite_pixel(kernel):
         assert_same_bytes(smooth_disparity(disp, None, radius=3, sigma=1.5, plane=p, kernel=kernel), want, kernel)
 
 
+@pytest.mark.parametrize("kernel", ["gaussian", "box"])
+def test_smoothing_non_negative_is_the_clamp_after_it(kernel):
+    """``non_negative`` clamps in the smoothing's last pass: the bytes of clamp_negative
+    after it (a plane below zero, -0, -inf, NaN and holes included)."""
+    rng = np.random.default_rng(21)
+    disp, valid = random_map(rng, (33, 47), spread=3)
+    plane = (rng.random(disp.shape) * 4 - 3).astype(np.float32)
+    disp = (disp - 2.5).astype(np.float32)
+    disp[rng.random(disp.shape) < 0.05] = -0.0
+    disp[rng.random(disp.shape) < 0.03] = -np.inf
+    disp[rng.random(disp.shape) < 0.03] = np.nan
+    for p in (None, plane):
+        plain = smooth_disparity(disp, valid, radius=3, sigma=1.5, plane=p, kernel=kernel)
+        assert (plain < 0).any()
+        got = smooth_disparity(disp, valid, radius=3, sigma=1.5, plane=p, kernel=kernel, non_negative=True)
+        assert_same_bytes(got, finishing.clamp_negative(plain.copy()), kernel)
+    got = smooth_disparity(disp, valid, radius=0, sigma=1.5, kernel=kernel, non_negative=True)
+    assert_same_bytes(got, finishing.clamp_negative(disp.copy()), "radius 0")
+
+
 def test_shift_plane_and_clamp_match_the_numpy_formulation():
     for a0, b1, b2 in ((3.25, 0.0137, -0.00211), (-40.1, 0.1, 0.3), (0.0, 1e-7, -1e-9)):
         model = RoadModel(a0=a0, b1=b1, b2=b2, a1=0.0, theta=0.0, inlier_share=1.0, n_points=0)
@@ -577,6 +672,7 @@ def test_kernels_give_the_same_bytes_with_one_thread_and_with_all():
             fill_holes(disp, valid, smooth=True),
             fill_holes(disp, valid, smooth=True, occluded=occluded),
             smooth_disparity(fill_holes(disp, valid), valid, radius=5, sigma=1.5, plane=plane),
+            smooth_disparity(fill_holes(disp, valid), valid, radius=3, sigma=1.5, plane=plane, kernel="box"),
         ]
 
     threads = numba.get_num_threads()
@@ -594,7 +690,7 @@ def test_finishing_kernels_are_cached_and_release_the_gil():
     that importing d3cli.kernels.cpu chose); nogil, so that the pool threads run them
     side by side."""
     assert len(finishing.KERNELS) >= 10
-    for kernel in finishing.KERNELS:
+    for kernel in finishing.KERNELS + range_box.KERNELS:
         assert isinstance(kernel, numba.core.registry.CPUDispatcher), kernel
         assert kernel.targetoptions.get("nogil") is True, kernel.py_func.__name__
         assert type(kernel._cache).__name__ == "FunctionCache", kernel.py_func.__name__
@@ -629,8 +725,7 @@ def test_run_tasks_loads_a_kernel_in_the_calling_thread_before_fanning_out():
         assert calls[0] == (0, True)  # the first call: task 0 here, before any pool thread
         assert sorted(i for i, _ in calls) == list(range(6))
         calls.clear()
-        finishing.run_tasks(task, 6, calls)  # afterwards every task goes to the pool
+        finishing.run_tasks(task, 6, calls)  # afterwards the calling thread and the pool share them
         assert sorted(i for i, _ in calls) == list(range(6))
-        assert not any(main for _, main in calls)
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
