@@ -16,6 +16,7 @@ import numba
 import numpy as np
 from llvmlite import ir
 from numba import njit, prange, types
+from numba.core import cgutils, errors
 from numba.extending import intrinsic
 from numba.cpython.unsafe.numbers import trailing_zeros
 
@@ -1013,22 +1014,78 @@ def _rbf_cells(dst, b, count, q0, q1, q2, q3, q4, q5, q6, q7, q8, wp):
         dst[j] = a
 
 
-#: The widest block of :func:`_rbf_run`; the rings of :func:`_rbf_passes` have this
-#: many cells more, so that a block reading past the last row stays in its ring.
+#: The widest block of :func:`_rbf_run` (six vectors of 16); the rings of
+#: :func:`_rbf_passes` have this many cells more, so that a block reading past the last
+#: row stays in its ring.
 RBF_MAX_LANES = 96
 
 
+@intrinsic
+def _rbf_cells_vec(typingctx, dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wx, wy, wz, vectors):
+    """:func:`_rbf_cells` over the ``16 vectors`` cells from ``b`` (``vectors`` a
+    literal) of up to three pixels of ``band`` cells each: cell ``b + i`` with i < band
+    takes the weights ``wx``, i < 2 band ``wy``, the others ``wz`` (one pixel's
+    weights repeated for fewer pixels).  Same terms in the same order per cell (float32
+    multiply, then add: no fused multiply-add), written as vectors of 16: LLVM's
+    vectoriser leaves the loop that picks a weight per cell scalar."""
+    if not isinstance(vectors, types.IntegerLiteral):
+        raise errors.RequireLiteralValue("vectors")
+    sources = (q0, q1, q2, q3, q4, q5, q6, q7, q8)
+    n_vec = vectors.literal_value
+
+    def codegen(context, builder, signature, args):
+        f32 = ir.FloatType()
+        i64 = ir.IntType(64)
+        vec = ir.VectorType(f32, 16)
+        zeros16 = ir.Constant(ir.VectorType(ir.IntType(32), 16), [0] * 16)
+
+        def at(k, i):  # a pointer to cell i of (1D) array argument k
+            ary = context.make_array(signature.args[k])(context, builder, args[k])
+            return cgutils.get_item_pointer(context, builder, signature.args[k], ary, [i])
+
+        def splat(x, ty):
+            v = builder.insert_element(ir.Constant(ir.VectorType(ty, 16), ir.Undefined), x, ir.IntType(32)(0))
+            return builder.shuffle_vector(v, ir.Constant(ir.VectorType(ty, 16), ir.Undefined), zeros16)
+
+        start = context.cast(builder, args[1], signature.args[1], types.intp)
+        width = context.cast(builder, args[2], signature.args[2], types.int64)
+        ends = (splat(width, i64), splat(builder.mul(width, i64(2)), i64))
+        weights = [[splat(builder.load(at(12 + g, i64(k))), f32) for k in range(9)] for g in range(3)]
+        for v in range(n_vec):
+            lanes = ir.Constant(ir.VectorType(i64, 16), list(range(16 * v, 16 * v + 16)))
+            first = builder.icmp_signed("<", lanes, ends[0])
+            second = builder.icmp_signed("<", lanes, ends[1])
+            j = builder.add(start, i64(16 * v))
+            a = ir.Constant(vec, [0.0] * 16)
+            for k in range(9):
+                w = builder.select(first, weights[0][k], builder.select(second, weights[1][k], weights[2][k]))
+                q = builder.load(builder.bitcast(at(3 + k, j), vec.as_pointer()), align=4)
+                a = builder.fadd(a, builder.fmul(w, q))
+            builder.store(a, builder.bitcast(at(0, j), vec.as_pointer()), align=4)
+        return context.get_dummy_value()
+
+    return types.void(dst, b, band, *sources, wx, wy, wz, vectors), codegen
+
+
 @njit(cache=True, error_model="numpy", inline="always")
-def _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, lanes):
-    """:func:`_rbf_run` with blocks of ``lanes`` cells (a literal: the loop is compiled
-    for it)."""
+def _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, group, vectors):
+    """:func:`_rbf_run` with blocks of ``16 vectors`` cells that hold ``group`` pixels
+    (literals; ``group band <= 16 vectors``)."""
     m = wr.shape[0]
-    p_fast = min(m, (room - lanes) // band + 1) if room >= lanes else 0
+    lanes = 16 * vectors
+    step = group * band
+    n_fast = min(m // group, (room - lanes) // step + 1) if room >= lanes else 0
     b = np.uint64(0)
-    for p in range(p_fast):
-        _rbf_cells(dst, b, lanes, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p])
+    for g in range(n_fast):
+        p = g * group
+        _rbf_cells_vec(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p], wr[p + (group > 1)],
+                       wr[p + group - 1], vectors)
+        b += np.uint64(step)
+    p_fast = min(m, (room - lanes) // band + 1) if room >= lanes else 0
+    for p in range(n_fast * group, p_fast):
+        _rbf_cells_vec(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p], wr[p], wr[p], vectors)
         b += np.uint64(band)
-    for p in range(p_fast, m):
+    for p in range(max(n_fast * group, p_fast), m):
         _rbf_cells(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p])
         b += np.uint64(band)
 
@@ -1039,34 +1096,43 @@ def _rbf_run(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room):
     cell (p, i) is ``dst[p B + i]``, from the sources ``qk[p B + i]``; ``room`` cells
     of ``dst`` (to the end of the row) may be written.
 
-    A loop over the B cells of a pixel vectorises only where it is long: LLVM's vector
-    loop takes 32 float32 at a time and does the rest one by one, and the bands are
-    4-130 wide (PT bands: 4-16), so most cells were done one by one.  Each pixel is
-    computed over a block of a fixed number of cells instead, the band rounded up to
-    16, 24, 32, 40, 48, 64 or 96 (two to twelve vectors, no scalar rest).  The cells of
-    a block past the band are the next pixels' of the row: they are computed afterwards
-    and overwrite them (the sources' cells past the run are read, and dropped).  The
-    pixels at the end of the row, whose block would leave it, and bands over 96 take
-    the plain loop.  Same terms in the same order per cell, so the same values.
-    Measured (issue 10; the passes, 1 thread, level 0 .. coarsest): road 63 -> 50,
-    27 -> 16, 6.8 -> 4.3 ms; KITTI 88 -> 78, 19 -> 17, 4.8 -> 3.2 ms.
+    A loop over the B cells of a pixel vectorises only where it is long, and the bands
+    are 4-130 wide (PT bands: 4-16).  The cells are computed in blocks of one to six
+    vectors of 16 (:func:`_rbf_cells_vec`, 16 .. 96 cells) instead: a block holds one
+    pixel, or two or three pixels of a narrow band (each cell with its own pixel's
+    weights), so that a band of 5 fills 15 lanes of a vector instead of 5.  The cells of
+    a block past its pixels are the next pixels' of the row: they are computed
+    afterwards and overwrite them (the sources' cells past the run are read, and
+    dropped).  The pixels at the end of the row, whose block would leave it, and bands
+    over 96 take the plain loop.  Same terms in the same order per cell, so the same
+    values.  Measured (issue 10; the passes, 1 thread, level 0 .. coarsest): road 63 ->
+    50, 27 -> 16, 6.8 -> 4.3 ms; KITTI 88 -> 78, 19 -> 17, 4.8 -> 3.2 ms (blocks of one
+    pixel, LLVM's vectoriser); on the finest level's volume, A/B in one process, CPU
+    time: road 30.1 -> 20.6 ms, KITTI 46.4 -> 39.6 ms (these vectors and groups).
     """
-    if band <= 16:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 16)
+    if band <= 5:
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 3, 1)
+    elif band <= 8:
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 2, 1)
+    elif band <= 10:
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 3, 2)
+    elif band <= 16:
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 1)
     elif band <= 24:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 24)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 2, 3)
     elif band <= 32:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 32)
-    elif band <= 40:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 40)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 2)
     elif band <= 48:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 48)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 3)
     elif band <= 64:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 64)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 4)
     elif band <= 96:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 96)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 6)
     else:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1 << 62)
+        b = np.uint64(0)
+        for p in range(wr.shape[0]):
+            _rbf_cells(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p])
+            b += np.uint64(band)
 
 
 @njit(cache=True, error_model="numpy")
