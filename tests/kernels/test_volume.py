@@ -194,13 +194,13 @@ def test_blocked_rbf_passes_equal_one_pass_at_a_time(shape, t_max, n_tasks):
     flat = vol.cost
     img = rng.uniform(100, 120, shape).astype(np.float32)  # similar grey levels: the passes mix
     weights = cpu.rbf_weights(img, 1.5, 12.0)
-    row_start, max_band, max_row = cpu._row_layout(vol.index)
+    row_start, _, max_row = cpu._row_layout(vol.index)
     covered = cpu._covered_bands(vol.index)
     one_by_one = flat.copy()
     for _ in range(t_max):
-        cpu._rbf_passes(one_by_one, vol.index, covered, weights, row_start, 1, max_band, max_row, 1)
+        cpu._rbf_passes(one_by_one, vol.index, covered, weights, row_start, 1, max_row, 1)
     blocked = flat.copy()
-    cpu._rbf_passes(blocked, vol.index, covered, weights, row_start, n_tasks, max_band, max_row, t_max)
+    cpu._rbf_passes(blocked, vol.index, covered, weights, row_start, n_tasks, max_row, t_max)
     np.testing.assert_array_equal(blocked, one_by_one)
     assert not np.array_equal(blocked, flat)
 
