@@ -17,6 +17,7 @@ import numba
 import numpy as np
 from llvmlite import ir
 from numba import njit, prange, types
+from numba.core import cgutils, errors
 from numba.extending import intrinsic
 from numba.cpython.unsafe.numbers import trailing_zeros
 
@@ -1157,64 +1158,204 @@ def _rbf_cells(dst, b, count, q0, q1, q2, q3, q4, q5, q6, q7, q8, wp):
         dst[j] = a
 
 
-#: The widest block of :func:`_rbf_run`; the rings of :func:`_rbf_passes` have this
-#: many cells more, so that a block reading past the last row stays in its ring.
+#: The widest block of :func:`_rbf_run` (six vectors of 16); the rings of
+#: :func:`_rbf_passes` have this many cells more, so that a block reading past the last
+#: row stays in its ring.
 RBF_MAX_LANES = 96
 
 
+@intrinsic
+def _rbf_cells_vec(typingctx, dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wx, wy, wz, vectors):
+    """:func:`_rbf_cells` over the ``16 vectors`` cells from ``b`` (``vectors`` a
+    literal) of up to three pixels of ``band`` cells each: cell ``b + i`` with i < band
+    takes the weights ``wx``, i < 2 band ``wy``, the others ``wz`` (one pixel's
+    weights repeated for fewer pixels).  Same terms in the same order per cell (float32
+    multiply, then add: no fused multiply-add), written as vectors of 16: LLVM's
+    vectoriser leaves the loop that picks a weight per cell scalar."""
+    if not isinstance(vectors, types.IntegerLiteral):
+        raise errors.RequireLiteralValue("vectors")
+    sources = (q0, q1, q2, q3, q4, q5, q6, q7, q8)
+    n_vec = vectors.literal_value
+
+    def codegen(context, builder, signature, args):
+        f32 = ir.FloatType()
+        i64 = ir.IntType(64)
+        vec = ir.VectorType(f32, 16)
+        zeros16 = ir.Constant(ir.VectorType(ir.IntType(32), 16), [0] * 16)
+
+        def at(k, i):  # a pointer to cell i of (1D) array argument k
+            ary = context.make_array(signature.args[k])(context, builder, args[k])
+            return cgutils.get_item_pointer(context, builder, signature.args[k], ary, [i])
+
+        def splat(x, ty):
+            v = builder.insert_element(ir.Constant(ir.VectorType(ty, 16), ir.Undefined), x, ir.IntType(32)(0))
+            return builder.shuffle_vector(v, ir.Constant(ir.VectorType(ty, 16), ir.Undefined), zeros16)
+
+        start = context.cast(builder, args[1], signature.args[1], types.intp)
+        width = context.cast(builder, args[2], signature.args[2], types.int64)
+        ends = (splat(width, i64), splat(builder.mul(width, i64(2)), i64))
+        weights = [[splat(builder.load(at(12 + g, i64(k))), f32) for k in range(9)] for g in range(3)]
+        for v in range(n_vec):
+            lanes = ir.Constant(ir.VectorType(i64, 16), list(range(16 * v, 16 * v + 16)))
+            first = builder.icmp_signed("<", lanes, ends[0])
+            second = builder.icmp_signed("<", lanes, ends[1])
+            j = builder.add(start, i64(16 * v))
+            a = ir.Constant(vec, [0.0] * 16)
+            for k in range(9):
+                w = builder.select(first, weights[0][k], builder.select(second, weights[1][k], weights[2][k]))
+                q = builder.load(builder.bitcast(at(3 + k, j), vec.as_pointer()), align=4)
+                a = builder.fadd(a, builder.fmul(w, q))
+            builder.store(a, builder.bitcast(at(0, j), vec.as_pointer()), align=4)
+        return context.get_dummy_value()
+
+    return types.void(dst, b, band, *sources, wx, wy, wz, vectors), codegen
+
+
+@intrinsic
+def _rbf_cells_borrowing(typingctx, out, d0, ring, own, nbr, weights, v, u, c0, band):
+    """Cells ``c0 .. c0 + 15`` (those below ``band``) of a pixel whose neighbours lack
+    some of its disparities: ``out[d0 + c]`` from the 3x3 neighbours' cells, neighbour k
+    at ``ring[nbr[3k] + c]`` for ``nbr[3k + 1] <= c < nbr[3k + 2]``, the pixel's own
+    cell ``ring[own + c]`` elsewhere, weighted by ``weights[v, u, k]`` and added in slot
+    order (float32 multiply, then add).  Masked loads and a masked store: no cell
+    outside the bands is read, none past the pixel written."""
+
+    def codegen(context, builder, signature, args):
+        f32 = ir.FloatType()
+        i64 = ir.IntType(64)
+        vec = ir.VectorType(f32, 16)
+        ivec = ir.VectorType(i64, 16)
+        bits = ir.VectorType(ir.IntType(1), 16)
+        zeros16 = ir.Constant(ir.VectorType(ir.IntType(32), 16), [0] * 16)
+        ring_t, out_t, nbr_t, weights_t = signature.args[2], signature.args[0], signature.args[4], signature.args[5]
+        ring_ary = context.make_array(ring_t)(context, builder, args[2])
+        out_ary = context.make_array(out_t)(context, builder, args[0])
+        nbr_ary = context.make_array(nbr_t)(context, builder, args[4])
+        weights_ary = context.make_array(weights_t)(context, builder, args[5])
+
+        def as_i64(k):
+            return context.cast(builder, args[k], signature.args[k], types.int64)
+
+        def splat(x, ty):
+            s = builder.insert_element(ir.Constant(ir.VectorType(ty, 16), ir.Undefined), x, ir.IntType(32)(0))
+            return builder.shuffle_vector(s, ir.Constant(ir.VectorType(ty, 16), ir.Undefined), zeros16)
+
+        ptr_t = ring_ary.data.type
+        load = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vec, [ptr_t, ir.IntType(32), bits, vec]),
+                                              "llvm.masked.load.v16f32.p0")
+        store = cgutils.get_or_insert_function(builder.module,
+                                               ir.FunctionType(ir.VoidType(), [vec, ptr_t, ir.IntType(32), bits]),
+                                               "llvm.masked.store.v16f32.p0")
+        c0 = as_i64(8)
+        lanes = builder.add(splat(c0, i64), ir.Constant(ivec, list(range(16))))
+        inside = builder.icmp_signed("<", lanes, splat(as_i64(9), i64))
+        zero = ir.Constant(vec, [0.0] * 16)
+        own_cells = builder.call(load, [builder.gep(ring_ary.data, [builder.add(as_i64(3), c0)]), ir.IntType(32)(4),
+                                        inside, zero])
+        a = zero
+        for k in range(9):
+            at, lo_k, hi_k = (builder.load(cgutils.get_item_pointer(context, builder, nbr_t, nbr_ary, [i64(3 * k + j)]))
+                              for j in range(3))
+            theirs = builder.and_(builder.icmp_signed(">=", lanes, splat(lo_k, i64)),
+                                  builder.icmp_signed("<", lanes, splat(hi_k, i64)))
+            cells = builder.call(load, [builder.gep(ring_ary.data, [builder.add(at, c0)]), ir.IntType(32)(4),
+                                        builder.and_(theirs, inside), own_cells])
+            wk = builder.load(cgutils.get_item_pointer(context, builder, weights_t, weights_ary,
+                                                       [as_i64(6), as_i64(7), i64(k)]))
+            a = builder.fadd(a, builder.fmul(splat(wk, f32), cells))
+        builder.call(store, [a, builder.gep(out_ary.data, [builder.add(as_i64(1), c0)]), ir.IntType(32)(4), inside])
+        return context.get_dummy_value()
+
+    return types.void(out, d0, ring, own, nbr, weights, v, u, c0, band), codegen
+
+
 @njit(cache=True, error_model="numpy", inline="always")
-def _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, lanes):
-    """:func:`_rbf_run` with blocks of ``lanes`` cells (a literal: the loop is compiled
-    for it)."""
+def _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, group, vectors):
+    """:func:`_rbf_run` with blocks of ``16 vectors`` cells that hold ``group`` pixels
+    (literals; ``group band <= 16 vectors``)."""
     m = wr.shape[0]
-    p_fast = min(m, (room - lanes) // band + 1) if room >= lanes else 0
+    lanes = 16 * vectors
+    step = group * band
+    n_fast = min(m // group, (room - lanes) // step + 1) if room >= lanes else 0
     b = np.uint64(0)
-    for p in range(p_fast):
-        _rbf_cells(dst, b, lanes, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p])
+    for g in range(n_fast):
+        p = g * group
+        _rbf_cells_vec(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p], wr[p + (group > 1)],
+                       wr[p + group - 1], vectors)
+        b += np.uint64(step)
+    p_fast = min(m, (room - lanes) // band + 1) if room >= lanes else 0
+    for p in range(n_fast * group, p_fast):
+        _rbf_cells_vec(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p], wr[p], wr[p], vectors)
         b += np.uint64(band)
-    for p in range(p_fast, m):
+    for p in range(max(n_fast * group, p_fast), m):
         _rbf_cells(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p])
         b += np.uint64(band)
 
 
 @njit(cache=True, error_model="numpy")
-def _rbf_run(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room):
-    """New values of a run of m pixels with one band B (``wr``: their (m, 9) weights):
-    cell (p, i) is ``dst[p B + i]``, from the sources ``qk[p B + i]``; ``room`` cells
-    of ``dst`` (to the end of the row) may be written.
+def _rbf_run(out, d0, ring, o0, o1, o2, o3, o4, o5, o6, o7, o8, weights, v, u0, u1, band, room):
+    """New values of a run of pixels u0 .. u1 - 1 of row v with one band B: cell (p, i)
+    is ``out[d0 + p B + i]``, from the sources ``ring[ok + p B + i]`` (k = 0 .. 8)
+    weighted by ``weights[v, u0 + p, k]``; ``room`` cells of ``out`` from ``d0`` (to the
+    end of the row) may be written.  It takes the arrays and offsets, not slices of
+    them: a slice passed to a function costs reference counting, and the covered pixels
+    outside the runs call it for one pixel each (KITTI's finest level, 1 thread, CPU
+    time of the passes: 39.6 ms before they did; 49.8 ms with slices, 35.5 ms with
+    offsets).
 
-    A loop over the B cells of a pixel vectorises only where it is long: LLVM's vector
-    loop takes 32 float32 at a time and does the rest one by one, and the bands are
-    4-130 wide (PT bands: 4-16), so most cells were done one by one.  Each pixel is
-    computed over a block of a fixed number of cells instead, the band rounded up to
-    16, 24, 32, 40, 48, 64 or 96 (two to twelve vectors, no scalar rest).  The cells of
-    a block past the band are the next pixels' of the row: they are computed afterwards
-    and overwrite them (the sources' cells past the run are read, and dropped).  The
-    pixels at the end of the row, whose block would leave it, and bands over 96 take
-    the plain loop.  Same terms in the same order per cell, so the same values.
-    Measured (issue 10; the passes, 1 thread, level 0 .. coarsest): road 63 -> 50,
-    27 -> 16, 6.8 -> 4.3 ms; KITTI 88 -> 78, 19 -> 17, 4.8 -> 3.2 ms.
+    A loop over the B cells of a pixel vectorises only where it is long, and the bands
+    are 4-130 wide (PT bands: 4-16).  The cells are computed in blocks of one to six
+    vectors of 16 (:func:`_rbf_cells_vec`, 16 .. 96 cells) instead: a block holds one
+    pixel, or two or three pixels of a narrow band (each cell with its own pixel's
+    weights), so that a band of 5 fills 15 lanes of a vector instead of 5.  The cells of
+    a block past its pixels are the next pixels' of the row: they are computed
+    afterwards and overwrite them (the sources' cells past the run are read, and
+    dropped).  The pixels at the end of the row, whose block would leave it, and bands
+    over 96 take the plain loop.  Same terms in the same order per cell, so the same
+    values.  Measured (issue 10; the passes, 1 thread, level 0 .. coarsest): road 63 ->
+    50, 27 -> 16, 6.8 -> 4.3 ms; KITTI 88 -> 78, 19 -> 17, 4.8 -> 3.2 ms (blocks of one
+    pixel, LLVM's vectoriser); on the finest level's volume, A/B in one process, CPU
+    time: road 30.1 -> 20.6 ms, KITTI 46.4 -> 39.6 ms (these vectors and groups).
+    Each (pixels, vectors) pair below is compiled on its own: a cold first call
+    compiles the passes in 14 s without them, 41 s with nine, 35 s with these eight
+    (bands of 9 and 10, rare, go one pixel a vector).
     """
-    if band <= 16:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 16)
+    dst = out[d0:d0 + room]
+    q0 = ring[o0:o0 + room]
+    q1 = ring[o1:o1 + room]
+    q2 = ring[o2:o2 + room]
+    q3 = ring[o3:o3 + room]
+    q4 = ring[o4:o4 + room]
+    q5 = ring[o5:o5 + room]
+    q6 = ring[o6:o6 + room]
+    q7 = ring[o7:o7 + room]
+    q8 = ring[o8:o8 + room]
+    wr = weights[v, u0:u1]
+    if band <= 5:
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 3, 1)
+    elif band <= 8:
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 2, 1)
+    elif band <= 16:
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 1)
     elif band <= 24:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 24)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 2, 3)
     elif band <= 32:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 32)
-    elif band <= 40:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 40)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 2)
     elif band <= 48:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 48)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 3)
     elif band <= 64:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 64)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 4)
     elif band <= 96:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 96)
+        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 6)
     else:
-        _rbf_blocks(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1 << 62)
+        b = np.uint64(0)
+        for p in range(wr.shape[0]):
+            _rbf_cells(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p])
+            b += np.uint64(band)
 
 
 @njit(cache=True, error_model="numpy")
-def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end, weights, acc):
+def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end, weights):
     """New values of row v, written into ``out`` (cell ``(v, u, d)`` at ``out[shift +
     off + d]``: the volume itself with ``shift`` 0, or a ring row), from the old rows
     v - 1, v, v + 1 (clamped at the image border) held in ``ring`` rows ``ra``, ``rh``,
@@ -1227,11 +1368,13 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
     have weight 0 and read a clamped, in-image cell: adding +0.0 leaves the
     (non-negative) sum unchanged, so the result is the same as skipping them.  Where
     every neighbour's band contains the pixel's (``covered``: all but thin lines along
-    the tile borders) one vectorised loop over nine slices does it.  ``run_end``
-    (:func:`_run_ends`) gives the end of each run of pixels that :func:`_rbf_run` computes
-    together.  Elsewhere, where a
+    the tile borders) :func:`_rbf_run` does it, for a run of pixels at once where their
+    neighbours all have their band (``run_end``, :func:`_run_ends`: the end of each
+    run), else for the pixel alone.  Elsewhere, where a
     neighbour's band lacks a disparity of the pixel's band, the pixel's own cell stands
-    in: the bands are built (:mod:`d3cli.method.band`) so that
+    in (:func:`_rbf_cells_borrowing`, vectors of 16 cells; KITTI's finest level, 1
+    thread, CPU time of the passes: 35.5 -> 30.5 ms against a scalar loop per slot and
+    part of the band, road 20.4 -> 18.0 ms): the bands are built (:mod:`d3cli.method.band`) so that
     this never happens for a cell the later steps read, it only keeps the halo cells
     finite.
     """
@@ -1241,6 +1384,7 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
     sh_a = row_start[ym]
     sh_h = row_start[v]
     sh_b = row_start[yp]
+    nbr = np.empty(27, np.int64)
     u = 0
     while u < w:
         off = index[v, u, 0]
@@ -1261,35 +1405,15 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
             ba = ra + index[ym, u - 1, 0] - sh_a + lo
             bh = rh + index[v, u - 1, 0] - sh_h + lo
             bb = rb + index[yp, u - 1, 0] - sh_b + lo
-            q0 = ring[ba:ba + room]
-            q1 = ring[ba + band:ba + band + room]
-            q2 = ring[ba + 2 * band:ba + 2 * band + room]
-            q3 = ring[bh:bh + room]
-            q4 = ring[bh + band:bh + band + room]
-            q5 = ring[bh + 2 * band:bh + 2 * band + room]
-            q6 = ring[bb:bb + room]
-            q7 = ring[bb + band:bb + band + room]
-            q8 = ring[bb + 2 * band:bb + 2 * band + room]
-            _rbf_run(out[shift + off + lo:shift + off + lo + room], q0, q1, q2, q3, q4, q5, q6, q7, q8,
-                     weights[v, u:u1], band, room)
+            _rbf_run(out, shift + off + lo, ring, ba, ba + band, ba + 2 * band, bh, bh + band, bh + 2 * band, bb,
+                     bb + band, bb + 2 * band, weights, v, u, u1, band, room)
             u = u1
             continue
         o4 = off - sh_h
-        res = out[shift + off + lo:shift + off + hi]
-        w0 = weights[v, u, 0]
-        w1 = weights[v, u, 1]
-        w2 = weights[v, u, 2]
-        w3 = weights[v, u, 3]
-        w4 = weights[v, u, 4]
-        w5 = weights[v, u, 5]
-        w6 = weights[v, u, 6]
-        w7 = weights[v, u, 7]
-        w8 = weights[v, u, 8]
         if covered[v, u]:
+            # one pixel, its neighbours' cells anywhere: a run of one
             xm = max(u - 1, 0)
             xp = min(u + 1, w - 1)
-            # slices: indices from range(n) are known >= 0, so numba adds no
-            # negative-index wraparound and the loop vectorises (4.5x, measured)
             o0 = ra + index[ym, xm, 0] - sh_a + lo
             o1 = ra + index[ym, u, 0] - sh_a + lo
             o2 = ra + index[ym, xp, 0] - sh_a + lo
@@ -1298,56 +1422,24 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
             o6 = rb + index[yp, xm, 0] - sh_b + lo
             o7 = rb + index[yp, u, 0] - sh_b + lo
             o8 = rb + index[yp, xp, 0] - sh_b + lo
-            s0 = ring[o0:o0 + band]
-            s1 = ring[o1:o1 + band]
-            s2 = ring[o2:o2 + band]
-            s3 = ring[o3:o3 + band]
-            s4 = ring[rh + o4 + lo:rh + o4 + hi]
-            s5 = ring[o5:o5 + band]
-            s6 = ring[o6:o6 + band]
-            s7 = ring[o7:o7 + band]
-            s8 = ring[o8:o8 + band]
-            for i in range(band):
-                a = np.float32(0.0)
-                a += w0 * s0[i]
-                a += w1 * s1[i]
-                a += w2 * s2[i]
-                a += w3 * s3[i]
-                a += w4 * s4[i]
-                a += w5 * s5[i]
-                a += w6 * s6[i]
-                a += w7 * s7[i]
-                a += w8 * s8[i]
-                res[i] = a
+            room = row_start[v + 1] - off - lo
+            _rbf_run(out, shift + off + lo, ring, o0, o1, o2, o3, rh + o4 + lo, o5, o6, o7, o8, weights, v, u, u + 1,
+                     band, room)
             u += 1
             continue
-        own = ring[rh + o4 + lo:rh + o4 + hi]
-        total = acc[:band]
-        for i in range(band):
-            total[i] = 0.0
         for k in range(9):
             y = min(max(v + k // 3 - 1, 0), h - 1)
             x = min(max(u + k % 3 - 1, 0), w - 1)
-            wk = weights[v, u, k]
             r = ra if k < 3 else (rh if k < 6 else rb)
-            a0 = min(max(lo, index[y, x, 1]), hi)  # [a0, a1): the disparities the neighbour holds
+            # [a0, a1): the disparities the neighbour holds; its cells at disparities
+            # lo .. hi - 1 would lie from nbr[3k] on
+            a0 = min(max(lo, index[y, x, 1]), hi)
             a1 = max(min(hi, index[y, x, 2]), a0)
-            # slices again (no negative-index checks): own cells, the neighbour's, own cells
-            head = total[:a0 - lo]
-            own_head = own[:a0 - lo]
-            for i in range(a0 - lo):
-                head[i] += wk * own_head[i]
-            q = r + index[y, x, 0] - row_start[y]
-            mid = total[a0 - lo:a1 - lo]
-            theirs = ring[q + a0:q + a1]
-            for i in range(a1 - a0):
-                mid[i] += wk * theirs[i]
-            tail = total[a1 - lo:]
-            own_tail = own[a1 - lo:]
-            for i in range(hi - a1):
-                tail[i] += wk * own_tail[i]
-        for i in range(band):
-            res[i] = total[i]
+            nbr[3 * k] = r + index[y, x, 0] - row_start[y] + lo
+            nbr[3 * k + 1] = a0 - lo
+            nbr[3 * k + 2] = a1 - lo
+        for c0 in range(0, band, 16):
+            _rbf_cells_borrowing(out, shift + off + lo, ring, rh + o4 + lo, nbr, weights, v, u, c0, band)
         u += 1
 
 
@@ -1368,7 +1460,7 @@ def _run_ends(run_end, covered, index):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _rbf_passes(cost, index, covered, weights, row_start, n_tasks, max_band, max_row, t_max):
+def _rbf_passes(cost, index, covered, weights, row_start, n_tasks, max_row, t_max):
     """``t_max`` 3x3 passes of eq. 2, in place, temporally blocked (issue 10 item 4).
 
     The rows are cut into ``n_tasks`` strips, one task each.  A task runs all passes
@@ -1411,7 +1503,6 @@ def _rbf_passes(cost, index, covered, weights, row_start, n_tasks, max_band, max
         # level 0: input rows; level p: rows of pass p; row y of a level at slot y % 3;
         # zeros after the last slot for the blocks of _rbf_run that read past it
         ring = np.zeros(t * 3 * max_row + RBF_MAX_LANES, np.float32)
-        acc = np.empty(max_band, np.float32)
         y_first = max(0, s0 - t)
         y_last = min(h, s1 + t)
         for step in range(y_first - 1, s1 + t - 1):
@@ -1434,11 +1525,10 @@ def _rbf_passes(cost, index, covered, weights, row_start, n_tasks, max_band, max
                 rh = src + y % 3 * max_row
                 rb = src + min(y + 1, h - 1) % 3 * max_row
                 if p == t:
-                    _rbf_row(cost, 0, y, ring, ra, rh, rb, row_start, index, covered, run_end, weights, acc)
+                    _rbf_row(cost, 0, y, ring, ra, rh, rb, row_start, index, covered, run_end, weights)
                 else:
                     dst = p * 3 * max_row + y % 3 * max_row
-                    _rbf_row(ring, dst - row_start[y], y, ring, ra, rh, rb, row_start, index, covered, run_end, weights,
-                             acc)
+                    _rbf_row(ring, dst - row_start[y], y, ring, ra, rh, rb, row_start, index, covered, run_end, weights)
 
 
 #: Strips (tasks) per thread of the blocked RBF: two balance the threads, more repeat
@@ -1471,10 +1561,10 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
     work = flat if overwrite_input else flat.copy()
     if t_max == 0 or work.size == 0:
         return _pack(work, index, n_disp, dense_shape)
-    row_start, max_band, max_row = _row_layout(index)
+    row_start, _, max_row = _row_layout(index)
     covered = _covered_bands(index)
     n_tasks = RBF_TASKS_PER_THREAD * numba.get_num_threads()
-    _rbf_passes(work, index, covered, weights, row_start, n_tasks, max_band, max_row, int(t_max))
+    _rbf_passes(work, index, covered, weights, row_start, n_tasks, max_row, int(t_max))
     return _pack(work, index, n_disp, dense_shape)
 
 

@@ -300,17 +300,20 @@ def rbf_filter_float32(cost, weights, t_max):
     return cur
 
 
-@pytest.mark.parametrize("n_disp", [4, 5, 15, 16, 17, 24, 25, 33, 40, 41, 48, 50, 64, 65, 96, 97, 130])
+@pytest.mark.parametrize("n_disp", [1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 15, 16, 17, 24, 25, 32, 33, 40, 41, 48, 50, 64,
+                                    65, 96, 97, 130])
 def test_rbf_filter_is_exact_for_every_band_width(n_disp):
-    # each band width takes its own block size in _rbf_run (16 ... 96 cells, or the
-    # plain loop), runs as long as a row and as short as a few pixels (the last pixels
-    # of a run take the plain loop): bit-identical to the same sums done in NumPy
+    # each band width takes its own block in _rbf_run (one to six vectors of 16 cells
+    # holding one, two or three pixels, or the plain loop), runs as long as a row and as
+    # short as a few pixels, a multiple of the pixels of a block or not (the last pixels
+    # of a run take blocks of one pixel, or the plain loop at the row's end):
+    # bit-identical to the same sums done in NumPy
     rng = np.random.default_rng(n_disp)
-    for shape in [(9, 40), (5, 4), (4, 3)]:
+    for shape in [(9, 40), (6, 23), (5, 12), (5, 4), (4, 3)]:
         img = rng.uniform(0, 255, shape).astype(np.float32)
         cost = random_volume(rng, *shape, n_disp)
         weights = cpu.rbf_weights(img, 1.5, 12.0)
-        for t_max in (1, 3):
+        for t_max in (1, 2, 4):
             np.testing.assert_array_equal(cpu.rbf_filter(cost, weights, t_max), rbf_filter_float32(cost, weights, t_max))
 
 
