@@ -206,6 +206,26 @@ def test_locally_noisy_band_gives_fewer_false_defects():
     assert false_global >= 5 and false_local <= false_global // 2
 
 
+def test_a_band_far_noisier_than_the_map_is_measured_with_its_own_spread():
+    # The top quarter 5x noisier than the rest (the dark far field of the synth dusk-cement
+    # pairs): the band's heights reach far beyond the map's noise_k sigma.  Its spread must
+    # come from all its heights; with the heights beyond the map's noise_k sigma left out
+    # (before 2026-11-25) it was cut off at that level and 48 blobs of the band's noise
+    # passed as defects over these four maps.
+    disp, cam, _ = pothole_scene(width=640, height=480, f=600.0, depth=0.06, radius=0.3)
+    false = 0
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        noise = cv2.GaussianBlur(rng.normal(0, 1, disp.shape).astype(np.float32), (0, 0), 6)
+        noise *= np.float32(1.0 / noise.std())
+        scale = np.where(np.arange(480)[:, None] < 120, 0.5, 0.1).astype(np.float32)
+        h, valid, plane = _heights(disp + noise * scale, cam, 0.25)
+        found = find_defects(h, valid, cam, plane)
+        assert any(d.kind == "pothole" and d.bbox_px[1] > 120 for d in found)  # the hole itself
+        false += len(found) - 1
+    assert false <= 6  # 3 measured; 48 with the truncated spread
+
+
 def _union_area(holes, threshold=0.01, spacing=1e-3):
     """Plane area deeper than ``threshold`` of flat-floored potholes (x, y, R, D, flat[, aspect]), numerically."""
     xs = np.arange(-0.8, 0.8, spacing)
