@@ -416,7 +416,7 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance, n_thr
     h, w = left.shape
     r = window // 2
     ii_l, ii_ll, ii_r, ii_rr, bits = _integral_images(left, right)
-    max_row = _row_layout(index)[2]  # the most cells of a row
+    max_row = _row_layout(index)[1]  # the most cells of a row
     cost = np.empty(n_cells, np.float32)
     # The rows are cut into blocks, one prange task each; inside a block acc is a running
     # sum along the rows (add the row entering the window, subtract the one leaving it),
@@ -1049,29 +1049,22 @@ def _rbf_normalise_row(out, up, cur, centre, has_up, has_down, stage):
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _row_layout(index):
-    """``(row_start, max_band, max_row)`` of a volume for the filter passes: the first
-    cell of every row (int64 (H + 1,), cells packed row after row), the widest band and
-    the most cells of a row (each at least 1).  One parallel pass over the index instead
-    of five NumPy passes in the calling thread (issue 10)."""
+    """``(row_start, max_row)`` of a volume for the filter passes: the first cell of
+    every row (int64 (H + 1,), cells packed row after row) and the most cells of a row
+    (at least 1).  One parallel pass over the index instead of NumPy passes in the
+    calling thread (issue 10)."""
     h, w, _ = index.shape
     row_start = np.zeros(h + 1, np.int64)
-    row_band = np.zeros(h, np.int64)
     for v in prange(h):
         total = 0
-        widest = 0
         for u in range(w):
-            size = np.int64(index[v, u, 2]) - np.int64(index[v, u, 1])
-            total += size
-            widest = max(widest, size)
+            total += np.int64(index[v, u, 2]) - np.int64(index[v, u, 1])
         row_start[v + 1] = total
-        row_band[v] = widest
-    max_band = 1
     max_row = 1
     for v in range(h):
-        max_band = max(max_band, row_band[v])
         max_row = max(max_row, row_start[v + 1])
         row_start[v + 1] += row_start[v]
-    return row_start, max_band, max_row
+    return row_start, max_row
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -1561,7 +1554,7 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
     work = flat if overwrite_input else flat.copy()
     if t_max == 0 or work.size == 0:
         return _pack(work, index, n_disp, dense_shape)
-    row_start, _, max_row = _row_layout(index)
+    row_start, max_row = _row_layout(index)
     covered = _covered_bands(index)
     n_tasks = RBF_TASKS_PER_THREAD * numba.get_num_threads()
     _rbf_passes(work, index, covered, weights, row_start, n_tasks, max_row, int(t_max))

@@ -194,7 +194,7 @@ def test_blocked_rbf_passes_equal_one_pass_at_a_time(shape, t_max, n_tasks):
     flat = vol.cost
     img = rng.uniform(100, 120, shape).astype(np.float32)  # similar grey levels: the passes mix
     weights = cpu.rbf_weights(img, 1.5, 12.0)
-    row_start, _, max_row = cpu._row_layout(vol.index)
+    row_start, max_row = cpu._row_layout(vol.index)
     covered = cpu._covered_bands(vol.index)
     one_by_one = flat.copy()
     for _ in range(t_max):
@@ -280,3 +280,14 @@ def test_rbf_filter_on_bands_is_exact(n_disp):
         expected = _rbf_pass_reference(expected, vol.index, weights)
         got = cpu.rbf_filter(vol, weights, t_max).cost
         np.testing.assert_array_equal(got.view(np.uint32), expected.view(np.uint32))
+
+
+def test_row_layout_against_numpy():
+    rng = np.random.default_rng(5)
+    lo, hi = random_bands(rng, 7, 11, 9)
+    vol = banded(rng.uniform(0, 1, (7, 11, 9)).astype(np.float32), lo, hi)
+    row_start, max_row = cpu._row_layout(vol.index)
+    sizes = (vol.index[:, :, 2] - vol.index[:, :, 1]).sum(axis=1)
+    np.testing.assert_array_equal(row_start, np.concatenate([[0], np.cumsum(sizes)]))
+    assert max_row == max(1, int(sizes.max()))
+    assert row_start[-1] == vol.cost.size

@@ -255,7 +255,7 @@ def test_road_config_finds_the_road_on_a_dark_steeply_pitched_pair():
 def test_solve_gives_the_bits_of_a_plain_lstsq():
     # _solve hands LAPACK a Fortran-ordered matrix (no copy); the solution must be that
     # of the plain C-ordered weighted least squares, bit for bit.
-    from d3cli.method.perspective import _solve
+    from d3cli.method import perspective
 
     rng = np.random.default_rng(3)
     u, v = rng.uniform(0, 1280, 5000), rng.uniform(0, 720, 5000)
@@ -267,4 +267,4 @@ def test_solve_gives_the_bits_of_a_plain_lstsq():
         if weights is not None:
             a, b = a * np.sqrt(weights)[:, None], d * np.sqrt(weights)
         plain = np.linalg.lstsq(a, b, rcond=None)[0]
-        assert np.array_equal(_solve(u, v, d, weights), plain)
+        assert np.array_equal(perspective._solve(u, v, d, weights), plain)
