@@ -199,22 +199,9 @@ def _integral_pair_into(img, ii, ii2):
 def _grid_bits(img):
     """The least k in :data:`GRID_BITS` such that every value of ``img`` is a multiple of
     2^-k of magnitude <= 255 (6: the first four pyramid levels of an 8-bit image; 20: a
-    warped one), else 64.  Row by row, branch-free within a row (as :func:`_grey_scale`),
-    stopping at the first row that fails."""
+    warped one), else 64 (:func:`_on_grid`)."""
     for k in GRID_BITS:
-        scale = 2.0 ** k
-        ok = True
-        for v in range(img.shape[0]):
-            row = img[v]
-            off = 0
-            for u in range(img.shape[1]):
-                val = np.float64(row[u])
-                g = val * scale
-                off += not ((abs(val) <= 255.0) & (g == np.floor(g)))
-            if off:
-                ok = False
-                break
-        if ok:
+        if _on_grid(img, 2.0 ** k, -255):
             return k
     return 64
 
@@ -816,24 +803,30 @@ def _grey_scale(img):
     means, exact in float32), so a pixel and its neighbour differ by one of 255 s + 1
     values.
     """
-    # Row by row, branch-free within a row (vectorised; issue 10: 0.95 -> 0.25 ms for
-    # the 720p road image), stopping after the first row that fails.
     scale = 1
     for k in range(GREY_STEPS):
-        ok = True
-        for v in range(img.shape[0]):
-            row = img[v]
-            bad = 0
-            for u in range(img.shape[1]):
-                g = np.float64(row[u]) * scale
-                bad += not ((g >= 0) & (g <= 255 * scale) & (g == np.floor(g)))
-            if bad:
-                ok = False
-                break
-        if ok:
+        if _on_grid(img, scale, 0):
             return scale
         scale *= 4
     return 0
+
+
+@njit(cache=True, error_model="numpy")
+def _on_grid(img, scale, least):
+    """Whether every value of ``img`` lies in [least, 255] and is a multiple of 1 / scale.
+
+    Row by row, branch-free within a row (vectorised; issue 10: 0.95 -> 0.25 ms for the
+    720p road image), stopping after the first row that fails.
+    """
+    for v in range(img.shape[0]):
+        row = img[v]
+        bad = 0
+        for u in range(img.shape[1]):
+            g = np.float64(row[u]) * scale
+            bad += not ((g >= least * scale) & (g <= 255 * scale) & (g == np.floor(g)))
+        if bad:
+            return False
+    return True
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -1157,6 +1150,13 @@ def _rbf_cells(dst, b, count, q0, q1, q2, q3, q4, q5, q6, q7, q8, wp):
 RBF_MAX_LANES = 96
 
 
+def _splat16(builder, x, ty):
+    """LLVM IR: a vector of 16 ``ty`` lanes, each ``x`` (for the vector intrinsics below)."""
+    undef = ir.Constant(ir.VectorType(ty, 16), ir.Undefined)
+    first = builder.insert_element(undef, x, ir.IntType(32)(0))
+    return builder.shuffle_vector(first, undef, ir.Constant(ir.VectorType(ir.IntType(32), 16), [0] * 16))
+
+
 @intrinsic
 def _rbf_cells_vec(typingctx, dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wx, wy, wz, vectors):
     """:func:`_rbf_cells` over the ``16 vectors`` cells from ``b`` (``vectors`` a
@@ -1174,20 +1174,15 @@ def _rbf_cells_vec(typingctx, dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, 
         f32 = ir.FloatType()
         i64 = ir.IntType(64)
         vec = ir.VectorType(f32, 16)
-        zeros16 = ir.Constant(ir.VectorType(ir.IntType(32), 16), [0] * 16)
 
         def at(k, i):  # a pointer to cell i of (1D) array argument k
             ary = context.make_array(signature.args[k])(context, builder, args[k])
             return cgutils.get_item_pointer(context, builder, signature.args[k], ary, [i])
 
-        def splat(x, ty):
-            v = builder.insert_element(ir.Constant(ir.VectorType(ty, 16), ir.Undefined), x, ir.IntType(32)(0))
-            return builder.shuffle_vector(v, ir.Constant(ir.VectorType(ty, 16), ir.Undefined), zeros16)
-
         start = context.cast(builder, args[1], signature.args[1], types.intp)
         width = context.cast(builder, args[2], signature.args[2], types.int64)
-        ends = (splat(width, i64), splat(builder.mul(width, i64(2)), i64))
-        weights = [[splat(builder.load(at(12 + g, i64(k))), f32) for k in range(9)] for g in range(3)]
+        ends = (_splat16(builder, width, i64), _splat16(builder, builder.mul(width, i64(2)), i64))
+        weights = [[_splat16(builder, builder.load(at(12 + g, i64(k))), f32) for k in range(9)] for g in range(3)]
         for v in range(n_vec):
             lanes = ir.Constant(ir.VectorType(i64, 16), list(range(16 * v, 16 * v + 16)))
             first = builder.icmp_signed("<", lanes, ends[0])
@@ -1219,7 +1214,6 @@ def _rbf_cells_borrowing(typingctx, out, d0, ring, own, nbr, weights, v, u, c0, 
         vec = ir.VectorType(f32, 16)
         ivec = ir.VectorType(i64, 16)
         bits = ir.VectorType(ir.IntType(1), 16)
-        zeros16 = ir.Constant(ir.VectorType(ir.IntType(32), 16), [0] * 16)
         ring_t, out_t, nbr_t, weights_t = signature.args[2], signature.args[0], signature.args[4], signature.args[5]
         ring_ary = context.make_array(ring_t)(context, builder, args[2])
         out_ary = context.make_array(out_t)(context, builder, args[0])
@@ -1229,10 +1223,6 @@ def _rbf_cells_borrowing(typingctx, out, d0, ring, own, nbr, weights, v, u, c0, 
         def as_i64(k):
             return context.cast(builder, args[k], signature.args[k], types.int64)
 
-        def splat(x, ty):
-            s = builder.insert_element(ir.Constant(ir.VectorType(ty, 16), ir.Undefined), x, ir.IntType(32)(0))
-            return builder.shuffle_vector(s, ir.Constant(ir.VectorType(ty, 16), ir.Undefined), zeros16)
-
         ptr_t = ring_ary.data.type
         load = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vec, [ptr_t, ir.IntType(32), bits, vec]),
                                               "llvm.masked.load.v16f32.p0")
@@ -1240,8 +1230,8 @@ def _rbf_cells_borrowing(typingctx, out, d0, ring, own, nbr, weights, v, u, c0, 
                                                ir.FunctionType(ir.VoidType(), [vec, ptr_t, ir.IntType(32), bits]),
                                                "llvm.masked.store.v16f32.p0")
         c0 = as_i64(8)
-        lanes = builder.add(splat(c0, i64), ir.Constant(ivec, list(range(16))))
-        inside = builder.icmp_signed("<", lanes, splat(as_i64(9), i64))
+        lanes = builder.add(_splat16(builder, c0, i64), ir.Constant(ivec, list(range(16))))
+        inside = builder.icmp_signed("<", lanes, _splat16(builder, as_i64(9), i64))
         zero = ir.Constant(vec, [0.0] * 16)
         own_cells = builder.call(load, [builder.gep(ring_ary.data, [builder.add(as_i64(3), c0)]), ir.IntType(32)(4),
                                         inside, zero])
@@ -1249,13 +1239,13 @@ def _rbf_cells_borrowing(typingctx, out, d0, ring, own, nbr, weights, v, u, c0, 
         for k in range(9):
             at, lo_k, hi_k = (builder.load(cgutils.get_item_pointer(context, builder, nbr_t, nbr_ary, [i64(3 * k + j)]))
                               for j in range(3))
-            theirs = builder.and_(builder.icmp_signed(">=", lanes, splat(lo_k, i64)),
-                                  builder.icmp_signed("<", lanes, splat(hi_k, i64)))
+            theirs = builder.and_(builder.icmp_signed(">=", lanes, _splat16(builder, lo_k, i64)),
+                                  builder.icmp_signed("<", lanes, _splat16(builder, hi_k, i64)))
             cells = builder.call(load, [builder.gep(ring_ary.data, [builder.add(at, c0)]), ir.IntType(32)(4),
                                         builder.and_(theirs, inside), own_cells])
             wk = builder.load(cgutils.get_item_pointer(context, builder, weights_t, weights_ary,
                                                        [as_i64(6), as_i64(7), i64(k)]))
-            a = builder.fadd(a, builder.fmul(splat(wk, f32), cells))
+            a = builder.fadd(a, builder.fmul(_splat16(builder, wk, f32), cells))
         builder.call(store, [a, builder.gep(out_ary.data, [builder.add(as_i64(1), c0)]), ir.IntType(32)(4), inside])
         return context.get_dummy_value()
 
@@ -1689,12 +1679,18 @@ def _seeds(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip
 
 @njit(cache=True, error_model="numpy")
 def _prefetch_band(cost, index, v, u):
-    """Prefetch the cells of pixel (u, v)'s band (one per 64-byte line, and its last)."""
+    """Prefetch the cells of pixel (u, v)'s band."""
     off = index[v, u, 0]
-    hi = off + index[v, u, 2]
-    for c in range(off + index[v, u, 1], hi, 16):  # 16 cells: a 64-byte line
+    _prefetch_cells(cost, off + index[v, u, 1], off + index[v, u, 2] - 1)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _prefetch_cells(cost, c0, c1):
+    """Prefetch the cells ``c0 .. c1`` of ``cost`` (c1 included): one per 64-byte line
+    from c0, and c1's."""
+    for c in range(c0, c1, 16):  # 16 cells: a 64-byte line
         _prefetch(cost, c)
-    _prefetch(cost, hi - 1)
+    _prefetch(cost, c1)
 
 
 @njit(cache=True, error_model="numpy")
@@ -1789,10 +1785,8 @@ def _prefetch_pixels(cost, flat_index, active, i0, i1):
     for i in range(i0, i1):
         k = 3 * active[i]
         off = flat_index[k]
-        hi = off + flat_index[k + 2]
-        for c in range(off + flat_index[k + 1], hi, 16):  # 16 cells: a 64-byte line
-            _prefetch(cost, c)
-        _prefetch(cost, hi)  # the line of the band's end, and the right neighbour's first cells
+        # to the band's end: the line of the right neighbour's first cells too
+        _prefetch_cells(cost, off + flat_index[k + 1], off + flat_index[k + 2])
 
 
 @njit(parallel=True, cache=True, error_model="numpy")

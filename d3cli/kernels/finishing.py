@@ -1321,7 +1321,7 @@ def _combine_task(task, tasks, low, up, base, disp, non_negative):
             # written over low through low itself: with a separate output argument that is
             # low, the vectorised loop's runtime overlap check failed and the scalar loop ran
             # (issue 10: road, 1 thread, CPU time, medians of 41: 0.66 -> 0.25 ms)
-            low[y, u] = _F32_ZERO if (non_negative and x < _F32_ZERO) else x
+            low[y, u] = at_least_zero(x) if non_negative else x
 
 
 def combine_shares(low, up, base, disp, non_negative=False):
@@ -1352,14 +1352,20 @@ def shift_plane_f32(a0, b1, b2, margin, shape):
     return out
 
 
+@njit(cache=True, inline="always")
+def at_least_zero(x):
+    """``x``, or 0 where ``x < 0`` (NaN and -0 stay): the finished map's disparities are
+    >= 0 (:func:`clamp_negative`, and the smoothing passes that clamp as they write)."""
+    return _F32_ZERO if x < _F32_ZERO else x
+
+
 @njit(cache=True, nogil=True)
 def _clamp_task(task, tasks, a):
     h, w = a.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
         for u in range(w):
-            if a[y, u] < _F32_ZERO:
-                a[y, u] = _F32_ZERO
+            a[y, u] = at_least_zero(a[y, u])
 
 
 def clamp_negative(a):

@@ -313,12 +313,8 @@ def build_ops(jit):
     @jit
     def band_min(cost, index, v, u):
         """Least cost of pixel (u, v) over its band, which is not empty."""
-        off = index[v, u, 0]
-        best = cost[UINT(off + index[v, u, 1])]
-        for d in range(index[v, u, 1] + 1, index[v, u, 2]):
-            c = cost[UINT(off + d)]
-            best = c if c < best else best  # a select, not a branch
-        return best
+        lo = index[v, u, 1]
+        return least(cost, UINT(index[v, u, 0] + lo), index[v, u, 2] - lo)
 
     @jit
     def holds_own_disparity(cost, index, v, u, d):

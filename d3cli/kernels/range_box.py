@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .finishing import run_tasks, row_tasks
+from .finishing import at_least_zero, row_tasks, run_tasks
 
 _F32_ZERO = np.float32(0.0)
 _F32_ONE = np.float32(1.0)
@@ -125,7 +125,7 @@ def _smooth_task(task, tasks, resid, masked, radius, threshold, base, disp, non_
                 d = disp[v, u]
                 # the residual's sum back (+ 0 without a plane: -0 becomes +0 as in NumPy)
                 x = smoothed + (base[v, u] if has_base else _F32_ZERO) if np.isfinite(d) else d
-                out[v, u] = _F32_ZERO if (non_negative and x < _F32_ZERO) else x
+                out[v, u] = at_least_zero(x) if non_negative else x
             else:
                 out[v, u] = smoothed
 

@@ -461,17 +461,26 @@ def test_smooth_groups_of_any_size_match_the_reference(max_group, radius):
     disp[rng.random(disp.shape) < 0.05] = np.inf
     want = ref_smooth_disparity(disp, valid, radius=radius, sigma=1.0, plane=plane)
     base = plane
+    grid = _unit_levels(disp, base, valid)
+    assert len(grid["levels"]) >= 6
+    low, up = grid["low"], grid["up"]
+    finishing.smooth_groups(*grid["args"], np.float32(-0.5), radius, low, up, max_group=max_group)
+    assert_same_smoothing(finishing.combine_shares(low, up, base, disp), want, f"group {max_group}")
+
+
+def _unit_levels(disp, base, valid):
+    """The steps before :func:`finishing.smooth_groups` with range levels 1.0 apart: the
+    residuals, the used levels, the share maps (zeroed where no level writes) and the
+    arguments of smooth_groups up to ``neg_inv2s2``."""
     resid, use, row_lo, row_hi, _ = finishing.residual_and_range(disp, base, valid)
     lo, hi = float(row_lo.min()), float(row_hi.max())
     n_levels = int(np.floor(hi - lo)) + 2
     low, up = np.empty(disp.shape, np.float32), np.empty(disp.shape, np.float32)
     used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels, low, up)
     levels = np.flatnonzero(used)
-    assert len(levels) >= 6
     values = np.array([lo + int(k) * 1.0 for k in levels], np.float64).astype(np.float32)
-    finishing.smooth_groups(resid, use, np.float32(lo), np.float32(1.0), n_levels, levels, values, row_lower,
-                            np.float32(-0.5), radius, low, up, max_group=max_group)
-    assert_same_smoothing(finishing.combine_shares(low, up, base, disp), want, f"group {max_group}")
+    args = (resid, use, np.float32(lo), np.float32(1.0), n_levels, levels, values, row_lower)
+    return {"levels": levels, "row_lower": row_lower, "low": low, "up": up, "args": args}
 
 
 @pytest.mark.parametrize("max_group", [1, 2, 4])
@@ -489,22 +498,16 @@ def test_smooth_groups_stop_each_level_after_its_last_row(max_group, radius):
     valid = rng.random(disp.shape) < 0.9
     want = ref_smooth_disparity(disp, valid, radius=radius, sigma=1.0)
     base = np.zeros(disp.shape, np.float32)
-    resid, use, row_lo, row_hi, _ = finishing.residual_and_range(disp, base, valid)
-    lo, hi = float(row_lo.min()), float(row_hi.max())
-    n_levels = int(np.floor(hi - lo)) + 2
-    low, up = np.empty(disp.shape, np.float32), np.empty(disp.shape, np.float32)
-    used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(1.0), n_levels, low, up)
-    levels = np.flatnonzero(used)
+    grid = _unit_levels(disp, base, valid)
+    levels, row_lower, low, up = grid["levels"], grid["row_lower"], grid["low"], grid["up"]
     last = [np.flatnonzero(row_lower[:, k] | (row_lower[:, k - 1] if k else False)).max() for k in levels]
     assert len(levels) >= 6 and min(last) < 40
-    values = np.array([lo + int(k) * 1.0 for k in levels], np.float64).astype(np.float32)
     before = numba.get_num_threads()
     try:
         for n in sorted({1, before}):
             numba.set_num_threads(n)
             shares = low.copy(), up.copy()  # each run fills copies of the same maps
-            finishing.smooth_groups(resid, use, np.float32(lo), np.float32(1.0), n_levels, levels, values,
-                                    row_lower, np.float32(-0.5), radius, *shares, max_group=max_group)
+            finishing.smooth_groups(*grid["args"], np.float32(-0.5), radius, *shares, max_group=max_group)
             got = finishing.combine_shares(*shares, base, disp)
             assert_same_smoothing(got, want, f"group {max_group}, {n} threads")
     finally:
