@@ -104,6 +104,11 @@ class AggregationConfig:
     # sigma_1 of that plain filter; None: sigma_space * kappa_a, the 3x3 kernel of eq. 3
     # stretched to the (2 kappa_a + 1)^2 window (same receptive field as RBF, Fig. 4)
     bf_sigma_space: float | None = None
+    # Issue 16: semi-global smoothing of the full-resolution aggregated cost: the mean of
+    # four path costs (left, right, down, up) with penalties P1 (one-disparity step) and
+    # P2 (larger jump) in cost units ((1 - NCC) / 2); sgm_p2 0: off (the paper's method)
+    sgm_p1: float = 0.0
+    sgm_p2: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -298,6 +303,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "aggregation.sigma_color": (lambda v: v > 0, "a number > 0"),
     "aggregation.kappa_a": (lambda v: 0 <= v <= 32, "an integer in [0, 32]"),
     "aggregation.bf_sigma_space": (lambda v: v is None or v > 0, "a number > 0 (pixels) or null"),
+    "aggregation.sgm_p1": (lambda v: v >= 0, "a number >= 0"),
+    "aggregation.sgm_p2": (lambda v: v >= 0, "a number >= 0 (0: off)"),
     "seeds.pkrn_min": (lambda v: v >= 1.0, "a number >= 1"),
     "seeds.epsilon": (lambda v: v >= 0, "a number >= 0"),
     "seeds.lr_tolerance": (lambda v: v >= 0, "an integer >= 0"),

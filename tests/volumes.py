@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from d3cli.kernels.volume import Volume
 
 #: Diffusion parameters every diffusion test runs: paper defaults, no adversarial update,
 #: the near-optimality gap, a wider neighbourhood, a wider tolerance.
@@ -51,3 +52,13 @@ def sparse_map(rng, shape, n_disp, share=0.15):
     disp = rng.integers(0, n_disp, shape).astype(np.int32)
     disp[rng.random(shape) >= share] = -1
     return disp
+
+
+def banded(cost, lo, hi):
+    """The dense cost as a banded Volume holding only the cells in [lo, hi)."""
+    h, w, n = cost.shape
+    sizes = (hi - lo).ravel()
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    index = np.stack([(starts - lo.ravel()).reshape(h, w), lo, hi], axis=2).astype(np.int32)
+    flat = np.concatenate([cost[v, u, lo[v, u]:hi[v, u]] for v in range(h) for u in range(w)]).astype(np.float32)
+    return Volume(flat, index, n)

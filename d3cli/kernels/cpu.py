@@ -85,6 +85,7 @@ _holds_own_disparity = ops.holds_own_disparity
 _band_min = ops.band_min
 _inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
+_sgm_step = ops.sgm_step
 
 #: Rows per parallel task of the NCC driver (one running window sum per task).
 NCC_BLOCK_ROWS = 32
@@ -2231,6 +2232,61 @@ def _write_patch(out, v, u, o00, o01, o10, o11):
         out[v + 1, u] = o10
         if u + 1 < out.shape[1]:
             out[v + 1, u + 1] = o11
+
+
+# ----------------------------------------------------------------------------- semi-global smoothing (issue 16)
+def sgm_smooth(cost, p1, p2):
+    """Mean of four semi-global path costs (left, right, down, up) of a volume.
+
+    Parameters
+    ----------
+    cost : Volume or ndarray, float32, (H, W, D)
+    p1, p2 : float
+        Penalties of a one-disparity step and of a larger jump, in cost units.
+
+    Returns
+    -------
+    Volume or ndarray
+        Same kind and band layout; each cell ``(L_left + L_right + L_down + L_up) / 4``
+        (:func:`pixel.sgm_step`), summed in that order.
+    """
+    flat, index, n_disp, dense = _unpack(cost)
+    acc = np.zeros_like(flat)
+    p1, p2 = np.float32(p1), np.float32(p2)
+    _sgm_rows(flat, index, n_disp, p1, p2, acc)
+    _sgm_columns(flat, index, n_disp, p1, p2, acc)
+    acc *= np.float32(0.25)
+    return _pack(acc, index, n_disp, dense)
+
+
+@njit(parallel=True, cache=True)
+def _sgm_rows(cost, index, n_disp, p1, p2, acc):
+    h, w = index.shape[0], index.shape[1]
+    for v in prange(h):
+        a = np.full(n_disp, np.inf, np.float32)
+        b = np.empty(n_disp, np.float32)
+        for u in range(w):
+            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            a, b = b, a
+        a[:] = np.inf
+        for u in range(w - 1, -1, -1):
+            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            a, b = b, a
+
+
+@njit(parallel=True, cache=True)
+def _sgm_columns(cost, index, n_disp, p1, p2, acc):
+    h, w = index.shape[0], index.shape[1]
+    for u in prange(w):
+        a = np.full(n_disp, np.inf, np.float32)
+        b = np.empty(n_disp, np.float32)
+        for v in range(h):
+            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            a, b = b, a
+        a[:] = np.inf
+        for v in range(h - 1, -1, -1):
+            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            a, b = b, a
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)

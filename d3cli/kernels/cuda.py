@@ -45,6 +45,7 @@ _diffuse_at = ops.diffuse_at
 _band_min = ops.band_min
 _inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
+_sgm_step = ops.sgm_step
 _pt_shift = ops.pt_shift
 _bilinear_at = ops.bilinear_at
 _pt_restore_at = ops.pt_restore_at
@@ -686,6 +687,69 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
     _inherit_kernel[blocks, threads](flat, index, _dev(coarse), bool(prc), _f64(dfm_pkrn_min), _f64(epsilon),
                                      np.int32(candidates), out)
     return out
+
+
+# ----------------------------------------------------------------------------- semi-global smoothing (issue 16)
+@cuda.jit
+def _sgm_rows_kernel(cost, index, p1, p2, scratch_a, scratch_b, acc):
+    v = cuda.grid(1)
+    if v < index.shape[0]:
+        w = index.shape[1]
+        a, b = scratch_a[v], scratch_b[v]
+        for k in range(a.shape[0]):
+            a[k] = np.inf
+        for u in range(w):
+            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            a, b = b, a
+        for k in range(a.shape[0]):
+            a[k] = np.inf
+        for i in range(w):
+            _sgm_step(cost, index, v, w - 1 - i, a, b, p1, p2, acc)
+            a, b = b, a
+
+
+@cuda.jit
+def _sgm_columns_kernel(cost, index, p1, p2, scratch_a, scratch_b, acc):
+    u = cuda.grid(1)
+    if u < index.shape[1]:
+        h = index.shape[0]
+        a, b = scratch_a[u], scratch_b[u]
+        for k in range(a.shape[0]):
+            a[k] = np.inf
+        for v in range(h):
+            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            a, b = b, a
+        for k in range(a.shape[0]):
+            a[k] = np.inf
+        for i in range(h):
+            _sgm_step(cost, index, h - 1 - i, u, a, b, p1, p2, acc)
+            a, b = b, a
+
+
+@cuda.jit
+def _scale_kernel(flat, factor):
+    i = cuda.grid(1)
+    if i < flat.shape[0]:
+        flat[i] *= factor
+
+
+def sgm_smooth(cost, p1, p2):
+    """Mean of four semi-global path costs of a volume (as the CPU backend's): one thread
+    per row for the row paths, one per column for the column paths."""
+    flat, index, n_disp, dense = _unpack(cost)
+    h, w = int(index.shape[0]), int(index.shape[1])
+    acc = _zeros(flat.shape[0], np.float32)
+    p1, p2 = np.float32(p1), np.float32(p2)
+    n = max(h, w)
+    scratch_a = cuda.device_array((n, n_disp), np.float32)
+    scratch_b = cuda.device_array((n, n_disp), np.float32)
+    blocks, threads = _grid_1d(h)
+    _sgm_rows_kernel[blocks, threads](flat, index, p1, p2, scratch_a, scratch_b, acc)
+    blocks, threads = _grid_1d(w)
+    _sgm_columns_kernel[blocks, threads](flat, index, p1, p2, scratch_a, scratch_b, acc)
+    blocks, threads = _grid_1d(flat.shape[0])
+    _scale_kernel[blocks, threads](acc, np.float32(0.25))
+    return _pack(acc, index, n_disp, dense)
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)

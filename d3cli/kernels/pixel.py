@@ -867,8 +867,46 @@ def build_ops(jit):
             return INF
         return d_prime * (1.0 - b2) + pt_shift(a0, b1, b2, delta, v, u)
 
+    @jit
+    def sgm_step(cost, index, v, u, prev, cur, p1, p2, acc):
+        """One pixel of one semi-global path over a banded volume (issue 16).
+
+        ``L(p, d) = C(p, d) + min(L(q, d), L(q, d -+ 1) + P1, min_k L(q, k) + P2) -
+        min_k L(q, k)`` with ``q`` the previous pixel of the path (``prev``; all inf at
+        the path's start, where ``L = C``), written to ``cur`` (inf outside the pixel's
+        band) and added to ``acc``.  Float32 throughout (``p1``, ``p2`` float32): the
+        same additions in the same order on every backend, no multiplication to fuse.
+        """
+        n = prev.shape[0]
+        pm = prev[0]
+        for d in range(1, n):
+            x = prev[d]
+            pm = x if x < pm else pm
+        for d in range(n):
+            cur[d] = INF
+        off = index[v, u, 0]
+        for d in range(index[v, u, 1], index[v, u, 2]):
+            c = cost[UINT(off + d)]
+            if pm == INF:
+                cur[d] = c
+                acc[UINT(off + d)] += c
+                continue
+            b = prev[d]
+            if d > 0:
+                x = prev[d - 1] + p1
+                b = x if x < b else b
+            if d + 1 < n:
+                x = prev[d + 1] + p1
+                b = x if x < b else b
+            x = pm + p2
+            b = x if x < b else b
+            el = c + (b - pm)
+            cur[d] = el
+            acc[UINT(off + d)] += el
+
     return SimpleNamespace(
         ncc_cost=ncc_cost,
+        sgm_step=sgm_step,
         ncc_window_cost=ncc_window_cost,
         cosine_cost=cosine_cost,
         box_sum=box_sum,

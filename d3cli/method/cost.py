@@ -168,7 +168,9 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
     Returns
     -------
     Volume
-        The aggregated volume with the visible bands (backend arrays).
+        The aggregated volume with the visible bands (backend arrays); at level 0 with
+        ``aggregation.sgm_p2 > 0`` the mean of four semi-global path costs of it
+        (``backend.sgm_smooth``).
     """
     level_dmax = level_max_disparity(max_disparity, level)
     # The cost drivers take the host store index (uploaded once); the result carries it.
@@ -204,4 +206,9 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
         overwrite_input=True,  # the raw NCC volume is not needed afterwards
         bf_sigma_space=agg.bf_sigma_space,
     )
-    return cost if visible is None else Volume(cost.cost, visible, cost.n_disp)
+    cost = cost if visible is None else Volume(cost.cost, visible, cost.n_disp)
+    if level == 0 and agg.sgm_p2 > 0:
+        # Issue 16: semi-global smoothing of the finest aggregated cost, four paths
+        # (measured on ../shared/data, see configs/kitti.yaml and README "Beside the peers")
+        cost = backend.sgm_smooth(cost, agg.sgm_p1, agg.sgm_p2)
+    return cost

@@ -1,0 +1,94 @@
+"""Semi-global smoothing of a cost volume (issue 16) against a NumPy reference.
+
+The reference states the path recursion literally, in float32 with the kernel's order of
+additions (paths left, right, down, up), so the kernel must equal it exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from d3cli.kernels import cpu
+from d3cli.kernels.volume import Volume
+from tests.volumes import banded
+
+F32 = np.float32
+
+
+def reference_paths(cost, lo, hi, p1, p2):
+    """(L_left + L_right + L_down + L_up) / 4 of a dense (H, W, D) cost whose cells
+    outside [lo, hi) of each pixel do not exist (inf in the path costs, 0 in the result)."""
+    h, w, n = cost.shape
+    p1, p2 = F32(p1), F32(p2)
+    acc = np.zeros((h, w, n), F32)
+    inside = (np.arange(n)[None, None, :] >= lo[:, :, None]) & (np.arange(n)[None, None, :] < hi[:, :, None])
+
+    def walk(pixels):
+        prev = np.full(n, np.inf, F32)
+        for v, u in pixels:
+            cur = np.full(n, np.inf, F32)
+            pm = prev.min()
+            for d in np.nonzero(inside[v, u])[0]:
+                c = cost[v, u, d]
+                if pm == np.inf:
+                    el = c
+                else:
+                    b = min(prev[d], prev[d - 1] + p1 if d > 0 else np.inf, prev[d + 1] + p1 if d + 1 < n else np.inf,
+                            pm + p2)
+                    el = F32(c + F32(F32(b) - pm))
+                cur[d] = el
+                acc[v, u, d] = F32(acc[v, u, d] + el)
+            prev = cur
+
+    for v in range(h):
+        walk([(v, u) for u in range(w)])
+        walk([(v, u) for u in range(w - 1, -1, -1)])
+    for u in range(w):
+        walk([(v, u) for v in range(h)])
+        walk([(v, u) for v in range(h - 1, -1, -1)])
+    return acc * F32(0.25), inside
+
+
+@pytest.mark.parametrize("p1, p2", [(0.0, 0.0), (0.05, 0.2), (0.4, 1.6)])
+def test_dense_volume_equals_the_reference(p1, p2):
+    rng = np.random.default_rng(3)
+    cost = rng.uniform(0, 1, (7, 9, 6)).astype(F32)
+    want, _ = reference_paths(cost, np.zeros((7, 9), int), np.full((7, 9), 6), p1, p2)
+    got = cpu.sgm_smooth(cost, p1, p2)
+    assert got.shape == cost.shape and got.dtype == F32
+    np.testing.assert_array_equal(got, want)
+
+
+def test_banded_volume_equals_the_reference():
+    rng = np.random.default_rng(5)
+    h, w, n = 6, 11, 9
+    cost = rng.uniform(0, 1, (h, w, n)).astype(F32)
+    lo = rng.integers(0, 5, (h, w))
+    hi = np.minimum(n, lo + rng.integers(1, 6, (h, w)))
+    want, inside = reference_paths(cost, lo, hi, 0.1, 0.5)
+    got = cpu.sgm_smooth(banded(cost, lo, hi), 0.1, 0.5)
+    assert isinstance(got, Volume) and np.array_equal(got.index, banded(cost, lo, hi).index)
+    for v in range(h):
+        for u in range(w):
+            off = got.index[v, u, 0]
+            np.testing.assert_array_equal(got.cost[off + lo[v, u]:off + hi[v, u]], want[v, u, lo[v, u]:hi[v, u]])
+
+
+def test_without_penalties_each_path_is_the_cost_plus_nothing():
+    # P2 = 0: the jump term min_k L(q, k) + P2 is the least one, so L(p, d) = C(p, d) on
+    # every path and their mean is the cost itself
+    cost = np.random.default_rng(8).uniform(0, 1, (4, 5, 3)).astype(F32)
+    np.testing.assert_array_equal(cpu.sgm_smooth(cost, 0.0, 0.0), cost)
+
+
+def test_a_lone_wrong_minimum_is_outvoted_by_its_neighbours():
+    # a row of pixels whose cost says d = 2, one pixel in the middle whose cost says d = 0
+    # by a small margin: with a jump penalty larger than that margin the paths carry d = 2
+    cost = np.full((1, 9, 4), 0.5, F32)
+    cost[0, :, 2] = 0.1
+    cost[0, 4, 0] = 0.05
+    assert cost[0, 4].argmin() == 0
+    smoothed = cpu.sgm_smooth(cost, 0.05, 0.2)
+    assert smoothed[0, 4].argmin() == 2
+    assert (smoothed.argmin(axis=2) == 2).all()
