@@ -2251,41 +2251,62 @@ def sgm_smooth(cost, p1, p2):
         (:func:`pixel.sgm_step`), summed in that order.
     """
     flat, index, n_disp, dense = _unpack(cost)
-    acc = np.zeros_like(flat)
+    acc = np.zeros_like(flat)  # zeros: cells outside every visible band stay defined (0)
     p1, p2 = np.float32(p1), np.float32(p2)
     _sgm_rows(flat, index, n_disp, p1, p2, acc)
     _sgm_columns(flat, index, n_disp, p1, p2, acc)
-    acc *= np.float32(0.25)
     return _pack(acc, index, n_disp, dense)
+
+
+#: Columns per task of the column paths: each task walks its columns down (then up) row
+#: by row, so the cells it reads lie side by side (8, 16 and 64 measured the same on
+#: KITTI; the first kernel walked one column at a time, a cache line per pixel).
+SGM_COLUMNS = 32
 
 
 @njit(parallel=True, cache=True)
 def _sgm_rows(cost, index, n_disp, p1, p2, acc):
     h, w = index.shape[0], index.shape[1]
     for v in prange(h):
-        a = np.full(n_disp, np.inf, np.float32)
-        b = np.empty(n_disp, np.float32)
+        # two path buffers, inf outside the band (pixel.sgm_step's layout)
+        a = np.full(n_disp + 2, np.inf, np.float32)
+        b = np.full(n_disp + 2, np.inf, np.float32)
+        plo, phi = 0, 0
         for u in range(w):
-            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            _sgm_step(cost, index, v, u, (a, 0), plo, phi, (b, 0), p1, p2, acc, 0)
+            plo, phi = index[v, u, 1], index[v, u, 2]
             a, b = b, a
         a[:] = np.inf
+        plo, phi = 0, 0
         for u in range(w - 1, -1, -1):
-            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            _sgm_step(cost, index, v, u, (a, 0), plo, phi, (b, 0), p1, p2, acc, 1)
+            plo, phi = index[v, u, 1], index[v, u, 2]
             a, b = b, a
 
 
 @njit(parallel=True, cache=True)
 def _sgm_columns(cost, index, n_disp, p1, p2, acc):
     h, w = index.shape[0], index.shape[1]
-    for u in prange(w):
-        a = np.full(n_disp, np.inf, np.float32)
-        b = np.empty(n_disp, np.float32)
+    n_tasks = (w + SGM_COLUMNS - 1) // SGM_COLUMNS
+    size = n_disp + 2
+    for task in prange(n_tasks):
+        u0 = task * SGM_COLUMNS
+        u1 = min(w, u0 + SGM_COLUMNS)
+        # per column two path buffers, column k's at k size of two arrays
+        a = np.full(size * (u1 - u0), np.inf, np.float32)
+        b = np.full(size * (u1 - u0), np.inf, np.float32)
         for v in range(h):
-            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            for u in range(u0, u1):
+                plo, phi = (index[v - 1, u, 1], index[v - 1, u, 2]) if v > 0 else (0, 0)
+                k = (u - u0) * size
+                _sgm_step(cost, index, v, u, (a, k), plo, phi, (b, k), p1, p2, acc, 1)
             a, b = b, a
         a[:] = np.inf
         for v in range(h - 1, -1, -1):
-            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            for u in range(u0, u1):
+                plo, phi = (index[v + 1, u, 1], index[v + 1, u, 2]) if v < h - 1 else (0, 0)
+                k = (u - u0) * size
+                _sgm_step(cost, index, v, u, (a, k), plo, phi, (b, k), p1, p2, acc, 2)
             a, b = b, a
 
 

@@ -690,47 +690,52 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
 
 
 # ----------------------------------------------------------------------------- semi-global smoothing (issue 16)
+@cuda.jit(device=True)
+def _all_inf(buffer, start, stop):
+    for k in range(start, stop):
+        buffer[k] = np.inf
+
+
 @cuda.jit
-def _sgm_rows_kernel(cost, index, p1, p2, scratch_a, scratch_b, acc):
+def _sgm_rows_kernel(cost, index, p1, p2, scratch, size, acc):
     v = cuda.grid(1)
     if v < index.shape[0]:
         w = index.shape[1]
-        a, b = scratch_a[v], scratch_b[v]
-        for k in range(a.shape[0]):
-            a[k] = np.inf
+        a, b = 2 * size * v, 2 * size * v + size  # this row's two path buffers
+        _all_inf(scratch, a, a + 2 * size)  # pixel.sgm_step's layout: inf outside the band
+        plo, phi = 0, 0
         for u in range(w):
-            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, 0)
+            plo, phi = index[v, u, 1], index[v, u, 2]
             a, b = b, a
-        for k in range(a.shape[0]):
-            a[k] = np.inf
+        _all_inf(scratch, 2 * size * v, 2 * size * (v + 1))
+        plo, phi = 0, 0
         for i in range(w):
-            _sgm_step(cost, index, v, w - 1 - i, a, b, p1, p2, acc)
+            u = w - 1 - i
+            _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, 1)
+            plo, phi = index[v, u, 1], index[v, u, 2]
             a, b = b, a
 
 
 @cuda.jit
-def _sgm_columns_kernel(cost, index, p1, p2, scratch_a, scratch_b, acc):
+def _sgm_columns_kernel(cost, index, p1, p2, scratch, size, acc):
     u = cuda.grid(1)
     if u < index.shape[1]:
         h = index.shape[0]
-        a, b = scratch_a[u], scratch_b[u]
-        for k in range(a.shape[0]):
-            a[k] = np.inf
+        a, b = 2 * size * u, 2 * size * u + size
+        _all_inf(scratch, a, a + 2 * size)
+        plo, phi = 0, 0
         for v in range(h):
-            _sgm_step(cost, index, v, u, a, b, p1, p2, acc)
+            _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, 1)
+            plo, phi = index[v, u, 1], index[v, u, 2]
             a, b = b, a
-        for k in range(a.shape[0]):
-            a[k] = np.inf
+        _all_inf(scratch, 2 * size * u, 2 * size * (u + 1))
+        plo, phi = 0, 0
         for i in range(h):
-            _sgm_step(cost, index, h - 1 - i, u, a, b, p1, p2, acc)
+            v = h - 1 - i
+            _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, 2)
+            plo, phi = index[v, u, 1], index[v, u, 2]
             a, b = b, a
-
-
-@cuda.jit
-def _scale_kernel(flat, factor):
-    i = cuda.grid(1)
-    if i < flat.shape[0]:
-        flat[i] *= factor
 
 
 def sgm_smooth(cost, p1, p2):
@@ -738,17 +743,14 @@ def sgm_smooth(cost, p1, p2):
     per row for the row paths, one per column for the column paths."""
     flat, index, n_disp, dense = _unpack(cost)
     h, w = int(index.shape[0]), int(index.shape[1])
-    acc = _zeros(flat.shape[0], np.float32)
+    acc = _zeros(flat.shape[0], np.float32)  # cells outside every visible band stay 0
     p1, p2 = np.float32(p1), np.float32(p2)
-    n = max(h, w)
-    scratch_a = cuda.device_array((n, n_disp), np.float32)
-    scratch_b = cuda.device_array((n, n_disp), np.float32)
+    size = n_disp + 2
+    scratch = cuda.device_array(2 * size * max(h, w), np.float32)  # inf-filled by the kernels
     blocks, threads = _grid_1d(h)
-    _sgm_rows_kernel[blocks, threads](flat, index, p1, p2, scratch_a, scratch_b, acc)
+    _sgm_rows_kernel[blocks, threads](flat, index, p1, p2, scratch, size, acc)
     blocks, threads = _grid_1d(w)
-    _sgm_columns_kernel[blocks, threads](flat, index, p1, p2, scratch_a, scratch_b, acc)
-    blocks, threads = _grid_1d(flat.shape[0])
-    _scale_kernel[blocks, threads](acc, np.float32(0.25))
+    _sgm_columns_kernel[blocks, threads](flat, index, p1, p2, scratch, size, acc)
     return _pack(acc, index, n_disp, dense)
 
 

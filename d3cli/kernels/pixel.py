@@ -868,41 +868,59 @@ def build_ops(jit):
         return d_prime * (1.0 - b2) + pt_shift(a0, b1, b2, delta, v, u)
 
     @jit
-    def sgm_step(cost, index, v, u, prev, cur, p1, p2, acc):
+    def sgm_step(cost, index, v, u, prev, plo, phi, cur, p1, p2, acc, mode):
         """One pixel of one semi-global path over a banded volume (issue 16).
 
         ``L(p, d) = C(p, d) + min(L(q, d), L(q, d -+ 1) + P1, min_k L(q, k) + P2) -
-        min_k L(q, k)`` with ``q`` the previous pixel of the path (``prev``; all inf at
-        the path's start, where ``L = C``), written to ``cur`` (inf outside the pixel's
-        band) and added to ``acc``.  Float32 throughout (``p1``, ``p2`` float32): the
-        same additions in the same order on every backend, no multiplication to fuse.
+        min_k L(q, k)`` over the pixel's band, with ``q`` the previous pixel of the path,
+        whose band is ``[plo, phi)`` (empty at the path's start, where ``L = C``, as where
+        its path costs are all inf).
+
+        ``prev`` and ``cur`` are ``(buffer, base)``: ``L(., d)`` at ``buffer[base + d + 1]``,
+        n_disp + 2 cells, inf outside the pixel's band; the two ends are sentinels, so
+        ``d -+ 1`` needs no test and the loop over the band is branch-free.  The step keeps
+        that so: it writes ``cur`` over its band and resets ``prev``'s band to inf (the
+        cells the path writes two pixels on; start with all inf).  ``mode`` says what
+        becomes of ``acc``: 0 ``acc = L`` (the first path), 1 ``acc += L``, 2 ``acc = (acc +
+        L) / 4`` (the last path: the mean of four).  Float32 throughout (``p1``, ``p2``
+        float32): the same operations in the same order on every backend.
         """
-        n = prev.shape[0]
-        pm = prev[0]
-        for d in range(1, n):
-            x = prev[d]
-            pm = x if x < pm else pm
-        for d in range(n):
-            cur[d] = INF
+        pbuf, pbase = prev
+        cbuf, cbase = cur
         off = index[v, u, 0]
-        for d in range(index[v, u, 1], index[v, u, 2]):
-            c = cost[UINT(off + d)]
-            if pm == INF:
-                cur[d] = c
-                acc[UINT(off + d)] += c
-                continue
-            b = prev[d]
-            if d > 0:
-                x = prev[d - 1] + p1
-                b = x if x < b else b
-            if d + 1 < n:
-                x = prev[d + 1] + p1
-                b = x if x < b else b
-            x = pm + p2
-            b = x if x < b else b
-            el = c + (b - pm)
-            cur[d] = el
-            acc[UINT(off + d)] += el
+        lo = index[v, u, 1]
+        hi = index[v, u, 2]
+        # Subscripts base + i made unsigned: no wraparound selects and no views (whose
+        # reference counts cost more than the loops, measured), so the loops vectorise.
+        seen = pbase + plo + 1
+        pm = np.float32(INF)  # float32: a float64 pm would round the sums differently
+        for i in range(phi - plo):  # (eight interleaved chains instead: no faster, measured)
+            x = pbuf[UINT(seen + i)]
+            pm = x if x < pm else pm
+        cells = off + lo
+        below = pbase + lo  # L(q, d - 1) of the band's first d
+        out = cbase + lo + 1
+        quarter = np.float32(0.25)
+        for i in range(hi - lo):
+            el = cost[UINT(cells + i)]
+            if pm != INF:
+                x = pbuf[UINT(below + 1 + i)]  # L(q, d)
+                jump = pm + p2
+                b = x if x < jump else jump
+                y = pbuf[UINT(below + i)] + p1  # L(q, d - 1) + P1
+                b = y if y < b else b
+                y = pbuf[UINT(below + 2 + i)] + p1  # L(q, d + 1) + P1
+                b = y if y < b else b
+                el = el + (b - pm)
+            cbuf[UINT(out + i)] = el
+            if mode == 0:
+                acc[UINT(cells + i)] = el
+            elif mode == 1:
+                acc[UINT(cells + i)] += el
+            else:
+                acc[UINT(cells + i)] = (acc[UINT(cells + i)] + el) * quarter
+        for i in range(phi - plo):
+            pbuf[UINT(seen + i)] = INF
 
     return SimpleNamespace(
         ncc_cost=ncc_cost,
