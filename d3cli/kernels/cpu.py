@@ -85,7 +85,7 @@ _holds_own_disparity = ops.holds_own_disparity
 _band_min = ops.band_min
 _inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
-_sgm_step = ops.sgm_step
+_sgm_step = njit(cache=True, error_model="numpy", inline="always")(ops.sgm_step.py_func)
 
 #: Rows per parallel task of the NCC driver (one running window sum per task).
 NCC_BLOCK_ROWS = 32
@@ -2262,6 +2262,10 @@ def sgm_smooth(cost, p1, p2):
 #: by row, so the cells it reads lie side by side (8, 16 and 64 measured the same on
 #: KITTI; the first kernel walked one column at a time, a cache line per pixel).
 SGM_COLUMNS = 32
+#: The column paths prefetch the cells of the pixel this many rows ahead: each task's
+#: rows lie apart in the volume, where the hardware's prefetcher does not follow (both
+#: column paths of a KITTI volume 20.1 -> 13.2 ms; 1 row ahead 15.1, 4 rows 13.5).
+SGM_PREFETCH_ROWS = 2
 
 
 @njit(parallel=True, cache=True)
@@ -2297,6 +2301,8 @@ def _sgm_columns(cost, index, n_disp, p1, p2, acc):
         b = np.full(size * (u1 - u0), np.inf, np.float32)
         for v in range(h):
             for u in range(u0, u1):
+                if v + SGM_PREFETCH_ROWS < h:
+                    _prefetch_pixel(cost, acc, index, v + SGM_PREFETCH_ROWS, u)
                 plo, phi = (index[v - 1, u, 1], index[v - 1, u, 2]) if v > 0 else (0, 0)
                 k = (u - u0) * size
                 _sgm_step(cost, index, v, u, (a, k), plo, phi, (b, k), p1, p2, acc, 1)
@@ -2304,10 +2310,21 @@ def _sgm_columns(cost, index, n_disp, p1, p2, acc):
         a[:] = np.inf
         for v in range(h - 1, -1, -1):
             for u in range(u0, u1):
+                if v >= SGM_PREFETCH_ROWS:
+                    _prefetch_pixel(cost, acc, index, v - SGM_PREFETCH_ROWS, u)
                 plo, phi = (index[v + 1, u, 1], index[v + 1, u, 2]) if v < h - 1 else (0, 0)
                 k = (u - u0) * size
                 _sgm_step(cost, index, v, u, (a, k), plo, phi, (b, k), p1, p2, acc, 2)
             a, b = b, a
+
+
+@njit(cache=True, inline="always")
+def _prefetch_pixel(cost, acc, index, v, u):
+    """Prefetch the band of pixel (v, u) in the volume and in the sums."""
+    c0 = index[v, u, 0] + index[v, u, 1]
+    c1 = index[v, u, 0] + index[v, u, 2] - 1
+    _prefetch_cells(cost, c0, c1)
+    _prefetch_cells(acc, c0, c1)
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)
