@@ -85,6 +85,8 @@ _holds_own_disparity = ops.holds_own_disparity
 _band_min = ops.band_min
 _inherit_patch_into = ops.inherit_patch_into
 _subpixel_at = ops.subpixel_at
+# compiled again to be inlined into the drivers (numba IR inlining: its mode folds to a
+# constant per call site; the semi-global smoothing of a KITTI volume 43 -> 37 ms)
 _sgm_step = njit(cache=True, error_model="numpy", inline="always")(ops.sgm_step.py_func)
 
 #: Rows per parallel task of the NCC driver (one running window sum per task).

@@ -696,46 +696,42 @@ def _all_inf(buffer, start, stop):
         buffer[k] = np.inf
 
 
+@cuda.jit(device=True)
+def _sgm_line(cost, index, line, along_rows, p1, p2, scratch, size, acc, forward_mode, backward_mode):
+    """Both paths along one row (``along_rows``) or column of the image, forward then
+    backward, with the line's two path buffers in ``scratch`` (``pixel.sgm_step``'s layout,
+    inf outside the band); ``*_mode`` as the step's ``mode``."""
+    n = index.shape[1] if along_rows else index.shape[0]
+    start = 2 * size * line
+    a, b = start, start + size
+    _all_inf(scratch, start, start + 2 * size)
+    plo, phi = 0, 0
+    for i in range(n):
+        v, u = (line, i) if along_rows else (i, line)
+        _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, forward_mode)
+        plo, phi = index[v, u, 1], index[v, u, 2]
+        a, b = b, a
+    _all_inf(scratch, start, start + 2 * size)
+    plo, phi = 0, 0
+    for i in range(n):
+        v, u = (line, n - 1 - i) if along_rows else (n - 1 - i, line)
+        _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, backward_mode)
+        plo, phi = index[v, u, 1], index[v, u, 2]
+        a, b = b, a
+
+
 @cuda.jit
 def _sgm_rows_kernel(cost, index, p1, p2, scratch, size, acc):
     v = cuda.grid(1)
     if v < index.shape[0]:
-        w = index.shape[1]
-        a, b = 2 * size * v, 2 * size * v + size  # this row's two path buffers
-        _all_inf(scratch, a, a + 2 * size)  # pixel.sgm_step's layout: inf outside the band
-        plo, phi = 0, 0
-        for u in range(w):
-            _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, 0)
-            plo, phi = index[v, u, 1], index[v, u, 2]
-            a, b = b, a
-        _all_inf(scratch, 2 * size * v, 2 * size * (v + 1))
-        plo, phi = 0, 0
-        for i in range(w):
-            u = w - 1 - i
-            _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, 1)
-            plo, phi = index[v, u, 1], index[v, u, 2]
-            a, b = b, a
+        _sgm_line(cost, index, v, True, p1, p2, scratch, size, acc, 0, 1)  # the first path stores
 
 
 @cuda.jit
 def _sgm_columns_kernel(cost, index, p1, p2, scratch, size, acc):
     u = cuda.grid(1)
     if u < index.shape[1]:
-        h = index.shape[0]
-        a, b = 2 * size * u, 2 * size * u + size
-        _all_inf(scratch, a, a + 2 * size)
-        plo, phi = 0, 0
-        for v in range(h):
-            _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, 1)
-            plo, phi = index[v, u, 1], index[v, u, 2]
-            a, b = b, a
-        _all_inf(scratch, 2 * size * u, 2 * size * (u + 1))
-        plo, phi = 0, 0
-        for i in range(h):
-            v = h - 1 - i
-            _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, 2)
-            plo, phi = index[v, u, 1], index[v, u, 2]
-            a, b = b, a
+        _sgm_line(cost, index, u, False, p1, p2, scratch, size, acc, 1, 2)  # the last one scales
 
 
 def sgm_smooth(cost, p1, p2):
