@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from d3cli.kernels.volume import Volume
+from d3cli.kernels.volume import Volume, banded_index
 
 #: Diffusion parameters every diffusion test runs: paper defaults, no adversarial update,
 #: the near-optimality gap, a wider neighbourhood, a wider tolerance.
@@ -54,11 +54,13 @@ def sparse_map(rng, shape, n_disp, share=0.15):
     return disp
 
 
-def banded(cost, lo, hi):
-    """The dense cost as a banded Volume holding only the cells in [lo, hi)."""
-    h, w, n = cost.shape
-    sizes = (hi - lo).ravel()
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    index = np.stack([(starts - lo.ravel()).reshape(h, w), lo, hi], axis=2).astype(np.int32)
-    flat = np.concatenate([cost[v, u, lo[v, u]:hi[v, u]] for v in range(h) for u in range(w)]).astype(np.float32)
-    return Volume(flat, index, n)
+def banded(dense_cost, lo, hi):
+    """The Volume holding the cells of ``dense_cost`` inside the bands ``lo <= d < hi``."""
+    index, n_cells = banded_index(lo, hi)
+    flat = np.full(n_cells, np.nan, np.float32)
+    h, w, n_disp = dense_cost.shape
+    for v in range(h):
+        for u in range(w):
+            off = index[v, u, 0]
+            flat[off + lo[v, u]:off + hi[v, u]] = dense_cost[v, u, lo[v, u]:hi[v, u]]
+    return Volume(flat, index, n_disp)

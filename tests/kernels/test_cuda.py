@@ -427,7 +427,6 @@ def test_banded_level_matches_cpu(gpu, rbf):
     """A level with ragged bands (issue 10 item 3): every stored cell after the cost and
     the aggregation, and every decision on the visible bands, as on the CPU."""
     from d3cli import load_config
-    from d3cli.kernels.volume import Volume
     from d3cli.method.band import band_indexes
     from d3cli.method.cost import aggregation_halo, level_cost
 

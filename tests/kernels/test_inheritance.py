@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from tests import reference as ref
-from tests.volumes import mark_missing_cells, random_volume, structured_volume
+from tests.volumes import banded, mark_missing_cells, random_volume, structured_volume
 
 from d3cli.kernels import cpu
 from d3cli.kernels.pixel import build_ops
@@ -158,8 +158,6 @@ def narrow_banded_volume(rng, h, w, n_disp, *, levels=None):
     levels' bands; patch windows d-2..d+2 often cross a band end), cost curves with a
     noisy minimum there; ``levels`` quantises the costs to force ties.  Returns the
     volume and the true disparities."""
-    from d3cli.kernels.volume import Volume, banded_index
-
     blocks = rng.integers(0, n_disp, (h // 4 + 1, w // 6 + 1))  # constant over 4x6 blocks
     true = np.minimum(np.repeat(np.repeat(blocks, 4, 0), 6, 1)[:h, :w], np.arange(w)[None, :])
     cube = structured_volume(rng, true, n_disp, noise=0.15)
@@ -167,12 +165,7 @@ def narrow_banded_volume(rng, h, w, n_disp, *, levels=None):
         cube = (np.floor(cube * levels) / levels).astype(np.float32)
     lo = np.clip(true - rng.integers(0, 4, (h, w)), 0, n_disp - 1)
     hi = np.clip(true + rng.integers(1, 5, (h, w)), lo + 1, n_disp)
-    index, n_cells = banded_index(lo, hi)
-    flat = np.empty(n_cells, np.float32)
-    for v in range(h):
-        for u in range(w):
-            flat[index[v, u, 0] + lo[v, u]:index[v, u, 0] + hi[v, u]] = cube[v, u, lo[v, u]:hi[v, u]]
-    return Volume(flat, index, n_disp), true
+    return banded(cube, lo, hi), true
 
 
 def test_windows_hold_the_cells_of_cost_or_inf():

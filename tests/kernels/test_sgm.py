@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from tests.volumes import banded
 
 from d3cli.kernels import cpu
 from d3cli.kernels.volume import Volume
-from tests.volumes import banded
 
 F32 = np.float32
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from tests.volumes import DIFFUSION_SETTINGS, random_volume, sparse_map
+from tests.volumes import DIFFUSION_SETTINGS, banded, random_volume, sparse_map
 
 from d3cli.kernels import cpu
 from d3cli.kernels.volume import Volume, banded_index, dense_index, is_dense, to_dense
@@ -25,18 +25,6 @@ def random_bands(rng, h, w, n_disp):
     full = rng.random((h, w)) < 0.2
     lo[full], hi[full] = 0, n_disp
     return lo, hi
-
-
-def banded(dense_cost, lo, hi):
-    """The Volume holding the cells of ``dense_cost`` inside the bands."""
-    index, n_cells = banded_index(lo, hi)
-    flat = np.full(n_cells, np.nan, np.float32)
-    h, w, n_disp = dense_cost.shape
-    for v in range(h):
-        for u in range(w):
-            off = index[v, u, 0]
-            flat[off + lo[v, u]:off + hi[v, u]] = dense_cost[v, u, lo[v, u]:hi[v, u]]
-    return Volume(flat, index, n_disp)
 
 
 def test_dense_index_is_the_hwd_layout():
