@@ -2272,27 +2272,32 @@ SGM_PREFETCH_ROWS = 2
 
 @njit(parallel=True, cache=True)
 def _sgm_rows(cost, index, n_disp, p1, p2, acc):
-    h, w = index.shape[0], index.shape[1]
-    for v in prange(h):
+    for v in prange(index.shape[0]):
         # two path buffers, inf outside the band (pixel.sgm_step's layout)
         a = np.full(n_disp + 2, np.inf, np.float32)
         b = np.full(n_disp + 2, np.inf, np.float32)
-        plo, phi = 0, 0
-        for u in range(w):
-            _sgm_step(cost, index, v, u, (a, 0), plo, phi, (b, 0), p1, p2, acc, 0)
-            plo, phi = index[v, u, 1], index[v, u, 2]
-            a, b = b, a
+        _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, 1, 0)  # left to right: the first path stores
         a[:] = np.inf
-        plo, phi = 0, 0
-        for u in range(w - 1, -1, -1):
-            _sgm_step(cost, index, v, u, (a, 0), plo, phi, (b, 0), p1, p2, acc, 1)
-            plo, phi = index[v, u, 1], index[v, u, 2]
-            a, b = b, a
+        b[:] = np.inf
+        _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, -1, 1)  # right to left
+
+
+@njit(cache=True, inline="always")
+def _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, step, mode):
+    """One row path (``step`` 1 rightwards, -1 leftwards) along row v; ``a``, ``b`` the
+    path buffers (all inf on entry)."""
+    w = index.shape[1]
+    plo, phi = 0, 0
+    for i in range(w):
+        u = i if step > 0 else w - 1 - i
+        _sgm_step(cost, index, v, u, (a, 0), plo, phi, (b, 0), p1, p2, acc, mode)
+        plo, phi = index[v, u, 1], index[v, u, 2]
+        a, b = b, a
 
 
 @njit(parallel=True, cache=True)
 def _sgm_columns(cost, index, n_disp, p1, p2, acc):
-    h, w = index.shape[0], index.shape[1]
+    w = index.shape[1]
     n_tasks = (w + SGM_COLUMNS - 1) // SGM_COLUMNS
     size = n_disp + 2
     for task in prange(n_tasks):
@@ -2301,23 +2306,27 @@ def _sgm_columns(cost, index, n_disp, p1, p2, acc):
         # per column two path buffers, column k's at k size of two arrays
         a = np.full(size * (u1 - u0), np.inf, np.float32)
         b = np.full(size * (u1 - u0), np.inf, np.float32)
-        for v in range(h):
-            for u in range(u0, u1):
-                if v + SGM_PREFETCH_ROWS < h:
-                    _prefetch_pixel(cost, acc, index, v + SGM_PREFETCH_ROWS, u)
-                plo, phi = (index[v - 1, u, 1], index[v - 1, u, 2]) if v > 0 else (0, 0)
-                k = (u - u0) * size
-                _sgm_step(cost, index, v, u, (a, k), plo, phi, (b, k), p1, p2, acc, 1)
-            a, b = b, a
+        _sgm_column_pass(cost, index, u0, u1, a, b, size, p1, p2, acc, 1, 1)  # down
         a[:] = np.inf
-        for v in range(h - 1, -1, -1):
-            for u in range(u0, u1):
-                if v >= SGM_PREFETCH_ROWS:
-                    _prefetch_pixel(cost, acc, index, v - SGM_PREFETCH_ROWS, u)
-                plo, phi = (index[v + 1, u, 1], index[v + 1, u, 2]) if v < h - 1 else (0, 0)
-                k = (u - u0) * size
-                _sgm_step(cost, index, v, u, (a, k), plo, phi, (b, k), p1, p2, acc, 2)
-            a, b = b, a
+        b[:] = np.inf
+        _sgm_column_pass(cost, index, u0, u1, a, b, size, p1, p2, acc, -1, 2)  # up: the last path scales
+
+
+@njit(cache=True, inline="always")
+def _sgm_column_pass(cost, index, u0, u1, a, b, size, p1, p2, acc, step, mode):
+    """One column path (``step`` 1 down, -1 up) over columns u0..u1, row by row; column
+    k's two path buffers at ``k size`` of ``a`` and ``b`` (all inf on entry)."""
+    h = index.shape[0]
+    for i in range(h):
+        v = i if step > 0 else h - 1 - i
+        ahead = v + step * SGM_PREFETCH_ROWS
+        for u in range(u0, u1):
+            if 0 <= ahead < h:
+                _prefetch_pixel(cost, acc, index, ahead, u)
+            plo, phi = (index[v - step, u, 1], index[v - step, u, 2]) if i > 0 else (0, 0)
+            k = (u - u0) * size
+            _sgm_step(cost, index, v, u, (a, k), plo, phi, (b, k), p1, p2, acc, mode)
+        a, b = b, a
 
 
 @njit(cache=True, inline="always")
