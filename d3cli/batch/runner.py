@@ -567,7 +567,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
             log.info("%s: removed the summary of an earlier --eval run (rerun with --eval to score)", out / name)
     _write_run_json(batch, records, **meta, interrupted=False)
     # issue 13: the page people look at, after every batch.
-    write_report_html(out, batch.rows, title=f"d3stereo {method}: {out}", config=cfg.to_dict(),
+    write_report_html(out, batch.rows, title=f"d3stereo run: {out} ({method})", config=cfg.to_dict(),
                       versions=package_versions(), run_counts=run_counts)
     return batch
 

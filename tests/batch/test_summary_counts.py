@@ -50,3 +50,11 @@ def test_a_failed_pair_is_counted_alike(tmp_path, pairs_root):
     run = json.loads((out / "run.json").read_text())
     assert (run["n_computed"], run["n_skipped"], run["n_failed"]) == (2, 0, 1)
     assert _counts_line(out) == "3 pairs: 2 ok (2 computed, 0 skipped as complete), 1 failed."
+
+
+def test_report_title_names_the_command_then_the_method(tmp_path, pairs_root):
+    # the title was f"d3stereo {method}: {out}", which read "d3stereo d3stereo: out" for the
+    # default method; now the command, the output folder and the method in brackets
+    out = tmp_path / "out"
+    _run(pairs_root, out)
+    assert f"<h1>d3stereo run: {out} (sgbm)</h1>" in (out / "report.html").read_text()
