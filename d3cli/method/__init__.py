@@ -1,4 +1,4 @@
-"""The D3Stereo method: the pipeline and one module per step of DESIGN.md section 1.
+"""The D3Stereo method: the pipeline and one module per step of the algorithm (docs/design.md).
 
 =================  ==========================================================
 module             step

@@ -1,4 +1,4 @@
-"""Band search: which disparities a finer pyramid level computes (issue 10, item 3).
+"""Band search: which disparities a finer pyramid level computes (docs/design.md, 'Pyramid and bands').
 
 The paper searches the full range at every level.  Below the coarsest level the coarser
 map already says where the answer lies: a fine pixel whose coarse pixel decided ``dc``

@@ -1,6 +1,6 @@
 """Steps 2-3: the aggregated matching cost volume of one pyramid level.
 
-Step 2 (DESIGN section 1): NCC cost ``C(p, d) = (1 - NCC) / 2`` over a w x w window.
+Step 2 (docs/design.md, 'Cost volumes'): NCC cost ``C(p, d) = (1 - NCC) / 2`` over a w x w window.
 Step 3 (paper eq. 2-3): recursive bilateral filtering (RBF) of every disparity slice,
 or the plain bilateral filter of the ablation.  :func:`level_cost` turns the
 configuration into the scalars the kernels take; the kernels live in
@@ -15,7 +15,7 @@ from .pyramid import level_max_disparity
 
 
 def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: float, backend, index=None):
-    """NCC cost volume ``C(p, d) = (1 - NCC) / 2`` of one level (DESIGN step 2).
+    """NCC cost volume ``C(p, d) = (1 - NCC) / 2`` of one level (docs/design.md, 'Cost volumes').
 
     Parameters
     ----------
@@ -208,7 +208,7 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
     )
     cost = cost if visible is None else Volume(cost.cost, visible, cost.n_disp)
     if level == 0 and agg.sgm_p2 > 0:
-        # Issue 16: semi-global smoothing of the finest aggregated cost, four paths
-        # (measured on ../shared/data, see configs/kitti.yaml and README "Beside the peers")
+        # Semi-global smoothing of the finest aggregated cost, four paths: it lowers
+        # PEP1 on driving scenes (docs/design.md, 'Semi-global smoothing'; configs/kitti.yaml)
         cost = backend.sgm_smooth(cost, agg.sgm_p1, agg.sgm_p2)
     return cost

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 
 def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, exclusion: int, backend, skip=None):
-    """Sparse decisive disparity map D_k^S (paper section III-B, DESIGN step 4).
+    """Sparse decisive disparity map D_k^S (paper section III-B; docs/design.md, 'Decisive seeds').
 
     Parameters
     ----------

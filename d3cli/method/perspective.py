@@ -1,4 +1,4 @@
-"""Perspective transformation (PT) for road scenes, DESIGN.md step 6.
+"""Perspective transformation (PT) for road scenes (docs/design.md, 'Perspective transformation').
 
 A planar road seen by a rectified rig has the disparity
 
@@ -123,8 +123,7 @@ def _solve(u, v, d, w=None):
         cols, d = [c * sw for c in cols], d * sw
     # The columns stacked as rows and transposed: a Fortran-ordered (n, 3) matrix, which
     # LAPACK takes as it is, where a C-ordered one is copied first.  The same values in
-    # the same LAPACK call, so the same solution (issue 10: the road fit's 11 solves on
-    # 14k points, 0.74-0.90 -> 0.60 ms each).
+    # the same LAPACK call, so the same solution, without the copy.
     a = np.stack(cols, axis=0).T
     sol, _, rank, _ = np.linalg.lstsq(a, d, rcond=None)
     return sol if rank == 3 else None
@@ -137,8 +136,7 @@ def _ransac(u, v, d, threshold, rng):
     solved and scored all at once: NumPy's stacked ``det``/``solve`` run the same LAPACK
     routine per matrix and the scores are the same element-wise float64 expressions, so
     the result is bit for bit that of a loop over the hypotheses (the first of the best
-    counts wins), without 200 rounds of Python and small-array overhead (issue 10: the
-    whole fit on the coarse map of the 1280x720 road pair 0.044 -> 0.028 s CPU).
+    counts wins), without 200 rounds of Python and small-array overhead.
     """
     n = u.size
     idx = rng.choice(n, size=min(n, _RANSAC_SAMPLE), replace=False)
@@ -190,7 +188,7 @@ def fit_road_model(
     min_inlier_share: float = 0.5,
     seed: int = 0,
 ) -> RoadModel:
-    """Robust fit of the road disparity model to a coarse disparity map (DESIGN step 6).
+    """Robust fit of the road disparity model to a coarse disparity map (docs/design.md, 'Perspective transformation').
 
     RANSAC (seeded, 3-point hypotheses scored on a subsample) gives the start, IRLS with
     Tukey's biweight refines it on all points.  Obstacles, kerbs and potholes are
@@ -296,8 +294,8 @@ def restored_validity_counts(valid: np.ndarray, narrow: np.ndarray, restored: np
                              narrow_range: float, masked: bool = False):
     """:func:`restored_validity` in one pass over the map, with counts instead of shares.
 
-    The kernel :func:`d3cli.kernels.finishing.restored_validity` (issue 10: road pair
-    3.6 ms of NumPy passes -> 0.7 ms, the pipeline's masking of the map included).
+    The kernel :func:`d3cli.kernels.finishing.restored_validity`: one compiled pass
+    instead of several NumPy passes, the pipeline's masking of the map included.
 
     Parameters
     ----------

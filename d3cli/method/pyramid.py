@@ -1,4 +1,4 @@
-"""Image pyramids and disparity ranges per level (DESIGN step 1)."""
+"""Image pyramids and disparity ranges per level (docs/design.md, 'Pyramid and bands')."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Band search (issue 10 item 3): the band rules against a NumPy reference, and every
+"""Band search (docs/design.md, 'Pyramid and bands'): the band rules against a NumPy reference, and every
 visible cell of a banded level equal to the full-range volume's cell."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Deep-feature cost pyramids (issue 14): the cosine cost against a NumPy reference, an
+"""Deep-feature cost pyramids (docs/design.md, 'Cost volumes'): the cosine cost against a NumPy reference, an
 ONNX backbone whose cosine cost equals NCC, and bad models refused in one line.
 
 The ONNX models are generated here with onnx.helper: nothing is downloaded.

@@ -1,4 +1,4 @@
-"""Perspective transformation (DESIGN step 6): road fit, warp/restore, PT in the pipeline and PT-SGM."""
+"""Perspective transformation (docs/design.md, 'Perspective transformation'): road fit, warp/restore, PT in the pipeline and PT-SGM."""
 
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ def test_fit_is_deterministic_and_integer_maps_work():
 
 
 def loop_ransac(u, v, d, threshold, seed, hypotheses=200, sample=5000):
-    """The RANSAC start as a plain loop over the hypotheses (the code before issue 10's
+    """The RANSAC start as a plain loop over the hypotheses (the code before the
     batched version), with the same generator calls and the refit on the inliers."""
     rng = np.random.default_rng(seed)
     idx = rng.choice(u.size, size=min(u.size, sample), replace=False)

@@ -1,4 +1,4 @@
-"""The semi-global smoothing switch (issue 16): where the pipeline applies it, and what
+"""The semi-global smoothing switch (docs/design.md, 'Semi-global smoothing'): where the pipeline applies it, and what
 it does to a pair with a known disparity."""
 
 from __future__ import annotations
