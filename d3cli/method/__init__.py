@@ -1,15 +1,20 @@
 """The D3Stereo method: the pipeline and one module per step of the algorithm (docs/design.md).
 
 =================  ==========================================================
-module             step
+module             step (section of docs/design.md)
 =================  ==========================================================
-``pyramid``        1. image pyramid, disparity range per level
-``cost``           2-3. NCC cost volume and its aggregation (RBF / bilateral)
+``pyramid``        1. image pyramid, disparity range per level ('Pyramid and
+                   bands')
+``band``           which disparities a finer level searches ('Pyramid and bands')
+``cost``           2-3. cost volume and its aggregation ('Cost volumes',
+                   'Aggregation', 'Semi-global smoothing')
+``features``       deep-feature cost pyramids ('Cost volumes')
 ``decisive``       4, 5, 7. decisive seeds, intra-scale diffusion, inter-scale
-                   inheritance
-``perspective``    6. perspective transformation for road scenes (PT)
+                   inheritance ('Decisive seeds', 'Diffusion', 'Inheritance')
+``perspective``    6. perspective transformation for road scenes ('Perspective
+                   transformation')
 ``refinement``     8. sub-pixel refinement, occlusion checks, hole filling,
-                   smoothing
+                   smoothing ('Finishing')
 ``pipeline``       :class:`D3Stereo`: the steps in order, coarsest level first
 =================  ==========================================================
 
