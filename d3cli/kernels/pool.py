@@ -6,7 +6,7 @@ and a pool, numba's thread count of threads in all, and :func:`row_tasks` says h
 blocks of rows a map is cut into.  Tasks write disjoint cells, so results do not depend on
 the thread count.  A thread pool, not ``prange``: OpenMP's spin-waiting made the parallel
 kernels slower than one thread whenever the machine was shared with other work; idle pool
-threads block instead of spinning (docs/design.md, 'Backends').
+threads block instead of spinning.
 
 May import: the standard library and numba only (no kernel module: every step may use it).
 """
