@@ -43,7 +43,7 @@ ALL_NAMES = ("fit_road_model", "occluded_by_uniqueness", "out_of_view", "speckle
 
 
 def _references():
-    from tests.kernels import test_finishing as t
+    from tests.kernels.finishing import references as t
 
     return {"occluded_by_uniqueness": t.ref_occluded_by_uniqueness, "out_of_view": t.ref_out_of_view,
             "fill_holes": t.ref_fill_holes, "smooth_disparity": t.ref_smooth_disparity}

@@ -1,9 +1,9 @@
-"""Step 8: sub-pixel refinement and hole filling.
+"""Step 8: sub-pixel refinement and the finishing (docs/design.md, 'Finishing').
 
-The occlusion tests, the filling and the smoothing run on the host for every backend, as
-numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of the NumPy/OpenCV
-formulation they replaced bit for bit (that formulation is the reference in
-``tests/kernels/test_finishing.py``).
+The occlusion tests, the speckle filter, the filling and the smoothing run on the host for
+every backend, as numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of the
+NumPy/OpenCV formulation they replaced bit for bit (that formulation is the reference in
+``tests/kernels/finishing/references.py``).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..kernels import finishing, range_box
+from ..kernels import finishing
 
 
 def _as_map(disparity) -> np.ndarray:
@@ -27,6 +27,7 @@ def _like(array, disp: np.ndarray, dtype) -> np.ndarray:
     a ValueError names both shapes when it does not fit)."""
     return np.ascontiguousarray(np.broadcast_to(np.asarray(array, dtype=dtype), disp.shape))
 
+
 def _check_updatable(valid: np.ndarray, disp: np.ndarray) -> None:
     """``valid`` is updated in place by the fused hole-making passes: it must be a
     C-contiguous bool map of the disparity's shape."""
@@ -35,7 +36,7 @@ def _check_updatable(valid: np.ndarray, disp: np.ndarray) -> None:
 
 
 def refine_subpixel(cost, disparity, *, backend):
-    """Parabola sub-pixel refinement at full resolution (DESIGN step 8).
+    """Parabola sub-pixel refinement at full resolution (docs/design.md, 'Finishing').
 
     Parameters
     ----------
@@ -108,7 +109,7 @@ def drop_occluded(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: in
     ``occluded = occluded_by_uniqueness(...) | out_of_view(...)`` on the incoming
     ``valid``, which is then updated in place (``valid &= ~occluded``), and ``out`` gets
     ``np.where(valid, disparity, inf)``: one pass over the rows instead of six over the
-    map (issue 10: KITTI 3.9 -> 2.9 ms, road 4.1 -> 3.3 ms, masking included, 1 thread).
+    map.
 
     Parameters
     ----------
@@ -140,7 +141,8 @@ def drop_occluded(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: in
 
 
 def speckles(disparity: np.ndarray, valid: np.ndarray, *, max_size: int, max_diff: float) -> np.ndarray:
-    """Small isolated regions of estimates: the speckle filter (issue 16).
+    """Small isolated regions of estimates: the speckle filter (an addition to the paper's
+    step 8; docs/design.md, 'Finishing').
 
     Decided pixels are joined into regions through their 4-neighbours whose disparity
     differs by at most ``max_diff``; a region of at most ``max_size`` pixels is a speckle.
@@ -178,8 +180,7 @@ def drop_speckles(disparity: np.ndarray, valid: np.ndarray, *, max_size: int, ma
                   out: np.ndarray | None = None) -> tuple[int, np.ndarray]:
     """:func:`speckles` made holes: ``valid &= ~speck`` in place and ``out = np.where(valid,
     disparity, inf)`` (``out`` may be ``disparity``; a new map when omitted, returned as
-    the second value); two passes around ``cv2.filterSpeckles`` instead of seven
-    (issue 10: KITTI 5.9 -> 5.1 ms, 1 thread).
+    the second value); two passes around ``cv2.filterSpeckles`` instead of seven.
 
     Returns
     -------
@@ -221,7 +222,7 @@ def fill_holes(
     ndarray, float32, (H, W)
     """
     disp = _as_map(disparity)
-    # issue 10: the usable pixels, their rows and their count in one pass
+    # the usable pixels, their rows and their count in one pass (instead of four)
     valid, row_has, n_valid = finishing.usable(disp, _like(valid, disp, bool))
     if n_valid == 0:
         return np.full(disp.shape, np.inf, np.float32)
@@ -232,8 +233,8 @@ def fill_holes(
     else:
         # Holes that are not occlusions (undecided: weak texture, rejected matches) lie
         # inside a surface: the median of the nearest valid values in the four directions
-        # estimates it better than the background side (the row neighbours found in the
-        # filling pass itself, issue 10: KITTI fill 4.6 -> 2.6 ms with the column scans).
+        # estimates it better than the background side (the row neighbours are found in
+        # the filling pass itself).
         up, down = finishing.nearest_along_columns(disp, valid)
         filled = finishing.fill_inside(disp, valid, _like(occluded, disp, bool), up, down)
     if not row_has.all():
@@ -281,7 +282,7 @@ def smooth_disparity(
     ``r_p``; levels no pixel interpolates from are skipped.  The box sums are those of
     ``cv2.boxFilter(..., normalize=False, borderType=cv2.BORDER_CONSTANT)``, bit for bit,
     and the range weights NumPy's float32 ``exp``: one pass per group of levels
-    (:func:`d3cli.kernels.finishing.smooth_groups`, a group per task) computes the
+    (:func:`d3cli.kernels.finishing.smoothing.smooth_groups`, a group per task) computes the
     weights of each entering row, its box sums and each pixel's shares of its two levels.
 
     Parameters
@@ -298,15 +299,15 @@ def smooth_disparity(
     plane : ndarray, float, (H, W), optional, keyword-only
         Reference disparity subtracted before and added after filtering (road model).
     kernel : {"gaussian", "box"}, keyword-only
-        Range kernel.  ``box`` (issue 16): every finite pixel takes the plain mean of the
+        Range kernel.  ``box``: every finite pixel takes the plain mean of the
         valid residuals in its box that lie within ``sigma`` of its own
-        (:func:`d3cli.kernels.range_box.box_range_smooth`, direct sums, no ``exp``): the
+        (:func:`d3cli.kernels.finishing.range_box.box_range_smooth`, direct sums, no ``exp``): the
         same KITTI accuracy as the Gaussian at radius 4, about ten times faster.
     non_negative : bool, keyword-only
         Negative results become 0 (NaN and -0 stay; what ``D3Stereo._finish`` wants:
         averaging residuals to a plane that dips below zero can end a hair below 0), in
-        the pass that adds the plane back (issue 10: one pass less than
-        :func:`d3cli.kernels.finishing.clamp_negative` after it).
+        the pass that adds the plane back (one pass less than
+        :func:`d3cli.kernels.finishing.smoothing.clamp_negative` after it).
 
     Returns
     -------
@@ -318,13 +319,20 @@ def smooth_disparity(
         return _unsmoothed(disp, non_negative)
     if kernel == "box":
         # the residual with its masked copy, then the sums with the plane added back: two
-        # passes (issue 10: nine passes before, then five; see box_smooth_disparity);
-        # no plane is a zero plane, still subtracted and added
+        # passes (see box_smooth_disparity); no plane is a zero plane, still subtracted and
+        # added
         base = None if plane is None else _like(plane, disp, np.float32)
-        return range_box.box_smooth_disparity(disp, base, valid, int(radius), float(sigma), non_negative)
+        return finishing.box_smooth_disparity(disp, base, valid, int(radius), float(sigma), non_negative)
     base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
     if kernel != "gaussian":
         raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
+    return _gaussian_smoothing(disp, valid, base, int(radius), float(sigma), non_negative)
+
+
+def _gaussian_smoothing(disp: np.ndarray, valid: np.ndarray | None, base: np.ndarray, radius: int, sigma: float,
+                        non_negative: bool) -> np.ndarray:
+    """:func:`smooth_disparity` with the Gaussian range kernel, radius > 0: the residual and
+    its range, the levels, their box-filtered groups and the blend of each pixel's shares."""
     resid, use, row_lo, row_hi, row_use = finishing.residual_and_range(disp, base, valid)
     if not row_use.any():
         return _unsmoothed(disp, non_negative)

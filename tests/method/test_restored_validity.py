@@ -1,4 +1,4 @@
-"""Which PT estimates survive the restore (issue 12, item 3: no negative disparity)."""
+"""Which PT estimates survive the restore (no negative disparity among them)."""
 
 import numpy as np
 

@@ -1,4 +1,4 @@
-"""Speckle filter before filling (``refine.speckle_size`` / ``speckle_range``, issue 16).
+"""Speckle filter before filling (``refine.speckle_size`` / ``speckle_range``).
 
 Known answers on hand-made maps, a breadth-first NumPy/Python reference of the region
 rule, and the pipeline switch (the filter applied to the unfilled map is exactly what

@@ -1,14 +1,16 @@
-"""Box range-kernel smoothing (``d3cli.kernels.range_box``, ``refine.smooth_kernel: box``):
-the kernel against a plain NumPy reference, and known answers through
-``d3cli.method.refinement.smooth_disparity``."""
+"""Box range-kernel smoothing (``d3cli.kernels.finishing.range_box``, ``refine.smooth_kernel:
+box``): the kernel against a plain NumPy reference, its glue against the NumPy formulation it
+replaced, and known answers through ``d3cli.method.refinement.smooth_disparity``."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from d3cli.kernels.range_box import box_range_smooth
+from d3cli.kernels.finishing.range_box import box_range_smooth
 from d3cli.method.refinement import smooth_disparity
+
+from .references import assert_same_bytes, random_map, ref_box_smoothing_glue
 
 
 def reference(resid, use, radius, threshold):
@@ -113,3 +115,19 @@ def test_box_range_smooth_sums_in_the_fixed_order_bit_for_bit(shape, radius):
     got = box_range_smooth(resid, use, radius, 1.5)
     want = reference_float32(resid, use, radius, 1.5)
     assert got.tobytes() == want.tobytes()
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (5, 7), (40, 64)])
+@pytest.mark.parametrize("with_plane", [False, True])
+def test_box_smoothing_glue_matches_the_numpy_formulation(shape, with_plane):
+    rng = np.random.default_rng(hash((shape, with_plane)) % 2**32)
+    disp, valid = random_map(rng, shape, spread=10)
+    disp[rng.random(shape) < 0.1] = -0.0  # -0 + 0 is +0: the sum back keeps the NumPy order
+    disp[rng.random(shape) < 0.05] = -np.inf
+    plane = (rng.random(shape) * 4 - 2).astype(np.float32) if with_plane else None
+    for radius in (1, 3):
+        want = ref_box_smoothing_glue(disp, valid, plane,
+                                      lambda r, u: box_range_smooth(r, u, radius, 1.5))
+        got = smooth_disparity(disp, valid, radius=radius, sigma=1.5, plane=plane, kernel="box")
+        assert_same_bytes(got, want, f"{shape} {radius}")
+

@@ -1,4 +1,4 @@
-"""Edge-preserving smoothing with a box range kernel (issue 16; host kernel for every backend).
+"""Edge-preserving smoothing with a box range kernel (host kernel for every backend).
 
 ``refine.smooth_kernel: box``: every finite pixel p becomes the mean of the residuals
 ``r_q`` of the valid pixels q in its (2 radius + 1)^2 box (clipped to the image) with
@@ -6,12 +6,11 @@
 of a Gaussian.  Direct summation: (2 radius + 1)^2 compare-and-adds per pixel and no
 ``exp``, about ten times faster than the piecewise-linear Gaussian filter of
 :func:`d3cli.method.refinement.smooth_disparity` at the radii used (4), with the same
-accuracy on KITTI (README "Beside the peers").
+accuracy on KITTI (README "Beside the peers"; docs/design.md, 'Finishing').
 
-The kernels run as tasks over blocks of rows on the finishing's thread pool
-(:func:`d3cli.kernels.finishing.run_tasks`), not with ``prange``: on the shared 2-core
-machine OpenMP's spin-waiting made two threads slower than one (KITTI, load about 3:
-7.4 ms with two threads against 3.2 ms with one).
+The kernels run as tasks over blocks of rows on the task pool
+(:func:`d3cli.kernels.pool.run_tasks`), not with ``prange``: on a shared machine OpenMP's
+spin-waiting made two threads slower than one.
 """
 
 from __future__ import annotations
@@ -19,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .finishing import at_least_zero, row_tasks, run_tasks
+from ..pool import row_tasks, run_tasks
+from .smoothing import at_least_zero
 
 _F32_ZERO = np.float32(0.0)
 _F32_ONE = np.float32(1.0)
@@ -71,10 +71,8 @@ def _smooth_task(task, tasks, resid, masked, radius, threshold, base, disp, non_
     for v in range(y0, y1):
         # Per source row, the interior columns take three offsets per pass (in order: each
         # pixel still sums its (2 radius + 1)^2 terms row after row, offset after offset)
-        # and the border columns their offsets inside the row one by one.  Issue 10: one
-        # load and store of a pixel's sums per three offsets instead of per offset: KITTI
-        # smoothing (radius 4), A/B on the pipeline's inputs, 1 thread, CPU time, medians
-        # of 31: 2.98 -> 1.97, 3.01 -> 1.92 ms.
+        # and the border columns their offsets inside the row one by one: one load and
+        # store of a pixel's sums per three offsets instead of per offset.
         total[:] = _F32_ZERO
         count[:] = _F32_ZERO
         centre = resid[v]
@@ -164,7 +162,7 @@ def box_range_smooth(resid, use, radius, threshold):
 
 
 def box_smooth_disparity(disp, base, valid, radius, threshold, non_negative=False):
-    """The box range-kernel smoothing of a disparity map in two passes (issue 10).
+    """The box range-kernel smoothing of a disparity map in two passes.
 
     ``resid = np.where(isfinite(disp), disp - base, inf)``, ``use = valid & isfinite(disp)``,
     :func:`box_range_smooth` of them, and ``np.where(isfinite(disp), smoothed + base, disp)``
@@ -173,7 +171,7 @@ def box_smooth_disparity(disp, base, valid, radius, threshold, non_negative=Fals
     residual pass writes the NaN-masked map the sums read, and the sums' pass adds the
     plane back: two passes over the map and two calls of the pool instead of five passes
     and three calls plus two parallel regions.  ``non_negative``: negative results become
-    0 in the same pass (:func:`d3cli.kernels.finishing.clamp_negative`).
+    0 in the same pass (:func:`d3cli.kernels.finishing.smoothing.clamp_negative`).
 
     Parameters
     ----------
@@ -202,5 +200,5 @@ def box_smooth_disparity(disp, base, valid, radius, threshold, non_negative=Fals
     return out
 
 
-#: The compiled kernels of this module (nogil, cached on disk), run by ``run_tasks``.
+#: The compiled kernels of this module (nogil, cached on disk), run by :func:`d3cli.kernels.pool.run_tasks`.
 KERNELS = (_masked_task, _residual_task, _smooth_task)

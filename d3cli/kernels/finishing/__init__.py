@@ -1,0 +1,56 @@
+"""Numba kernels of the finishing of the disparity map (docs/design.md, 'Finishing').
+
+Host only: the finishing runs on the CPU for every backend (the CUDA backend downloads its
+integer and sub-pixel maps first, see ``D3Stereo._finish``), so these kernels serve the CPU
+and the CUDA pipeline alike.  ``d3cli.method.refinement`` calls them; its docstrings say
+what each step means.  By concern:
+
+- ``occlusion.py``: the uniqueness and left-border tests, fused with the masking, and the
+  validity after the restore of the perspective transformation;
+- ``speckle.py``: OpenCV's 1/16 px fixed point around ``cv2.filterSpeckles``, and the
+  dropping of the pixels it marked;
+- ``fill.py``: the hole filling (row-wise, median of four directions, empty rows);
+- ``exp.py``: NumPy's float32 ``exp``, bit for bit, for the range weights;
+- ``smoothing.py``: the Gaussian range smoothing (piecewise-linear bilateral filter), the
+  road plane map and the clamp of negative values;
+- ``range_box.py``: the box range-kernel smoothing.
+
+Every kernel gives exactly the values of the NumPy/OpenCV formulation it replaced (kept as
+the reference in ``tests/kernels/finishing/references.py``): the same float32/float64
+operations in the same order, bit for bit.  The kernels release the GIL (``nogil``) and run
+as tasks over blocks of rows (or groups of range levels) on :mod:`d3cli.kernels.pool`; tasks
+write disjoint cells, so the results do not depend on the thread count.  This package
+re-exports the public kernels of its modules: ``finishing.fill_inside(...)`` and
+``finishing.fill.fill_inside(...)`` are the same function.
+
+May import: ``d3cli.kernels.pool``, ``d3cli.kernels.cpu`` (only for the numba cache folder it
+chooses on import), numba, numpy and llvmlite; no other kernel step.
+"""
+
+from __future__ import annotations
+
+# cpu.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
+# when it is imported; the decorators of this package's modules read that setting, so it
+# must run first (a package's __init__ runs before any of its modules).
+from .. import cpu as _cpu  # noqa: F401,E402  (import for its side effect)
+from . import exp, fill, occlusion, range_box, smoothing, speckle  # noqa: E402
+from .exp import numpy_exp, numpy_expf  # noqa: E402
+from .fill import (copy_nearest_rows, fill_inside, fill_rows_smaller_side, keep_valid,  # noqa: E402
+                   nearest_along_columns, usable)
+from .occlusion import drop_occluded, out_of_view_mask, restored_validity, uniqueness_occluded  # noqa: E402
+from .range_box import box_range_smooth, box_smooth_disparity  # noqa: E402
+from .smoothing import (at_least_zero, clamp_negative, combine_shares, range_levels,  # noqa: E402
+                        residual_and_range, shift_plane_f32, smooth_groups)
+from .speckle import drop_marked, fixed_point_16, fixed_point_16_finite  # noqa: E402
+
+#: The compiled kernels of the package (nogil, cached on disk), run by
+#: :func:`d3cli.kernels.pool.run_tasks`.
+KERNELS = occlusion.KERNELS + speckle.KERNELS + fill.KERNELS + exp.KERNELS + smoothing.KERNELS + range_box.KERNELS
+
+__all__ = [
+    "KERNELS", "at_least_zero", "box_range_smooth", "box_smooth_disparity", "clamp_negative", "combine_shares",
+    "copy_nearest_rows", "drop_marked", "drop_occluded", "exp", "fill", "fill_inside", "fill_rows_smaller_side",
+    "fixed_point_16", "fixed_point_16_finite", "keep_valid", "nearest_along_columns", "numpy_exp", "numpy_expf",
+    "occlusion", "out_of_view_mask", "range_box", "range_levels", "residual_and_range", "restored_validity",
+    "shift_plane_f32", "smooth_groups", "smoothing", "speckle", "uniqueness_occluded", "usable",
+]

@@ -1,0 +1,285 @@
+"""Hole filling: the usable pixels, the nearest valid values along rows and columns, the fill.
+
+Row-wise filling with the smaller side (:func:`fill_rows_smaller_side`), the median of the
+four nearest values inside surfaces (:func:`nearest_along_columns`, :func:`fill_inside`),
+empty rows from the nearest filled row (:func:`copy_nearest_rows`) and the median's
+write-back (:func:`keep_valid`); each the bytes of the NumPy formulation it replaced
+(docs/design.md, 'Finishing').
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..pool import row_tasks, run_tasks, threads
+
+_F32_TWO = np.float32(2.0)
+_F32_INF = np.float32(np.inf)
+
+
+@njit(cache=True, nogil=True)
+def _usable_task(task, tasks, disp, valid, use, row_has, counts):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    n = 0
+    for y in range(y0, y1):
+        m = 0
+        for u in range(w):
+            ok = valid[y, u] & np.isfinite(disp[y, u])  # &: no branch
+            use[y, u] = ok
+            m += ok
+        row_has[y] = m > 0
+        n += m
+    counts[task] = n
+
+
+def usable(disp, valid):
+    """``valid & np.isfinite(disp)``, which rows have such a pixel, and how many there are:
+    one pass instead of four (and, any, all, any per row)."""
+    h, w = disp.shape
+    use = np.empty((h, w), np.bool_)
+    row_has = np.empty(h, np.bool_)
+    tasks = row_tasks(h)
+    counts = np.zeros(tasks, np.int64)
+    run_tasks(_usable_task, tasks, disp, valid, use, row_has, counts)
+    return use, row_has, int(counts.sum())
+
+
+@njit(cache=True, inline="always")
+def _np_minimum(a, b):
+    """``np.minimum`` of two non-NaN values (the second when they compare equal)."""
+    return a if a < b else b
+
+
+@njit(cache=True, nogil=True)
+def _fill_rows_task(task, tasks, disp, valid, filled, row_has):
+    h, w = disp.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        # One pass: the holes of a run between two valid pixels (or a row end, inf) all
+        # take the same value, the smaller of the two, written when the run ends (instead
+        # of a right-to-left scan of the whole row and a second pass)
+        d_row = disp[y]
+        v_row = valid[y]
+        f_row = filled[y]
+        left = _F32_INF
+        start = 0  # the first hole of the current run
+        has = False
+        for u in range(w):
+            x = d_row[u]
+            f_row[u] = x
+            if v_row[u]:
+                if start < u:
+                    fill = _np_minimum(left, x)
+                    for j in range(start, u):
+                        f_row[j] = fill
+                left = x
+                has = True
+                start = u + 1
+        fill = _np_minimum(left, _F32_INF)
+        for j in range(start, w):
+            f_row[j] = fill
+        row_has[y] = has
+
+
+def fill_rows_smaller_side(disp, valid):
+    """Row-wise fill: each hole takes the smaller of the nearest valid values left and right.
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
+        Pixels to keep and to fill from (finite values only).
+
+    Returns
+    -------
+    filled : ndarray, float32, (H, W)
+        ``disp`` where valid, else the smaller neighbour (inf where the row has none).
+    row_has : ndarray, bool, (H,)
+        Whether the row has a valid pixel.
+    """
+    h, w = disp.shape
+    filled = np.empty((h, w), np.float32)
+    row_has = np.zeros(h, np.bool_)
+    run_tasks(_fill_rows_task, row_tasks(h), disp, valid, filled, row_has)
+    return filled, row_has
+
+
+@njit(cache=True, nogil=True)
+def _nearest_columns_task(task, tasks, disp, valid, up, down):
+    h, w = disp.shape
+    u0, u1 = (task * w) // tasks, ((task + 1) * w) // tasks
+    if u1 <= u0:
+        return
+    last = np.full(u1 - u0, _F32_INF, np.float32)
+    n = u1 - u0
+    for y in range(h):  # top down: the nearest valid value at or above
+        d_row = disp[y, u0:u1]
+        v_row = valid[y, u0:u1]
+        o_row = up[y, u0:u1]
+        for i in range(n):  # selects: vectorised across the columns
+            x = d_row[i]  # both loaded before the select: a load in its arm is a branch
+            prev = last[i]
+            value = x if v_row[i] else prev
+            last[i] = value
+            o_row[i] = value
+    last[:] = _F32_INF
+    for y in range(h - 1, -1, -1):  # bottom up: at or below
+        d_row = disp[y, u0:u1]
+        v_row = valid[y, u0:u1]
+        o_row = down[y, u0:u1]
+        for i in range(n):
+            x = d_row[i]
+            prev = last[i]
+            value = x if v_row[i] else prev
+            last[i] = value
+            o_row[i] = value
+
+
+def nearest_along_columns(disp, valid):
+    """Values of the nearest valid pixel above and below in each column, in the map's own
+    (H, W) layout, without transposed copies (tasks over blocks of columns, rows streamed).
+
+    Returns
+    -------
+    up, down : ndarray, float32, (H, W)
+        The nearest valid value at or above (below) each pixel; inf where there is none.
+    """
+    h, w = disp.shape
+    up = np.empty((h, w), np.float32)
+    down = np.empty((h, w), np.float32)
+    n = threads()
+    tasks = 1 if n == 1 else max(1, min(w // 64, 4 * n))
+    run_tasks(_nearest_columns_task, tasks, disp, valid, up, down)
+    return up, down
+
+
+@njit(cache=True, inline="always")
+def _order(a, b):
+    """``(a, b)`` in increasing order, swapped only when ``a > b`` (equal values keep their
+    order: a network of such adjacent exchanges sorts stably, as an insertion sort)."""
+    swap = a > b
+    return (b if swap else a), (a if swap else b)
+
+
+@njit(cache=True, inline="always")
+def _inside_value(l_v, r_v, up_v, down_v, occluded):
+    """The fill of one hole from its four nearest values (see :func:`fill_inside`)."""
+    side = _np_minimum(l_v, r_v)
+    # The nearest values are finite or +inf (none): sorting all four with +inf
+    # last gives the finite ones in the order of the reference's insertion sort
+    # of the finite values alone (left, right, up, down; stable on ties).  Selects
+    # only: the pattern of holes is random, and branches mispredicted.
+    a0, a1 = _order(l_v, r_v)
+    a1, a2 = _order(a1, up_v)
+    a0, a1 = _order(a0, a1)
+    a2, a3 = _order(a2, down_v)
+    a1, a2 = _order(a1, a2)
+    a0, a1 = _order(a0, a1)
+    n = (l_v != _F32_INF) + (r_v != _F32_INF) + (up_v != _F32_INF) + (down_v != _F32_INF)
+    # median of the n finite ones: the middle one, or the float32 mean of the two
+    median = a0 if n == 1 else ((a0 + a1) / _F32_TWO if n == 2 else (a1 if n == 3 else (a1 + a2) / _F32_TWO))
+    return side if (occluded or n == 0) else median
+
+
+@njit(cache=True, nogil=True)
+def _fill_inside_task(task, tasks, disp, valid, occluded, up, down, out):
+    h, w = disp.shape
+    left = np.empty(w, np.float32)  # the task's own row buffers
+    right = np.empty(w, np.float32)
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        d_row = disp[y]
+        v_row = valid[y]
+        # the nearest valid value at or left of u and at or right of j = w - 1 - u: two
+        # independent chains of selects in one loop (faster than two scans)
+        a = _F32_INF
+        b = _F32_INF
+        for u in range(w):
+            j = w - 1 - u
+            x = d_row[u]  # loaded before the select: a load in its arm compiles to a branch
+            z = d_row[j]
+            a = x if v_row[u] else a
+            b = z if v_row[j] else b
+            left[u] = a
+            right[j] = b
+        for u in range(w):  # no carried value: this loop vectorises
+            fill = _inside_value(left[u], right[u], up[y, u], down[y, u], occluded[y, u])
+            out[y, u] = disp[y, u] if valid[y, u] else fill
+
+
+def fill_inside(disp, valid, occluded, up, down):
+    """Fill with the median of the finite nearest values in four directions where a hole
+    is not occluded and has one, else with the smaller row neighbour.
+
+    The row neighbours are found on the way, in two row buffers that stay in the cache (no
+    left/right maps written and read back).
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W)
+    valid, occluded : ndarray, bool, (H, W)
+    up, down : ndarray, float32, (H, W)
+        Nearest valid values above and below: finite, or +inf where there is none (what
+        :func:`nearest_along_columns` gives).
+
+    Returns
+    -------
+    ndarray, float32, (H, W)
+        As ``np.nanmedian`` over the finite ones (mean of the middle two of an even count,
+        in float32).
+    """
+    h, w = disp.shape
+    out = np.empty((h, w), np.float32)
+    run_tasks(_fill_inside_task, row_tasks(h), disp, valid, occluded, up, down, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def copy_nearest_rows(filled, row_has):
+    """Rows without a valid pixel copy the nearest row that has one (the upper on a tie).
+
+    Parameters
+    ----------
+    filled : ndarray, float32, (H, W), modified in place
+    row_has : ndarray, bool, (H,)
+        At least one True.
+    """
+    h = filled.shape[0]
+    above = np.full(h, -1, np.int64)
+    last = -1
+    for y in range(h):
+        if row_has[y]:
+            last = y
+        above[y] = last
+    below = -1
+    for y in range(h - 1, -1, -1):
+        if row_has[y]:
+            below = y
+            continue
+        up = above[y]
+        if below < 0 or (up >= 0 and y - up <= below - y):
+            filled[y, :] = filled[up, :]
+        else:
+            filled[y, :] = filled[below, :]
+
+
+@njit(cache=True, nogil=True)
+def _keep_valid_task(task, tasks, filled, valid, other):
+    h, w = filled.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            if not valid[y, u]:
+                filled[y, u] = other[y, u]
+
+
+def keep_valid(filled, valid, other):
+    """``filled`` where valid, else ``other``, in place (float32 (H, W))."""
+    run_tasks(_keep_valid_task, row_tasks(filled.shape[0]), filled, valid, other)
+
+
+#: The compiled kernels of this module (nogil, cached on disk), run by :func:`d3cli.kernels.pool.run_tasks`.
+KERNELS = (_usable_task, _fill_rows_task, _nearest_columns_task, _fill_inside_task, copy_nearest_rows,
+           _keep_valid_task)

@@ -1,0 +1,290 @@
+"""Which estimates the finishing drops as occluded or impossible: the occlusion tests.
+
+The uniqueness test (a right-image column claimed by a larger disparity), the left-border
+test (out of view), both fused with the masking of the pipeline (:func:`drop_occluded`),
+and the validity after the restore of the perspective transformation
+(:func:`restored_validity`).  Each gives the bytes of the NumPy formulation it replaced
+(``tests/kernels/finishing/references.py``); see docs/design.md, 'Finishing'.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..pool import row_tasks, run_tasks
+
+_F32_ONE = np.float32(1.0)
+_F32_INF = np.float32(np.inf)
+# NumPy's float -> int64 cast of a value outside the int64 range (and of NaN) gives
+# INT64_MIN on x86, which the reference's clip then maps to column 0
+_INT64_LIMIT = 9.223372036854775807e18
+
+
+# ----------------------------------------------------------------------------- restore after PT
+@njit(cache=True, nogil=True)
+def _restored_task(task, tasks, valid, narrow, restored, hi, masked, keep_out, counts):
+    h, w = valid.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    n_ends = 0
+    n_outside = 0
+    n_negative = 0
+    for y in range(y0, y1):
+        for u in range(w):
+            r = restored[y, u]
+            q = narrow[y, u]
+            # bitwise & and | of bools: selects, no branches
+            valid_yu = valid[y, u]
+            ends = valid_yu & ((q <= 0) | (q >= hi))
+            outside = valid_yu & (not (np.float32(u) - r >= -0.5))
+            negative = valid_yu & (not (r >= 0))
+            n_ends += ends
+            n_outside += outside
+            n_negative += negative & (not ends) & (not outside)
+            keep = valid_yu & (not (ends | outside | negative))
+            keep_out[y, u] = keep
+            if masked.shape[0] == h:
+                masked[y, u] = r if keep else _F32_INF
+    counts[task, 0] = n_ends
+    counts[task, 1] = n_outside
+    counts[task, 2] = n_negative
+
+
+def restored_validity(valid, narrow, restored, hi, masked=None):
+    """The estimates that survive the restore of the perspective transformation, in one pass
+    (counts, validity and masked map together, instead of a pass each).
+
+    Parameters
+    ----------
+    valid : ndarray, bool, (H, W), C-contiguous
+    narrow : ndarray, (H, W), C-contiguous
+        Narrow-range disparities (any real dtype).
+    restored : ndarray, float32, (H, W), C-contiguous
+    hi : scalar
+        Upper end of the narrow range, already of the type NumPy compares ``narrow`` with
+        it in (``narrow >= hi``).
+    masked : ndarray, float32, (H, W), optional
+        Receives ``np.where(kept, restored, inf)`` (may be ``restored`` itself).
+
+    Returns
+    -------
+    kept : ndarray, bool, (H, W)
+        ``valid & ~ends & ~outside & ~negative`` with ``ends = (narrow <= 0) | (narrow >=
+        hi)``, ``outside = ~(float32(u) - restored >= -0.5)``, ``negative = ~(restored >= 0)``.
+    counts : ndarray, int64, (3,)
+        Valid pixels at the range ends, outside, and negative but neither of the others.
+    """
+    h, w = valid.shape
+    kept = np.empty((h, w), np.bool_)
+    tasks = row_tasks(h)
+    counts = np.zeros((tasks, 3), np.int64)
+    if masked is None:
+        masked = np.empty((0, 0), np.float32)
+    run_tasks(_restored_task, tasks, valid, narrow, restored, hi, masked, kept, counts)
+    return kept, counts.sum(axis=0)
+
+
+# ----------------------------------------------------------------------------- occlusion tests
+@njit(cache=True, inline="always")
+def _right_column(u, d, w):
+    """Column ``round(u - d)`` clipped to [0, w-1], as NumPy computes it (float64, half to
+    even): 0 where ``u - d`` is NaN, infinite or beyond the int64 range (NumPy's cast gives
+    INT64_MIN there, which the clip maps to 0).  Selects only, so that a loop over a row
+    vectorises."""
+    x = np.float64(u) - d
+    inside = (x > -0.5) & (x < w - 0.5)  # rounds to 0 .. w-1 (False for NaN)
+    beyond = (x >= w - 0.5) & (abs(x) < _INT64_LIMIT)  # rounds to w - 1 or above
+    # np.rint (half to even) of |x| < 2^51: adding and subtracting 1.5 * 2^52 rounds to an
+    # integer in the current (nearest-even) mode; measured 25 % faster than np.rint here
+    r = np.int64(((x if inside else 0.0) + 6755399441055744.0) - 6755399441055744.0)
+    return r if inside else (w - 1 if beyond else 0)
+
+
+@njit(cache=True, nogil=True)
+def _nearest_claims(disparity, valid, y, row_best, row_target):
+    """The uniqueness test's scatter for row y: ``row_target[u]`` the right column of every
+    pixel u, ``row_best[x]`` the largest valid disparity that claims right column x (-inf
+    where none does; a NaN disparity wins its column); shared by the test alone and by
+    the fused hole-making pass.  Returns the number of valid pixels of the row."""
+    w = disparity.shape[1]
+    d_row = disparity[y]
+    v_row = valid[y]
+    for u in range(w):  # no branch: vectorised (the scatter below is not)
+        row_target[u] = _right_column(u, np.float64(d_row[u]), w)
+    row_best[:] = -np.inf
+    n_valid = 0
+    for u in range(w):
+        if v_row[u]:
+            n_valid += 1
+            d = np.float64(d_row[u])
+            xr = row_target[u]
+            if d > row_best[xr] or d != d:
+                row_best[xr] = d
+    return n_valid
+
+
+@njit(cache=True, nogil=True)
+def _uniqueness_task(task, tasks, disparity, valid, tolerance, best, target, out):
+    h, w = disparity.shape
+    row_best = best[task]
+    row_target = target[task]
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        _nearest_claims(disparity, valid, y, row_best, row_target)
+        for u in range(w):
+            out[y, u] = valid[y, u] and np.float64(disparity[y, u]) < row_best[row_target[u]] - tolerance
+
+
+def uniqueness_occluded(disparity, valid, tolerance):
+    """Left pixels whose right-image match is claimed by a larger disparity.
+
+    Parameters
+    ----------
+    disparity : ndarray, float32, (H, W), C-contiguous
+    valid : ndarray, bool, (H, W), C-contiguous
+    tolerance : float
+        Pixels with ``d < max_d(match) - tolerance`` are occluded.
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+        Per row, the largest valid disparity that maps to each right column
+        ``round(u - d)`` (a scatter-max into one row buffer per task), then the test; NaN
+        wins the maximum as in ``np.maximum``.
+    """
+    h, w = disparity.shape
+    out = np.zeros((h, w), np.bool_)
+    tasks = row_tasks(h)
+    best = np.empty((tasks, max(w, 1)), np.float64)
+    target = np.empty((tasks, max(w, 1)), np.int64)
+    run_tasks(_uniqueness_task, tasks, disparity, valid, float(tolerance), best, target, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _first_valid_from(disparity, valid, y, start):
+    """The left-border test's ``b`` of row y: the first valid disparity at or right of
+    column ``start`` (float32), -inf when the row has none."""
+    for u in range(start, disparity.shape[1]):
+        if valid[y, u]:
+            return disparity[y, u]
+    return -_F32_INF
+
+
+@njit(cache=True, nogil=True)
+def _out_of_view_task(task, tasks, disparity, valid, start, out):
+    h, w = disparity.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        b = _first_valid_from(disparity, valid, y, start)
+        b_minus_1 = b - _F32_ONE
+        for u in range(w):
+            out[y, u] = valid[y, u] and u < b and disparity[y, u] < b_minus_1
+
+
+def out_of_view_mask(disparity, valid, start):
+    """Left-border pixels below the first valid disparity ``b`` at or right of ``start``.
+
+    Parameters
+    ----------
+    disparity : ndarray, float32, (H, W)
+    valid : ndarray, bool, (H, W)
+    start : int
+        First column searched for ``b`` (0 <= start < W); rows without one get b = -inf.
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+        ``valid & (u < b) & (d < b - 1)`` (``b - 1`` in float32, as NumPy computes it).
+    """
+    h, w = disparity.shape
+    out = np.zeros((h, w), np.bool_)
+    run_tasks(_out_of_view_task, row_tasks(h), disparity, valid, int(start), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _drop_occluded_task(task, tasks, disparity, valid, tolerance, start, best, target, out, occluded, counts):
+    h, w = disparity.shape
+    row_best = best[task]
+    row_target = target[task]
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    n = 0
+    for y in range(y0, y1):
+        # both tests read the row's validity before any of it is dropped
+        n_valid = _nearest_claims(disparity, valid, y, row_best, row_target)
+        b = _first_valid_from(disparity, valid, y, start)
+        b_minus_1 = b - _F32_ONE
+        d_row = disparity[y]
+        v_row = valid[y]
+        o_row = out[y]
+        c_row = occluded[y]
+        # the loop chosen by the row's share of holes: selects or branches, whichever is
+        # faster for that share (measured on the pipeline's inputs of every data set)
+        if 8 * (w - n_valid) > w:
+            # many holes: selects (a branch on validity is mispredicted); every pixel has a
+            # right column, so reading row_best there is safe
+            for u in range(w):
+                d32 = d_row[u]
+                keep = v_row[u]
+                claimed = np.float64(d32) < row_best[row_target[u]] - tolerance
+                occ = keep & (claimed | ((u < b) & (d32 < b_minus_1)))
+                c_row[u] = occ
+                keep = keep & (not occ)
+                v_row[u] = keep
+                o_row[u] = d32 if keep else _F32_INF
+                n += occ
+        else:
+            # few holes: branches (predicted; the vectorised loop above gathers row_best,
+            # slower here)
+            for u in range(w):
+                d32 = d_row[u]
+                keep = v_row[u]
+                occ = keep and (np.float64(d32) < row_best[row_target[u]] - tolerance
+                                or (u < b and d32 < b_minus_1))
+                c_row[u] = occ
+                keep = keep and not occ
+                v_row[u] = keep
+                o_row[u] = d32 if keep else _F32_INF
+                n += occ
+    counts[task] = n
+
+
+def drop_occluded(disparity, valid, tolerance, start, out):
+    """Both occlusion tests, their holes and the masked map, in one pass over the rows.
+
+    ``occluded = uniqueness_occluded(...) | out_of_view_mask(...)`` (the tests read
+    ``valid`` as it comes in), then ``valid &= ~occluded`` in place and
+    ``out = np.where(valid, disparity, inf)``: what the pipeline did in six passes over the
+    map (two tests, or, and-not, where, astype).
+
+    Parameters
+    ----------
+    disparity : ndarray, float32, (H, W), C-contiguous
+    valid : ndarray, bool, (H, W), C-contiguous; updated in place
+    tolerance : float
+    start : int
+        As :func:`out_of_view_mask` (0 <= start < W).
+    out : ndarray, float32, (H, W)
+        Receives the masked map; may be ``disparity`` itself (each pixel is read before
+        it is written, and the tests of a row finish before its first write).
+
+    Returns
+    -------
+    occluded : ndarray, bool, (H, W)
+    count : int
+        Number of occluded pixels.
+    """
+    h, w = disparity.shape
+    occluded = np.empty((h, w), np.bool_)
+    tasks = row_tasks(h)
+    best = np.empty((tasks, max(w, 1)), np.float64)
+    target = np.empty((tasks, max(w, 1)), np.int64)
+    counts = np.zeros(tasks, np.int64)
+    run_tasks(_drop_occluded_task, tasks, disparity, valid, float(tolerance), int(start), best, target, out,
+              occluded, counts)
+    return occluded, int(counts.sum())
+
+
+#: The compiled kernels of this module (nogil, cached on disk), run by :func:`d3cli.kernels.pool.run_tasks`.
+KERNELS = (_restored_task, _uniqueness_task, _out_of_view_task, _drop_occluded_task)
