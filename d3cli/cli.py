@@ -210,7 +210,7 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     KITTI root, a manifest YAML, or two image files.
     """
     from . import batch
-    from .data import datasets
+    from .data import layouts as datasets
     from .evaluation import report
 
     _setup_logging(verbose, quiet)
@@ -341,7 +341,7 @@ def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
     PRED_DIRs give one side-by-side table (comparison.md).
     """
     from . import batch
-    from .data import datasets
+    from .data import layouts as datasets
     from .evaluation import report
 
     _setup_logging(verbose, quiet)

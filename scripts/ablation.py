@@ -39,7 +39,7 @@ from benchmark import evaluate_pairs, family_means
 
 from d3cli import load_config
 from d3cli.config import read_yaml_lines
-from d3cli.data.datasets import discover
+from d3cli.data.layouts import discover
 from d3cli.errors import D3Error
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -43,7 +43,7 @@ import numpy as np
 
 def gt_bump_px(gt_dir: Path):
     """(u, v) of the pair's ground-truth bump centre in the left image, or None."""
-    from d3cli.data.io import read_calib
+    from d3cli.data.formats import read_calib
     from d3cli.data.synth import StereoRig
 
     source = gt_dir / "SOURCE.txt"

@@ -72,7 +72,7 @@ def _load(spec: dict):
     import numpy as np
 
     if spec.get("pair"):
-        from d3cli.data.datasets import discover, load_pair_images, resolve_max_disparity
+        from d3cli.data.layouts import discover, load_pair_images, resolve_max_disparity
 
         pair = discover([str(Path(spec["data"]) / spec["pair"])])[0]
         left, right = load_pair_images(pair)

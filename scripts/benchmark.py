@@ -42,8 +42,8 @@ import numpy as np
 from d3cli import D3Stereo, load_config
 from d3cli.baselines import elas_disparity, pandora_sgm_disparity, pt_sgm_disparity, sgbm_disparity
 from d3cli.baselines.peers import require
-from d3cli.data.datasets import discover, load_ground_truth, load_pair_images, resolve_max_disparity
-from d3cli.data.io import to_grey
+from d3cli.data.layouts import discover, load_ground_truth, load_pair_images, resolve_max_disparity
+from d3cli.data.formats import to_grey
 from d3cli.evaluation.metrics import disparity_errors, photometric_scores
 
 KEYS = ("epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density")

@@ -24,7 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from d3cli.data.io import write_image, write_pfm
+from d3cli.data.formats import write_image, write_pfm
 
 SAMPLES = Path(__file__).resolve().parents[1] / "d3cli" / "data" / "samples"
 

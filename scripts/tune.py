@@ -19,7 +19,7 @@ import sys
 from benchmark import evaluate_pairs, family_means
 
 from d3cli import load_config
-from d3cli.data.datasets import discover
+from d3cli.data.layouts import discover
 
 
 def main(argv=None) -> int:

@@ -18,7 +18,7 @@ def make_pair_folder():
     """
 
     def _make(root, name="pair", shift=6, size=(48, 96), *, seed=0, colour=False, gt=True):
-        from d3cli.data.io import write_pfm
+        from d3cli.data.formats import write_pfm
 
         folder = Path(root) / name
         folder.mkdir(parents=True, exist_ok=True)

@@ -33,7 +33,7 @@ def make_pair_folder_module():
     from tests.helpers import textured_pair, write_png
 
     def make(root, name, *, shift, seed):
-        from d3cli.data.io import write_pfm
+        from d3cli.data.formats import write_pfm
 
         folder = Path(root) / name
         folder.mkdir(parents=True)

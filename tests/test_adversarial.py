@@ -33,7 +33,7 @@ from click.testing import CliRunner
 from d3cli.batch import LOCK_FILE, OUTPUT_FILES
 from d3cli.cli import main
 from d3cli.config import MAX_CONFIG_INT, MAX_YAML_DEPTH, MAX_YAML_NODES
-from d3cli.data.io import write_pfm
+from d3cli.data.formats import write_pfm
 from tests.helpers import textured_pair, write_png
 
 ALIAS_BOMB = "".join(

@@ -18,7 +18,7 @@ from tests.helpers import write_png
 import d3cli.batch.methods
 import d3cli.batch.outputs
 import d3cli.batch.runner
-import d3cli.data.io
+import d3cli.data.formats
 import d3cli.method.pipeline
 from d3cli.batch import OUTPUT_FILES, run_batch
 from d3cli.cli import main
@@ -85,11 +85,11 @@ def test_disparity_is_read_back_in_pixels(tmp_path, make_pair_folder):
     make_pair_folder(root, "p", shift=6, size=(48, 96))
     out = tmp_path / "out"
     assert invoke("run", root, "-o", out, "--method", "sgbm", "--no-fill").exit_code == 0
-    disp = d3cli.data.io.read_pfm(out / "p" / "disp.pfm")
+    disp = d3cli.data.formats.read_pfm(out / "p" / "disp.pfm")
     inner = disp[8:-8, 40:-8]
     assert np.nanmedian(np.where(np.isfinite(inner), inner, np.nan)) == pytest.approx(6, abs=0.25)
     assert np.isinf(disp[:, :8]).all()  # --no-fill leaves SGBM's border invalid
-    valid = d3cli.data.io.read_image(out / "p" / "valid.png")
+    valid = d3cli.data.formats.read_image(out / "p" / "valid.png")
     assert set(np.unique(valid)) <= {0, 255}
 
 
@@ -238,7 +238,7 @@ def test_missing_input(tmp_path):
 def test_gt_of_another_size(tmp_path, make_pair_folder):
     root = tmp_path / "pairs"
     folder = make_pair_folder(root, "p", size=(48, 96))
-    d3cli.data.io.write_pfm(folder / "disp_gt.pfm", np.full((40, 96), 5, np.float32))
+    d3cli.data.formats.write_pfm(folder / "disp_gt.pfm", np.full((40, 96), 5, np.float32))
     result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm", "--eval")
     assert_user_error(result, contains="1 of 1 pairs failed")
     assert "disp_gt.pfm" in result.output or "ground truth" in result.output
@@ -351,7 +351,7 @@ def test_writer_failure_leaves_no_half_written_files(tmp_path, pairs_root, monke
                     fh.write(b"\x89PNG\r\n\x1a\n-half")
                 raise RuntimeError("disk on fire")
 
-            return d3cli.data.io.atomic_write(path, partial)
+            return d3cli.data.formats.atomic_write(path, partial)
         return real(path, disp)
 
     monkeypatch.setattr(d3cli.batch.outputs, "write_kitti_png", half_then_crash)
@@ -365,16 +365,16 @@ def test_writer_failure_leaves_no_half_written_files(tmp_path, pairs_root, monke
         path = out / "b" / f
         if path.exists():
             if f.endswith(".pfm"):
-                d3cli.data.io.read_pfm(path)
+                d3cli.data.formats.read_pfm(path)
             else:
-                d3cli.data.io.read_image(path)
+                d3cli.data.formats.read_image(path)
     monkeypatch.setattr(d3cli.batch.outputs, "write_kitti_png", real)
     assert invoke("run", pairs_root, "-o", out, "--method", "sgbm").exit_code == 0
     assert [p["status"] for p in run_json(out)["pairs"]] == ["skipped", "ok", "skipped"]
 
 
 def test_keyboard_interrupt_propagates_and_is_recorded(tmp_path, pairs_root, monkeypatch):
-    from d3cli.data.datasets import discover
+    from d3cli.data.layouts import discover
 
     calls = []
 
@@ -492,10 +492,10 @@ def test_bundled_samples_are_reproducible(tmp_path):
     runpy.run_path(str(script), run_name="make_samples")["main"](["--out", str(tmp_path)])
     for name in ("motorcycle", "road"):
         for f in ("left.png", "right.png"):
-            np.testing.assert_array_equal(d3cli.data.io.read_image(tmp_path / name / f),
-                                          d3cli.data.io.read_image(samples_dir() / name / f))
-        np.testing.assert_array_equal(d3cli.data.io.read_pfm(tmp_path / name / "disp_gt.pfm"),
-                                      d3cli.data.io.read_pfm(samples_dir() / name / "disp_gt.pfm"))
+            np.testing.assert_array_equal(d3cli.data.formats.read_image(tmp_path / name / f),
+                                          d3cli.data.formats.read_image(samples_dir() / name / f))
+        np.testing.assert_array_equal(d3cli.data.formats.read_pfm(tmp_path / name / "disp_gt.pfm"),
+                                      d3cli.data.formats.read_pfm(samples_dir() / name / "disp_gt.pfm"))
     total = sum(p.stat().st_size for p in samples_dir().glob("*/*") if p.parent.name != "__pycache__")
     assert total < 1.5e6
 
@@ -504,7 +504,7 @@ def test_bundled_samples_are_reproducible(tmp_path):
 
 
 def test_pointcloud_from_calib_matches_the_disparity(tmp_path):
-    from d3cli.data import io
+    from d3cli.data import formats as io
     from d3cli.road.pointcloud import read_ply
 
     data = tmp_path / "synth"

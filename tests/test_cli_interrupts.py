@@ -54,7 +54,7 @@ def test_handled_interrupt_from_exec_code_in_the_batch_exits_130_not_by_the_sign
     make_pair_folder(tmp_path / "pairs", "a")
     code = """
         import sys
-        import d3cli.data.datasets as datasets
+        import d3cli.data.layouts as datasets
 
         def discover(inputs):  # Ctrl-C inside exec()'d code, as in a dataclass definition
             exec("raise KeyboardInterrupt")

@@ -6,7 +6,7 @@ from click.testing import CliRunner
 
 from d3cli.cli import main
 from d3cli.config import MAX_CONFIG_INT
-from d3cli.data.datasets import discover
+from d3cli.data.layouts import discover
 from d3cli.errors import InputError
 
 

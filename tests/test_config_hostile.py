@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from d3cli.cli import main
 from d3cli.config import MAX_CONFIG_INT, load_config, parse_override
-from d3cli.data.datasets import discover
+from d3cli.data.layouts import discover
 from d3cli.errors import ConfigError, InputError
 
 # 368 bytes that expand to 9^9 (~387 million) strings with a plain yaml.safe_load

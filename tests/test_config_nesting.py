@@ -4,7 +4,7 @@ traceback (issue 12, hostile input)."""
 import pytest
 
 from d3cli.config import MAX_YAML_DEPTH, load_config
-from d3cli.data.datasets import discover
+from d3cli.data.layouts import discover
 from d3cli.errors import ConfigError, InputError
 
 

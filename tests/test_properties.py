@@ -252,7 +252,7 @@ def test_memory_estimate_is_a_non_negative_int(shape, dmax, method, cfg):
 @FEW
 @given(st.binary(max_size=300), st.sampled_from([".png", ".pfm", ".npy", ".pgm", ".jpg"]))
 def test_readers_on_random_bytes(tmp_path_factory, blob, ext):
-    from d3cli.data import io
+    from d3cli.data import formats as io
 
     path = tmp_path_factory.mktemp("img") / f"file{ext}"
     path.write_bytes(blob)
@@ -266,7 +266,7 @@ def test_readers_on_random_bytes(tmp_path_factory, blob, ext):
 @given(st.integers(1, 6), st.integers(1, 6), st.binary(min_size=0, max_size=200), st.sampled_from([b"Pf", b"PF"]),
        st.sampled_from([b"-1.0", b"1.0", b"nan", b"0"]))
 def test_read_pfm_on_truncated_or_odd_headers(tmp_path_factory, w, h, raster, ident, scale):
-    from d3cli.data import io
+    from d3cli.data import formats as io
 
     path = tmp_path_factory.mktemp("pfm") / "d.pfm"
     path.write_bytes(ident + b"\n%d %d\n" % (w, h) + scale + b"\n" + raster)

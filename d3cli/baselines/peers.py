@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from ..config import PeersConfig
-from ..data.io import to_grey
+from ..data.formats import to_grey
 from ..errors import BackendUnavailable, InputError
 from ..method import DisparityResult
 from .sgbm import _to_uint8, fill_holes_rowwise

@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from ..config import Config
-from ..data.io import to_grey
+from ..data.formats import to_grey
 from ..errors import InputError
 from ..method import DisparityResult
 from ..method.perspective import fit_road_model, restored_validity

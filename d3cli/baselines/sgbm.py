@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from ..config import SGBMConfig
-from ..data.io import to_grey
+from ..data.formats import to_grey
 from ..errors import InputError
 from ..method import DisparityResult
 

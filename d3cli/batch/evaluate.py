@@ -15,7 +15,7 @@ from typing import Iterable, Sequence
 
 from tqdm import tqdm
 
-from ..data import datasets, io
+from ..data import formats as io, layouts as datasets
 from ..errors import D3Error, InputError, where_what_fix
 from ..evaluation import metrics, pictures, report
 from ..evaluation.html import write_report_html

@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from .. import __version__
-from ..data import io
+from ..data import formats as io
 from ..errors import ConfigError, D3Error, OutputError, where_what_fix
 from .warmup import warm_jit
 

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.io import atomic_write, read_image, write_image, write_kitti_png, write_pfm
+from ..data.formats import atomic_write, read_image, write_image, write_kitti_png, write_pfm
 from ..evaluation import pictures
 from ..errors import OutputError, where_what_fix
 from ..evaluation.report import jsonable

@@ -42,7 +42,7 @@ from typing import Sequence
 
 from .. import __version__
 from ..config import Config
-from ..data import datasets, io
+from ..data import formats as io, layouts as datasets
 from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind, raise_terminated
 from ..evaluation import diagnostics, report
 from ..road.pointcloud import camera_from, save_pair_cloud

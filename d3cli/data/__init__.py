@@ -1,11 +1,15 @@
-"""Data in and out: images, disparity files, masks, calibration, dataset layouts,
-the synthetic road dataset and the bundled samples.
+"""Data in and out: file formats, dataset layouts, the synthetic road dataset and the
+bundled samples.
 
-- ``io``: image / PFM / KITTI PNG / mask / calibration readers and atomic writers;
-- ``datasets``: discovery of pairs in every supported layout and manifests, ground
+- ``formats``: image / PFM / KITTI PNG / disparity / mask / calibration readers, the
+  colour picture of a disparity map, and the atomic writer every output goes through;
+- ``layouts``: discovery of pairs in every supported layout and manifests, ground
   truth loading, disparity ranges;
 - ``synth``: ray-cast synthetic road pairs with exact ground truth (``d3stereo synth``);
 - ``samples/``: the bundled sample pairs (``d3stereo run`` without INPUT).
+
+Inside: ``formats`` imports nothing else of ``data``; ``layouts`` and ``synth`` import
+``formats``; neither imports the other.
 
 May import: :mod:`d3cli.config`, :mod:`d3cli.errors` only (no method, no batch).
 """

@@ -19,7 +19,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from urllib.parse import quote
 
-from ..data.io import atomic_write
+from ..data.formats import atomic_write
 from .report import counts_sentence, jsonable, summarize
 
 REPORT_FILE = "report.html"

@@ -11,7 +11,7 @@ import math
 import cv2
 import numpy as np
 
-from ..data.io import colorize_disparity
+from ..data.formats import colorize_disparity
 
 #: Percentiles of the estimate that span ``disp_color.png`` unless a range is fixed.
 ROBUST_PERCENTILES = (1.0, 99.0)

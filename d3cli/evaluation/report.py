@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OutputError, where_what_fix
-from ..data.io import atomic_write
+from ..data.formats import atomic_write
 
 #: Metrics computed against ground truth; a pair "has gt" when its EPE is a number.
 DISPARITY_COLUMNS = ["epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density"]

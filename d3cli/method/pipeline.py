@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import Config
-from ..data.io import to_grey
+from ..data.formats import to_grey
 from ..errors import InputError
 from ..kernels import finishing, get_backend
 from .band import band_indexes

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, where_what_fix
-from ..data.io import atomic_write
+from ..data.formats import atomic_write
 
 log = logging.getLogger(__name__)
 

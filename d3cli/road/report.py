@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..data.io import atomic_write, write_image, write_pfm
+from ..data.formats import atomic_write, write_image, write_pfm
 from .defects import find_defects
 from .plane import fit_road_plane, height_map, seen_by_both
 from .pointcloud import Camera, disparity_to_points

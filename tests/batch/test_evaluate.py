@@ -9,7 +9,7 @@ import pytest
 
 from d3cli.batch import evaluate_folders
 from d3cli.batch.evaluate import find_prediction, read_prediction
-from d3cli.data import datasets, io
+from d3cli.data import formats as io, layouts as datasets
 from d3cli.errors import InputError
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 
 from d3cli.batch.outputs import write_disparity_outputs
-from d3cli.data import io
+from d3cli.data import formats as io
 
 
 def test_write_disparity_outputs(tmp_path):

@@ -21,7 +21,7 @@ from tests.helpers import textured_pair, write_png
 
 import d3cli.batch.fingerprint
 from d3cli.cli import main
-from d3cli.data.io import read_pfm, write_pfm
+from d3cli.data.formats import read_pfm, write_pfm
 from d3cli.road.pointcloud import read_ply
 
 

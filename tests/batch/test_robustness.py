@@ -25,7 +25,7 @@ from tests.helpers import textured_pair, write_png
 
 import d3cli.batch.outputs
 import d3cli.batch.runner
-import d3cli.data.io
+import d3cli.data.formats.images
 from d3cli.batch import LOCK_FILE, OUTPUT_FILES, RESULT_FILE, acquire_lock, release_lock
 from d3cli.cli import main
 from d3cli.config import Config, load_config
@@ -59,9 +59,9 @@ def assert_complete(pair_dir):
         path = pair_dir / name
         assert path.is_file(), path
         if name.endswith(".pfm"):
-            d3cli.data.io.read_pfm(path)
+            d3cli.data.formats.read_pfm(path)
         else:
-            d3cli.data.io.read_image(path)
+            d3cli.data.formats.read_image(path)
     json.loads((pair_dir / RESULT_FILE).read_text())
 
 
@@ -184,7 +184,7 @@ def test_interrupt_while_writing_result_json_leaves_no_half_pair(tmp_path, four_
                 Path(tmp).write_text('{"pair": "b", "half')
                 raise KeyboardInterrupt
 
-            return d3cli.data.io.atomic_write(path, partial)
+            return d3cli.data.formats.atomic_write(path, partial)
         return real(path, data)
 
     monkeypatch.setattr(d3cli.batch.runner, "write_json", interrupt_on_b)
@@ -197,7 +197,7 @@ def test_interrupt_while_writing_result_json_leaves_no_half_pair(tmp_path, four_
 
 # ----------------------------------------------------------------------------- disk full
 def test_disk_full_stops_the_batch_with_one_error_and_keeps_finished_pairs(tmp_path, four_pairs, monkeypatch):
-    real = d3cli.data.io.write_encoded
+    real = d3cli.data.formats.images.write_encoded
 
     def full_disk_on_b(path, image):
         if Path(path).parent.name == "b":
@@ -205,7 +205,7 @@ def test_disk_full_stops_the_batch_with_one_error_and_keeps_finished_pairs(tmp_p
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         return real(path, image)
 
-    monkeypatch.setattr(d3cli.data.io, "write_encoded", full_disk_on_b)
+    monkeypatch.setattr(d3cli.data.formats.images, "write_encoded", full_disk_on_b)
     out = tmp_path / "out"
     result = invoke("run", four_pairs, "-o", out, "--method", "sgbm")
     assert result.exit_code == 1
@@ -221,20 +221,20 @@ def test_disk_full_stops_the_batch_with_one_error_and_keeps_finished_pairs(tmp_p
     assert info["interrupted"] is True and info["stopped_at"] == "b"
     assert [p["status"] for p in info["pairs"]] == ["ok", "failed"]
 
-    monkeypatch.setattr(d3cli.data.io, "write_encoded", real)
+    monkeypatch.setattr(d3cli.data.formats.images, "write_encoded", real)
     assert invoke("run", four_pairs, "-o", out, "--method", "sgbm").exit_code == 0
     assert [p["status"] for p in run_json(out)["pairs"]] == ["skipped", "ok", "ok", "ok"]
 
 
 def test_other_write_errors_fail_only_that_pair(tmp_path, four_pairs, monkeypatch):
-    real = d3cli.data.io.write_encoded
+    real = d3cli.data.formats.images.write_encoded
 
     def eio_on_c(path, image):
         if Path(path).parent.name == "c":
             raise OSError(errno.EIO, os.strerror(errno.EIO))
         return real(path, image)
 
-    monkeypatch.setattr(d3cli.data.io, "write_encoded", eio_on_c)
+    monkeypatch.setattr(d3cli.data.formats.images, "write_encoded", eio_on_c)
     out = tmp_path / "out"
     result = invoke("run", four_pairs, "-o", out, "--method", "sgbm")
     assert error_lines(result.output) == [f"Error: 1 of 4 pairs failed (see {out / 'run.json'})"]
@@ -347,7 +347,7 @@ def test_truncated_png_in_the_middle_of_a_batch(tmp_path, four_pairs):
 
 def test_pair_and_gt_size_mismatches_in_one_batch(tmp_path, four_pairs):
     write_png(four_pairs / "b" / "right.png", np.zeros((48, 90), np.uint8))
-    d3cli.data.io.write_pfm(four_pairs / "c" / "disp_gt.pfm", np.full((40, 96), 5, np.float32))
+    d3cli.data.formats.write_pfm(four_pairs / "c" / "disp_gt.pfm", np.full((40, 96), 5, np.float32))
     out = tmp_path / "out"
     result = invoke("run", four_pairs, "-o", out, "--method", "sgbm", "--eval")
     assert error_lines(result.output) == [f"Error: 2 of 4 pairs failed (see {out / 'run.json'})"]

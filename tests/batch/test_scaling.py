@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from d3cli.batch import parse_shard, parse_workers, run_batch, select_shard
 from d3cli.cli import main
 from d3cli.config import load_config
-from d3cli.data import datasets
+from d3cli.data import layouts as datasets
 from d3cli.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]

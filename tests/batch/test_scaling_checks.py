@@ -17,7 +17,7 @@ from click.testing import CliRunner
 import d3cli
 from d3cli.batch.executors import AUTO_SERIAL_CORES, available_cores, largest_first, pair_cost, parse_workers
 from d3cli.cli import main
-from d3cli.data import datasets
+from d3cli.data import layouts as datasets
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -97,7 +97,7 @@ from d3cli.batch import run_batch
 from d3cli.batch.executors import pool_start_method
 from d3cli.batch.warmup import warm_jit
 from d3cli.config import load_config
-from d3cli.data import datasets
+from d3cli.data import layouts as datasets
 cfg = load_config(None)
 print(pool_start_method())
 warm_jit(cfg, "d3stereo")  # runs the parallel kernels here: numba's OpenMP threads start

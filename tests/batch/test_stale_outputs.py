@@ -17,7 +17,7 @@ from click.testing import CliRunner
 import d3cli.batch.runner
 from d3cli.batch import OUTPUT_FILES
 from d3cli.cli import main
-from d3cli.data.io import read_image, read_pfm, write_pfm
+from d3cli.data.formats import read_image, read_pfm, write_pfm
 
 
 def invoke(*args):

@@ -1,4 +1,4 @@
-"""10/12-bit data in 16-bit PNGs and float images (issue 12, item 16): the pair is
+"""10/12-bit data in 16-bit PNGs and float images: the pair is
 scaled to its type's full range with one factor, detected or declared."""
 
 import cv2
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from d3cli.baselines import sgbm_disparity
-from d3cli.data.datasets import load_pair_images, normalise_bit_depth, read_pair_folder
-from d3cli.data.io import to_grey
+from d3cli.data.layouts import load_pair_images, normalise_bit_depth, read_pair_folder
+from d3cli.data.formats import to_grey
 from d3cli.errors import InputError
 from tests.helpers import textured_pair
 

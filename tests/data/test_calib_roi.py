@@ -1,7 +1,7 @@
 """Karlsruhe calibration files describe the full and the cropped (roi) images; the
-images are distributed cropped, so the roi projections apply (issue 12, item 4)."""
+images are distributed cropped, so the roi projections apply."""
 
-from d3cli.data.io import read_calib
+from d3cli.data.formats import read_calib
 
 CALIB = """\
 roi: 2.6e+01 1.369e+03 7.0e+01 4.41e+02

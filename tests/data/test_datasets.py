@@ -1,4 +1,4 @@
-"""Tests of d3cli.data.datasets: every layout on tiny generated fixtures, manifests, bad inputs."""
+"""Tests of d3cli.data.layouts: every layout on tiny generated fixtures, manifests, bad inputs."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from d3cli.data import io
-from d3cli.data.datasets import (
+from d3cli.data import formats as io
+from d3cli.data.layouts import (
     LAYOUTS,
     Pair,
     detect_layout,

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from d3cli.data import datasets, io
+from d3cli.data import formats as io, layouts as datasets
 
 
 def test_disp_noc_png_is_the_mask(tmp_path):

@@ -1,4 +1,4 @@
-"""Image sizes come from the headers before anything is decoded (issue 12, item 13)."""
+"""Image sizes come from the headers before anything is decoded, so a huge or broken file is refused without being decoded."""
 
 import struct
 import zlib
@@ -6,8 +6,8 @@ import zlib
 import numpy as np
 import pytest
 
-from d3cli.data import io
-from d3cli.data.datasets import load_pair_images, pair_image_size, read_pair_folder
+from d3cli.data import formats as io
+from d3cli.data.layouts import load_pair_images, pair_image_size, read_pair_folder
 from d3cli.errors import InputError
 from tests.helpers import write_png
 
@@ -55,7 +55,7 @@ def test_a_truncated_png_gives_our_error_and_no_opencv_warning(tmp_path):
     write_png(tmp_path / "ok.png", (np.arange(2500) % 251).astype(np.uint8).reshape(50, 50))
     data = (tmp_path / "ok.png").read_bytes()
     (tmp_path / "cut.png").write_bytes(data[: len(data) // 2])
-    code = "import sys; from d3cli.data import io\ntry:\n    io.read_image(sys.argv[1])\nexcept Exception as e:\n    print(e)"
+    code = "import sys; from d3cli.data import formats as io\ntry:\n    io.read_image(sys.argv[1])\nexcept Exception as e:\n    print(e)"
     done = subprocess.run([sys.executable, "-c", code, str(tmp_path / "cut.png")], capture_output=True, text=True,
                           timeout=60)
     assert "cannot read image (corrupt or not an image)" in done.stdout

@@ -1,6 +1,5 @@
 """Images beyond OpenCV's own decoder limits are refused naming the file and the fix, from
-the header, instead of OpenCV's assertion text or libpng lines without a file name
-(issue 12, item 13)."""
+the header, instead of OpenCV's assertion text or libpng lines without a file name."""
 
 import subprocess
 import sys
@@ -9,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from d3cli.data import io
+from d3cli.data import formats as io
 from d3cli.errors import InputError
 from tests.data.test_image_headers import _png_claiming
 from tests.helpers import write_png
@@ -25,7 +24,7 @@ def test_a_side_beyond_opencvs_limit_is_refused_from_the_header(tmp_path, width,
 
 def test_no_libpng_or_opencv_lines_on_stderr(tmp_path):
     path = _png_claiming(tmp_path / "wide.png", 2_000_000, 1)
-    code = "import sys; from d3cli.data import io\ntry:\n    io.read_image(sys.argv[1])\nexcept Exception as e:\n    print(e)"
+    code = "import sys; from d3cli.data import formats as io\ntry:\n    io.read_image(sys.argv[1])\nexcept Exception as e:\n    print(e)"
     done = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=60)
     assert "has a side longer than 1048576 pixels" in done.stdout
     assert done.stderr == ""  # was "libpng warning: Image width exceeds user limit in IHDR" and more
@@ -46,7 +45,7 @@ def test_an_opencv_assertion_names_the_file_and_the_fix(tmp_path, monkeypatch):
         raise cv2.error("OpenCV(4.9.0) loadsave.cpp:77: error: (-215:Assertion failed) "
                         "pixels <= CV_IO_MAX_IMAGE_PIXELS in function 'validateInputImageSize'\n")
 
-    monkeypatch.setattr(io.cv2, "imdecode", refuse)
+    monkeypatch.setattr(cv2, "imdecode", refuse)
     with pytest.raises(InputError) as info:
         io.read_image(tmp_path / "img.png")
     message = str(info.value)

@@ -1,8 +1,8 @@
-"""An input that is a symlink loop or a broken link is named as such (issue 12 item 15)."""
+"""An input that is a symlink loop or a broken link is named as such, not as a missing file."""
 
 import pytest
 
-from d3cli.data.datasets import discover
+from d3cli.data.layouts import discover
 from d3cli.errors import InputError
 
 

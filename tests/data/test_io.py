@@ -1,4 +1,4 @@
-"""Tests of d3cli.data.io: every reader/writer round trip and every bad-input message."""
+"""Tests of d3cli.data.formats: every reader/writer round trip and every bad-input message."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from d3cli.data import io
+from d3cli.data import formats as io
 from d3cli.errors import InputError, OutputError
 
 

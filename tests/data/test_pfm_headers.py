@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from d3cli.data import io
+from d3cli.data import formats as io
 from d3cli.errors import InputError
 
 

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from d3cli.data import synth
+from d3cli.data import formats, layouts, synth
+from d3cli.data.synth import render as synth_render, rig as synth_rig
 from d3cli.errors import InputError
 
 W, H = 160, 96
@@ -96,7 +97,7 @@ def test_flat_road_follows_the_pt_plane_model_with_the_calib_roll():
     coef, residual = _plane_fit(pair.disparity)
     assert np.abs(residual).max() < 1e-3
     theta = math.radians(pair.calib["roll_deg"])
-    # d = a0 + a1 (v cos(theta) - u sin(theta)) (DESIGN.md section 1, PT)
+    # d = a0 + a1 (v cos(theta) - u sin(theta)) (docs/design.md, 'Perspective transformation')
     assert coef[2] > 0
     assert math.degrees(math.atan2(-coef[1], coef[2])) == pytest.approx(pair.calib["roll_deg"], abs=1e-3)
     assert coef[1] == pytest.approx(-coef[2] * math.tan(theta), abs=1e-6)
@@ -122,7 +123,7 @@ def test_pothole_is_farther_than_the_road_plane():
 
 
 def test_rig_is_rectified():
-    rig = synth._sample_rig(np.random.default_rng(5), W, H)
+    rig = synth_rig._sample_rig(np.random.default_rng(5), W, H)
     rot = rig.rotation()
     assert np.allclose(rot @ rot.T, np.eye(3))
     left, right = rig.centres()
@@ -142,7 +143,7 @@ def test_occlusion_check_hides_points_under_the_surface():
     points[..., 0] = np.linspace(-0.05, 0.05, 3)
     points[..., 1] = 0.1
     points[1, :, 2] = -0.01  # 1 cm below the road
-    visible = synth._visible_from(np.array([0.0, 0.0, 1.0]), points, flat, lip, 16, -0.5, -0.5, 0.02, 1e-3, 5e-4)
+    visible = synth_render._visible_from(np.array([0.0, 0.0, 1.0]), points, flat, lip, 16, -0.5, -0.5, 0.02, 1e-3, 5e-4)
     assert visible[0].all() and not visible[1].any()
 
 
@@ -193,7 +194,7 @@ def test_generate_dataset_writes_consistent_pair_folders(tmp_path):
         left = cv2.imread(str(folder / "left.png"), cv2.IMREAD_UNCHANGED)
         right = cv2.imread(str(folder / "right.png"), cv2.IMREAD_UNCHANGED)
         mask = cv2.imread(str(folder / "mask0nocc.png"), cv2.IMREAD_UNCHANGED)
-        disp = synth.read_pfm(folder / "disp_gt.pfm")
+        disp = formats.read_pfm(folder / "disp_gt.pfm")
         assert left.shape == right.shape == mask.shape == disp.shape == (H, W)
         assert left.dtype == np.uint8 and set(np.unique(mask)) <= {0, 255}
         assert np.isfinite(disp[mask > 0]).all()
@@ -216,13 +217,12 @@ def test_generate_dataset_writes_consistent_pair_folders(tmp_path):
 
 
 def test_generated_folders_are_read_by_the_io_and_datasets_modules(tmp_path):
-    io = pytest.importorskip("d3cli.data.io")
-    datasets = pytest.importorskip("d3cli.data.datasets")
+    io, datasets = formats, layouts
     folder = synth.generate_dataset(tmp_path, n=1, seed=9, width=W, height=H)[0]
     pair = datasets.discover([tmp_path])[0]
     assert pair.name == folder.name and pair.family == "synth" and pair.gt_invalid == "inf"
     gt, mask = datasets.load_ground_truth(pair, (H, W))
-    assert np.array_equal(gt, synth.read_pfm(folder / "disp_gt.pfm"))
+    assert np.array_equal(gt, formats.read_pfm(folder / "disp_gt.pfm"))
     assert pair.max_disparity == io.read_calib(folder / "calib.txt")["ndisp"]
 
 
@@ -231,10 +231,10 @@ def test_generate_dataset_rejects_zero_pairs(tmp_path):
         synth.generate_dataset(tmp_path, n=0)
 
 
-def test_pfm_round_trip_of_the_local_writer(tmp_path):
+def test_pfm_bytes_of_the_ground_truth_writer(tmp_path):
     disp = np.arange(12, dtype=np.float32).reshape(3, 4)
     disp[0, 0] = np.inf
-    synth._write_pfm_local(tmp_path / "d.pfm", disp)
+    formats.write_pfm(tmp_path / "d.pfm", disp)
     data = (tmp_path / "d.pfm").read_bytes()
-    assert data.startswith(b"Pf\n4 3\n-1.0\n")
-    assert np.array_equal(synth.read_pfm(tmp_path / "d.pfm"), disp)
+    assert data == b"Pf\n4 3\n-1.0\n" + np.flipud(disp).astype("<f4").tobytes()
+    assert np.array_equal(formats.read_pfm(tmp_path / "d.pfm"), disp)

@@ -1,5 +1,5 @@
 """`d3stereo synth` never mixes two datasets in a folder, and refuses sizes it cannot
-render (issue 12, item 17)."""
+render (before rendering anything)."""
 
 import json
 

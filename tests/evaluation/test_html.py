@@ -7,7 +7,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from d3cli.data import io
+from d3cli.data import formats as io
 from d3cli.evaluation.html import histogram_svg, write_report_html
 
 

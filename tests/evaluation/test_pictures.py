@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from d3cli.data.io import colorize_disparity
+from d3cli.data.formats import colorize_disparity
 from d3cli.evaluation import pictures
 
 

@@ -167,7 +167,7 @@ def test_bad_models_are_one_line_config_errors(tmp_path, problem, message):
 
 
 def test_perspective_transformation_with_features_on_the_road_sample(tmp_path):
-    from d3cli.data.datasets import load_ground_truth, load_pair_images, read_pair_folder
+    from d3cli.data.layouts import load_ground_truth, load_pair_images, read_pair_folder
     from d3cli.data.samples import __file__ as samples_init
     from pathlib import Path
 

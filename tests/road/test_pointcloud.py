@@ -9,7 +9,7 @@ import pytest
 
 from d3cli import load_config
 from d3cli.errors import InputError
-from d3cli.data.io import read_calib
+from d3cli.data.formats import read_calib
 from d3cli.road.pointcloud import Camera, camera_from, disparity_to_points, read_ply, save_pair_cloud, write_ply
 from d3cli.data.synth import render_pair
 

@@ -1,0 +1,128 @@
+"""Ground-truth disparity in any supported encoding (PFM, KITTI PNG, scaled 8/16-bit
+images, ``.npy``) and non-occlusion masks.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import InputError, where_what_fix
+from .images import _decode_unchanged, _existing_file, _single_channel
+from .pfm import read_pfm
+
+
+DISPARITY_EXTENSIONS = (".pfm", ".png", ".pgm", ".ppm", ".tif", ".tiff", ".npy")
+INVALID_CONVENTIONS = ("auto", "zero", "inf", "none")
+
+
+def _normalise_invalid(path: Path, invalid: str) -> str:
+    text = str(invalid).strip().lower()
+    aliases = {"0": "zero", "zeros": "zero", "infinity": "inf", "nonfinite": "inf", "-": "auto", "": "auto"}
+    text = aliases.get(text, text)
+    if text not in INVALID_CONVENTIONS:
+        raise InputError(
+            where_what_fix(
+                str(path),
+                f"unknown invalid-value convention {invalid!r}",
+                f"use one of {', '.join(INVALID_CONVENTIONS)}",
+            )
+        )
+    return text
+
+
+def _load_npy(path: Path) -> np.ndarray:
+    try:
+        array = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:  # EOFError: an empty or truncated file
+        raise InputError(
+            where_what_fix(str(path), f"cannot read .npy file ({exc})", "give a NumPy array saved with np.save")
+        ) from None
+    if array.ndim == 3 and array.shape[2] == 1:
+        array = array[:, :, 0]
+    if array.ndim != 2 or not np.issubdtype(array.dtype, np.number):
+        raise InputError(
+            where_what_fix(
+                str(path), f"expected a 2-D numeric disparity array, got {array.dtype} {array.shape}", "save (H, W) floats"
+            )
+        )
+    return array
+
+
+def read_disparity(path: str | os.PathLike, *, scale: float = 1.0, invalid: str = "auto") -> np.ndarray:
+    """Read a disparity map in any supported format.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``.pfm``, ``.png``/``.pgm``/``.ppm``/``.tif`` (integer values) or ``.npy``.
+    scale : float, keyword-only
+        Stored value per pixel of disparity: disparity = value / scale (KITTI 256,
+        Middlebury 2001 8 or 16, 2003 quarter 4, 2005/2006 third 3).
+    invalid : {"auto", "zero", "inf", "none"}, keyword-only
+        Which stored values mean "no ground truth". ``"auto"`` by format: PFM non-finite;
+        PNG/PGM 0; npy non-finite or <= 0. ``"zero"``: 0 (and NaN); ``"inf"``: non-finite;
+        ``"none"``: nothing is converted. ``"0"`` is accepted for ``"zero"``.
+
+    Returns
+    -------
+    ndarray, float32, (H, W)
+        Disparity in pixels with inf where invalid.
+    """
+    path = _existing_file(path, "disparity file")
+    mode = _normalise_invalid(path, invalid)
+    if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
+        raise InputError(where_what_fix(str(path), f"disparity scale must be > 0, got {scale!r}", "fix gt_scale"))
+    ext = path.suffix.lower()
+    if ext == ".pfm":
+        raw = read_pfm(path)
+        auto = "inf"
+    elif ext == ".npy":
+        raw = _load_npy(path)
+        auto = "npy"
+    elif ext in DISPARITY_EXTENSIONS:
+        raw = _single_channel(path, _decode_unchanged(path), "disparity image")
+        auto = "zero"
+    else:
+        raise InputError(
+            where_what_fix(
+                str(path), f"unsupported disparity format '{ext}'", "use .pfm, .png, .pgm or .npy"
+            )
+        )
+    if mode == "auto":
+        mode = auto
+    raw64 = raw.astype(np.float64)
+    disp = (raw64 / float(scale)).astype(np.float32)
+    if mode == "none":
+        return disp
+    bad = ~np.isfinite(raw64)
+    if mode == "zero":
+        bad |= raw64 == 0
+    elif mode == "npy":
+        bad |= raw64 <= 0
+    disp[bad] = np.inf
+    return disp
+
+
+def read_mask(path: str | os.PathLike, *, min_value: int = 1) -> np.ndarray:
+    """Read an evaluation mask.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Any image (palette PNGs are expanded by OpenCV; any channel counts).
+    min_value : int, keyword-only
+        Pixels whose value reaches this are True. The default 1 means nonzero = True;
+        Middlebury 2014 ``mask0nocc.png`` needs 255 (128 marks occluded pixels).
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+    """
+    path = _existing_file(path, "mask file")
+    image = _decode_unchanged(path)
+    hit = image >= min_value
+    return hit.any(axis=2) if hit.ndim == 3 else hit

@@ -1,0 +1,255 @@
+"""Images: read (RGB, 8/16-bit, size and bit-depth checks from the header), grey
+conversion, and the atomic image writer.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ...errors import InputError, OutputError, where_what_fix
+from .atomic import atomic_write
+
+
+# OpenCV prints its own "[ WARN:0@...] PNG input buffer is incomplete" lines to stderr for
+# files that this module then reports as one Error naming the file: keep only errors.
+cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+
+
+#: Largest image decoded (pixels): 16384^2, ~1.6 GB as 16-bit RGB.
+MAX_IMAGE_PIXELS = 16384 * 16384
+
+
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".tif", ".tiff", ".bmp")
+
+
+# ITU-R BT.601 luma weights, the ones OpenCV and most stereo code use.
+_LUMA_RGB = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+
+
+def _existing_file(path: str | os.PathLike, what: str = "file") -> Path:
+    """Return ``path`` as a Path, raising InputError when it is missing or a folder."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(where_what_fix(str(path), f"{what} not found", "check the path"))
+    if path.is_dir():
+        raise InputError(where_what_fix(str(path), "is a folder, not a file", "give the file itself"))
+    return path
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise InputError(
+            where_what_fix(str(path), f"cannot read file ({exc.strerror})", "check its permissions")
+        ) from None
+
+
+def image_size(path: str | os.PathLike) -> tuple[int, int] | None:
+    """(width, height) from the image file's header, without decoding the pixels.
+
+    A 1 MB PNG can claim 32000x32000 pixels (3 GB once decoded): sizes are checked from
+    the header first.  Returns None when the header cannot be read this way (the decoder
+    then says what is wrong).  Uses Pillow (a dependency of scikit-image) for the header.
+    """
+    from PIL import Image  # header parsing only; OpenCV has no header-only reader
+
+    try:
+        with Image.open(path) as image:  # lazy: reads the header, decodes nothing
+            return int(image.size[0]), int(image.size[1])
+    except Image.DecompressionBombError:  # Pillow refuses > 179 Mpx even to open
+        limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+        try:
+            with Image.open(path) as image:
+                return int(image.size[0]), int(image.size[1])
+        finally:
+            Image.MAX_IMAGE_PIXELS = limit
+    except Exception:  # noqa: BLE001 - any header Pillow cannot parse: let OpenCV decide
+        return None
+
+
+def _opencv_max_side() -> int:
+    """Longest image side OpenCV's decoders accept: 2**20 unless the user raised it with
+    ``OPENCV_IO_MAX_IMAGE_WIDTH`` / ``OPENCV_IO_MAX_IMAGE_HEIGHT`` (OpenCV's own variables)."""
+    limits = []
+    for name in ("OPENCV_IO_MAX_IMAGE_WIDTH", "OPENCV_IO_MAX_IMAGE_HEIGHT"):
+        try:
+            limits.append(int(os.environ.get(name, 1 << 20)))
+        except ValueError:
+            limits.append(1 << 20)
+    return min(limits)
+
+
+def _decode_unchanged(path: Path) -> np.ndarray:
+    """Decode an image file with OpenCV keeping bit depth and channels (BGR order)."""
+    # imdecode on the raw bytes instead of imread(path): imread cannot open non-ASCII
+    # paths on some platforms and says nothing about why it failed.
+    size = image_size(path)
+    if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:
+        raise InputError(where_what_fix(
+            str(path), f"image of {size[0]}x{size[1]} pixels is larger than {MAX_IMAGE_PIXELS} pixels "
+                       f"(about {size[0] * size[1] * 6 / 1e9:.1f} GB to decode)",
+            "give an image of at most 16384x16384 pixels, or crop or downscale it"))
+    side = _opencv_max_side()
+    if size is not None and max(size) > side:
+        # OpenCV would refuse it with its own assertion text (or libpng lines on stderr)
+        # and no file name.
+        raise InputError(where_what_fix(
+            str(path), f"image of {size[0]}x{size[1]} pixels has a side longer than {side} pixels, "
+                       "the most OpenCV decodes",
+            "crop or downscale it (a stereo pair this wide is likely a mistake)"))
+    data = np.frombuffer(_read_bytes(path), dtype=np.uint8)
+    try:
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    except cv2.error as exc:  # e.g. a header beyond OpenCV's own size limit
+        # "OpenCV(4.9.0) /path/loadsave.cpp:77: error: (-215:Assertion failed) ... in function
+        # '...'": the part after "error:" says what is wrong.
+        reason = " ".join(str(exc).split()).rpartition(" error: ")[2][:160]
+        raise InputError(where_what_fix(str(path), f"cannot decode image (OpenCV: {reason})",
+                                        "give an 8/16-bit PNG, JPEG, PPM/PGM or TIFF of a sensible size")) from None
+    if image is None:
+        raise InputError(
+            where_what_fix(
+                str(path),
+                "cannot read image (corrupt or not an image)",
+                "give an 8/16-bit PNG, JPEG, PPM/PGM or TIFF file",
+            )
+        )
+    return image
+
+
+def _bgr_to_rgb(image: np.ndarray) -> np.ndarray:
+    """(H, W) stays; (H, W, 1) -> (H, W); BGR(A) -> RGB (alpha dropped)."""
+    if image.ndim == 2:
+        return image
+    channels = image.shape[2]
+    if channels == 1:
+        return image[:, :, 0]
+    if channels == 2:  # grey + alpha
+        return image[:, :, 0]
+    return image[:, :, 2::-1]
+
+
+def _shape_text(shape) -> str:
+    """``(H, W, ...)`` -> ``'HxW'`` as in the error messages."""
+    return f"{shape[0]}x{shape[1]}"
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """Read an 8- or 16-bit image.
+
+    Parameters
+    ----------
+    path : str or path-like
+        PNG, JPEG, PPM/PGM, TIFF or BMP file; grey, grey+alpha, RGB or RGBA.
+
+    Returns
+    -------
+    ndarray
+        uint8, uint16 or float32 (float TIFF; values as stored), ``(H, W)`` for grey
+        images, ``(H, W, 3)`` RGB otherwise (alpha dropped).
+
+    Raises
+    ------
+    InputError
+        The file is missing, unreadable, corrupt, or not 8/16-bit.
+    """
+    path = _existing_file(path, "image file")
+    image = _decode_unchanged(path)
+    if image.dtype.kind == "f":
+        image = image.astype(np.float32, copy=False)
+        if not np.isfinite(image).all():
+            raise InputError(where_what_fix(str(path), "float image with NaN or inf samples",
+                                            "give finite intensities (or an 8/16-bit image)"))
+    elif image.dtype not in (np.uint8, np.uint16):
+        raise InputError(
+            where_what_fix(
+                str(path),
+                f"unsupported pixel type {image.dtype} (expected 8/16-bit integers or float)",
+                "convert the image to 8- or 16-bit PNG",
+            )
+        )
+    return np.ascontiguousarray(_bgr_to_rgb(image))
+
+
+def to_grey(img: np.ndarray) -> np.ndarray:
+    """Convert an image to float32 grey levels on the 0-255 scale.
+
+    Parameters
+    ----------
+    img : ndarray
+        ``(H, W)`` or ``(H, W, 3)`` RGB (``(H, W, 4)`` RGBA: alpha ignored); uint8,
+        uint16 (divided by 257 so 65535 -> 255) or float (taken as 0-255 already).
+
+    Returns
+    -------
+    ndarray, float32, (H, W)
+        ``0.299 R + 0.587 G + 0.114 B`` for colour images.
+    """
+    img = np.asarray(img)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    if img.ndim == 3 and img.shape[2] in (3, 4):
+        grey = img[:, :, :3].astype(np.float32) @ _LUMA_RGB
+    elif img.ndim == 2:
+        grey = img.astype(np.float32)
+    else:
+        raise ValueError(f"to_grey expects (H, W) or (H, W, 3) images, got shape {img.shape}")
+    if img.dtype == np.uint16:
+        grey /= np.float32(257.0)
+    return np.ascontiguousarray(grey, dtype=np.float32)
+
+
+def _encode_image(path: Path, image: np.ndarray) -> bytes:
+    ext = path.suffix.lower() or ".png"
+    ok, buffer = cv2.imencode(ext, image)
+    if not ok:
+        raise OutputError(
+            where_what_fix(str(path), f"OpenCV cannot encode {image.dtype} {image.shape} as {ext}", "use .png")
+        )
+    return buffer.tobytes()
+
+
+def write_encoded(path: Path, image: np.ndarray) -> None:
+    """Encode ``image`` by the extension of ``path`` and write it there (not atomic: the
+    public writers call this on a temporary file)."""
+    Path(path).write_bytes(_encode_image(Path(path), image))
+
+
+def write_image(path: str | os.PathLike, img: np.ndarray) -> Path:
+    """Write an image atomically (format from the extension, RGB converted to BGR).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Output file (``.png`` keeps 16-bit data; ``.jpg`` is 8-bit only).
+    img : ndarray
+        uint8 or uint16, ``(H, W)`` grey or ``(H, W, 3)`` RGB.
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    img = np.asarray(img)
+    if img.ndim == 3 and img.shape[2] == 3:
+        img = np.ascontiguousarray(img[:, :, ::-1])
+    elif img.ndim == 3 and img.shape[2] == 4:
+        img = np.ascontiguousarray(img[:, :, [2, 1, 0, 3]])
+    return atomic_write(path, lambda tmp: write_encoded(tmp, img))
+
+
+def _single_channel(path: Path, image: np.ndarray, what: str) -> np.ndarray:
+    """Accept (H, W) or a colour image whose channels are all equal (a grey saved as RGB)."""
+    if image.ndim == 2:
+        return image
+    first = image[:, :, 0]
+    if all(np.array_equal(first, image[:, :, c]) for c in range(1, min(image.shape[2], 3))):
+        return first
+    raise InputError(
+        where_what_fix(str(path), f"{what} has {image.shape[2]} different channels", "give a single-channel image")
+    )

@@ -1,0 +1,317 @@
+""":func:`render_pair` (one pair in memory) and :func:`generate_dataset` (pair folders
+on disk, every file written atomically through :mod:`d3cli.data.formats`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import InputError, OutputError, where_what_fix
+from ..formats import atomic_write, write_image, write_pfm
+from .render import _Lighting, _expose, _render_view, _sample_lighting
+from .rig import MATERIALS, VARIANTS, StereoRig, _road_bounds, _sample_rig, _texel_size
+from .terrain import _build_height_field, _HeightField, _RoadShape, _sample_road, _sample_road_point
+from .texture import _build_albedo, _build_mipmap, _build_wetness, _MipMap
+from .truth import SynthPair, _describe_hole, _ground_truth, pothole_truth
+
+log = logging.getLogger(__name__)
+
+
+def _check_choice(name: str, value: str, choices) -> None:
+    if value not in choices:
+        raise InputError(where_what_fix("synth", f"unknown {name} {value!r}", f"use one of {', '.join(choices)}"))
+
+
+#: Image sides accepted by the generator: smaller cannot hold a road scene, larger would
+#: need tens of GB while rendering (a 200000-pixel width used to end in a MemoryError).
+MIN_SIDE, MAX_SIDE = 32, 8192
+
+
+#: The file that marks a folder as one synthetic dataset (seed and size).
+DATASET_FILE = "synth.json"
+
+
+def _check_size(width: int, height: int) -> None:
+    if width < MIN_SIDE or height < MIN_SIDE:
+        raise InputError(where_what_fix("synth", f"image size {width}x{height} is too small",
+                                        f"use a width and height of at least {MIN_SIDE} pixels"))
+    if width > MAX_SIDE or height > MAX_SIDE:
+        raise InputError(where_what_fix("synth", f"image size {width}x{height} is too large",
+                                        f"use a width and height of at most {MAX_SIDE} pixels"))
+
+
+def _claim_folder(out_dir: Path, identity: dict) -> None:
+    """Refuse to mix two datasets in one folder; mark the folder as this dataset.
+
+    A folder may be empty, or hold a dataset made with the same seed and size (a rerun,
+    or more pairs of the same set: pairs are deterministic).  Anything else is refused,
+    so that pairs of two seeds or sizes never end up side by side.
+    """
+    marker = out_dir / DATASET_FILE
+    entries = [p.name for p in out_dir.iterdir()] if out_dir.is_dir() else []
+    if entries:
+        try:
+            stored = json.loads(marker.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            stored = None
+        if stored != identity:
+            made_by = (f"a synthetic set with seed {stored.get('seed')} and size {stored.get('width')}x"
+                       f"{stored.get('height')}" if isinstance(stored, dict) else f"{len(entries)} other entries")
+            raise OutputError(where_what_fix(
+                str(out_dir), f"the folder is not empty (it holds {made_by})",
+                "give an empty or new folder, or the same --seed/--width/--height as before"))
+    atomic_write(marker, lambda tmp: tmp.write_text(json.dumps(identity) + "\n", encoding="utf-8"))
+
+
+def render_pair(
+    *,
+    seed: int,
+    width: int = 1280,
+    height: int = 720,
+    variant: str = "sun",
+    material: str = "asphalt",
+    noise: bool = True,
+    potholes: int | None = None,
+    flat: bool = False,
+    supersample: int = 2,
+) -> SynthPair:
+    """Render one synthetic road stereo pair with exact ground truth.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of everything random (rig, road, texture, light, noise); equal seeds give
+        bit-identical pairs.
+    width, height : int
+        Image size in pixels (at least 32).
+    variant : {"sun", "dusk", "wet"}
+        Illumination (see the module docstring).
+    material : {"asphalt", "cement"}
+        Road surface texture.
+    noise : bool
+        False leaves out sensor noise (images are still blurred and quantised).
+    potholes : int or None
+        Number of potholes; None draws 0-3.
+    flat : bool
+        True makes the road the exact plane z = 0 (no undulation, slope, potholes or
+        bump), so the disparity is exactly ``a0 + a1 (v cos(theta) - u sin(theta))``.
+    supersample : int
+        Rays per pixel along each axis (antialiasing).
+
+    Returns
+    -------
+    SynthPair
+        Images uint8 (H, W), disparity float32 (H, W) (inf invalid), nocc bool (H, W),
+        calib and info dicts.
+    """
+    _check_choice("variant", variant, VARIANTS)
+    _check_choice("material", material, MATERIALS)
+    _check_size(width, height)
+    if int(supersample) < 1:
+        raise InputError(where_what_fix("synth", f"supersample is {supersample}", "use 1 or more rays per axis"))
+    rng = np.random.default_rng(seed)
+    scene = _build_scene(rng, width, height, variant, material, potholes, flat)
+    left_img, right_img = _render_views(scene, width, height, int(supersample), rng, noise)
+
+    disparity, nocc, points = _ground_truth(scene.rig, scene.field_, scene.h_top)
+    pothole_ids, defects_gt = pothole_truth(scene.road.holes, scene.rig, points)
+    finite = disparity[np.isfinite(disparity)]
+    calib = scene.rig.calib()
+    calib["ndisp"] = int(math.ceil(float(finite.max()))) + 8 if finite.size else width // 4
+    info = _pair_info(scene, seed=seed, variant=variant, material=material, noise=noise, flat=flat)
+    return SynthPair(left_img, right_img, disparity, nocc, calib, info, pothole_ids, defects_gt)
+
+
+@dataclass(frozen=True)
+class _Scene:
+    """Everything :func:`render_pair` draws before rendering: rig, road, texture, light."""
+
+    rig: StereoRig
+    road: _RoadShape
+    texel: float
+    spacing: float
+    field_: _HeightField
+    h_top: float
+    lighting: _Lighting
+    mip: _MipMap
+    wet: np.ndarray
+
+
+def _build_scene(rng, width: int, height: int, variant: str, material: str, potholes: int | None,
+                 flat: bool) -> _Scene:
+    """Draw the rig, road, height field, light and texture, in the order the seed fixes."""
+    rig = _sample_rig(rng, width, height)
+    road = _sample_road(rng, rig, potholes, flat)
+    holes = road.holes
+
+    texel = _texel_size(rig)
+    spacing = float(np.clip(1.5 * texel, 2e-3, 2e-2))
+    # The visible patch depends on the height range and the tilt part of the height
+    # range on the patch: two rounds from a generous start settle it.
+    z_low, z_high = -0.15, 0.1
+    for _ in range(2):
+        bounds = _road_bounds(rig, z_low, z_high, margin=0.05)
+        z_low, z_high = road.height_range(bounds)
+    bounds = _road_bounds(rig, z_low, z_high, margin=0.05)
+    field_ = _build_height_field(rng, road, bounds, spacing)
+    h_top = float(field_.h.max()) + 1e-3
+    if field_.h.max() > z_high or field_.h.min() < z_low:
+        raise RuntimeError("synthetic road height left the range its visible patch was computed for")
+
+    lighting = _sample_lighting(rng, variant, rig)
+    light_pool = None
+    if variant == "dusk":
+        light_pool = (*_sample_road_point(rng, rig), rng.uniform(1.0, 2.5))
+    albedo = _build_albedo(rng, material, bounds, texel, holes, light_pool)
+    mip = _build_mipmap(albedo, texel, bounds[0], bounds[2])
+    del albedo
+    wet = _build_wetness(rng, field_) if variant == "wet" else np.zeros((1, 1))
+    return _Scene(rig, road, texel, spacing, field_, h_top, lighting, mip, wet)
+
+
+def _render_views(scene: _Scene, width: int, height: int, supersample: int, rng, noise: bool):
+    """Ray-cast both views and expose them (one exposure scale, from the left view)."""
+    rig, field_, mip, lighting = scene.rig, scene.field_, scene.mip, scene.lighting
+    rot = rig.rotation()
+    left_c, right_c = rig.centres()
+    hf = (field_.h, field_.grad_x, field_.grad_y, scene.wet, field_.lipschitz, field_.tile,
+          field_.x0, field_.y0, field_.spacing, scene.h_top)
+    radiance = [
+        _render_view(c, rot, rig.f, rig.cx, rig.cy, width, height, supersample, *hf,
+                     mip.flat, mip.offsets, mip.shapes, mip.scales, mip.texel, mip.x0, mip.y0,
+                     lighting.light, lighting.shade, lighting.shadows)
+        for c in (left_c, right_c)
+    ]
+    scale = lighting.mean_electrons / max(float(radiance[0].mean()), 1e-9)
+    return tuple(_expose(r, scale, lighting, rng, noise, rig) for r in radiance)
+
+
+def _pair_info(scene: _Scene, *, seed: int, variant: str, material: str, noise: bool, flat: bool) -> dict:
+    """The scene description stored in ``SynthPair.info`` (and SOURCE.txt)."""
+    road, rig, lighting = scene.road, scene.rig, scene.lighting
+    return {
+        "seed": int(seed),
+        "variant": variant,
+        "material": material,
+        "noise": bool(noise),
+        "flat": bool(flat),
+        "potholes": [_describe_hole(hole, rig) for hole in road.holes],
+        "bump": None if road.bump is None else {"x": road.bump[0], "y": road.bump[1], "height_m": road.bump[4]},
+        "undulation_std_m": road.undulation_m,
+        "cross_slope": road.cross_slope,
+        "grade": road.grade,
+        "light_elevation_deg": math.degrees(math.asin(float(lighting.light[2]))),
+        "texel_m": scene.texel,
+        "grid_spacing_m": scene.spacing,
+    }
+
+
+def _write_text(path: Path, lines: list[str]) -> None:
+    atomic_write(path, lambda tmp: tmp.write_text("\n".join(lines) + "\n", encoding="utf-8"))
+
+
+def pair_name(index: int, variant: str, material: str) -> str:
+    """Folder name of pair ``index``: ``synth-0000-sun-asphalt``."""
+    return f"synth-{index:04d}-{variant}-{material}"
+
+
+def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, height: int = 720) -> list[Path]:
+    """Render ``n`` pairs into pair folders under ``out_dir``.
+
+    Variants cycle sun, dusk, wet and materials asphalt, cement, so six consecutive
+    pairs cover every combination.  Each folder holds ``left.png``, ``right.png``
+    (8-bit grey), ``disp_gt.pfm`` (float32, inf invalid), ``mask0nocc.png`` (255 =
+    visible in the right view), ``calib.txt`` and ``SOURCE.txt`` (``gt_scale: 1``,
+    ``gt_invalid: inf``, seeds and scene description); every file is written under a
+    temporary name and renamed.  The same (seed, index, size) always gives the same
+    pair; ``render_pair(seed=<pair_seed in SOURCE.txt>, ...)`` reproduces it.
+
+    Returns
+    -------
+    list of Path
+        The pair folders, in index order.
+    """
+    if int(n) < 1:
+        raise InputError(where_what_fix("synth", f"--n is {n}", "ask for at least one pair"))
+    _check_size(width, height)
+    out_dir = Path(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(where_what_fix(str(out_dir), f"cannot create the folder ({exc.strerror or exc})",
+                                         "choose a writable output folder")) from exc
+    _claim_folder(out_dir, {"generator": "d3stereo synth", "seed": int(seed), "width": int(width),
+                            "height": int(height)})
+    folders = []
+    for index in range(int(n)):
+        variant = VARIANTS[index % len(VARIANTS)]
+        material = MATERIALS[index % len(MATERIALS)]
+        pair_seed = int(np.random.SeedSequence([int(seed), index]).generate_state(1)[0])
+        pair = render_pair(seed=pair_seed, width=width, height=height, variant=variant, material=material)
+        folder = out_dir / pair_name(index, variant, material)
+        folders.append(_write_pair(folder, pair, dataset_seed=int(seed), index=index))
+        finite = pair.disparity[np.isfinite(pair.disparity)]
+        log.info("synth: wrote %s (disparity %.1f-%.1f px)", folder.name, finite.min(), finite.max())
+    return folders
+
+
+def _write_pair(folder: Path, pair: SynthPair, *, dataset_seed: int, index: int) -> Path:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(where_what_fix(str(folder), f"cannot create the folder ({exc.strerror or exc})",
+                                         "choose a writable output folder")) from exc
+    write_image(folder / "left.png", pair.left)
+    write_image(folder / "right.png", pair.right)
+    write_pfm(folder / "disp_gt.pfm", pair.disparity)
+    write_image(folder / "mask0nocc.png", np.where(pair.nocc, 255, 0).astype(np.uint8))
+    if pair.pothole_ids is not None:
+        write_image(folder / "potholes_gt.png", pair.pothole_ids)
+    gt_text = json.dumps({"definitions": "depth_mm: below the surrounding surface; area_m2: horizontal area "
+                                         "deeper than 10 mm; volume_l: fill volume up to the surrounding "
+                                         "surface; visible_px: pixels of potholes_gt.png with this id; nested potholes (the "
+                                         "floor of one inside the other's part deeper than 10 mm) are one defect: "
+                                         "the deepest one's entry lists its members and holds the union's area and "
+                                         "volume, the others say part_of that id",
+                          "potholes": pair.defects_gt}, indent=2) + "\n"
+    atomic_write(folder / "defects_gt.json", lambda tmp: tmp.write_text(gt_text, encoding="utf-8"))
+    calib = pair.calib
+    _write_text(folder / "calib.txt", [f"{key}: {_fmt(calib[key])}" for key in
+                                       ("f", "baseline", "cx", "cy", "width", "height", "height_m",
+                                        "pitch_deg", "roll_deg", "doffs", "ndisp")])
+    info = pair.info
+    finite = pair.disparity[np.isfinite(pair.disparity)]
+    holes = "; ".join(f"x={h['x']:.3f} y={h['y']:.3f} depth={h['depth_m']:.3f} diameter={h['diameter_m']:.2f} "
+                      f"u={h['u']:.1f} v={h['v']:.1f}" for h in info["potholes"]) or "none"
+    bump = "none" if info["bump"] is None else (f"x={info['bump']['x']:.3f} y={info['bump']['y']:.3f} "
+                                                 f"height={info['bump']['height_m']:.3f}")
+    _write_text(folder / "SOURCE.txt", [
+        "source: d3stereo synthetic road (d3cli.synth), exact ground truth by ray casting",
+        "family: synth",
+        "gt_scale: 1",
+        "gt_invalid: inf",
+        f"dataset_seed: {dataset_seed}",
+        f"index: {index}",
+        f"pair_seed: {info['seed']}",
+        f"variant: {info['variant']}",
+        f"material: {info['material']}",
+        f"potholes: {holes}",
+        f"bump: {bump}",
+        f"max_disparity: {calib['ndisp']}",
+        f"image_size: {calib['width']}x{calib['height']}",
+        f"disparity_range: {finite.min():.3f} {finite.max():.3f}",
+        f"nocc_share: {pair.nocc.mean():.4f}",
+        f"reproduce: render_pair(seed={info['seed']}, width={calib['width']}, height={calib['height']}, "
+        f"variant={info['variant']!r}, material={info['material']!r})",
+    ])
+    return folder
+
+
+def _fmt(value) -> str:
+    return str(value) if isinstance(value, int) else f"{value:.10g}"
