@@ -124,12 +124,12 @@ def summarize_group(rows: list[dict]) -> dict:
         "ok": len(ok),
         "failed": sum(row["status"] == "failed" for row in rows),
         "skipped": sum(row["status"] == "skipped" for row in rows),
-        "with_gt": sum(number(row.get("epe")) is not None for row in ok),
-        "means": {key: _mean(number(row.get(key)) for row in ok) for key in MEAN_KEYS},
+        "with_gt": sum(as_number(row.get("epe")) is not None for row in ok),
+        "means": {key: _mean(as_number(row.get(key)) for row in ok) for key in MEAN_KEYS},
     }
 
 
-def number(value) -> float | None:
+def as_number(value) -> float | None:
     """A row value as float; ``None`` for "not measured" (None, empty, NaN)."""
     if value is None or value == "":
         return None

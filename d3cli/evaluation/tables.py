@@ -13,9 +13,9 @@ from .summary import (
     DISPARITY_COLUMNS,
     METRIC_COLUMNS,
     PHOTOMETRIC_COLUMNS,
+    as_number,
     checked_row,
     family_of,
-    number,
     summarize,
     summarize_group,
 )
@@ -218,7 +218,7 @@ def _markdown_table(header: list[str], body: list[list[str]], *, n_text_columns:
 def _columns_with_values(rows: list[dict]) -> list[str]:
     """Metric columns that some row has a value for, then time (always shown)."""
     present = [
-        key for key in METRIC_COLUMNS if any(number(row.get(key)) is not None for row in rows)
+        key for key in METRIC_COLUMNS if any(as_number(row.get(key)) is not None for row in rows)
     ]
     return [*present, "time_s"]
 
@@ -283,7 +283,7 @@ def format_table(summary: Mapping) -> str:
 
 
 def _format_value(key: str, value) -> str:
-    number = number(value)
+    number = as_number(value)
     if number is None:
         return MISSING
     if math.isinf(number):
