@@ -42,7 +42,7 @@ class _Group(click.Group):
             # The batch turns SIGTERM into an interrupt while it runs and puts the previous
             # handler back at its end; with the default one there, a SIGTERM between the
             # end of the batch and the exit (the summary lines) killed the process by the
-            # signal, status -15 instead of 143 or 0 (issue 12; seen on a fast machine).
+            # signal, status -15 instead of 143 or 0 (seen on a fast machine).
             signal.signal(signal.SIGTERM, raise_terminated)
         try:
             result = super().invoke(ctx)
@@ -55,7 +55,7 @@ class _Group(click.Group):
         except Exception as exc:
             # A Ctrl-C that lands inside a numba kernel comes out as "SystemError: ...
             # returned a result with an exception set" with the KeyboardInterrupt as its
-            # cause: an interrupt, not a crash (issue 12 item 8).
+            # cause: an interrupt, not a crash.
             interrupt = interrupt_behind(exc)
             if interrupt is None:
                 raise
@@ -91,7 +91,7 @@ def _end_of_command() -> None:
     """The command's exit status is decided: make sure the process ends with it.
 
     Two ways a handled Ctrl-C still ended a ``d3stereo`` process by the signal (status
-    -2 instead of 130, issue 12):
+    -2 instead of 130):
 
     * a second SIGINT during the interpreter's shutdown (atexit, thread joins): SIGINT
       is ignored from here on;
@@ -215,7 +215,7 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
 
     _setup_logging(verbose, quiet)
     if max_disparity is not None and not 0 < max_disparity <= MAX_CONFIG_INT:
-        # bounded like every integer setting (issue 12 item 14): the kernels take 32-bit scalars
+        # bounded like every integer setting: the kernels take 32-bit scalars
         raise click.BadParameter(f"must be a positive number of pixels (at most {MAX_CONFIG_INT}), got "
                                  f"{str(max_disparity)[:30]}", param_hint="--max-disparity")
     cfg, source = _resolve_config(config_path, overrides, method=method, backend=backend, no_fill=no_fill)

@@ -1,4 +1,4 @@
-"""The adversarial suite of issue 12: what a hostile or unlucky user does to ``d3stereo run``.
+"""The adversarial suite: what a hostile or unlucky user does to ``d3stereo run``.
 
 Every case checks the whole contract at once: the exit code, the exact one-line
 ``Error:`` (and ``failed:``) lines, no traceback, and that no input file changed (hashes

@@ -1,4 +1,4 @@
-"""A broken pair folder inside a dataset fails alone (issue 12, item 15)."""
+"""A broken pair folder inside a dataset fails alone."""
 
 import json
 

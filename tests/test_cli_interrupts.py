@@ -1,5 +1,5 @@
-"""Ctrl-C ends a ``d3stereo`` process with exit 130 and one line, whenever it comes
-(issue 12, item 8): while Python imports the libraries, and after a handled interrupt
+"""Ctrl-C ends a ``d3stereo`` process with exit 130 and one line, whenever it comes:
+while Python imports the libraries, and after a handled interrupt
 whose KeyboardInterrupt passed through ``exec()``'d code (CPython then marks the process
 to be killed by SIGINT after shutdown: status -2 instead of 130)."""
 

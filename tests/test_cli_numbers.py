@@ -1,4 +1,4 @@
-"""Numbers outside a config (issue 12 item 14): a manifest reads whole numbers as the config
+"""Numbers outside a config: a manifest reads whole numbers as the config
 does (``1e2`` is 100) and every integer is bounded up front, on the command line too."""
 
 import pytest

@@ -1,4 +1,4 @@
-"""Each warning of a pair reaches the user once (issue 12, item 19)."""
+"""Each warning of a pair reaches the user once."""
 
 import subprocess
 import sys

@@ -1,4 +1,4 @@
-"""Property tests of the library entry points under bad input (issue 6, item 1).
+"""Property tests of the library entry points under bad input.
 
 Every call either returns a map of the right shape whose values are finite or inf
 (exactly where invalid), or raises a D3Error subclass with a message: never another
@@ -324,7 +324,7 @@ def cv2_blur(img, sigma):
 @given(road_pairs(), st.sampled_from([["pyramid.levels=2"], ["pyramid.levels=3"], ["pyramid.levels=2", "pyramid.band=false"],
                                       ["pyramid.levels=2", "pt.margin=3"]]))
 def test_pt_on_road_like_pairs_keeps_the_contract(pair, overrides):
-    # Issue 12 item 3 escaped the tiny random images above: PT needs a pair big enough
+    # A PT failure once escaped the tiny random images above: PT needs a pair big enough
     # for a road fit.  No negative disparity, valid pixels finite, whatever the plane.
     left, right, dmax = pair
     cfg = load_config(None, ["pt.enabled=true", "cost.window=9", "refine.smooth_radius=7", *overrides])

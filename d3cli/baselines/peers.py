@@ -3,7 +3,7 @@ census + SGM pipeline (CNES, with pandora_plugin_libsgm).
 
 Neither is a dependency: each is imported when its method runs, and a missing package is
 a :class:`~d3cli.errors.BackendUnavailable` naming the install command (extra ``peers``).
-Both run with the settings of the comparison in the README (issue 16), every one a key of
+Both run with the settings of the comparison in the README, every one a key of
 the ``peers`` config section or a constant named here:
 
 - ELAS: the library's Middlebury or robotics preset (``peers.elas_preset``), range

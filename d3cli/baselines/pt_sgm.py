@@ -25,7 +25,7 @@ log = logging.getLogger(__name__)
 def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int, cfg: Config) -> DisparityResult:
     """PT-SGM: OpenCV SGBM after the perspective transformation of PT-D3Stereo.
 
-    The road model (DESIGN step 6) is fitted with :func:`d3cli.method.perspective.fit_road_model` to
+    The road model (docs/design.md, 'Perspective transformation') is fitted with :func:`d3cli.method.perspective.fit_road_model` to
     SGBM on the pair downsampled to the coarsest pyramid level (``cfg.pyramid.levels``,
     area averaging, range ``ceil(max_disparity / 2^(k-1))``; a finer level when SGBM's
     empty left strip would cover more than half of the coarse image); the right image is warped
@@ -57,22 +57,7 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
     t0 = time.perf_counter()
     pt = cfg.pt
     grey_l, grey_r = to_grey(left), to_grey(right)
-    levels = usable_levels(grey_l.shape, cfg.pyramid.levels)
-    top = levels - 1
-    # SGBM leaves the leftmost numDisparities columns empty: go finer until at least half
-    # of the columns can hold an estimate.
-    while top > 0 and grey_l.shape[1] >> top < 2 * _num_disparities(level_max_disparity(max_disparity, top)):
-        top -= 1
-    coarse_l = _to_uint8(build_pyramid(grey_l, top + 1)[top])
-    coarse_r = _to_uint8(build_pyramid(grey_r, top + 1)[top])
-    coarse, _ = _sgbm_raw(coarse_l, coarse_r, level_max_disparity(max_disparity, top), cfg.sgbm)
-    model = fit_road_model(
-        coarse,
-        scale=2**top,
-        inlier_threshold=pt.inlier_threshold,
-        iterations=pt.iterations,
-        min_inlier_share=pt.min_inlier_share,
-    )
+    model = _coarse_road_model(grey_l, grey_r, max_disparity, cfg)
     narrow = pt.narrow_range
     pt_info = model.to_info(narrow_range=narrow)
     if not model.road_like:
@@ -105,4 +90,25 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
     }
     return DisparityResult(
         disparity=disp, valid=valid, timings={"total": time.perf_counter() - t0}, info=info, warnings=warnings
+    )
+
+
+def _coarse_road_model(grey_l: np.ndarray, grey_r: np.ndarray, max_disparity: int, cfg: Config):
+    """The road model of :func:`pt_sgm_disparity`: fitted to SGBM on a coarse pyramid level."""
+    pt = cfg.pt
+    levels = usable_levels(grey_l.shape, cfg.pyramid.levels)
+    top = levels - 1
+    # SGBM leaves the leftmost numDisparities columns empty: go finer until at least half
+    # of the columns can hold an estimate.
+    while top > 0 and grey_l.shape[1] >> top < 2 * _num_disparities(level_max_disparity(max_disparity, top)):
+        top -= 1
+    coarse_l = _to_uint8(build_pyramid(grey_l, top + 1)[top])
+    coarse_r = _to_uint8(build_pyramid(grey_r, top + 1)[top])
+    coarse, _ = _sgbm_raw(coarse_l, coarse_r, level_max_disparity(max_disparity, top), cfg.sgbm)
+    return fit_road_model(
+        coarse,
+        scale=2**top,
+        inlier_threshold=pt.inlier_threshold,
+        iterations=pt.iterations,
+        min_inlier_share=pt.min_inlier_share,
     )

@@ -85,7 +85,7 @@ def sgbm_disparity(
     ----------
     left, right : ndarray, (H, W) or (H, W, 3), uint8/uint16/float
         Rectified pair of equal shape; converted to grey uint8 with
-        :func:`d3cli.data.io.to_grey`.
+        :func:`d3cli.data.formats.to_grey`.
     max_disparity : int
         Largest disparity searched, pixels (> 0).  OpenCV searches
         ``numDisparities = ceil((max_disparity + 1) / 16) * 16`` values starting at 0;

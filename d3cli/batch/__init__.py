@@ -1,6 +1,9 @@
 """Running many pairs: discovery results in, one output folder out.
 
 - ``runner``: :func:`run_batch` (``d3stereo run``), resume, interruption;
+- ``records``: :class:`BatchResult` and ``run.json``;
+- ``signals``: Ctrl-C and SIGTERM held, deferred or turned into an interrupt during a batch;
+- ``extras``: ``cloud.ply`` and the road outputs of a complete pair, from its files;
 - ``methods``: method name -> code (:func:`compute_pair`);
 - ``evaluate``: scoring a pair or folders of predictions (``d3stereo eval``);
 - ``outputs``: the per-pair files, written atomically, read back, removed;

@@ -64,11 +64,8 @@ def available_cores() -> int:
 
 
 #: ``--workers auto`` runs serially on this many cores or fewer (one core: a pool has
-#: nothing to gain).  Was 2 while the only measurements were taken with other sessions
-#: loading the 2-core test machine (pool wall 0.8-1.5x serial's); on the quiet machine two
-#: forked workers took 0.81x the serial wall time on 8 synth pairs (5 repetitions, every
-#: one below 1) and 0.76x on the 29 pairs of ../shared/data (3 repetitions), with the same
-#: CPU seconds (README "Scaling out", scripts/bench_scaling.py).
+#: nothing to gain); on two quiet cores two forked workers already take about 0.8x the
+#: serial wall time with the same CPU seconds (README "Scaling out", scripts/bench_scaling.py).
 AUTO_SERIAL_CORES = 1
 
 

@@ -115,7 +115,7 @@ def object_map_path(gt) -> Path | None:
 
 
 def input_identity(pair) -> dict:
-    """Everything of a pair (a :class:`d3cli.data.datasets.Pair`) its outputs depend on.
+    """Everything of a pair (a :class:`d3cli.data.layouts.Pair`) its outputs depend on.
 
     File fields become :func:`file_identity` (so an absolute and a relative spelling of
     the same file agree); other fields (``gt_scale``, ``gt_invalid``, ``max_disparity``,

@@ -5,8 +5,8 @@ larger than the rest: :func:`check_memory` turns "this would need 90 GB" into a 
 :class:`~d3cli.errors.InputError` that names the estimate and the fix, before the cost
 volume is allocated.
 
-The estimate models the pipeline's peak (DESIGN steps 2-5), which is reached at the
-finest level (level 1):
+The estimate models the pipeline's peak (cost, aggregation, seeds and diffusion;
+docs/design.md, 'Cost volumes'), which is reached at the finest level (level 1):
 
 * cost volumes: float32 ``(H, W, D + 1)``, the worst case of the band search (a band
   can be the full range); RBF filters the NCC volume in place (1 volume), the plain

@@ -25,37 +25,32 @@ or swapped pair (:func:`d3cli.evaluation.diagnostics.suspicious_result`; warning
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
 import logging
 import os
-import platform
 import signal
-import sys
-import threading
 import time
-from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Sequence
 
-from .. import __version__
 from ..config import Config
 from ..data import formats as io, layouts as datasets
-from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind, raise_terminated
+from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind
 from ..evaluation import diagnostics, report
-from ..road.pointcloud import camera_from, save_pair_cloud
-from ..road.report import DEFECTS_CSV, road_report, write_defects_csv
+from ..road.report import DEFECTS_CSV, write_defects_csv
 from . import resources
 from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .executors import make_executor, select_shard
-from .fingerprint import cloud_fingerprint, feature_files, package_versions, pair_fingerprint, settings_fingerprint
+from .extras import write_extras
+from .fingerprint import feature_files, package_versions, pair_fingerprint, settings_fingerprint
 from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock, shard_lock_name
 from .methods import compute_pair
 from ..evaluation.html import write_report_html
+from .records import BatchResult, write_run_json
+from .signals import interrupts_unwrapped, signals_deferred, signals_held, sigterm_as_interrupt
 from .outputs import (
-    CLOUD_FILE,
     ERROR_MAP,
     RESULT_FILE,
     RUN_FILE,
@@ -99,51 +94,6 @@ class BatchInterrupted(KeyboardInterrupt):
         return self.args[0]
 
 
-@dataclass
-class BatchResult:
-    """What a batch did.
-
-    Attributes
-    ----------
-    out_dir : Path
-        The output folder.
-    rows : list of dict
-        One row per pair for :mod:`d3cli.evaluation.report` (``pair``, ``family``, ``status``,
-        metric keys, ``time_s``, ``error``).
-    n_failed : int
-        Number of pairs that failed.
-    run_json : Path
-        Path of ``run.json``.
-    summary : dict or None
-        :func:`d3cli.evaluation.report.summarize` of the rows when evaluating, else None.
-    n_computed, n_skipped : int
-        Pairs computed by this run, and pairs kept as complete from an earlier run
-        (``ok`` and ``skipped`` in run.json); in the rows and the summary both are ``ok``.
-    """
-
-    out_dir: Path
-    rows: list = field(default_factory=list)
-    n_failed: int = 0
-    run_json: Path | None = None
-    summary: dict | None = None
-    n_computed: int = 0
-    n_skipped: int = 0
-
-    def counts_line(self) -> str:
-        """``N ok (C computed, S skipped as complete), F failed of T pairs``: run.json's counts."""
-        return (f"{self.n_computed + self.n_skipped} ok ({self.n_computed} computed, {self.n_skipped} skipped "
-                f"as complete), {self.n_failed} failed of {self.n_pairs} pairs")
-
-    @property
-    def n_pairs(self) -> int:
-        return len(self.rows)
-
-    @property
-    def failures(self) -> list[tuple[str, str]]:
-        """(pair, error message) of each failed pair."""
-        return [(r["pair"], r.get("error", "")) for r in self.rows if r["status"] == "failed"]
-
-
 def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, settings, fingerprint) -> dict:
     """Compute, write and (optionally) score one pair; returns the stored result dict.
 
@@ -165,10 +115,10 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
         remove_pair_files(pair_dir)
         written = write_disparity_outputs(pair_dir, result.disparity, result.valid, left=left,
                                           color_range=tuple(cfg.run.color_range) or None)
-        if written["png_clipped"]:  # issue 12 item 18: said once per pair, kept in result.json
+        if written["png_clipped"]:  # said once per pair, kept in result.json
             result.warnings.append(clipped_warning(written["png_clipped"]))
         scores, eval_error = _score(pair, left, right, result.disparity, pair_dir) if evaluate else (None, None)
-        write_panel(pair_dir, pair.name, left, scores)  # issue 13: panel.png
+        write_panel(pair_dir, pair.name, left, scores)  # panel.png: the pair at a glance
     except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
         remove_pair_files(pair_dir, remove_folder=True)
         raise
@@ -184,7 +134,7 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
         "inputs": {"left": pair.left, "right": pair.right, "gt": pair.gt},
         "shape": [height, width],
         "max_disparity": dmax,
-        "color_range": written["color_range"],  # issue 13: robust range, stated
+        "color_range": written["color_range"],  # the robust range of disp_color.png, stated
         "valid_share": float(result.valid.mean()) if result.valid.size else 0.0,
         "timings": {**result.timings, "wall": wall},
         "metrics": scores,
@@ -236,61 +186,6 @@ def _score(pair, left, right, disparity, pair_dir: Path) -> tuple[dict | None, s
     return None, message
 
 
-def _stored_map(pair, pair_dir: Path, cfg):
-    """(left image, camera or None, disparity, valid) of a complete pair, from its files.
-
-    Clouds and road outputs are made from what was written (disp.pfm, valid.png), so a
-    rerun adds them to pairs computed earlier without computing them again.
-    """
-    left, _ = datasets.load_pair_images(pair)
-    calib = io.read_calib(pair.calib) if pair.calib is not None else None
-    camera = camera_from(calib, cfg, left.shape[:2])
-    return left, camera, io.read_pfm(pair_dir / "disp.pfm"), io.read_mask(pair_dir / "valid.png")
-
-
-def _with_warnings(pair, pair_dir: Path, stored: dict, texts, *, changed: bool = False) -> dict:
-    """``stored`` with the warnings of ``texts`` it does not hold yet (logged); result.json
-    rewritten when there are any or ``changed``."""
-    new = [text for text in texts if text not in stored.get("warnings", [])]
-    if not (new or changed):
-        return stored
-    for text in new:
-        log.warning("%s: %s", pair.name, text)
-    stored = {**stored, "warnings": [*stored.get("warnings", []), *new]}
-    write_json(pair_dir / RESULT_FILE, stored)
-    return stored
-
-
-def _write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -> dict:
-    """``cloud.ply`` (when asked and missing or made with another camera) and the road outputs
-    (``road.report``) of a complete pair, from one read of its files; returns ``stored``
-    with any new warnings."""
-    cloud_path = pair_dir / CLOUD_FILE
-    cloud_fp = cloud_fingerprint(cfg, pair)
-    cloud_done = cloud_path.is_file() and (stored.get("cloud") or {}).get("fingerprint") == cloud_fp
-    want_cloud = pointcloud and not cloud_done
-    if not (want_cloud or cfg.road.report):
-        return stored
-    left, camera, disparity, valid = _stored_map(pair, pair_dir, cfg)
-    warnings = []
-    if want_cloud:
-        cloud_path.unlink(missing_ok=True)  # made with another camera: never left beside the new settings
-        stored = {**stored, "cloud": None}
-    if want_cloud and camera is None:
-        warnings.append("no cloud.ply: focal length or baseline unknown; add calib.txt to the pair "
-                        "or set camera.f and camera.baseline")
-    elif want_cloud:
-        depth_range = (cfg.camera.min_depth_m, cfg.camera.max_depth_m)
-        n_points = save_pair_cloud(cloud_path, disparity, valid, left, camera, depth_range=depth_range)
-        log.info("%s: cloud.ply with %d points", pair.name, n_points)
-        stored = {**stored, "cloud": {"fingerprint": cloud_fp, "points": n_points,
-                                      "depth_range_m": list(depth_range),
-                                      "camera": dataclasses.asdict(camera)}}
-    if cfg.road.report:  # all the logic in d3cli.road.report
-        warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road)[1]
-    return _with_warnings(pair, pair_dir, stored, warnings, changed=want_cloud)
-
-
 def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
     """A complete earlier result; scored now from disp.pfm if it was stored unscored."""
     if evaluate and not stored.get("metrics"):
@@ -298,34 +193,22 @@ def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
         disparity = io.read_pfm(pair_dir / "disp.pfm")
         scores, eval_error = _score(pair, left, right, disparity, pair_dir)
         stored = {**stored, "metrics": scores, "evaluation_error": eval_error}
-        write_panel(pair_dir, pair.name, left, stored["metrics"])  # issue 13: panel with the error tile
+        write_panel(pair_dir, pair.name, left, stored["metrics"])  # the panel, now with the error tile
         write_json(pair_dir / RESULT_FILE, stored)
     return stored
 
 
-def run_batch(
-    pairs: Sequence,
-    out_dir: str | os.PathLike,
-    *,
-    cfg: Config,
-    method: str,
-    evaluate: bool = False,
-    overwrite: bool = False,
-    max_disparity: int | None = None,
-    progress: bool = True,
-    config_source: str | None = None,
-    pointcloud: bool = False,
-    workers: int = 1,
-    scheduler: str | None = None,
-    shard: tuple[int, int] | None = None,
-    break_lock: bool = False,
-) -> BatchResult:
+def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, method: str, evaluate: bool = False,
+              overwrite: bool = False, max_disparity: int | None = None, progress: bool = True,
+              config_source: str | None = None, pointcloud: bool = False, workers: int = 1,
+              scheduler: str | None = None, shard: tuple[int, int] | None = None,
+              break_lock: bool = False) -> BatchResult:
     """Run ``method`` on every pair, writing ``out_dir/<pair>/...`` and ``out_dir/run.json``.
 
     Parameters
     ----------
-    pairs : sequence of d3cli.data.datasets.Pair
-        The pairs, e.g. from :func:`d3cli.data.datasets.discover`.
+    pairs : sequence of d3cli.data.layouts.Pair
+        The pairs, e.g. from :func:`d3cli.data.layouts.discover`.
     out_dir : path-like
         Output folder; created when missing.
     cfg : Config, keyword-only
@@ -370,6 +253,31 @@ def run_batch(
     BackendUnavailable
         When ``cfg.run.backend`` is ``cuda`` and CUDA cannot be used (checked up front).
     """
+    out, pairs = _prepare(pairs, out_dir, cfg=cfg, method=method, scheduler=scheduler, shard=shard)
+    # SIGTERM handled before the lock file exists: a kill between the two left a lock behind.
+    previous = sigterm_as_interrupt()
+    lock = None
+    try:
+        # A Ctrl-C in the middle of taking the lock left the lock file behind: it is
+        # taken whole, and the interrupt raised once it is held (and released below).
+        with signals_deferred():
+            lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
+        executor = make_executor(workers, scheduler, out)
+        return _locked_batch(pairs, out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
+                             max_disparity=max_disparity, progress=progress, config_source=config_source,
+                             pointcloud=pointcloud, executor=executor, shard=shard)
+    finally:
+        if lock is not None:
+            with signals_held():  # a Ctrl-C now would leave the lock behind
+                release_lock(lock)
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _prepare(pairs: Sequence, out_dir, *, cfg: Config, method: str, scheduler: str | None,
+             shard: tuple[int, int] | None) -> tuple[Path, list]:
+    """(output folder, pairs of this run): the folder checked and created, CUDA checked,
+    the shard selected, paths made absolute for a Dask cluster."""
     check_output_folder(Path(out_dir), pairs)  # before anything is written or removed
     out = ensure_writable(out_dir)
     if method != "sgbm" and cfg.run.backend == "cuda":
@@ -383,96 +291,7 @@ def run_batch(
         # Workers may run in another folder, on another machine: only absolute paths mean the same there.
         out = out.resolve()
         pairs = [_absolute(p) for p in pairs]
-    # SIGTERM handled before the lock file exists: a kill between the two left a lock behind.
-    previous = _sigterm_as_interrupt()
-    lock = None
-    try:
-        # A Ctrl-C in the middle of taking the lock left the lock file behind: it is
-        # taken whole, and the interrupt raised once it is held (and released below).
-        with _signals_deferred():
-            lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
-        executor = make_executor(workers, scheduler, out)
-        return _locked_batch(pairs, out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
-                             max_disparity=max_disparity, progress=progress, config_source=config_source,
-                             pointcloud=pointcloud, executor=executor, shard=shard)
-    finally:
-        if lock is not None:
-            with _signals_held():  # a Ctrl-C now would leave the lock behind
-                release_lock(lock)
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
-
-
-@contextlib.contextmanager
-def _interrupts_unwrapped():
-    """Let a Ctrl-C that surfaced wrapped in another exception (a numba kernel's
-    ``SystemError``, e.g. during the JIT warm-up before the first pair) stop the batch as
-    the KeyboardInterrupt it is."""
-    try:
-        yield
-    except KeyboardInterrupt:
-        raise
-    except Exception as exc:
-        interrupt = interrupt_behind(exc)
-        if interrupt is None:
-            raise
-        raise interrupt from None
-
-
-@contextlib.contextmanager
-def _signals_held():
-    """Ignore SIGINT and SIGTERM for the duration (in the main thread; elsewhere a no-op).
-
-    Used while run.json records an interruption: a second Ctrl-C (people press it twice)
-    would otherwise interrupt the handler of the first and leave no run.json.  The
-    handlers are restored afterwards, so a later Ctrl-C still works.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
-
-
-@contextlib.contextmanager
-def _signals_deferred():
-    """Hold SIGINT/SIGTERM back for the duration and deliver them at its end.
-
-    Only signals whose handler is a Python function (Ctrl-C's KeyboardInterrupt, our
-    SIGTERM handler) are held; in the main thread only.  A signal that came meanwhile
-    is delivered once the block is done, by calling its own handler.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    pending = []
-    held = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        handler = signal.getsignal(sig)
-        if callable(handler):
-            held[sig] = handler
-            signal.signal(sig, lambda signum, frame: pending.append(signum))
-    try:
-        yield
-    finally:
-        for sig, handler in held.items():
-            signal.signal(sig, handler)
-    if pending:
-        held[pending[0]](pending[0], None)
-
-
-def _sigterm_as_interrupt():
-    """Make SIGTERM (a scheduler cancelling the job, ``kill``) end the batch like Ctrl-C.
-
-    Returns the previous handler, or None where signals cannot be set (not the main thread).
-    """
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    return signal.signal(signal.SIGTERM, raise_terminated)
+    return out, pairs
 
 
 def _absolute(pair):
@@ -501,14 +320,14 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
                              max_disparity=max_disparity, settings=settings, pointcloud=pointcloud)
     order = {pair.name: i for i, pair in enumerate(pairs)}
     try:
-        with _interrupts_unwrapped(), executor:
+        with interrupts_unwrapped(), executor:
             meta["execution"] = executor.describe()
             # Compile before the first pair (and before a pool fans out): no pair's time includes it.
             # Ctrl-C/SIGTERM are held until the kernels are loaded: numba loads a cached
             # kernel through a ctypes callback of llvmlite, and a KeyboardInterrupt raised
             # inside it crashed the process (SIGSEGV, exit -11 instead of 130; seen once in
             # tests/batch/test_interrupts.py).  The interrupt is delivered right after.
-            with _signals_deferred():
+            with signals_deferred():
                 meta["compile_s"] = round(executor.warm(cfg, method), 3) if pairs else 0.0
             bar = progress_bar(None, progress, method)
             bar.reset(total=len(pairs))
@@ -523,26 +342,43 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
             finally:
                 bar.close()
     except KeyboardInterrupt as exc:
-        current = executor.current
-        terminated = isinstance(exc, Terminated)
-        with _signals_held():  # a second Ctrl-C must not cut the record of the first short
-            _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
-                            stop_reason="terminated (SIGTERM)" if terminated else "interrupted (Ctrl-C / SIGINT)")
-        n_done = sum(r["status"] in ("ok", "skipped") for r in records)
-        raise BatchInterrupted(n_done, len(pairs), batch.run_json, terminated=terminated) from None
+        raise _interrupted(batch, records, meta, executor.current, exc) from None
     except OutputError as exc:
         current = executor.current
         if not io.is_disk_full(exc) or current is None:
             raise
-        row, record = failed_row(current, str(exc), 0.0)
-        batch.rows.append(row)
-        records.append(record)
-        try:  # the disk is full: this may well fail too
-            _write_run_json(batch, records, **meta, interrupted=True, stopped_at=current.name,
-                            stop_reason=str(exc))
-        except OutputError as again:
-            log.warning("run.json not written: %s", again)
+        _record_disk_full(batch, records, meta, current, exc)
         raise
+    _finish(batch, records, meta, pairs, out, order=order, evaluate=evaluate, settings=settings)
+    return batch
+
+
+def _interrupted(batch: BatchResult, records: list, meta: dict, current, exc: KeyboardInterrupt) -> BatchInterrupted:
+    """Record Ctrl-C or SIGTERM in run.json; the :class:`BatchInterrupted` to raise."""
+    terminated = isinstance(exc, Terminated)
+    with signals_held():  # a second Ctrl-C must not cut the record of the first short
+        write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
+                       stop_reason="terminated (SIGTERM)" if terminated else "interrupted (Ctrl-C / SIGINT)")
+    n_done = sum(r["status"] in ("ok", "skipped") for r in records)
+    return BatchInterrupted(n_done, meta["n_total"], batch.run_json, terminated=terminated)
+
+
+def _record_disk_full(batch: BatchResult, records: list, meta: dict, current, exc: OutputError) -> None:
+    """Fail the pair that met a full disk and record the stop in run.json, if the disk allows."""
+    row, record = failed_row(current, str(exc), 0.0)
+    batch.rows.append(row)
+    records.append(record)
+    try:  # the disk is full: this may well fail too
+        write_run_json(batch, records, **meta, interrupted=True, stopped_at=current.name,
+                       stop_reason=str(exc))
+    except OutputError as again:
+        log.warning("run.json not written: %s", again)
+
+
+def _finish(batch: BatchResult, records: list, meta: dict, pairs: list, out: Path, *, order: dict,
+            evaluate: bool, settings: str) -> None:
+    """After the last pair: counts, defects.csv, the summary files, run.json and report.html."""
+    cfg, method, shard = meta["cfg"], meta["method"], meta["shard"]
     # Parallel executors finish pairs in any order; the files list them in input order.
     batch.rows.sort(key=lambda r: order[r["pair"]])
     records.sort(key=lambda r: order[r["pair"]])
@@ -561,15 +397,14 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
         report.write_summary(out, batch.rows, method=method, extra={"settings": settings}, run_counts=run_counts)
         batch.summary = report.summarize(batch.rows)
     if not evaluate or shard is not None:
-        # issue 12 item 7: the summary of an earlier --eval run (maybe another method) would
+        # The summary of an earlier --eval run (maybe another method) would
         # describe maps this run may have replaced; only d3stereo's own files are removed.
         for name in remove_stale_summaries(out):
             log.info("%s: removed the summary of an earlier --eval run (rerun with --eval to score)", out / name)
-    _write_run_json(batch, records, **meta, interrupted=False)
-    # issue 13: the page people look at, after every batch.
+    write_run_json(batch, records, **meta, interrupted=False)
+    # The page people look at, after every batch.
     write_report_html(out, batch.rows, title=f"d3stereo run: {out} ({method})", config=cfg.to_dict(),
                       versions=package_versions(), run_counts=run_counts)
-    return batch
 
 
 def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, settings,
@@ -592,7 +427,7 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
         else:
             stored = _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
                                max_disparity=max_disparity, settings=settings, fingerprint=fingerprint)
-        stored = _write_extras(pair, pair_dir, stored, cfg, pointcloud=pointcloud)
+        stored = write_extras(pair, pair_dir, stored, cfg, pointcloud=pointcloud)
     except D3Error as exc:
         if io.is_disk_full(exc):
             raise  # every later pair would fail the same way: the batch stops
@@ -605,7 +440,7 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
         return failed_row(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
     wall = stored.get("timings", {}).get("wall")
     if evaluate and stored.get("evaluation_error"):
-        # issue 12 item 6: the maps are complete and kept; only the evaluation failed.
+        # The maps are complete and kept; only the evaluation failed.
         message = f"{pair.name}: evaluation failed, maps kept: {stored['evaluation_error']}"
         row, record = failed_row(pair, message, wall or 0.0)
         record["stage"] = "evaluation"
@@ -619,38 +454,3 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
     if stored.get("info", {}).get("pt") is not None:
         record["pt"] = stored["info"]["pt"]  # the fitted road model and its inlier share
     return row, record
-
-
-def _write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, started,
-                    config_source, interrupted, n_total=None, stopped_at=None, stop_reason=None,
-                    execution=None, compile_s=None, shard=None) -> None:
-    failed = [{"pair": r["pair"], "error": r["error"]} for r in records if r["status"] == "failed"]
-    data = {
-        "d3stereo": __version__,
-        "started": started,
-        "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "interrupted": interrupted,
-        "method": method,
-        "backend": cfg.run.backend,
-        "backends_used": sorted({r["backend"] for r in records if r.get("backend")}),
-        "max_disparity_override": max_disparity,
-        "config_source": config_source,
-        "config": cfg.to_dict(),
-        "versions": package_versions(),
-        "python": sys.version.split()[0],
-        "platform": platform.platform(),
-        "n_pairs": len(records),
-        "n_total": len(records) if n_total is None else n_total,
-        "stopped_at": stopped_at,
-        "stop_reason": stop_reason,
-        "n_failed": len(failed),
-        "n_computed": sum(r["status"] == "ok" for r in records),
-        "n_skipped": sum(r["status"] == "skipped" for r in records),  # complete from an earlier run
-        # Seconds spent compiling numba kernels up front; not part of any pair's wall time.
-        "compile_s": compile_s,
-        "execution": execution or {"mode": "serial", "workers": 1},
-        "shard": list(shard) if shard else None,
-        "pairs": records,
-        "failed": failed,
-    }
-    write_json(batch.run_json, data)

@@ -20,7 +20,9 @@ from pathlib import Path
 from urllib.parse import quote
 
 from ..data.formats import atomic_write
-from .report import counts_sentence, jsonable, summarize
+from .report import jsonable
+from .summary import summarize
+from .tables import counts_sentence
 
 REPORT_FILE = "report.html"
 
@@ -200,14 +202,6 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
         return []
     e = html.escape
     done = [(pair, data) for pair, data, _ in reports if data is not None]
-    every = [(pair, d) for pair, data in done for d in data["defects"]]
-    pits = [(pair, d) for pair, d in every if d.get("kind") == "pothole"]
-    bumps = [(pair, d) for pair, d in every if d.get("kind") == "bump"]
-    low = sum(bool(d.get("low_confidence")) for _, d in every)
-
-    def total(items, key):
-        return sum(_num(d.get(key)) or 0.0 for _, d in items)
-
     parts = ['<h2 id="road">Road inspection</h2>',
              "<p>Depth: below the surrounding road surface (the median height of a ring of road "
              "around the defect); area: of the road plane covered; volume: to fill it up to the "
@@ -216,13 +210,8 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
              "“Road inspection outputs”.</p>",
              '<table><thead><tr><th>pairs with a road report</th><th>with defects</th><th>potholes</th>'
              "<th>bumps</th><th>low confidence</th><th>pothole area m²</th><th>pothole volume l</th>"
-             "<th>deepest pothole</th></tr></thead><tbody>"]
-    deepest = max(pits, key=lambda pd: _num(pd[1].get("max_depth_mm")) or 0.0, default=None)
-    deep_txt = (f'<a href="#road-{e(deepest[0])}">{e(deepest[0])}</a> #{e(str(deepest[1].get("id")))} '
-                f'{_num(deepest[1].get("max_depth_mm")) or 0.0:.0f} mm') if deepest else "–"
-    parts.append(f"<tr><td>{len(done)} of {len(reports)}</td><td>{sum(bool(d['defects']) for _, d in done)}</td>"
-                 f"<td>{len(pits)}</td><td>{len(bumps)}</td><td>{low}</td><td>{total(pits, 'area_m2'):.3f}</td>"
-                 f"<td>{total(pits, 'volume_l'):.2f}</td><td>{deep_txt}</td></tr></tbody></table>")
+             "<th>deepest pothole</th></tr></thead><tbody>",
+             _road_totals_row(done, len(reports))]
     if (out_dir / "defects.csv").is_file():
         parts.append('<p>Every defect of the batch: <a href="defects.csv">defects.csv</a>.</p>')
 
@@ -233,35 +222,8 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
     with_defects = sorted(((p, d) for p, d in done if d["defects"]),
                           key=lambda pd: (-deepest_of(pd[1]), -len(pd[1]["defects"])))
     parts.append('<div class="cards">')
-    cols = ("id", "kind", "depth mm (bump: height)", "mean mm", "area m²", "volume l", "decided", "confidence")
     for pair, data in with_defects:
-        folder = out_dir / pair
-        n_pits = sum(d.get("kind") == "pothole" for d in data["defects"])
-        parts.append(f'<div class="card road" id="road-{e(pair)}"><b>{e(pair)}</b>: {n_pits} pothole(s), '
-                     f"{len(data['defects']) - n_pits} bump(s)<br>")
-        pics = [p for p in ROAD_PICTURES if (folder / p).is_file()]
-        if pics:
-            href = quote(f"{pair}/{pics[0]}")
-            parts.append(f'<a href="{e(href)}"><img loading="lazy" src="{e(href)}" alt="defects of {e(pair)}"></a><br>'
-                         + " ".join(f'<a href="{e(quote(f"{pair}/{p}"))}">{p}</a>' for p in pics))
-        parts.append('<table class="sortable"><thead><tr>' + "".join(f"<th>{c}</th>" for c in cols)
-                     + "</tr></thead><tbody>")
-        for d in data["defects"]:
-            low_d = bool(d.get("low_confidence"))
-            vals = [(d.get("id"), str(d.get("id"))), (None, str(d.get("kind"))),
-                    (d.get("max_depth_mm"), f"{_num(d.get('max_depth_mm')) or 0.0:.1f}"),
-                    (d.get("mean_depth_mm"), f"{_num(d.get('mean_depth_mm')) or 0.0:.1f}"),
-                    (d.get("area_m2"), f"{_num(d.get('area_m2')) or 0.0:.4f}"),
-                    (d.get("volume_l"), f"{_num(d.get('volume_l')) or 0.0:.2f}"),
-                    (d.get("decided_share"), f"{100 * (_num(d.get('decided_share')) or 0.0):.0f} %"),
-                    (None, "low" if low_d else "ok")]
-            cells = "".join(f'<td data-v="{_num(v) if _num(v) is not None else ""}">{e(t)}</td>' for v, t in vals)
-            row_cls = ' class="low"' if low_d else ""
-            parts.append(f"<tr{row_cls}>{cells}</tr>")
-        parts.append("</tbody></table>")
-        for w in data.get("warnings") or []:
-            parts.append(f'<p class="low">{e(str(w))}</p>')
-        parts.append("</div>")
+        parts += _road_card(out_dir, pair, data)
     parts.append("</div>")
     clean = [(p, d) for p, d in done if not d["defects"]]
     if clean:
@@ -271,6 +233,60 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
     if missing:
         parts.append("<p>No road outputs (no camera, not run with --road-report, or failed; see each "
                      "result.json): " + e(", ".join(f"{p} ({why})" for p, why in missing)) + ".</p>")
+    return parts
+
+
+def _road_totals_row(done: list, n_reports: int) -> str:
+    """The batch totals' table row of :func:`road_section` (``done``: (pair, defects.json data))."""
+    e = html.escape
+    every = [(pair, d) for pair, data in done for d in data["defects"]]
+    pits = [(pair, d) for pair, d in every if d.get("kind") == "pothole"]
+    bumps = [(pair, d) for pair, d in every if d.get("kind") == "bump"]
+    low = sum(bool(d.get("low_confidence")) for _, d in every)
+
+    def total(items, key):
+        return sum(_num(d.get(key)) or 0.0 for _, d in items)
+
+    deepest = max(pits, key=lambda pd: _num(pd[1].get("max_depth_mm")) or 0.0, default=None)
+    deep_txt = (f'<a href="#road-{e(deepest[0])}">{e(deepest[0])}</a> #{e(str(deepest[1].get("id")))} '
+                f'{_num(deepest[1].get("max_depth_mm")) or 0.0:.0f} mm') if deepest else "–"
+    return (f"<tr><td>{len(done)} of {n_reports}</td><td>{sum(bool(d['defects']) for _, d in done)}</td>"
+            f"<td>{len(pits)}</td><td>{len(bumps)}</td><td>{low}</td><td>{total(pits, 'area_m2'):.3f}</td>"
+            f"<td>{total(pits, 'volume_l'):.2f}</td><td>{deep_txt}</td></tr></tbody></table>")
+
+
+def _road_card(out_dir: Path, pair: str, data: Mapping) -> list[str]:
+    """HTML of one pair's card in :func:`road_section`: thumbnail, links and defects table."""
+    e = html.escape
+    cols = ("id", "kind", "depth mm (bump: height)", "mean mm", "area m²", "volume l", "decided", "confidence")
+    folder = out_dir / pair
+    parts = []
+    n_pits = sum(d.get("kind") == "pothole" for d in data["defects"])
+    parts.append(f'<div class="card road" id="road-{e(pair)}"><b>{e(pair)}</b>: {n_pits} pothole(s), '
+                 f"{len(data['defects']) - n_pits} bump(s)<br>")
+    pics = [p for p in ROAD_PICTURES if (folder / p).is_file()]
+    if pics:
+        href = quote(f"{pair}/{pics[0]}")
+        parts.append(f'<a href="{e(href)}"><img loading="lazy" src="{e(href)}" alt="defects of {e(pair)}"></a><br>'
+                     + " ".join(f'<a href="{e(quote(f"{pair}/{p}"))}">{p}</a>' for p in pics))
+    parts.append('<table class="sortable"><thead><tr>' + "".join(f"<th>{c}</th>" for c in cols)
+                 + "</tr></thead><tbody>")
+    for d in data["defects"]:
+        low_d = bool(d.get("low_confidence"))
+        vals = [(d.get("id"), str(d.get("id"))), (None, str(d.get("kind"))),
+                (d.get("max_depth_mm"), f"{_num(d.get('max_depth_mm')) or 0.0:.1f}"),
+                (d.get("mean_depth_mm"), f"{_num(d.get('mean_depth_mm')) or 0.0:.1f}"),
+                (d.get("area_m2"), f"{_num(d.get('area_m2')) or 0.0:.4f}"),
+                (d.get("volume_l"), f"{_num(d.get('volume_l')) or 0.0:.2f}"),
+                (d.get("decided_share"), f"{100 * (_num(d.get('decided_share')) or 0.0):.0f} %"),
+                (None, "low" if low_d else "ok")]
+        cells = "".join(f'<td data-v="{_num(v) if _num(v) is not None else ""}">{e(t)}</td>' for v, t in vals)
+        row_cls = ' class="low"' if low_d else ""
+        parts.append(f"<tr{row_cls}>{cells}</tr>")
+    parts.append("</tbody></table>")
+    for w in data.get("warnings") or []:
+        parts.append(f'<p class="low">{e(str(w))}</p>')
+    parts.append("</div>")
     return parts
 
 

@@ -1,6 +1,6 @@
 """Scores of a disparity estimate: against ground truth, or by photometric consistency.
 
-Definitions (DESIGN.md section 4), fixed so that nobody can misread a table:
+Definitions (docs/design.md, 'Metrics'), fixed so that nobody can misread a table:
 
 * **Evaluated pixels**: finite, positive ground truth, intersected with the
   non-occlusion mask when one is given.  ``n_px`` is their number.
@@ -41,7 +41,7 @@ DISPARITY_KEYS = ("epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density", "n_px"
 #: Keys returned by :func:`photometric_scores`.
 PHOTOMETRIC_KEYS = ("mse", "psnr", "ssim", "coverage")
 
-#: SSIM settings of DESIGN.md section 4 (Wang et al. 2004: Gaussian window, sigma 1.5).
+#: SSIM settings of docs/design.md, 'Metrics' (Wang et al. 2004: Gaussian window, sigma 1.5).
 SSIM_SIGMA = 1.5
 DATA_RANGE = 255.0
 
@@ -137,7 +137,7 @@ def photometric_scores(left: np.ndarray, right: np.ndarray, pred: np.ndarray) ->
     Parameters
     ----------
     left, right : ndarray, float, (H, W)
-        Grey images on the 0-255 scale (e.g. from :func:`d3cli.data.io.to_grey`).
+        Grey images on the 0-255 scale (e.g. from :func:`d3cli.data.formats.to_grey`).
     pred : ndarray, float, (H, W)
         Left-view disparity in pixels; non-finite = no estimate.
 
@@ -157,7 +157,7 @@ def photometric_scores(left: np.ndarray, right: np.ndarray, pred: np.ndarray) ->
 
     Notes
     -----
-    SSIM uses the settings of Wang et al. (2004) as in DESIGN.md section 4:
+    SSIM uses the settings of Wang et al. (2004) as in docs/design.md, 'Metrics':
     ``skimage.metrics.structural_similarity(left, warped, gaussian_weights=True,
     sigma=1.5, use_sample_covariance=False, data_range=255, full=True)``, and averages
     the full-size SSIM map over the scored pixels only.  Where the warp is undefined
@@ -318,7 +318,7 @@ def _check_same_2d_shape(where: str, **arrays: np.ndarray | None) -> None:
                     where,
                     f"{name} has shape {shape}",
                     "give a single-channel (H, W) array (convert colour images with "
-                    "d3cli.data.io.to_grey)",
+                    "d3cli.data.formats.to_grey)",
                 )
             )
     shapes = set(given.values())

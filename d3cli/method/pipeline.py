@@ -240,80 +240,15 @@ class D3Stereo:
             Integer map and aggregated cost volume of ``stop_level`` (backend arrays), the
             per-level maps (finest first) and per-level statistics (coarsest first).
         """
-        cfg = self.cfg
-        backend = self.backend
         levels = len(pyr_l)
         per_level: list[dict] = []
         level_maps: list = []
         disp = None
         cost = None
         for level in range(levels - 1, stop_level - 1, -1):
-            shape = tuple(pyr_l[level].shape)
-            stats: dict = {"level": level + 1, "shape": list(shape)}
-            t0 = time.perf_counter()
-            bands = None
-            if disp is not None and cfg.pyramid.band:
-                bands = band_indexes(backend.to_host(disp), shape, n_disp=level_max_disparity(dmax, level) + 1,
-                                     margin=cfg.pyramid.band_margin, tile=cfg.pyramid.band_tile,
-                                     halo=aggregation_halo(cfg))
-                stats["band_cells"] = bands[2]
-            cost = level_cost(pyr_l[level], pyr_r[level], level=level, max_disparity=dmax, cfg=cfg, backend=backend,
-                              features=None if features is None else features[level], bands=bands)
-            t1 = time.perf_counter()
-            if level == levels - 1:
-                disp = self._seeds(cost)
-                stats["seeds"] = backend.count_decided(disp)
-            else:
-                disp = inherit(
-                    cost,
-                    disp,
-                    prc=cfg.inheritance.prc,
-                    dfm_pkrn_min=cfg.inheritance.dfm_pkrn_min,
-                    epsilon=cfg.seeds.epsilon,
-                    backend=backend,
-                    candidates=cfg.inheritance.candidates,
-                )
-                stats["inherited"] = backend.count_decided(disp)
-                if cfg.seeds.every_level and cfg.pyramid.ars:
-                    # (the linear structure, ars false, has seeds at the coarsest level only)
-                    # inherited disparities win; fresh seeds cover what inheritance left
-                    seeds = self._seeds(cost, skip=disp)
-                    disp = backend.merge_sparse(disp, seeds)
-                    stats["seeds"] = backend.count_decided(seeds)
-            t2 = time.perf_counter()
-            sweeps = 0
-            if cfg.pyramid.ars or level == stop_level:
-                disp, sweeps = diffuse(
-                    cost,
-                    disp,
-                    max_gap=cfg.diffusion.max_gap,
-                    tau=cfg.diffusion.tau,
-                    kappa_d=cfg.diffusion.kappa_d,
-                    adversarial=cfg.diffusion.adversarial,
-                    max_sweeps=cfg.diffusion.max_sweeps,
-                    backend=backend,
-                )
-            t3 = time.perf_counter()
-            stats.update(
-                sweeps=int(sweeps),
-                decided_share=backend.count_decided(disp) / float(shape[0] * shape[1]),
-                time_cost=t1 - t0,
-                time_decide=t2 - t1,
-                time_diffusion=t3 - t2,
-            )
-            log.debug(
-                "level %d %s: %s %d, %d sweeps, %.1f%% decided; cost %.3fs, %s %.3fs, diffusion %.3fs",
-                level + 1,
-                "x".join(map(str, shape)),
-                "seeds" if level == levels - 1 else "inherited",
-                stats.get("seeds", stats.get("inherited", 0)),
-                sweeps,
-                100 * stats["decided_share"],
-                t1 - t0,
-                "seeds" if level == levels - 1 else "inheritance",
-                t2 - t1,
-                t3 - t2,
-            )
+            disp, cost, stats = self._match_level(pyr_l[level], pyr_r[level], disp, level=level,
+                                                  coarsest=level == levels - 1, dmax=dmax, stop_level=stop_level,
+                                                  features=None if features is None else features[level])
             for key in ("cost", "decide", "diffusion"):
                 timings[key] = timings.get(key, 0.0) + stats["time_" + key]
             per_level.append(stats)
@@ -321,6 +256,92 @@ class D3Stereo:
             if level > stop_level:
                 cost = None  # free the coarse volume before the next, larger one
         return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level)
+
+    def _match_level(self, left, right, coarser, *, level: int, coarsest: bool, dmax: int, stop_level: int,
+                     features):
+        """One level of :meth:`_match`: cost, seeds or inheritance, diffusion.
+
+        ``coarser``: the integer map of the level above (None at the coarsest level).
+        Returns ``(disparity, cost volume, statistics)`` of this level.
+        """
+        cfg = self.cfg
+        backend = self.backend
+        shape = tuple(left.shape)
+        stats: dict = {"level": level + 1, "shape": list(shape)}
+        t0 = time.perf_counter()
+        bands = None
+        if coarser is not None and cfg.pyramid.band:
+            bands = band_indexes(backend.to_host(coarser), shape, n_disp=level_max_disparity(dmax, level) + 1,
+                                 margin=cfg.pyramid.band_margin, tile=cfg.pyramid.band_tile,
+                                 halo=aggregation_halo(cfg))
+            stats["band_cells"] = bands[2]
+        cost = level_cost(left, right, level=level, max_disparity=dmax, cfg=cfg, backend=backend,
+                          features=features, bands=bands)
+        t1 = time.perf_counter()
+        disp = self._decide(cost, coarser, stats, coarsest=coarsest)
+        t2 = time.perf_counter()
+        sweeps = 0
+        if cfg.pyramid.ars or level == stop_level:
+            disp, sweeps = diffuse(
+                cost,
+                disp,
+                max_gap=cfg.diffusion.max_gap,
+                tau=cfg.diffusion.tau,
+                kappa_d=cfg.diffusion.kappa_d,
+                adversarial=cfg.diffusion.adversarial,
+                max_sweeps=cfg.diffusion.max_sweeps,
+                backend=backend,
+            )
+        t3 = time.perf_counter()
+        stats.update(
+            sweeps=int(sweeps),
+            decided_share=backend.count_decided(disp) / float(shape[0] * shape[1]),
+            time_cost=t1 - t0,
+            time_decide=t2 - t1,
+            time_diffusion=t3 - t2,
+        )
+        log.debug(
+            "level %d %s: %s %d, %d sweeps, %.1f%% decided; cost %.3fs, %s %.3fs, diffusion %.3fs",
+            level + 1,
+            "x".join(map(str, shape)),
+            "seeds" if coarsest else "inherited",
+            stats.get("seeds", stats.get("inherited", 0)),
+            sweeps,
+            100 * stats["decided_share"],
+            t1 - t0,
+            "seeds" if coarsest else "inheritance",
+            t2 - t1,
+            t3 - t2,
+        )
+        return disp, cost, stats
+
+    def _decide(self, cost, coarser, stats: dict, *, coarsest: bool):
+        """The decided pixels before diffusion: seeds at the coarsest level, below it the
+        inherited disparities of ``coarser`` (plus fresh seeds where configured); counts
+        go into ``stats``."""
+        cfg = self.cfg
+        backend = self.backend
+        if coarsest:
+            disp = self._seeds(cost)
+            stats["seeds"] = backend.count_decided(disp)
+            return disp
+        disp = inherit(
+            cost,
+            coarser,
+            prc=cfg.inheritance.prc,
+            dfm_pkrn_min=cfg.inheritance.dfm_pkrn_min,
+            epsilon=cfg.seeds.epsilon,
+            backend=backend,
+            candidates=cfg.inheritance.candidates,
+        )
+        stats["inherited"] = backend.count_decided(disp)
+        if cfg.seeds.every_level and cfg.pyramid.ars:
+            # (the linear structure, ars false, has seeds at the coarsest level only)
+            # inherited disparities win; fresh seeds cover what inheritance left
+            seeds = self._seeds(cost, skip=disp)
+            disp = backend.merge_sparse(disp, seeds)
+            stats["seeds"] = backend.count_decided(seeds)
+        return disp
 
     def _seeds(self, cost, *, skip=None):
         """Decisive seeds of a level (step 4) with the configured tests; ``skip`` as in
@@ -398,7 +419,7 @@ class D3Stereo:
         if cfg.refine.subpixel:
             sub = refine_subpixel(match.cost, match.disparity, backend=backend)
         # The volume's last reader was the sub-pixel step: release it before the host
-        # finishing allocates its own maps (the peak of a 720p road pair, issue 10 item 8).
+        # finishing allocates its own maps (the peak of a 720p road pair).
         match.cost = None
         if cfg.refine.subpixel:
             if road is not None:
@@ -411,7 +432,7 @@ class D3Stereo:
             if road is not None:
                 out = backend.to_host(self._pt_restore(backend.to_device(out), road))
         valid = disp >= 0
-        # Issue 10: each test below makes its holes in one pass (valid in place, the map
+        # Peak memory: each test below makes its holes in one pass (valid in place, the map
         # masked into ``out``); ``owned``: ``out`` is this method's own map, written in place.
         owned = False
         if road is not None:
@@ -446,7 +467,7 @@ class D3Stereo:
 
     def _pt_valid(self, valid: np.ndarray, disp: np.ndarray, out: np.ndarray, info: dict):
         """Validity after PT (:func:`restored_validity`) and ``np.where(valid, out, inf)``,
-        from one pass (issue 10); the shares go to ``info['pt']``.  Returns ``(valid,
+        from one pass (no extra full-size map); the shares go to ``info['pt']``.  Returns ``(valid,
         masked_map)``."""
         valid, counts, out = restored_validity_counts(valid, disp, out, narrow_range=self.cfg.pt.narrow_range,
                                                      masked=True)

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..config import RoadConfig
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
 
@@ -76,28 +77,83 @@ def _median_filled(height: np.ndarray, size: int) -> np.ndarray:
     return np.where(finite, med, np.inf).astype(np.float32)
 
 
+@dataclass(frozen=True)
+class DefectTuning:
+    """Tuning of :func:`find_defects` that no configuration key exposes.
+
+    The thresholds people set (depth, height, area, ring, confidence, splitting) are
+    :class:`~d3cli.config.RoadConfig`'s; these are fixed by measurement and changed in
+    tests and experiments only.
+
+    Attributes
+    ----------
+    median_px : int
+        Odd median filter size against disparity noise before thresholding (3 or 5).
+    noise_k : float
+        A defect's peak depth must exceed ``noise_k`` times the height noise expected at
+        its distance (:func:`disparity_noise`).
+    mean_noise_k, noise_cell_px : float
+        A defect's mean depth must exceed ``mean_noise_k`` standard errors of a mean over
+        its pixels.  Stereo noise is spatially correlated over the matching support, so a
+        region of ``n`` pixels averages only ``max(1, n / noise_cell_px)`` independent
+        errors: ``se = sigma_h sqrt(noise_cell_px / max(n, noise_cell_px))``.
+        ``noise_cell_px`` is the correlation area of the disparity error: its integral
+        ``sum rho`` measured 670-940 px on the sun/dusk synth pairs (cost window 25,
+        smoothing radius 15 of configs/road.yaml).  5 standard errors: the map holds
+        ~10^3 such cells per kind, and the errors of the noisy pairs have heavier tails
+        than a Gaussian (the usual 5-sigma allowance for looking everywhere).
+    split_smooth_px : float
+        Gaussian smoothing of the depth for the saddles of :func:`_split`, pixels (about
+        one noise cell: ``0.4 sqrt(noise_cell_px)``).
+    split_terrace : bool
+        Cut terraces too (a shallow pothole whose floor runs into a deeper one's wall, cue 3
+        of :func:`_split`); the shelf must lie ``max(min_depth_mm, 3 sigma_h)`` above the pit.
+    local_noise_px : int
+        Outer radius of the annulus around a region whose robust height spread (1.4826
+        MAD of all its heights) replaces sigma_h in both significance tests where it is
+        larger.
+    """
+
+    median_px: int = 5
+    noise_k: float = 3.0
+    mean_noise_k: float = 5.0
+    noise_cell_px: float = 900.0
+    split_smooth_px: float = 12.0
+    split_terrace: bool = True
+    local_noise_px: int = 80
+
+
+@dataclass(frozen=True)
+class _Scene:
+    """What every region of one height map is measured against (computed once per map)."""
+
+    height: np.ndarray
+    decided: np.ndarray
+    camera: Camera
+    plane: RoadPlane
+    road: RoadConfig
+    tuning: DefectTuning
+    finite: np.ndarray
+    smooth: np.ndarray
+    footprint: np.ndarray
+    v_all: np.ndarray
+    u_all: np.ndarray
+    kernel_ring: np.ndarray
+    kernel_gap: np.ndarray
+    kernel_local: np.ndarray
+    map_decided: float
+    sigma_d: float
+    split_noise: float
+
+
 def find_defects(
     height: np.ndarray,
     decided: np.ndarray,
     camera: Camera,
     plane: RoadPlane,
+    road: RoadConfig | None = None,
+    tuning: DefectTuning | None = None,
     *,
-    min_depth_mm: float = 10.0,
-    min_height_mm: float = 20.0,
-    min_area_m2: float = 0.005,
-    ring_px: int = 12,
-    median_px: int = 5,
-    min_decided_share: float = 0.5,
-    noise_k: float = 3.0,
-    mean_noise_k: float = 5.0,
-    noise_cell_px: float = 900.0,
-    split_prominence_mm: float = 6.0,
-    split_neck: float = 0.9,
-    split_min_area_m2: float = 0.01,
-    split_smooth_px: float = 12.0,
-    split_terrace: bool = True,
-    min_region_decided_share: float = 0.25,
-    local_noise_px: int = 80,
     return_regions: bool = False,
 ):
     """Potholes and bumps of one height map.
@@ -110,45 +166,21 @@ def find_defects(
         Pixels the method decided itself (valid.png).
     camera : Camera
     plane : RoadPlane
-    min_depth_mm, min_height_mm, min_area_m2 : float, keyword-only
-        Thresholds of a pothole (depth below the surrounding surface), a bump (height
-        above it) and of both (area on the road plane).
-    ring_px : int, keyword-only
-        Width of the ring of surrounding road that gives the reference height, pixels.
-    median_px : int, keyword-only
-        Odd median filter size against disparity noise before thresholding (3 or 5).
-    min_decided_share : float, keyword-only
-        Below this share of decided pixels a defect is ``low_confidence``.
-
-    noise_k : float, keyword-only
-        A defect's peak depth must exceed ``noise_k`` times the height noise expected at
-        its distance (:func:`disparity_noise`).
-    mean_noise_k, noise_cell_px : float, keyword-only
-        A defect's mean depth must exceed ``mean_noise_k`` standard errors of a mean over
-        its pixels.  Stereo noise is spatially correlated over the matching support, so a
-        region of ``n`` pixels averages only ``max(1, n / noise_cell_px)`` independent
-        errors: ``se = sigma_h sqrt(noise_cell_px / max(n, noise_cell_px))``.
-        ``noise_cell_px`` is the correlation area of the disparity error: its integral
-        ``sum rho`` measured 670-940 px on the sun/dusk synth pairs (cost window 25,
-        smoothing radius 15 of configs/road.yaml).  5 standard errors: the map holds
-        ~10^3 such cells per kind, and the errors of the noisy pairs have heavier tails
-        than a Gaussian (the usual 5-sigma allowance for looking everywhere).
-    split_prominence_mm, split_neck, split_min_area_m2, split_smooth_px : float, keyword-only
-        Splitting of joined potholes (:func:`_split`): depth-saddle prominence (at least the
-        map's ``noise_k`` sigma_h too), neck ratio (1: no neck split), smallest part
-        (plane area) and the Gaussian smoothing of the depth for the saddles, pixels (about
-        one noise cell: ``0.4 sqrt(noise_cell_px)``).
-    split_terrace : bool, keyword-only
-        Cut terraces too (a shallow pothole whose floor runs into a deeper one's wall, cue 3
-        of :func:`_split`); the shelf must lie ``max(min_depth_mm, 3 sigma_h)`` above the pit.
-    min_region_decided_share : float, keyword-only
-        A region with a smaller share of decided pixels is dropped (measured on the hole
+    road : RoadConfig, optional
+        The thresholds (defaults: ``RoadConfig()``): ``min_depth_mm``, ``min_height_mm``
+        and ``min_area_m2`` of a pothole (depth below the surrounding surface), a bump
+        (height above it) and of both (area on the road plane); ``ring_px``, the width of
+        the ring of surrounding road that gives the reference height, pixels;
+        ``min_decided_share``, below which share of decided pixels a defect is
+        ``low_confidence``; ``split_prominence_mm``, ``split_neck`` and
+        ``split_min_area_m2``, the splitting of joined potholes (:func:`_split`):
+        depth-saddle prominence (at least the map's ``noise_k`` sigma_h too), neck ratio
+        (1: no neck split) and smallest part (plane area); ``min_region_decided_share``:
+        a region with a smaller share of decided pixels is dropped (measured on the hole
         filling's extrapolation), unless the map's own decided share is below
         ``min_decided_share`` (then every defect is kept, low confidence).
-    local_noise_px : int, keyword-only
-        Outer radius of the annulus around a region whose robust height spread (1.4826
-        MAD of all its heights) replaces sigma_h in both significance tests where it is
-        larger.
+    tuning : DefectTuning, optional
+        The rest of the tuning (defaults: ``DefectTuning()``).
     return_regions : bool, keyword-only
         Also return each defect's pixel mask (bool (H, W)), same order.
 
@@ -157,100 +189,134 @@ def find_defects(
     list of Defect
         Potholes first (deepest first), then bumps; ids 1..N in that order.
     """
+    road = RoadConfig() if road is None else road
+    scene = _scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning)
+    found: list = []
+    for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
+        found += _find_kind(scene, kind, sign, thr_mm)
+    found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
+    defects = [Defect(id=i + 1, kind=kind, low_confidence=d["decided_share"] < road.min_decided_share, **d)
+               for i, (kind, _, d) in enumerate(found)]
+    return (defects, [r for _, r, _ in found]) if return_regions else defects
+
+
+def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, tuning: DefectTuning) -> _Scene:
+    """The per-map quantities of :func:`find_defects`: filtered heights, footprints, noise."""
     shape = height.shape
     finite = np.isfinite(height)
-    smooth = _median_filled(height, median_px)
+    smooth = _median_filled(height, tuning.median_px)
     footprint = plane_footprint(shape, camera, plane)
     v_all, u_all = np.mgrid[0:shape[0], 0:shape[1]]
+    ring_px, local_noise_px = road.ring_px, tuning.local_noise_px
     kernel_ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
     kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
     kernel_local = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * local_noise_px + 1, 2 * local_noise_px + 1))
     map_decided = float(decided[finite].mean()) if finite.any() else 0.0
-    found: list = []
     sigma_d = disparity_noise(smooth, camera, plane)
     # Saddle depth that splits a region: half the threshold, but not less than the height
     # noise at the median distance (noisy floors would otherwise split into pieces).
     z_med = float(np.median(_points(smooth, *np.nonzero(finite)[::-1], camera, plane)[:, 2])) if finite.any() else 0.0
-    split_noise = noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
-    for kind, sign, thr_mm in (("pothole", -1.0, min_depth_mm), ("bump", 1.0, min_height_mm)):
-        with np.errstate(invalid="ignore"):
-            cand = finite & (sign * smooth > thr_mm * 1e-3)
-        other = finite & (np.abs(smooth) > min(min_depth_mm, min_height_mm) * 1e-3)
-        n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
-        # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
-        # below it the outline of a noisy map is drawn by the noise.
-        for comp in _split(labels, n, sign * smooth, footprint, level=max(thr_mm * 1e-3, split_noise), prominence=max(split_prominence_mm * 1e-3, split_noise),
-                           smooth_px=split_smooth_px, neck=split_neck, min_part_m2=split_min_area_m2,
-                           step=max(thr_mm * 1e-3, split_noise) if split_terrace else np.inf):
-            if footprint[comp].sum() < 0.25 * min_area_m2:
-                continue  # cannot pass the area test even with its rim
-            grown = cv2.dilate(comp.astype(np.uint8), kernel_gap).astype(bool)
-            ring = cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & ~grown & finite & ~other
-            if ring.sum() < 10:
-                ring = cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & ~grown & finite
-            if ring.sum() < 10:
-                continue
-            ref = float(np.median(height[ring]))
-            with np.errstate(invalid="ignore"):
-                depth_s = sign * (smooth - ref)
-                depth = sign * (height - ref)
-            region = comp & (depth_s > thr_mm * 1e-3)
-            area = float(footprint[region].sum())
-            if area < min_area_m2 or not region.any():
-                continue
-            peak = float(np.percentile(depth_s[region], 98))
-            # Significance: the peak must stand above the height noise at that distance
-            # (sigma_h = c Z / (f B) sigma_d, sigma_d measured on this map), not only above
-            # the fixed threshold: far, noisy road otherwise yields false potholes.
-            z_region = float(np.median(_points(height, u_all[region], v_all[region], camera, plane)[:, 2]))
-            sigma_h = plane.offset * z_region / (camera.f * camera.baseline) * sigma_d
-            # The local noise where it is higher: the map's error is not uniform (a dark or
-            # far part of the image matches worse), and a blob of that local noise passes a
-            # test made with the map's median noise.  Robust spread (1.4826 MAD) of every
-            # height in an annulus outside the ring: other defects there are a minority,
-            # which the median ignores.  Leaving out the heights beyond the map's noise_k
-            # sigma_h instead (before 2026-11-25) cut the spread of a noisy part off at that
-            # level: on the dark far field of dusk pairs the estimate came out too small and
-            # blobs of noise passed as defects (synth seeds 0 7 11 13 17 23 31 41 59, 54
-            # pairs: false defects + duplicates 12 -> 4, at most 1 in any pair (was 6),
-            # recall 78/80 either way; scripts/bench_road.py).
-            annulus = (cv2.dilate(comp.astype(np.uint8), kernel_local).astype(bool)
-                       & ~cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & finite)
-            if annulus.sum() >= 50:
-                local = height[annulus]
-                sigma_h = max(sigma_h, float(1.4826 * np.median(np.abs(local - np.median(local)))))
-            if peak < noise_k * sigma_h:
-                continue
-            # Significance of the mean depth: a small blob of correlated matching noise can
-            # peak above noise_k sigma, but a real depression spans many noise cells.
-            n_px = int((region & finite).sum())
-            mean_raw = float(np.mean(depth[region & finite])) if n_px else 0.0
-            if mean_raw < mean_noise_k * sigma_h * np.sqrt(noise_cell_px / max(n_px, noise_cell_px)):
-                continue
-            share = float(decided[region].mean())
-            if share < min_region_decided_share and map_decided >= min_decided_share:
-                continue  # measured on filled pixels: the hole filling's extrapolation, no depth
-            zone = cv2.dilate(comp.astype(np.uint8), kernel_ring).astype(bool) & finite
-            vol = float((footprint[zone] * np.clip(depth_s[zone], 0, None)).sum())
-            w = footprint[region]
-            vs, us = v_all[region], u_all[region]
-            # 3-D centroid from the measured points of the region (footprint weighted).
-            pts = _points(height, us, vs, camera, plane)
-            found.append((kind, region, dict(
-                centroid_px=(float(np.average(us, weights=w)), float(np.average(vs, weights=w))),
-                bbox_px=(int(us.min()), int(vs.min()), int(us.max()), int(vs.max())),
-                centroid_m=tuple(float(x) for x in np.average(pts, axis=0, weights=w)),
-                area_m2=area,
-                max_depth_mm=peak * 1e3,
-                mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
-                volume_l=vol * 1e3,
-                decided_share=share,
-                outline_px=outline(region),
-            )))
-    found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
-    defects = [Defect(id=i + 1, kind=kind, low_confidence=d["decided_share"] < min_decided_share, **d)
-               for i, (kind, _, d) in enumerate(found)]
-    return (defects, [r for _, r, _ in found]) if return_regions else defects
+    split_noise = tuning.noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
+    return _Scene(height=height, decided=decided, camera=camera, plane=plane, road=road, tuning=tuning,
+                  finite=finite, smooth=smooth, footprint=footprint, v_all=v_all, u_all=u_all,
+                  kernel_ring=kernel_ring, kernel_gap=kernel_gap, kernel_local=kernel_local,
+                  map_decided=map_decided, sigma_d=sigma_d, split_noise=split_noise)
+
+
+def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
+    """(kind, region mask, measurements) of every pothole (``sign`` -1) or bump (+1)."""
+    road, tuning = s.road, s.tuning
+    with np.errstate(invalid="ignore"):
+        cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
+    other = s.finite & (np.abs(s.smooth) > min(road.min_depth_mm, road.min_height_mm) * 1e-3)
+    n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
+    found = []
+    # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
+    # below it the outline of a noisy map is drawn by the noise.
+    for comp in _split(labels, n, sign * s.smooth, s.footprint, level=max(thr_mm * 1e-3, s.split_noise),
+                       prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
+                       smooth_px=tuning.split_smooth_px, neck=road.split_neck, min_part_m2=road.split_min_area_m2,
+                       step=max(thr_mm * 1e-3, s.split_noise) if tuning.split_terrace else np.inf):
+        measured = _measure(s, comp, other, sign, thr_mm)
+        if measured is not None:
+            found.append((kind, *measured))
+    return found
+
+
+def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm: float):
+    """(region, measurements) of one split component, or None when it is no defect."""
+    road, tuning, finite, footprint = s.road, s.tuning, s.finite, s.footprint
+    if footprint[comp].sum() < 0.25 * road.min_area_m2:
+        return None  # cannot pass the area test even with its rim
+    grown = cv2.dilate(comp.astype(np.uint8), s.kernel_gap).astype(bool)
+    ring = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite & ~other
+    if ring.sum() < 10:
+        ring = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite
+    if ring.sum() < 10:
+        return None
+    ref = float(np.median(s.height[ring]))
+    with np.errstate(invalid="ignore"):
+        depth_s = sign * (s.smooth - ref)
+        depth = sign * (s.height - ref)
+    region = comp & (depth_s > thr_mm * 1e-3)
+    area = float(footprint[region].sum())
+    if area < road.min_area_m2 or not region.any():
+        return None
+    peak = float(np.percentile(depth_s[region], 98))
+    sigma_h = _local_sigma_h(s, comp, region)
+    if peak < tuning.noise_k * sigma_h:
+        return None
+    # Significance of the mean depth: a small blob of correlated matching noise can
+    # peak above noise_k sigma, but a real depression spans many noise cells.
+    n_px = int((region & finite).sum())
+    mean_raw = float(np.mean(depth[region & finite])) if n_px else 0.0
+    if mean_raw < tuning.mean_noise_k * sigma_h * np.sqrt(tuning.noise_cell_px / max(n_px, tuning.noise_cell_px)):
+        return None
+    share = float(s.decided[region].mean())
+    if share < road.min_region_decided_share and s.map_decided >= road.min_decided_share:
+        return None  # measured on filled pixels: the hole filling's extrapolation, no depth
+    zone = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & finite
+    vol = float((footprint[zone] * np.clip(depth_s[zone], 0, None)).sum())
+    w = footprint[region]
+    vs, us = s.v_all[region], s.u_all[region]
+    # 3-D centroid from the measured points of the region (footprint weighted).
+    pts = _points(s.height, us, vs, s.camera, s.plane)
+    return region, dict(
+        centroid_px=(float(np.average(us, weights=w)), float(np.average(vs, weights=w))),
+        bbox_px=(int(us.min()), int(vs.min()), int(us.max()), int(vs.max())),
+        centroid_m=tuple(float(x) for x in np.average(pts, axis=0, weights=w)),
+        area_m2=area,
+        max_depth_mm=peak * 1e3,
+        mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
+        volume_l=vol * 1e3,
+        decided_share=share,
+        outline_px=outline(region),
+    )
+
+
+def _local_sigma_h(s: _Scene, comp: np.ndarray, region: np.ndarray) -> float:
+    """Height noise a region's depth is tested against, metres.
+
+    Significance: the peak must stand above the height noise at that distance
+    (sigma_h = c Z / (f B) sigma_d, sigma_d measured on this map), not only above the
+    fixed threshold: far, noisy road otherwise yields false potholes.
+    """
+    camera, plane = s.camera, s.plane
+    z_region = float(np.median(_points(s.height, s.u_all[region], s.v_all[region], camera, plane)[:, 2]))
+    sigma_h = plane.offset * z_region / (camera.f * camera.baseline) * s.sigma_d
+    # The local noise where it is higher: the map's error is not uniform (a dark or far
+    # part of the image matches worse), and a blob of that local noise passes a test made
+    # with the map's median noise.  Robust spread (1.4826 MAD) of every height in an
+    # annulus outside the ring: other defects there are a minority, which the median
+    # ignores.  Leaving out the heights beyond the map's noise_k sigma_h instead cut the
+    # spread of a noisy part off at that level: on the dark far field of dusk pairs the
+    # estimate came out too small and blobs of noise passed as defects.
+    annulus = (cv2.dilate(comp.astype(np.uint8), s.kernel_local).astype(bool)
+               & ~cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & s.finite)
+    if annulus.sum() >= 50:
+        local = s.height[annulus]
+        sigma_h = max(sigma_h, float(1.4826 * np.median(np.abs(local - np.median(local)))))
+    return sigma_h
 
 
 def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane) -> float:
@@ -349,11 +415,39 @@ def _terrace_pieces(part: np.ndarray, depth: np.ndarray, footprint: np.ndarray, 
 
     if not np.isfinite(step) or _calls_left <= 0 or footprint[part].sum() < 2 * min_part_m2:
         return [part]
+    deepest = float(np.percentile(depth[part], 98))
+    candidates = _terrace_candidates(part, depth, footprint, level=level, step=step, min_part_m2=min_part_m2,
+                                     level_step=level_step, deepest=deepest)
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    for _, t, core, blobs in candidates[:3]:
+        markers = np.zeros(part.shape, np.int32)
+        markers[core] = 1
+        for i, blob in enumerate(blobs, start=2):
+            markers[blob] = i
+        basins = watershed(-depth, markers, mask=part)
+        if not _keep_shelves(basins, len(blobs), part, cross, ledge_share):
+            continue
+        log.debug("terrace at %.1f mm: shelves of %s m^2 beside a pit to %.1f mm", t * 1e3,
+                  [round(float(footprint[b].sum()), 3) for b in blobs], deepest * 1e3)
+        out = []
+        for i in range(1, len(blobs) + 2):
+            piece = basins == i
+            if piece.any():
+                out += _terrace_pieces(piece, depth, footprint, level=t + level_step, step=step,
+                                       min_part_m2=min_part_m2, level_step=level_step, ledge_share=ledge_share,
+                                       _calls_left=_calls_left - 1)
+        return out
+    return [part]
+
+
+def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarray, *, level: float, step: float,
+                        min_part_m2: float, level_step: float, deepest: float) -> list:
+    """(shelf area, level t, core mask, shelf blobs) of every level that shows a terrace,
+    largest shelf first (:func:`_terrace_pieces`)."""
     # Opening disc: half the radius of the smallest part, in pixels at the part's distance.
     pixel_m = float(np.sqrt(np.median(footprint[part])))
     radius_px = max(2, int(round(0.5 * np.sqrt(min_part_m2 / np.pi) / max(pixel_m, 1e-9))))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
-    deepest = float(np.percentile(depth[part], 98))
     # Candidate levels: the shelf is widest just above a floor (a raised-cosine or any
     # rounded wall is flat where it meets the floor, so the bands above the floor are wide
     # too); the level with the largest shelf is tried first.
@@ -387,40 +481,29 @@ def _terrace_pieces(part: np.ndarray, depth: np.ndarray, footprint: np.ndarray, 
         if blobs:
             candidates.append((sum(float(footprint[b].sum()) for b in blobs), t, core, blobs))
     candidates.sort(key=lambda c: -c[0])
-    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
-    for _, t, core, blobs in candidates[:3]:
-        markers = np.zeros(part.shape, np.int32)
-        markers[core] = 1
-        for i, blob in enumerate(blobs, start=2):
-            markers[blob] = i
-        basins = watershed(-depth, markers, mask=part)
-        # A shallow pothole beside the pit has an outline of its own: most of its piece's
-        # border is rim (the part's outside).  A ledge around the pit borders the pit along
-        # as much as it borders the road.
-        kept = 0
-        for i in range(2, len(blobs) + 2):
-            piece = basins == i
-            edge = piece & ~cv2.erode(piece.astype(np.uint8), cross, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
-            near = cv2.dilate(edge.astype(np.uint8), cross).astype(bool)
-            shared = int((near & (basins == 1)).sum())
-            rim = int((near & ~part).sum()) + int(edge[0].sum() + edge[-1].sum() + edge[:, 0].sum() + edge[:, -1].sum())
-            if shared >= ledge_share * max(shared + rim, 1):
-                basins[piece] = 1
-            else:
-                kept += 1
-        if not kept:
-            continue
-        log.debug("terrace at %.1f mm: shelves of %s m^2 beside a pit to %.1f mm", t * 1e3,
-                  [round(float(footprint[b].sum()), 3) for b in blobs], deepest * 1e3)
-        out = []
-        for i in range(1, len(blobs) + 2):
-            piece = basins == i
-            if piece.any():
-                out += _terrace_pieces(piece, depth, footprint, level=t + level_step, step=step,
-                                       min_part_m2=min_part_m2, level_step=level_step, ledge_share=ledge_share,
-                                       _calls_left=_calls_left - 1)
-        return out
-    return [part]
+    return candidates
+
+
+def _keep_shelves(basins: np.ndarray, n_blobs: int, part: np.ndarray, cross: np.ndarray, ledge_share: float) -> int:
+    """Number of shelf basins (labels 2 ..) kept as pothole pieces; the others are merged
+    into the pit's basin (label 1) in ``basins``, in place.
+
+    A shallow pothole beside the pit has an outline of its own: most of its piece's border
+    is rim (the part's outside).  A ledge around the pit borders the pit along as much as
+    it borders the road.
+    """
+    kept = 0
+    for i in range(2, n_blobs + 2):
+        piece = basins == i
+        edge = piece & ~cv2.erode(piece.astype(np.uint8), cross, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+        near = cv2.dilate(edge.astype(np.uint8), cross).astype(bool)
+        shared = int((near & (basins == 1)).sum())
+        rim = int((near & ~part).sum()) + int(edge[0].sum() + edge[-1].sum() + edge[:, 0].sum() + edge[:, -1].sum())
+        if shared >= ledge_share * max(shared + rim, 1):
+            basins[piece] = 1
+        else:
+            kept += 1
+    return kept
 
 
 def _watershed_parts(surface: np.ndarray, peaks: np.ndarray, mask: np.ndarray) -> list:

@@ -52,7 +52,7 @@ def camera_from(calib: dict | None, cfg, shape: tuple[int, int]) -> Camera | Non
     Parameters
     ----------
     calib : dict or None
-        :func:`d3cli.data.io.read_calib` of the pair's calib.txt (Middlebury, KITTI, synth,
+        :func:`d3cli.data.formats.read_calib` of the pair's calib.txt (Middlebury, KITTI, synth,
         Stereo-Road layouts), or None.  When it gives a ``width`` different from the
         image width (images downsized after calibration), f, cx, cy and doffs are
         scaled by image width / calib width.

@@ -143,13 +143,7 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         warnings.append("no defects: the scene is not road-like (perspective transformation fell back)")
         defects, regions = [], []
     else:
-        defects, regions = find_defects(
-            height, decided, camera, plane, min_depth_mm=road_cfg.min_depth_mm,
-            min_height_mm=road_cfg.min_height_mm, min_area_m2=road_cfg.min_area_m2,
-            ring_px=road_cfg.ring_px, min_decided_share=road_cfg.min_decided_share,
-            split_prominence_mm=road_cfg.split_prominence_mm, split_neck=road_cfg.split_neck,
-            split_min_area_m2=road_cfg.split_min_area_m2,
-            min_region_decided_share=road_cfg.min_region_decided_share, return_regions=True)
+        defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
         if decided_share < road_cfg.min_decided_share:
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
             defects = [d.__class__(**{**d.__dict__, "low_confidence": True}) for d in defects]

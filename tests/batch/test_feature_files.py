@@ -1,7 +1,6 @@
 """A batch with ``cost.kind: features`` reads each pair's own precomputed ``features.npz``
 (a relative path: beside the pair's left image), and the feature files are part of a
-pair's fingerprint: a changed npz recomputes that pair only (issue 14 item 2, issue 12
-item 2)."""
+pair's fingerprint: a changed npz recomputes that pair only."""
 
 from __future__ import annotations
 

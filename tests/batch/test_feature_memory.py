@@ -1,4 +1,4 @@
-"""The memory check counts the feature channels of ``cost.kind: features`` (issue 14 item 6).
+"""The memory check counts the feature channels of ``cost.kind: features``.
 
 Per level i both views hold float32 (H / 2^i, W / 2^i, C_i + 1) (vectors and norms),
 counted twice (the raw maps and the normalised copies).

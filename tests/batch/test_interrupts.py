@@ -1,4 +1,4 @@
-"""Ctrl-C inside a compiled kernel and SIGTERM stop the batch (issue 12, items 8 and 9)."""
+"""Ctrl-C inside a compiled kernel and SIGTERM stop the batch."""
 
 import json
 import os
@@ -71,7 +71,7 @@ def test_sigterm_stops_a_serial_batch_with_143_run_json_and_no_lock(tmp_path, ma
 
 
 def test_ctrl_c_at_eight_moments_of_a_d3stereo_batch(tmp_path, make_pair_folder):
-    """Issue 12: SIGINT at eight moments spread over a d3stereo batch (loading kernels,
+    """SIGINT at eight moments spread over a d3stereo batch (loading kernels,
     discovery, computing, writing) always exits 130 with the resume line, records no pair
     as failed, leaves no lock, and a rerun completes.  (The first tenth of a second, the
     interpreter's own start-up before d3cli runs, is left out: README "Failure behaviour".)"""

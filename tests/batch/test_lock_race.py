@@ -1,4 +1,4 @@
-"""Two processes take over the same stale lock at the same moment (issue 12 item 10).
+"""Two processes take over the same stale lock at the same moment.
 
 Before flock, both saw the lock as stale, both removed it and both created their own:
 two runs wrote into one folder.  ``os.kill`` (the liveness probe of the stale check) is

@@ -1,5 +1,5 @@
 """An output folder that overlaps the inputs is refused before anything is written or
-removed (issue 12, item 1: a ground truth named disp.png was replaced by the prediction)."""
+removed (a ground truth named disp.png was once replaced by the prediction)."""
 
 import hashlib
 

@@ -1,4 +1,4 @@
-"""A rerun recomputes whatever changed (issue 12 item 2), and keeps what did not.
+"""A rerun recomputes whatever changed, and keeps what did not.
 
 Each test changes one thing the outputs depend on (an input file, the manifest's range,
 the range the ground truth gives, ``gt_scale`` in SOURCE.txt, a method setting, the

@@ -1,4 +1,4 @@
-"""A batch under faults (issue 6): Ctrl-C, a full disk, two runs at once, corrupt inputs,
+"""A batch under faults: Ctrl-C, a full disk, two runs at once, corrupt inputs,
 memory limits, and pairs that are not rectified or swapped.
 
 CLI runs use ``--method sgbm`` on tiny pairs so that they test the batch, not the pipeline;
@@ -356,7 +356,7 @@ def test_pair_and_gt_size_mismatches_in_one_batch(tmp_path, four_pairs):
     assert "disp_gt.pfm" in errors["c"] or "ground truth" in errors["c"]
     assert errors["c"].startswith("c: evaluation failed, maps kept: ")
     assert not (out / "b").exists()
-    for name in "acd":  # c: a bad ground truth fails the evaluation, not the maps (issue 12 item 6)
+    for name in "acd":  # c: a bad ground truth fails the evaluation, not the maps
         assert_complete(out / name)
 
 

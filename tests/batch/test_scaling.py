@@ -235,7 +235,7 @@ def d3_serial(d3_pairs, tmp_path_factory):
 
 @pytest.mark.parametrize("method", ["d3stereo", "sgbm"])
 def test_dask_subprocess_cluster_survives_a_worker_killed_mid_batch(tmp_path, request, method):
-    """Issue 11's Done-when: `dask scheduler` + two `dask worker --no-nanny` on 127.0.0.1,
+    """The Dask acceptance run: `dask scheduler` + two `dask worker --no-nanny` on 127.0.0.1,
     `python -m d3cli run --scheduler` on 8 pairs; one worker is SIGKILLed after the first
     pair finishes: exit 0, every map as serial.  The default method (d3stereo) on 360x640
     pairs, SGBM on 720x1280 ones."""

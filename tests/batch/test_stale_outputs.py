@@ -1,4 +1,4 @@
-"""What a rerun leaves in OUT (issue 12 items 6, 7, 18).
+"""What a rerun leaves in OUT.
 
 * a ground truth that cannot be scored fails the pair's evaluation, never its maps;
 * a run without ``--eval`` leaves no summary of an earlier ``--eval`` run (another method)

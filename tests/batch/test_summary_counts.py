@@ -1,4 +1,4 @@
-"""summary.md, summary.json and report.html count the pairs as run.json does (issue 12 item 7): pairs
+"""summary.md, summary.json and report.html count the pairs as run.json does: pairs
 kept complete from an earlier run are "skipped as complete", not silently "ok"."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Metrics against hand-computed values on tiny arrays (DESIGN.md section 4)."""
+"""Metrics against hand-computed values on tiny arrays (docs/design.md, 'Metrics')."""
 
 import math
 

@@ -1,12 +1,14 @@
 """Road plane, height and potholes on an analytic scene (tests/road/scene.py)."""
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
 import pytest
 
-from d3cli.road.defects import find_defects
+from d3cli.config import RoadConfig
+from d3cli.road.defects import DefectTuning, find_defects
 from d3cli.road.plane import fit_road_plane, height_map, plane_footprint
 from d3cli.road.pointcloud import disparity_to_points
 
@@ -47,7 +49,7 @@ def test_height_map_is_zero_on_the_road_and_minus_depth_at_the_bottom(scene):
 def test_pothole_depth_area_volume_within_a_few_percent(scene):
     disp, cam, rot, valid, plane = scene
     h = height_map(disp, valid, cam, plane)
-    defects = find_defects(h, valid, cam, plane, min_depth_mm=10.0, min_area_m2=0.005)
+    defects = find_defects(h, valid, cam, plane, RoadConfig(min_depth_mm=10.0, min_area_m2=0.005))
     assert [d.kind for d in defects] == ["pothole"]
     d = defects[0]
     truth = paraboloid_truth(0.08, 0.3, 0.01)
@@ -79,13 +81,13 @@ def test_bump_is_a_second_kind_and_thresholds_hold(scene):
     pts, _ = disparity_to_points(disp, valid, cam)
     plane = fit_road_plane(pts, cam, sigma_disparity=0.05)
     h = height_map(disp, valid, cam, plane)
-    defects = find_defects(h, valid, cam, plane, min_depth_mm=10.0, min_height_mm=20.0, min_area_m2=0.005)
+    defects = find_defects(h, valid, cam, plane, RoadConfig(min_depth_mm=10.0, min_height_mm=20.0, min_area_m2=0.005))
     assert [d.kind for d in defects] == ["pothole", "bump"]
     assert defects[1].max_depth_mm == pytest.approx(40.0, rel=0.05)
     assert [d.id for d in defects] == [1, 2]
     # Deeper threshold than the hole: nothing; a larger minimum area than the hole: nothing.
-    assert [d.kind for d in find_defects(h, valid, cam, plane, min_depth_mm=60.0)] == ["bump"]
-    assert find_defects(h, valid, cam, plane, min_area_m2=1.0) == []
+    assert [d.kind for d in find_defects(h, valid, cam, plane, RoadConfig(min_depth_mm=60.0))] == ["bump"]
+    assert find_defects(h, valid, cam, plane, RoadConfig(min_area_m2=1.0)) == []
 
 
 def test_few_decided_pixels_mark_defects_low_confidence(scene):
@@ -93,7 +95,7 @@ def test_few_decided_pixels_mark_defects_low_confidence(scene):
     h = height_map(disp, valid, cam, plane)
     decided = np.zeros_like(valid)
     decided[::3] = True  # a third of the rows decided
-    (d,) = find_defects(h, decided, cam, plane, min_decided_share=0.5)
+    (d,) = find_defects(h, decided, cam, plane, RoadConfig(min_decided_share=0.5))
     assert d.decided_share == pytest.approx(1 / 3, abs=0.03)
     assert d.low_confidence
 
@@ -129,7 +131,7 @@ def test_correlated_noise_blobs_are_not_defects(seed):
     u0, v0, u1, v1 = found[0].bbox_px
     assert u0 < 320 + 0.1 * 600 / 1.5 < u1 and v0 < 240 < v1  # around the hole (0.1 m right, on the axis)
     # Without the mean-depth test the same map yields false potholes and bumps.
-    assert len(find_defects(h, valid, cam, plane, mean_noise_k=0.0)) >= 3
+    assert len(find_defects(h, valid, cam, plane, tuning=DefectTuning(mean_noise_k=0.0))) >= 3
 
 
 def _heights(disp, cam, sigma):
@@ -154,7 +156,7 @@ def two_pits():
                          ids=["both cues", "neck only", "depth saddle only"])
 def test_overlapping_potholes_are_two_defects(two_pits, kw):
     h, valid, cam, plane = two_pits
-    pits = find_defects(h, valid, cam, plane, **kw)
+    pits = find_defects(h, valid, cam, plane, RoadConfig(**kw))
     assert [d.kind for d in pits] == ["pothole", "pothole"]
     assert [d.max_depth_mm for d in pits] == pytest.approx([60, 60], rel=0.05)
     left, right = sorted(pits, key=lambda d: d.centroid_px[0])
@@ -169,7 +171,8 @@ def test_overlapping_potholes_are_two_defects(two_pits, kw):
 
 def test_both_cues_off_keep_the_joined_region_whole(two_pits):
     h, valid, cam, plane = two_pits
-    pits = find_defects(h, valid, cam, plane, split_prominence_mm=100.0, split_neck=1.0, split_terrace=False)
+    pits = find_defects(h, valid, cam, plane, RoadConfig(split_prominence_mm=100.0, split_neck=1.0),
+                        DefectTuning(split_terrace=False))
     assert len(pits) == 1
 
 
@@ -178,7 +181,7 @@ def test_a_region_on_filled_pixels_is_not_reported(scene):
     h = height_map(disp, valid, cam, plane)
     decided = h > -0.005  # the pothole itself was filled, the road around decided
     assert find_defects(h, decided, cam, plane) == []
-    (d,) = find_defects(h, decided, cam, plane, min_region_decided_share=0.0)
+    (d,) = find_defects(h, decided, cam, plane, RoadConfig(min_region_decided_share=0.0))
     assert d.decided_share < 0.1 and d.low_confidence
     # A map that is mostly filled keeps it (flagged): every defect is low confidence there.
     (d,) = find_defects(h, np.zeros_like(valid), cam, plane)
@@ -202,7 +205,7 @@ def test_locally_noisy_band_gives_fewer_false_defects():
             found = find_defects(h, valid, cam, plane)
             assert any(d.kind == "pothole" and d.bbox_px[1] > 120 for d in found)  # the hole itself
             false_local += len(found) - 1
-            false_global += len(find_defects(h, valid, cam, plane, local_noise_px=1)) - 1  # no annulus
+            false_global += len(find_defects(h, valid, cam, plane, tuning=DefectTuning(local_noise_px=1))) - 1  # no annulus
     assert false_global >= 5 and false_local <= false_global // 2
 
 
@@ -256,12 +259,12 @@ def _flat_scene(holes):
 
 # This scene's pixels are ~3x as large on the road as those of a 1280x720 synth pair: 4 px
 # of depth smoothing before the split is the default's 12 px there (~2 cm on the road).
-SMOOTH = {"split_smooth_px": 4.0}
+SMOOTH = DefectTuning(split_smooth_px=4.0)
 
 
 def test_a_shallow_pothole_on_a_deeper_ones_wall_is_a_second_defect():
     h, valid, cam, plane = _flat_scene(TERRACE)
-    pits = find_defects(h, valid, cam, plane, **SMOOTH)
+    pits = find_defects(h, valid, cam, plane, tuning=SMOOTH)
     assert [d.kind for d in pits] == ["pothole", "pothole"]
     deep, shallow = pits  # deepest first
     assert deep.max_depth_mm == pytest.approx(50.0, rel=0.03)
@@ -277,13 +280,13 @@ def test_without_the_terrace_cue_the_neck_cut_gives_the_shallow_one_deep_wall():
     # Why terraces are cut first: the neck cut follows the outline, not the wall between
     # the floors, and the shallow part then reads 20 % too deep.
     h, valid, cam, plane = _flat_scene(TERRACE)
-    pits = find_defects(h, valid, cam, plane, split_terrace=False, **SMOOTH)
+    pits = find_defects(h, valid, cam, plane, tuning=replace(SMOOTH, split_terrace=False))
     assert len(pits) == 2 and pits[1].max_depth_mm > 28.0
 
 
 def test_a_pit_inside_a_shallower_pothole_is_one_defect():
     h, valid, cam, plane = _flat_scene(NESTED)
-    pits = find_defects(h, valid, cam, plane, **SMOOTH)
+    pits = find_defects(h, valid, cam, plane, tuning=SMOOTH)
     assert len(pits) == 1
     assert pits[0].max_depth_mm == pytest.approx(50.0, rel=0.03)
     assert pits[0].area_m2 == pytest.approx(_union_area(NESTED), rel=0.05)

@@ -1,5 +1,5 @@
 """YAML nested thousands of levels deep is an Error naming the file, not a RecursionError
-traceback (issue 12, hostile input)."""
+traceback (hostile input)."""
 
 import pytest
 

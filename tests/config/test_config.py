@@ -11,7 +11,7 @@ from d3cli.cli import main
 from d3cli.config import Config, load_config, read_yaml
 from d3cli.errors import ConfigError
 
-DEFAULT_YAML = Path(__file__).resolve().parents[1] / "configs" / "default.yaml"
+DEFAULT_YAML = Path(__file__).resolve().parents[2] / "configs" / "default.yaml"
 
 
 def write(tmp_path, text, name="cfg.yaml"):

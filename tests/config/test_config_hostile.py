@@ -1,5 +1,5 @@
 """Hostile and odd YAML: alias bombs, non-scalar keys, FIFOs and devices, YAML 1.2
-numbers, huge integers (issue 12, items 11, 12 and 14).  Each case ends in one short
+numbers, huge integers.  Each case ends in one short
 ``Error:`` line, never a traceback, a hang or a memory blow-up."""
 
 from __future__ import annotations

@@ -1,0 +1,87 @@
+"""Configuration: YAML -> frozen dataclasses, with every default and every check here.
+
+A configuration is built in three layers, later ones winning:
+
+1. the defaults written in the dataclasses (``sections``),
+2. a YAML file (``-c FILE``; ``configs/default.yaml`` documents every key),
+3. ``--set section.key=value`` overrides (values parsed as YAML scalars).
+
+Unknown sections or keys, wrong types and out-of-range values raise
+:class:`~d3cli.errors.ConfigError` naming the file, the dotted key, what was expected
+and the valid keys.
+
+- ``sections``: one frozen dataclass per section, :class:`Config`, the method and backend names;
+- ``checks``: types and ranges of every key, :func:`quote`, the error messages;
+- ``yamlfile``: bounded, strict YAML reading (YAML 1.2 numbers), ``--set`` parsing;
+- ``load``: :func:`load_config` and :func:`config_from_dict`.
+
+May import: :mod:`d3cli.errors` only (and PyYAML); every other room may import this one.
+``from d3cli.config import NAME`` works for every public name below.
+"""
+
+from ..errors import ConfigError
+from .checks import MAX_CONFIG_INT, QUOTE_CHARS, quote
+from .load import config_from_dict, load_config
+from .sections import (
+    BACKENDS,
+    METHODS,
+    AggregationConfig,
+    CameraConfig,
+    Config,
+    CostConfig,
+    DiffusionConfig,
+    FeaturesConfig,
+    InheritanceConfig,
+    PeersConfig,
+    PTConfig,
+    PyramidConfig,
+    RefineConfig,
+    RoadConfig,
+    RunConfig,
+    SeedConfig,
+    SGBMConfig,
+)
+from .yamlfile import (
+    MAX_YAML_BYTES,
+    MAX_YAML_DEPTH,
+    MAX_YAML_NODES,
+    parse_override,
+    parse_yaml,
+    read_bounded,
+    read_yaml,
+    read_yaml_lines,
+)
+
+__all__ = [
+    "BACKENDS",
+    "METHODS",
+    "MAX_CONFIG_INT",
+    "MAX_YAML_BYTES",
+    "MAX_YAML_DEPTH",
+    "MAX_YAML_NODES",
+    "QUOTE_CHARS",
+    "AggregationConfig",
+    "CameraConfig",
+    "Config",
+    "ConfigError",
+    "CostConfig",
+    "DiffusionConfig",
+    "FeaturesConfig",
+    "InheritanceConfig",
+    "PeersConfig",
+    "PTConfig",
+    "PyramidConfig",
+    "RefineConfig",
+    "RoadConfig",
+    "RunConfig",
+    "SeedConfig",
+    "SGBMConfig",
+    "config_from_dict",
+    "load_config",
+    "parse_override",
+    "parse_yaml",
+    "quote",
+    "read_bounded",
+    "read_yaml",
+    "read_yaml_lines",
+]

@@ -1,0 +1,144 @@
+"""Summaries of pair rows: counts, per-family and overall means, failures and warnings.
+
+Rows are described in :mod:`d3cli.evaluation.report`.  Means are plain means of the
+per-pair values over the ``ok`` pairs that have the value; failed pairs are listed with
+their message, never averaged in silently.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+
+#: Metrics computed against ground truth; a pair "has gt" when its EPE is a number.
+DISPARITY_COLUMNS = ["epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density"]
+
+#: Metrics of the warped right image (no ground truth needed).
+PHOTOMETRIC_COLUMNS = ["mse", "psnr", "ssim", "coverage"]
+
+#: Metric keys in display order (disparity errors, then photometric scores).
+METRIC_COLUMNS = [*DISPARITY_COLUMNS, *PHOTOMETRIC_COLUMNS]
+
+#: KITTI D1 and Middlebury figures (:func:`d3cli.evaluation.metrics.benchmark_metrics`),
+#: each on all ground-truth pixels (``_all``) and on the non-occluded ones (``_noc``).
+BENCHMARK_COLUMNS = [
+    f"{fig}_{mask}"
+    for fig in ("d1", "bad_0.5", "bad_1", "bad_2", "bad_4", "avgerr", "rms", "a50", "a90", "a95", "a99")
+    for mask in ("all", "noc")
+] + ["d1_bg", "d1_fg"]
+
+#: Columns naming the mask files behind the ``_all`` and ``_noc`` figures.
+MASK_COLUMNS = ["mask_all", "mask_noc"]
+
+#: Columns of ``metrics.csv``, in order; keys of a row outside this list follow them.
+CSV_COLUMNS = ["pair", "family", "status", *METRIC_COLUMNS, "n_px", *BENCHMARK_COLUMNS,
+               *MASK_COLUMNS, "n_px_all", "n_px_noc", "time_s", "error"]
+
+#: Pair outcomes.
+STATUSES = ("ok", "failed", "skipped")
+
+#: Keys averaged by :func:`summarize`.
+MEAN_KEYS = [*METRIC_COLUMNS, *BENCHMARK_COLUMNS, "time_s"]
+
+#: Family label of rows whose ``family`` is empty.
+NO_FAMILY = "other"
+
+
+def summarize(rows: Iterable[Mapping]) -> dict:
+    """Counts, overall and per-family means, and the list of failures.
+
+    Parameters
+    ----------
+    rows : iterable of dict
+        Pair rows (see the module docstring).
+
+    Returns
+    -------
+    dict
+        ``counts``: ``{"ok", "failed", "skipped", "total"}``;
+        ``overall`` and ``families[<family>]`` (families sorted by name; an empty family
+        is :data:`NO_FAMILY`): ``{"pairs", "ok", "failed", "skipped", "with_gt",
+        "means"}`` where ``with_gt`` counts the ok pairs with a numeric EPE and
+        ``means`` maps every key of :data:`MEAN_KEYS` to the mean over the ok pairs
+        that have a numeric value (``None`` when none has);
+        ``failures``: ``[{"pair", "family", "error"}]``;
+        ``skipped``: ``[{"pair", "family", "reason"}]``;
+        ``warnings``: ``[{"pair", "family", "warning"}]``, one per entry of a row's
+        ``warnings`` list (e.g. "the pair may be unrectified or swapped").
+
+    Raises
+    ------
+    ValueError
+        When a row's ``status`` is not one of :data:`STATUSES`.
+    """
+    rows = [checked_row(row) for row in rows]
+    families = sorted({family_of(row) for row in rows})
+    return {
+        "counts": {
+            **{status: sum(row["status"] == status for row in rows) for status in STATUSES},
+            "total": len(rows),
+        },
+        "overall": summarize_group(rows),
+        "families": {
+            family: summarize_group([row for row in rows if family_of(row) == family])
+            for family in families
+        },
+        "failures": [
+            {"pair": row["pair"], "family": family_of(row), "error": row.get("error") or ""}
+            for row in rows
+            if row["status"] == "failed"
+        ],
+        "skipped": [
+            {"pair": row["pair"], "family": family_of(row), "reason": row.get("error") or ""}
+            for row in rows
+            if row["status"] == "skipped"
+        ],
+        "warnings": [
+            {"pair": row["pair"], "family": family_of(row), "warning": str(text)}
+            for row in rows
+            for text in (row.get("warnings") or [])
+        ],
+    }
+
+
+def checked_row(row: Mapping) -> dict:
+    """A copy of ``row``; ValueError when its ``status`` is not one of :data:`STATUSES`."""
+    status = row.get("status", "")
+    if status not in STATUSES:
+        raise ValueError(
+            f"pair {row.get('pair')!r}: status is {status!r}; expected one of {', '.join(STATUSES)}"
+        )
+    return dict(row)
+
+
+def family_of(row: Mapping) -> str:
+    """The row's family; :data:`NO_FAMILY` when it has none."""
+    return row.get("family") or NO_FAMILY
+
+
+def summarize_group(rows: list[dict]) -> dict:
+    """Counts and means of one group of rows, as in :func:`summarize`'s ``overall``."""
+    ok = [row for row in rows if row["status"] == "ok"]
+    return {
+        "pairs": len(rows),
+        "ok": len(ok),
+        "failed": sum(row["status"] == "failed" for row in rows),
+        "skipped": sum(row["status"] == "skipped" for row in rows),
+        "with_gt": sum(as_number(row.get("epe")) is not None for row in ok),
+        "means": {key: _mean(as_number(row.get(key)) for row in ok) for key in MEAN_KEYS},
+    }
+
+
+def as_number(value) -> float | None:
+    """A row value as float; ``None`` for "not measured" (None, empty, NaN)."""
+    if value is None or value == "":
+        return None
+    number = float(value)
+    return None if math.isnan(number) else number
+
+
+def _mean(values: Iterable[float | None]) -> float | None:
+    present = [v for v in values if v is not None]
+    # math.fsum: exact sum, so a mean does not depend on the order of the pairs.
+    return math.fsum(present) / len(present) if present else None
+

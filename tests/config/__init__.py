@@ -1,0 +1,1 @@
+"""Tests of :mod:`d3cli.config`: sections and defaults, YAML reading, checks and their messages."""
