@@ -1,0 +1,67 @@
+"""CPU drivers of the perspective transformation: the warp of the right image and
+the restore of full-range disparities.  The contract: :mod:`d3cli.kernels.backend`."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
+from ..cpu_common import ops
+
+
+# ----------------------------------------------------------------------------- perspective transformation
+_pt_shift = ops.pt_shift
+
+
+_bilinear_at = ops.bilinear_at
+
+
+_pt_restore_at = ops.pt_restore_at
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def pt_warp(right, a0, b1, b2, delta):
+    """Right image warped by the road model (DESIGN step 6): ``R'(x, v) = R(x - s(x, v), v)``.
+
+    Parameters
+    ----------
+    right : ndarray, float32, (H, W)
+        Full-resolution grey right image.
+    a0, b1, b2, delta : float
+        Road model ``d = a0 + b1 v + b2 u`` and margin, full-resolution pixels.
+
+    Returns
+    -------
+    ndarray, float32, (H, W)
+        Bilinear samples; columns beyond the image replicate the border.
+    """
+    h, w = right.shape
+    out = np.empty((h, w), np.float32)
+    for v in prange(h):
+        for x in range(w):
+            out[v, x] = _bilinear_at(right, v, x - _pt_shift(a0, b1, b2, delta, v, x))
+    return out
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def pt_restore(disp, a0, b1, b2, delta):
+    """Full-range disparity from the disparity against the warped right image.
+
+    ``d = d' (1 - b2) + s(u, v)`` (exact inverse of :func:`pt_warp`); inf stays inf.
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W)
+        Disparity ``d'`` of the left image against ``pt_warp(right, ...)``.
+
+    Returns
+    -------
+    ndarray, float32, (H, W)
+    """
+    h, w = disp.shape
+    out = np.empty((h, w), np.float32)
+    for v in prange(h):
+        for u in range(w):
+            out[v, u] = _pt_restore_at(disp[v, u], a0, b1, b2, delta, v, u)
+    return out
