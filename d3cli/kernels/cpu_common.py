@@ -18,9 +18,8 @@ from .volume import Volume, dense_index
 
 # error_model="numpy" (here and on every driver): a float division by zero gives inf/nan
 # instead of raising, so numba emits no zero test per division and a loop with a
-# division can vectorise (the NCC formula: 0.161 -> 0.143 s CPU at level 1 of the 720p
-# road pair).  Every division the kernels do has a non-zero divisor (a zero one would
-# have raised before), so the results are the same (issue 10; checked with the md5 that
+# division can vectorise.  Every division the kernels do has a non-zero divisor (a zero
+# one would have raised before), so the results are the same (checked with the md5 that
 # scripts/bench_speed.py prints per case, before and after).
 ops = build_ops(njit(cache=True, error_model="numpy"))
 
@@ -49,8 +48,7 @@ def _pack(flat, index, n_disp, dense_shape):
 def _on_grid(img, scale, least):
     """Whether every value of ``img`` lies in [least, 255] and is a multiple of 1 / scale.
 
-    Row by row, branch-free within a row (vectorised; issue 10: 0.95 -> 0.25 ms for the
-    720p road image), stopping after the first row that fails.
+    Row by row, branch-free within a row (vectorised), stopping after the first row that fails.
     """
     for v in range(img.shape[0]):
         row = img[v]
@@ -68,7 +66,7 @@ def _row_layout(index):
     """``(row_start, max_row)`` of a volume for the filter passes: the first cell of
     every row (int64 (H + 1,), cells packed row after row) and the most cells of a row
     (at least 1).  One parallel pass over the index instead of NumPy passes in the
-    calling thread (issue 10)."""
+    calling thread."""
     h, w, _ = index.shape
     row_start = np.zeros(h + 1, np.int64)
     for v in prange(h):

@@ -13,14 +13,14 @@ Rules for everything in here: arguments are arrays, indices and scalars; results
 scalars; no allocation, no exceptions, no Python objects.  Scratch memory and loops over
 the image belong to the drivers.
 
-Conventions (DESIGN.md section 1)
+Conventions (docs/design.md, 'Cost volumes')
 ---------------------------------
 * A cost volume is a pair ``(cost, index)``: ``cost`` a flat float32 array, ``index``
   an int32 (H, W, 3) array ``[off, lo, hi]`` per pixel; the pixel (u, v) holds the
   disparities ``lo <= d < hi`` (its *band*) at ``cost[off + d]``.  The full-range volume
   is the band ``[0, D)`` everywhere with ``off = (v W + u) D``: exactly the (H, W, D)
   array, disparity innermost (:mod:`d3cli.kernels.volume`).  Fine pyramid levels store
-  only a band around what the coarser level decided (issue 10; :mod:`d3cli.method.band`).
+  only a band around what the coarser level decided (:mod:`d3cli.method.band`).
   Cost is ``(1 - NCC) / 2`` in [0, 1], lower is better.  Cells whose right pixel
   ``u - d`` is outside the image, or whose window is flat, hold 1.0 and never win.
 * Disparity maps are int32 with ``-1`` for undecided pixels (never 0, a legal disparity).

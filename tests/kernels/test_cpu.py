@@ -42,7 +42,7 @@ def test_ncc_cost_volume_matches_reference(shape, window):
 def test_ncc_cost_volume_running_row_sums_match_reference_across_row_blocks(window):
     # 75 rows: the kernel's running row sums restart every 32 rows and add/subtract the
     # rows entering/leaving the window in between; every row must still equal the
-    # float64 per-window reference (issue 10 item 2), windows taller than a block included.
+    # float64 per-window reference, windows taller than a block included.
     rng = np.random.default_rng(window)
     left, right = random_images(rng, (75, 40))
     got = cpu.ncc_cost_volume(left, right, 12, window, 1e-2)
@@ -404,7 +404,7 @@ def test_seed_whose_right_pixel_is_outside_is_rejected():
 
 def _in_order_candidate(cells, lo, u, pkrn_min, epsilon, exclusion):
     """Test (a) of the seeds as the in-order scan with a strict ``<`` (the kernel before
-    issue 10's lanes): the first disparity of least cost, then the second cost."""
+    interleaved lanes): the first disparity of least cost, then the second cost."""
     d1, c1 = lo, cells[0]
     for k in range(1, len(cells)):
         if cells[k] < c1:
@@ -424,7 +424,7 @@ def _in_order_candidate(cells, lo, u, pkrn_min, epsilon, exclusion):
 @pytest.mark.parametrize("levels", [None, 3])
 def test_seed_candidate_by_lanes_equals_the_in_order_scan(levels):
     """pixel.seed_candidate takes the least and second costs by value in four interleaved
-    lanes and d1 as the first disparity holding the least (issue 10): the same verdicts as
+    lanes and d1 as the first disparity holding the least: the same verdicts as
     the in-order scan on bands of 1 to 41 cells (every lane remainder), ties included."""
     rng = np.random.default_rng(21 if levels else 22)
     h, w, n_disp = 6, 60, 48
@@ -452,7 +452,7 @@ def test_seed_candidate_by_lanes_equals_the_in_order_scan(levels):
     ([0.5, 0.2, 0.9, 0.9], 2.6, -1),
 ])
 def test_seed_pkrn_second_cost_known_answers(curve, pkrn_min, want):
-    # Naive PKRN (exclusion 0) keeps c2 in the same pass as the minimum (issue 10): the
+    # Naive PKRN (exclusion 0) keeps c2 in the same pass as the minimum: the
     # second cost is the least of the other cells, wherever it lies.
     cost = np.ones((1, 8, 4), np.float32)
     cost[0, 5] = curve
@@ -496,7 +496,7 @@ def test_diffusion_matches_whole_image_jacobi_reference(settings):
 
 @pytest.mark.parametrize("settings", DIFFUSION_SETTINGS, ids=lambda s: "-".join(f"{k}{v}" for k, v in s.items()))
 def test_diffusion_finding_the_least_costs_itself_matches_reference(settings):
-    # min_cost None (the pipeline's call, issue 10): pixel.diffuse_at finds the least
+    # min_cost None (the pipeline's call): pixel.diffuse_at finds the least
     # cost of a pixel whose candidate reaches the gap test; the maps of the reference
     rng = np.random.default_rng(27)
     for h, w in SHAPES:
@@ -619,7 +619,7 @@ def one_jacobi_sweep(cost, index, disp, max_gap, tau, kappa_d, adversarial):
 @pytest.mark.parametrize("settings", DIFFUSION_SETTINGS, ids=lambda s: "-".join(f"{k}{v}" for k, v in s.items()))
 def test_first_sweep_on_plain_neighbourhoods_matches_diffuse_at(settings):
     """The first sweep settles pixels without a decided neighbour and decided pixels in
-    a uniform 3x3 block without ``pixel.diffuse_at`` (issue 10): on maps of uniform and
+    a uniform 3x3 block without ``pixel.diffuse_at``: on maps of uniform and
     undecided blocks, over bands (the disparity sometimes outside the band), costs with
     ties and NaN cells, it gives what ``diffuse_at`` gives every pixel."""
     from d3cli.kernels.volume import Volume, banded_index

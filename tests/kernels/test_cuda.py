@@ -44,8 +44,10 @@ def gpu():
 @pytest.fixture(autouse=True)
 def small_blocks(gpu, monkeypatch):
     """Blocks of 4 x 4 (2D) and 8 (1D) threads: many partly filled blocks on odd sizes."""
-    monkeypatch.setattr(gpu, "BLOCK_2D", (4, 4))
-    monkeypatch.setattr(gpu, "BLOCK_1D", 8)
+    from d3cli.kernels import cuda_launch  # where the launches read them
+
+    monkeypatch.setattr(cuda_launch, "BLOCK_2D", (4, 4))
+    monkeypatch.setattr(cuda_launch, "BLOCK_1D", 8)
 
 
 def host(gpu, array):
@@ -93,7 +95,9 @@ def test_ncc_cost_volume_matches_cpu(gpu, monkeypatch, window, max_disparity, ba
     left[2:9, 1:6] = 117.0  # flat windows: cost 1
     right[6:, 15:] = 40.0
     if band_rows:  # a scratch of 3 rows: the volume is computed in 4 bands
-        monkeypatch.setattr(gpu, "NCC_SCRATCH_BYTES", band_rows * (W + 1) * (max_disparity + 1) * 8)
+        from d3cli.kernels.cost import cuda as cost_cuda  # where the driver reads it
+
+        monkeypatch.setattr(cost_cuda, "NCC_SCRATCH_BYTES", band_rows * (W + 1) * (max_disparity + 1) * 8)
     got = host(gpu, gpu.ncc_cost_volume(gpu.to_device(left), gpu.to_device(right), max_disparity, window, 0.5))
     want = cpu.ncc_cost_volume(left, right, max_disparity, window, 0.5)
     assert got.shape == want.shape and got.dtype == np.float32
@@ -424,7 +428,7 @@ def test_cosine_cost_volume_matches_cpu(gpu, max_disparity):
 # ----------------------------------------------------------------------------- band search
 @pytest.mark.parametrize("rbf", [True, False])
 def test_banded_level_matches_cpu(gpu, rbf):
-    """A level with ragged bands (issue 10 item 3): every stored cell after the cost and
+    """A level with ragged bands: every stored cell after the cost and
     the aggregation, and every decision on the visible bands, as on the CPU."""
     from d3cli import load_config
     from d3cli.method.band import band_indexes

@@ -85,7 +85,7 @@ def test_seeds_skip_the_pixels_already_decided(case):
 
 
 def test_right_view_wta_table_of_a_row_equals_the_scan_of_each_column(case):
-    """The seeds' row table (one pass over the cells, issue 10) against pixel.right_wta,
+    """The seeds' row table (one pass over the cells) against pixel.right_wta,
     which scans the disparities of one right pixel; ties and columns without a cell included."""
     _, vol, _ = case
     flat, index, n_disp = vol.cost, vol.index, vol.n_disp
@@ -172,7 +172,7 @@ def test_banded_invalidation_sets_only_out_of_view_cells(case):
 @pytest.mark.parametrize("t_max", [1, 2, 4])
 @pytest.mark.parametrize("n_tasks", [1, 2, 3, 7, 40])
 def test_blocked_rbf_passes_equal_one_pass_at_a_time(shape, t_max, n_tasks):
-    """All passes at once over strips (temporal blocking, issue 10) give the bits of
+    """All passes at once over strips (temporal blocking) give the bits of
     ``t_max`` single passes, on bands of every width and for any number of strips (the
     halo rows each strip recomputes included; 40 strips on 23 rows: one row each)."""
     rng = np.random.default_rng(t_max * 100 + n_tasks + shape[0])

@@ -54,12 +54,10 @@ def rbf_weights(img, sigma_space, sigma_color):
     # neighbour for the mirrored slot (8 - k): half the exp calls, the same values.
     # Row by row within a block of rows, the forward kernels of a row and of the row
     # above in a two-row ring (nothing zero-filled: the kernels towards neighbours
-    # outside the image are never read).  Issue 10: a row's sum, its quotients (through
-    # the reciprocal, checked exact) and its float32 staging in one vectorised pass
-    # instead of copies of the kernels, nine exact divisions per pixel and a staging
-    # pass per slot, and the table index from float32 differences: level 0, 2 threads,
-    # 720p road 7.7 -> 5.0 ms, KITTI 6.9 -> 5.6 ms, Middlebury-Q 5.6 -> 4.5 ms; the same
-    # bits.
+    # outside the image are never read).  A row's sum, its quotients (through the
+    # reciprocal, checked exact) and its float32 staging in one vectorised pass instead
+    # of copies of the kernels, nine exact divisions per pixel and a staging pass per
+    # slot, and the table index from float32 differences; the same bits.
     centre = _rbf_weight(0, 0, 0.0, 0.0, inv_ss2, inv_sc2)
     # Grey levels that are all multiples of 1/s in 0..255 (an 8-bit image: s = 1 at full
     # resolution, 4, 16, 64 at the next levels) have only 255 s + 1 differences
@@ -98,7 +96,7 @@ def rbf_weights(img, sigma_space, sigma_color):
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _rbf_passes(cost, index, covered, weights, row_start, n_tasks, max_row, t_max):
-    """``t_max`` 3x3 passes of eq. 2, in place, temporally blocked (issue 10 item 4).
+    """``t_max`` 3x3 passes of eq. 2, in place, temporally blocked.
 
     The rows are cut into ``n_tasks`` strips, one task each.  A task runs all passes
     over its strip as a wavefront: at step t it reads input row t + 1 and computes row
@@ -112,9 +110,7 @@ def _rbf_passes(cost, index, covered, weights, row_start, n_tasks, max_row, t_ma
     their originals are copied before any task starts.  Every row of every pass is
     computed by :func:`_rbf_row` from the same three rows as pass-by-pass filtering
     would, so the result is the same, bit for bit (``tests/kernels``: against the NumPy
-    reference and one pass at a time).  Measured on the level-1 volumes of
-    ``scripts/bench_speed.py``'s cases, 2 threads, A/B in one process: road full range
-    0.065 -> 0.054 s, road.yaml 0.061 -> 0.053 s, Middlebury-Q 0.033 -> 0.028 s.
+    reference and one pass at a time).
     """
     h = index.shape[0]
     t = max(1, t_max)

@@ -156,10 +156,7 @@ def _rbf_normalise_row(out, up, cur, centre, has_up, has_down, stage):
             _rbf_pixel(stage, up, cur, centre, has_up, has_down, u)
     # Streaming stores: the weights (36 bytes a pixel, 33 MB at 720p) are read back by
     # the filter only after the rest of the level's weights, so caching them only
-    # evicts the cost volume and costs a read of each line first (issue 10: 2 threads,
-    # A/B on the pipeline's inputs, level 0: 720p road pair 7.40 -> 6.25 ms CPU, KITTI
-    # 9.01 -> 8.33 ms; these weights and then rbf_filter on the level's NCC volume:
-    # 45.7 -> 44.5 ms and 61.7 -> 60.7 ms).
+    # evicts the cost volume and costs a read of each line first.
     outf = out.reshape(-1)
     for u in range(w):
         for k in range(9):
@@ -175,11 +172,10 @@ def _covered_bands(index):
     out = np.empty((h, w), np.uint8)
     # Most pixels have the band of all eight neighbours.  Whether a pixel has the band of
     # both row neighbours is found once per pixel and reused by the rows above and below
-    # (3.8 -> 1.5 ms at level 1 of the 720p road pair, 2 threads; the same map).  The
+    # (the same map).  The
     # band (lo, hi) as one int64 key, so that both tests are branch-free loops over
     # contiguous rows (vectorised); only the pixels that fail them (the border columns,
-    # and about 2 % at level 0) take the test of every neighbour (issue 10: 1.58 -> 0.92 ms
-    # at level 0 of the 720p road pair, 2 threads; the same map).
+    # and about 2 % at level 0) take the test of every neighbour (the same map).
     key = np.empty((h, w), np.int64)
     same_row = np.empty((h, w), np.bool_)
     for y in prange(h):

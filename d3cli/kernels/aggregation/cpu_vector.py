@@ -145,9 +145,7 @@ def _rbf_run(out, d0, ring, o0, o1, o2, o3, o4, o5, o6, o7, o8, weights, v, u0, 
     weighted by ``weights[v, u0 + p, k]``; ``room`` cells of ``out`` from ``d0`` (to the
     end of the row) may be written.  It takes the arrays and offsets, not slices of
     them: a slice passed to a function costs reference counting, and the covered pixels
-    outside the runs call it for one pixel each (KITTI's finest level, 1 thread, CPU
-    time of the passes: 39.6 ms before they did; 49.8 ms with slices, 35.5 ms with
-    offsets).
+    outside the runs call it for one pixel each (offsets measured faster than slices).
 
     A loop over the B cells of a pixel vectorises only where it is long, and the bands
     are 4-130 wide (PT bands: 4-16).  The cells are computed in blocks of one to six
@@ -158,13 +156,9 @@ def _rbf_run(out, d0, ring, o0, o1, o2, o3, o4, o5, o6, o7, o8, weights, v, u0, 
     afterwards and overwrite them (the sources' cells past the run are read, and
     dropped).  The pixels at the end of the row, whose block would leave it, and bands
     over 96 take the plain loop.  Same terms in the same order per cell, so the same
-    values.  Measured (issue 10; the passes, 1 thread, level 0 .. coarsest): road 63 ->
-    50, 27 -> 16, 6.8 -> 4.3 ms; KITTI 88 -> 78, 19 -> 17, 4.8 -> 3.2 ms (blocks of one
-    pixel, LLVM's vectoriser); on the finest level's volume, A/B in one process, CPU
-    time: road 30.1 -> 20.6 ms, KITTI 46.4 -> 39.6 ms (these vectors and groups).
-    Each (pixels, vectors) pair below is compiled on its own: a cold first call
-    compiles the passes in 14 s without them, 41 s with nine, 35 s with these eight
-    (bands of 9 and 10, rare, go one pixel a vector).
+    values.  Each (pixels, vectors) pair below is compiled on its own, which lengthens a
+    cold first compile; hence only these eight (bands of 9 and 10, rare, go one pixel a
+    vector).
     """
     dst = out[d0:d0 + room]
     q0 = ring[o0:o0 + room]
@@ -218,9 +212,8 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
     neighbours all have their band (``run_end``, :func:`_run_ends`: the end of each
     run), else for the pixel alone.  Elsewhere, where a
     neighbour's band lacks a disparity of the pixel's band, the pixel's own cell stands
-    in (:func:`_rbf_cells_borrowing`, vectors of 16 cells; KITTI's finest level, 1
-    thread, CPU time of the passes: 35.5 -> 30.5 ms against a scalar loop per slot and
-    part of the band, road 20.4 -> 18.0 ms): the bands are built (:mod:`d3cli.method.band`) so that
+    in (:func:`_rbf_cells_borrowing`, vectors of 16 cells, faster than a scalar loop per
+    slot and part of the band): the bands are built (:mod:`d3cli.method.band`) so that
     this never happens for a cell the later steps read, it only keeps the halo cells
     finite.
     """
@@ -294,7 +287,7 @@ def _run_ends(run_end, covered, index):
     """For the pixels of a row that start a run in :func:`_rbf_row` (interior,
     ``covered`` 2), the end of the run: the first pixel past it that is not interior,
     not ``covered`` 2 or has another band.  Found once per call, not once per pass and
-    halo row (the passes at road level 0: 49.9 -> 43.8 ms, 1 thread)."""
+    halo row."""
     w = covered.shape[0]
     for u in range(w - 2, 0, -1):
         if covered[u] == 2:

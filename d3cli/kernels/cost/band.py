@@ -11,7 +11,7 @@ from ..intrinsics import _store_fence, _store_nt
 from ..pixel import UINT
 
 
-# ----------------------------------------------------------------------------- band search (issue 10)
+# ----------------------------------------------------------------------------- band search
 @njit(parallel=True, cache=True, error_model="numpy")
 def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
     """Stored and visible indexes of a finer level's banded volume (host side, any backend).
@@ -30,7 +30,7 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
     ch, cw = coarse.shape
     nty = (h + tile - 1) // tile
     ntx = (w + tile - 1) // tile
-    # Per column, once (issue 10: no integer divisions per pixel): the coarse column, the
+    # Per column, once (no integer divisions per pixel): the coarse column, the
     # tile column and the tile columns within the halo.
     col_cu = np.empty(w, np.int64)
     col_tx = np.empty(w, np.int64)
@@ -83,8 +83,7 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
     # Runs of columns with the same tiles (own and within the halo) have the same bands
     # in a row: per row the stored band of each run and the row's cells first, then the
     # bands and offsets written once per pixel, instead of a second pass over the
-    # stored bands for the offsets (issue 10: 2 threads, A/B on the pipeline's inputs,
-    # finest level: 720p road pair 3.16 -> 2.50 ms CPU, KITTI 1.83 -> 1.49 ms).
+    # stored bands for the offsets.
     seg = np.empty(w + 1, np.int64)  # run k: columns seg[k] .. seg[k + 1] - 1
     n_seg = 0
     for u in range(w):
@@ -118,9 +117,7 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
     store = np.empty((h, w, 3), np.int32)
     visible = np.empty((h, w, 3), np.int32)
     # The visible bands with streaming stores (_store_nt): they are read only after the
-    # level's cost and aggregation, which evict them anyway (issue 10: finest level, 2
-    # threads, A/B on the pipeline's inputs: 720p road pair 2.22 -> 2.02 ms CPU, KITTI
-    # 1.21 -> 1.11 ms); the stored ones go to the NCC next, from the caches.
+    # level's cost and aggregation, which evict them anyway; the stored ones go to the NCC next, from the caches.
     for v in prange(h):  # the cells are packed pixel after pixel
         ty = v // tile
         base = row_cells[v]

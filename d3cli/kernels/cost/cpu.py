@@ -97,10 +97,8 @@ def _grid_bits(img):
 @njit(parallel=True, cache=True, error_model="numpy")
 def _integral_images(left, right):
     """The four integral images of the NCC (L, L^2, R, R^2), two at a time: each is a
-    serial scan, and four in a row were 4 ms of one thread at 1280x720.  Each is written
-    in place into its slice of one array (issue 10: a zeroed temporary per image and a
-    copy of it were 6.4 -> 3.9 ms of one thread at 1280x720, 2.7 -> 1.5 ms on KITTI),
-    an image's two in one scan (2.6 -> 1.7 ms CPU at 1280x720, 1.3 -> 0.7 ms on KITTI)."""
+    serial scan.  Each is written in place into its slice of one array (no zeroed
+    temporary per image and no copy of it), an image's two in one scan."""
     h, w = left.shape
     out = np.empty((4, h + 1, w + 1), np.float64)
     bits = np.empty(2, np.int64)
@@ -113,7 +111,7 @@ def _integral_images(left, right):
 
 # ----------------------------------------------------------------------------- matching cost (step 2)
 def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None):
-    """NCC cost volume ``(1 - NCC) / 2`` with box sums (DESIGN step 2).
+    """NCC cost volume ``(1 - NCC) / 2`` with box sums (docs/design.md, step 2).
 
     The window is clipped to the part where both the left window around (u, v) and the
     right window around (u - d, v) lie inside the image.  Cells with u - d < 0 or a flat
@@ -158,7 +156,7 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance, n_thr
     # The rows are cut into blocks, one prange task each; inside a block acc is a running
     # sum along the rows (add the row entering the window, subtract the one leaving it),
     # and along a row the window sum over columns slides too, so the work per cell does
-    # not grow with the window (issue 10 item 2).  acc holds, per column, only the
+    # not grow with the window .  acc holds, per column, only the
     # disparities some pixel within the window radius needs (the hull of their bands).
     # float64 keeps the add/subtract drift far below the 1e-5 cost tolerance (values
     # <= 255^2 * window^2; float32 sums drift by more than that: measured, see tests).
@@ -169,9 +167,7 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance, n_thr
         # the window sums, their slides) holds fewer than (2r + 2)^2 of them, so below
         # 2^53 units of 2^-(kl + kr) all are exact in float64: they do not depend on
         # where the blocks start, and fewer, taller blocks fill fewer window rows anew
-        # (issue 10: the 720p road pair, window 25, left 8-bit and right PT-warped, 2
-        # threads, A/B on the pipeline's inputs: level 0 32.6 -> 31.0 ms CPU, level 1
-        # 7.4 -> 6.6 ms; KITTI's grey levels from colour fail the test in the first row).
+        # (KITTI's grey levels from colour fail the test in the first row).
         block = max(block, h // (NCC_EXACT_TASKS * n_threads))  # (numba's get_num_threads here: no caching)
     n_blocks = (h + block - 1) // block
     for b in prange(n_blocks):
@@ -210,8 +206,7 @@ def _block_hull(index, vb0, vb1, n_disp, r):
 
     Branch-free over the bands, then one pass per column offset over contiguous columns
     (vectorised) instead of a 2r + 1 loop per column; min and max are exact, so the
-    hull is the same.  Issue 10: all blocks of level 0, one thread, A/B on the
-    pipeline's inputs: 720p road pair 2.70 -> 2.29 ms, KITTI 0.41 -> 0.33 ms.
+    hull is the same.
     """
     w = index.shape[1]
     col_lo = np.full(w, n_disp, np.int64)
@@ -252,9 +247,7 @@ def _add_row_products(acc, acc_lo, acc_hi, left, right, y_in, y_out, r_in, r_out
     rounded after each of the two terms as two passes would (``(a + x) + (-y)``, no
     fused multiply-add), so the sums are the same bits.  The right rows are read
     reversed (``R(y, u - d)`` with d rising), so they are first copied reversed into
-    ``r_in``, ``r_out`` and both operands run forward (vectorises).  Issue 10: with the
-    in-place integral images, NCC CPU time (2 threads, captured inputs) at level 0 of
-    KITTI 74 -> 59 ms, Middlebury-Q 51 -> 41 ms, the 720p road pair 64 -> 52 ms.
+    ``r_in``, ``r_out`` and both operands run forward (vectorises).
     """
     w = acc.shape[0]
     if y_in >= 0:
@@ -293,8 +286,8 @@ def _window_stats(ii, ii2, v0, v1, r, inv, mean, var):
     The box sums are :func:`_box_sum`'s expression ``ii[r1+1, c1+1] - ii[r0, c1+1] -
     ii[r1+1, c0] + ii[r0, c0]`` and the moments :func:`pixel.ncc_cost`'s (``s inv``,
     ``ss inv - m m``), so the values are bit for bit those the formula computed per
-    cell; written over slices (non-negative subscripts) the loop vectorises (issue 10:
-    the per-column box sums took a third of the NCC time at level 1 of Middlebury-Q).
+    cell; written over slices (non-negative subscripts) the loop vectorises (the
+    per-column box sums had taken a third of the NCC time).
     """
     m = ii.shape[1] - 1 - 2 * r  # columns with an unclipped window
     if m <= 0:
@@ -337,8 +330,7 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
     cell's numerator ``slr / n - m_l m_r`` and ``v_l v_r`` (-1: a flat window) in the
     row buffers ``num``, ``den``; the second, one loop over the row's contiguous cells,
     takes the square root and the division (a band of 5-7 cells is shorter than a
-    vector; a row of cells is not: NCC at level 1 of the 720p road pair 0.071 -> 0.062 s
-    CPU).  Operation for operation this is :func:`pixel.ncc_cost`, so the values are the
+    vector; a row of cells is not).  Operation for operation this is :func:`pixel.ncc_cost`, so the values are the
     same bits.  Cells of clipped windows (the image borders) get their ``num``, ``den``
     from their own box sums (:func:`_clipped_terms`) before that second pass.
     """
@@ -366,17 +358,15 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
         if d_fast > lo:
             # flat subscripts cast to unsigned (known >= 0): no negative-index wraparound,
             # so the loops vectorise, and no slice objects per pixel, whose set-up cost
-            # more than the 5-40 cells of a band (issue 10: NCC at level 0 of the road
-            # pair 52.0 -> 47.7 ms of one thread, KITTI 59.0 -> 57.3 ms)
+            # more than the 5-40 cells of a band
             n = d_fast - lo
             ea = (u + r) * acc_w + lo  # acc[u + r, lo] in accf
             la = (u - r - 1) * acc_w + lo
             o = off + lo - start
             if run_lo == lo and run_hi == d_fast and u > r and n <= NCC_NARROW:
                 # a narrow band: slide and the cell's terms in one loop, the same operations
-                # (issue 10: two loops over 5-8 cells barely vectorise, and one costs less;
-                # NCC at level 0 of the road pair 51.9 -> 46.9 ms of one thread; on wide
-                # bands one loop is slower, KITTI's 37 cells 56.7 -> 60.0 ms)
+                # (two loops over 5-8 cells barely vectorise, and one costs less; on wide
+                # bands one loop is slower)
                 ml_u = ml[u]
                 vl_u = vl[u]
                 for i in range(n):  # slide by one column
@@ -427,9 +417,8 @@ def _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0,
     :func:`_ncc_row`'s pass over the row: den -1 where u - d < 0 or a window is flat.
 
     Operation for operation :func:`pixel.ncc_window_cost` up to the square root and the
-    division, which the row's pass does for them too (issue 10: done per cell, serially,
-    after that pass, these cells took 7.3 ms of one thread at level 0 of the road pair,
-    window 25; now 4.8 ms).  Each window sum of L*R is summed up from 0 over its columns
+    division, which the row's pass does for them too (done per cell, serially, after that
+    pass, these cells took longer).  Each window sum of L*R is summed up from 0 over its columns
     as before: summing column by column over a pixel's cells (one vector loop per
     column) measured slower on these 5-20 cell bands.
     """
@@ -437,9 +426,7 @@ def _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0,
     # Where the window starts at column d (c0 = d: clipped by the right image's edge),
     # the sum over columns d .. c1 is the one over d .. c1' < c1 of a pixel before it
     # (c1 grows with u) continued: the same additions in the same order, so it is kept
-    # per disparity and continued instead of summed afresh (issue 10: with _block_hull,
-    # NCC at level 0 of the 720p road pair, window 25, 2 threads, A/B on the pipeline's
-    # inputs: 33.4 -> 32.0 ms CPU; KITTI's window 5 gains within noise).
+    # per disparity and continued instead of summed afresh.
     run_c1 = np.full(n_disp, -1, np.int64)  # the last column summed into run_slr[d], -1: none
     run_slr = np.empty(n_disp, np.float64)
     for u in range(w):
@@ -476,7 +463,7 @@ def _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0,
 
 
 def cosine_cost_volume(fl, fr, nl, nr, max_disparity, index=None):
-    """Deep-feature cost volume ``(1 - cos) / 2`` of one level (DESIGN step 2, features).
+    """Deep-feature cost volume ``(1 - cos) / 2`` of one level (docs/design.md, step 2, features).
 
     Parameters
     ----------
@@ -520,7 +507,7 @@ def invalidate_out_of_view(cost):
     """Set every cell whose right pixel u - d is outside the image back to 1, in place.
 
     Aggregation averages such cells with valid neighbours and pulls them below 1; reset
-    after it, they keep their meaning: no match, never a winner (DESIGN step 2).
+    after it, they keep their meaning: no match, never a winner (docs/design.md, step 2).
     Returns ``cost`` (a Volume or an (H, W, D) array).
     """
     flat, index, n_disp, _ = _unpack(cost)

@@ -126,7 +126,7 @@ def _ncc_band(ii_l, ii_ll, ii_r, ii_rr, prefix, index, r, v_start, n_rows, min_v
 
 
 def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None):
-    """NCC cost volume ``(1 - NCC) / 2`` with box sums (DESIGN step 2), on the device.
+    """NCC cost volume ``(1 - NCC) / 2`` with box sums (docs/design.md, step 2), on the device.
 
     Integral images give the window sums of L, L^2, R and R^2; the cross term L*R comes
     from per-row prefix sums of window-column sums.  Rows are processed in bands so that

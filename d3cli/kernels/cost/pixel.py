@@ -27,7 +27,7 @@ def build(jit, shared):
 
     @jit
     def ncc_cost(n, sl, sll, sr, srr, slr, min_variance):
-        """Matching cost ``(1 - NCC) / 2`` from window sums (DESIGN step 2).
+        """Matching cost ``(1 - NCC) / 2`` from window sums (docs/design.md, step 2).
 
         ``n`` pixels; ``sl, sll`` sums of L and L^2; ``sr, srr`` of R and R^2; ``slr`` of
         L*R (float64).  A window whose grey-level variance is <= ``min_variance`` is flat:

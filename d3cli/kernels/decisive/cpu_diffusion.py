@@ -31,10 +31,9 @@ def _evaluate_pixels(cost, index, flat_index, disp, min_cost, max_gap, active, i
     """``new_values[i]`` for the frontier pixels ``active[i0:i1]``; ``flat_index`` is
     ``index`` flat.
 
-    Block by block, the next block's cells are prefetched first (issue 10: the frontier
-    is sparse, its cells are not in the cache and the hardware prefetcher cannot guess
-    them; KITTI finest level, 41 sweeps, 2 threads: 69 -> 63 ms).  A prefetch per pixel inside the
-    loop cost 30 ns a pixel: the loop compiled worse (road, coarsest level 2.7 -> 4.1 ms).
+    Block by block, the next block's cells are prefetched first (the frontier is sparse,
+    its cells are not in the cache and the hardware prefetcher cannot guess them).  A
+    prefetch per pixel inside the loop made the loop compile worse.
     """
     w = UINT(disp.shape[1])
     for b in range(i0, i1, PREFETCH_BLOCK):
@@ -132,17 +131,15 @@ def _evaluate_all(cost, index, disp0, min_cost, max_gap, disp, tau, kappa_d, adv
     :func:`pixel.diffuse_at`: a pixel without a decided neighbour has no candidate, and a
     decided pixel whose decided neighbours all hold its disparity d keeps it when d wins
     its one candidate set (:func:`pixel.holds_own_disparity`); :func:`_plain_neighbourhoods`
-    finds them a row at a time.  Issue 10: most pixels of a first sweep are plain (road
-    pair, finest level: 97 %, KITTI 65 %), and the candidate loop's branches are what a
-    pixel costs; first sweep, 2 threads, A/B on the pipeline's inputs: road finest level
-    7.8 -> 2.6 ms, KITTI finest level 10.4 -> about 8.5 ms (0.81x on a loaded machine);
-    the whole diffusion of those levels 0.45x and 0.91x.
+    finds them a row at a time.  Most pixels of a first sweep are plain (road pair,
+    finest level: 97 %, KITTI 65 %), and the candidate loop's branches are what a pixel
+    costs.
     """
     h, w = disp0.shape
     for v in prange(h):
         n = 0
         # tau = kappa_d = 1 (the defaults) as constants: the compiler unrolls the
-        # neighbour loops (issue 10: 26 -> 22 ms CPU, road pair level 1)
+        # neighbour loops
         if tau == 1 and kappa_d == 1:
             plain = np.zeros(w, np.uint8)  # border pixels stay MIXED
             if 0 < v < h - 1:
@@ -184,9 +181,8 @@ def _build_frontier(changed, n_changed, listed, row_listed, active, h, w, kappa_
 
     ``listed`` is a bitmap of the map, ``(w + 63) // 64`` uint64 words per row, and
     ``row_listed`` a flag per row; both are all zero on entry and on return.  The pixels
-    are marked, then collected row by row (issue 10: in row-major order the evaluation
-    reads the cost volume nearly sequentially; KITTI level 1, 41 sweeps: 57 -> 43 ms
-    CPU against the order of the changed pixels' neighbourhoods).
+    are marked, then collected row by row (in row-major order the evaluation reads the
+    cost volume nearly sequentially).
     """
     words = (w + 63) // 64
     one = np.uint64(1)
@@ -233,8 +229,7 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     min_cost : ndarray, float32, (H, W), or None
         Least cost of each pixel over its band (:func:`min_cost`); None: found by
         ``pixel.diffuse_at`` for the few pixels whose candidate gets as far as the gap
-        test (issue 10: KITTI finest level, 13 % of the first sweep's pixels; no
-        :func:`min_cost` pass over the whole volume).
+        test (no :func:`min_cost` pass over the whole volume).
     max_gap : float
         Accepted states cost at most min_cost + max_gap; < 0: off.
     tau, kappa_d : int
@@ -270,8 +265,8 @@ def _diffuse(cost, index, disp0, min_cost, max_gap, tau, kappa_d, adversarial, m
     # The first frontier is nearly the whole image: evaluate every pixel in parallel,
     # reading disp0 and writing the new map, instead of listing the pixels serially.  The
     # same result: a pixel without a decided neighbour has no candidate and keeps its
-    # state.  Issue 10: no copy of disp0, no full-size zeroed stamp: every full-size
-    # array written here costs its page faults (road pair, level 1: 4 ms of 31).
+    # state.  No copy of disp0, no full-size zeroed stamp: every full-size array written
+    # here costs its page faults.
     disp = np.empty((h, w), np.int32)
     row_changes = np.zeros(h + 1, np.int64)
     _evaluate_all(cost, index, disp0, min_cost, max_gap, disp, tau, kappa_d, adversarial, row_changes)

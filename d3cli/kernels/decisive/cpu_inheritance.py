@@ -46,7 +46,7 @@ def _inherit(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates):
     out = np.empty((h, w), np.int32)
     for pv in prange((h + 1) // 2):
         # The test variant as constants in each branch: the compiler specialises the
-        # inlined tests (road pair, level 1: 63 -> 49 ms CPU against one generic call).
+        # inlined tests (measured faster than one generic call).
         if prc and candidates == 0:
             _inherit_row_prc(cost, index, coarse, pv, out, 0)
         elif prc:
@@ -119,9 +119,7 @@ def _inherit_row_prc(cost, index, coarse, pv, out, candidates):
     patch summarises the right windows x0 + 1 and x0 + 2 of both rows and takes x0 - 1
     and x0 from the patch before it, whose x0 + 1 and x0 + 2 they are when its coarse
     disparity is the same (84-99 % of the decided patches); otherwise it reads all four.
-    The pixel then picks its right pixel's decision by a select.  Issue 10, A/B on the
-    pipeline's inputs, 2 threads, finest level: road 18.8 -> 12.2 ms, Middlebury
-    7.0 -> 4.7 ms, KITTI 8.1 -> 5.6 ms (the levels above: about -33 % too).
+    The pixel then picks its right pixel's decision by a select.
     """
     h = out.shape[0]
     w = out.shape[1]

@@ -20,7 +20,7 @@ _right_wta = ops.right_wta
 
 # ----------------------------------------------------------------------------- seeds (step 4)
 def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None):
-    """Sparse seed map (DESIGN step 4); int32 (H, W), -1 undecided.
+    """Sparse seed map (docs/design.md, step 4); int32 (H, W), -1 undecided.
 
     ``skip`` (int32 (H, W), optional): pixels decided there (>= 0) are not examined and
     stay -1 (the pipeline merges fresh seeds only where inheritance left a hole).
@@ -49,9 +49,7 @@ def _seeds(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip
 
     Test (a) runs over a list of the row's examined pixels and prefetches the band of the
     one :data:`SEED_PREFETCH` further: where inheritance decided many pixels, the bands
-    left lie scattered and each waited its own cache misses.  Issue 10: finest levels,
-    1 thread (CPU time), A/B on the pipeline's inputs: KITTI 12.3 -> 7.7 ms, road
-    3.2 -> 2.7 ms, road-full 15.6 -> 9.7 ms.
+    left lie scattered and each waited its own cache misses.
     """
     h, w, _ = index.shape
     out = np.empty((h, w), np.int32)
@@ -100,8 +98,8 @@ def _right_wta_row(cost, index, v):
     One pass over the row's cells: cell (u, d) is a candidate of the right pixel x = u - d.
     Pixels are taken in increasing u, so each x sees its candidates in increasing d, and
     a strict ``<`` keeps the smallest d on ties, as ``right_wta``'s scan does; x without
-    a cell gets 0, as there.  Issue 10: the scan read up to ``n_disp`` pixels' index and
-    cost per candidate seed.
+    a cell gets 0, as there.  (The per-seed scan read up to ``n_disp`` pixels' index and
+    cost per candidate seed.)
     """
     w = index.shape[1]
     best = np.full(w, np.inf, np.float32)

@@ -36,7 +36,7 @@ def _seeds_kernel(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusio
 
 
 def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None):
-    """Sparse seed map (DESIGN step 4); int32 (H, W), -1 undecided; ``skip`` as on the CPU."""
+    """Sparse seed map (docs/design.md, step 4); int32 (H, W), -1 undecided; ``skip`` as on the CPU."""
     flat, index, n_disp, _ = _unpack(cost)
     has_skip = skip is not None
     d_skip = _dev(skip) if has_skip else _zeros(1, np.int32).reshape(1, 1)
@@ -110,7 +110,7 @@ def _subpixel_kernel(cost, index, disp, out):
 
 
 def subpixel(cost, disp):
-    """Parabola sub-pixel refinement (DESIGN step 8); float32 (H, W), inf where undecided."""
+    """Parabola sub-pixel refinement (docs/design.md, step 8); float32 (H, W), inf where undecided."""
     d_disp = _dev(disp)
     flat, index, _, _ = _unpack(cost)
     return _per_pixel(_subpixel_kernel, d_disp.shape, np.float32, flat, index, d_disp)

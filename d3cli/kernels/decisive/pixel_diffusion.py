@@ -119,8 +119,8 @@ def build(jit, shared):
             return cur
         if max_gap >= 0.0:
             # an empty min_cost (the CPU driver's): the least cost is found here, only
-            # for the pixels that get this far (issue 10: KITTI finest level, 13 % of
-            # the first sweep's; the min_cost pass over the whole volume, 7 ms, is gone)
+            # for the pixels that get this far (a small share: no min_cost pass over
+            # the whole volume)
             least = min_cost[v, u] if min_cost.shape[0] > 0 else band_min(cost, index, v, u)
             if best_c > least + max_gap:
                 return cur

@@ -184,8 +184,8 @@ def build(jit, shared):
     # five cells once per pixel and view (one index entry and one band test for the left
     # view) and decide from them, with the same comparisons in the same order as the
     # functions above, so the decisions are the same (tests/kernels/test_inheritance.py
-    # holds them to each other on random banded volumes).  Issue 10: the per-pixel form
-    # re-read every cell up to three times (road pair, level 1: 90 ms CPU).
+    # holds them to each other on random banded volumes).  The per-pixel form re-reads
+    # every cell up to three times.
 
     @jit
     def window5(cost, index, v, u, d):

@@ -35,10 +35,8 @@ def build(jit, shared):
 
         The least cost c1 and the second cost c2 are found by value (:func:`least_two`,
         :func:`least`), and d1 as the first disparity holding c1: the smallest on ties,
-        as a scan with a strict ``<`` finds it.  Issue 10: the in-order scan waited a
-        compare and a select per cell; KITTI finest level, 1 thread (CPU time), A/B on
-        the pipeline's inputs: seeds 17.6 -> 12.3 ms.  (Cells are never NaN: the costs
-        lie in [0, 1].)
+        as a scan with a strict ``<`` finds it (an in-order scan waits a compare and a
+        select per cell).  (Cells are never NaN: the costs lie in [0, 1].)
         """
         off = index[v, u, 0]
         lo = index[v, u, 1]
@@ -91,7 +89,7 @@ def build(jit, shared):
 
     @jit
     def seed_at(cost, index, n_disp, v, u, pkrn_min, epsilon, lr_tolerance, exclusion):
-        """Decisive seed at (u, v) of the coarsest level, or UNDECIDED (DESIGN step 4).
+        """Decisive seed at (u, v) of the coarsest level, or UNDECIDED (docs/design.md, step 4).
 
         Winner-take-all ``d1`` (smallest disparity on ties) is kept when
         (a) PKRN = (c2 + eps) / (c1 + eps) >= pkrn_min, where c2 is the least cost at any

@@ -28,7 +28,7 @@ def build(jit, shared):
 
     @jit
     def subpixel_at(cost, index, disp, v, u):
-        """Sub-pixel disparity by a parabola through C(d-1), C(d), C(d+1) (DESIGN step 8).
+        """Sub-pixel disparity by a parabola through C(d-1), C(d), C(d+1) (docs/design.md, step 8).
 
         The offset is clamped to [-0.5, 0.5]; at the ends of the range or on a flat or
         concave curve the integer disparity is returned; inf where undecided.

@@ -22,7 +22,7 @@ _pt_restore_at = ops.pt_restore_at
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def pt_warp(right, a0, b1, b2, delta):
-    """Right image warped by the road model (DESIGN step 6): ``R'(x, v) = R(x - s(x, v), v)``.
+    """Right image warped by the road model (docs/design.md, step 6): ``R'(x, v) = R(x - s(x, v), v)``.
 
     Parameters
     ----------

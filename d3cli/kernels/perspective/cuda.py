@@ -27,7 +27,7 @@ def _pt_warp_kernel(right, a0, b1, b2, delta, out):
 
 
 def pt_warp(right, a0, b1, b2, delta):
-    """Right image warped by the road model (DESIGN step 6): ``R'(x, v) = R(x - s(x, v), v)``.
+    """Right image warped by the road model (docs/design.md, step 6): ``R'(x, v) = R(x - s(x, v), v)``.
 
     Parameters
     ----------

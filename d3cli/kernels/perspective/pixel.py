@@ -28,7 +28,7 @@ def build(jit, shared):
 
     @jit
     def pt_shift(a0, b1, b2, delta, v, u):
-        """Perspective-transformation shift ``s(u, v) = a0 + b1 v + b2 u - delta`` (DESIGN step 6).
+        """Perspective-transformation shift ``s(u, v) = a0 + b1 v + b2 u - delta`` (docs/design.md, step 6).
 
         The road model ``d = a0 + a1 (v cos(theta) - u sin(theta))`` written linearly:
         ``b1 = a1 cos(theta)``, ``b2 = -a1 sin(theta)``; ``delta`` is the margin.  All in
@@ -56,7 +56,7 @@ def build(jit, shared):
     @jit
     def pt_restore_at(d_prime, a0, b1, b2, delta, v, u):
         """Full-range disparity of a left pixel from its disparity ``d_prime`` against the
-        warped right image (DESIGN step 6).
+        warped right image (docs/design.md, step 6).
 
         Left (u, v) matches ``R'(u - d', v) = R(u - d' - s(u - d', v), v)``, so
         ``d = d' + s(u - d', v) = d' (1 - b2) + s(u, v)``; inf stays inf.

@@ -12,7 +12,7 @@ from ..cuda_launch import _grid_1d, _pack, _unpack, _zeros, ops
 _sgm_step = ops.sgm_step
 
 
-# ----------------------------------------------------------------------------- semi-global smoothing (issue 16)
+# ----------------------------------------------------------------------------- semi-global smoothing
 @cuda.jit(device=True)
 def _all_inf(buffer, start, stop):
     for k in range(start, stop):

@@ -29,7 +29,7 @@ def build(jit, shared):
 
     @jit
     def sgm_step(cost, index, v, u, prev, plo, phi, cur, p1, p2, acc, mode):
-        """One pixel of one semi-global path over a banded volume (issue 16).
+        """One pixel of one semi-global path over a banded volume.
 
         ``L(p, d) = C(p, d) + min(L(q, d), L(q, d -+ 1) + P1, min_k L(q, k) + P2) -
         min_k L(q, k)`` over the pixel's band, with ``q`` the previous pixel of the path,
