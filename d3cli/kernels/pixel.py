@@ -45,6 +45,9 @@ INF = math.inf
 UINT = np.uint64  # subscripts already checked to be >= 0
 
 
+# Longer than 80 lines by design: a factory whose length is the per-pixel functions it
+# compiles (each short); one closure scope is what lets the same source compile for the
+# CPU and for CUDA (calling an @njit function from a CUDA kernel fails in the simulator).
 def build_shared(jit):
     """Compile the per-pixel helpers shared by several steps with ``jit``.
 

@@ -217,6 +217,8 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
     this never happens for a cell the later steps read, it only keeps the halo cells
     finite.
     """
+    # Longer than 80 lines: one compiled kernel whose loops were tuned together for speed
+    # (docs/performance.md); a split is a separate change, to be measured and md5-checked.
     h, w, _ = index.shape
     ym = max(v - 1, 0)
     yp = min(v + 1, h - 1)

@@ -27,6 +27,8 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
     store, visible : ndarray, int32, (h, w, 3)
     n_cells : int
     """
+    # Longer than 80 lines: one compiled kernel whose loops were tuned together for speed
+    # (docs/performance.md); a split is a separate change, to be measured and md5-checked.
     ch, cw = coarse.shape
     nty = (h + tile - 1) // tile
     ntx = (w + tile - 1) // tile

@@ -334,6 +334,8 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
     same bits.  Cells of clipped windows (the image borders) get their ``num``, ``den``
     from their own box sums (:func:`_clipped_terms`) before that second pass.
     """
+    # Longer than 80 lines: one compiled kernel whose loops were tuned together for speed
+    # (docs/performance.md); a split is a separate change, to be measured and md5-checked.
     v0 = max(0, v - r)
     v1 = min(h - 1, v + r)
     n_full = (v1 - v0 + 1) * (2 * r + 1)

@@ -11,6 +11,9 @@ import numpy as np
 from ..pixel import INF, UINT
 
 
+# Longer than 80 lines by design: a factory whose length is the per-pixel functions it
+# compiles (each short); one closure scope is what lets the same source compile for the
+# CPU and for CUDA (calling an @njit function from a CUDA kernel fails in the simulator).
 def build(jit, shared):
     """Compile this step's per-pixel functions with ``jit``.
 
