@@ -113,9 +113,6 @@ class Backend(Protocol):
     def rbf_filter(self, cost, weights, t_max, overwrite_input=False) -> Any:
         """Recursive bilateral filtering: ``t_max`` passes of the 3x3 kernel (paper eq. 2).
 
-        The passes run in place, row by row and all passes at once (on the CPU the row
-        passes of ``aggregation/cpu.py``), so the filter needs one volume and a few row buffers.
-
         Parameters
         ----------
         cost : Volume or ndarray, float32, (H, W, D)
@@ -123,8 +120,8 @@ class Backend(Protocol):
             From :func:`rbf_weights`.
         t_max : int
         overwrite_input : bool
-            Filter ``cost`` itself (the pipeline no longer needs the raw NCC volume): one
-            volume at the peak instead of two.  The result is the same.
+            The pipeline no longer needs the raw volume: the backend may use ``cost``'s
+            memory (one volume fewer at the peak).  The result is the same.
 
         Returns
         -------
@@ -176,10 +173,8 @@ class Backend(Protocol):
         disp0 : ndarray, int32, (H, W)
             Sparse decisive map D_i^S (-1 undecided); not modified.
         min_cost : ndarray, float32, (H, W), or None
-            Least cost of each pixel over its band (:func:`min_cost`); None: found by
-            ``pixel.diffuse_at`` for the few pixels whose candidate gets as far as the gap
-            test (a small share of the pixels; no :func:`min_cost` pass over the whole
-            volume).
+            Least cost of each pixel over its band (:func:`min_cost`); not read when
+            ``max_gap < 0``; None: found by the backend where the gap test needs it.
         max_gap : float
             Accepted states cost at most min_cost + max_gap; < 0: off.
         tau, kappa_d : int

@@ -43,8 +43,7 @@ def _grey_scale(img):
 def rbf_weights(img, sigma_space, sigma_color):
     """Normalised 3x3 bilateral weights per pixel (paper eq. 3), computed once per level.
 
-    Returns float32 (H, W, 9); slot k is the neighbour (dy, dx) = (k // 3 - 1, k % 3 - 1);
-    neighbours outside the image get weight 0.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.rbf_weights`.
     """
     h, w = img.shape
     inv_ss2 = 1.0 / (sigma_space * sigma_space)
@@ -172,23 +171,12 @@ RBF_TASKS_PER_THREAD = 2
 def rbf_filter(cost, weights, t_max, overwrite_input=False):
     """Recursive bilateral filtering: ``t_max`` passes of the 3x3 kernel (paper eq. 2).
 
+    ``overwrite_input`` filters ``cost`` itself: one volume at the peak instead of two.
+
     The passes run in place, row by row and all passes at once (:func:`_rbf_passes`),
     so the filter needs one volume and a few row buffers.
 
-    Parameters
-    ----------
-    cost : Volume or ndarray, float32, (H, W, D)
-    weights : ndarray, float32, (H, W, 9)
-        From :func:`rbf_weights`.
-    t_max : int
-    overwrite_input : bool
-        Filter ``cost`` itself (the pipeline no longer needs the raw NCC volume): one
-        volume at the peak instead of two.  The result is the same.
-
-    Returns
-    -------
-    Volume or ndarray, float32, (H, W, D)
-        The same kind as ``cost``; ``cost``'s own array with ``overwrite_input``.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.rbf_filter`.
     """
     flat, index, n_disp, dense_shape = _unpack(cost)
     work = flat if overwrite_input else flat.copy()
@@ -204,9 +192,7 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
 def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
     """One pass of a plain (2 radius + 1)^2 bilateral filter over every disparity slice.
 
-    The ablation counterpart of RBF (paper Fig. 4): same kernel as eq. 3, larger support.
-    A neighbour whose band lacks the disparity contributes the pixel's own cell (as in
-    :func:`rbf_filter`; never for a cell the later steps read).
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.bilateral_filter`.
     """
     flat, index, n_disp, dense_shape = _unpack(cost)
     max_band = max(1, int((index[:, :, 2] - index[:, :, 1]).max()))

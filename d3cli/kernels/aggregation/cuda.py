@@ -41,11 +41,7 @@ def _rbf_weights_kernel(img, inv_ss2, inv_sc2, weights):
 def rbf_weights(img, sigma_space, sigma_color):
     """Normalised 3x3 bilateral weights per pixel (paper eq. 3), computed once per level.
 
-    Returns
-    -------
-    device array, float32, (H, W, 9)
-        Slot k is the neighbour (dy, dx) = (k // 3 - 1, k % 3 - 1); neighbours outside
-        the image get weight 0.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.rbf_weights`.
     """
     d_img = _dev(img)
     h, w = d_img.shape
@@ -84,19 +80,10 @@ def _rbf_pass(src, dst, index, weights):
 def rbf_filter(cost, weights, t_max, overwrite_input=False):
     """Recursive bilateral filtering: ``t_max`` passes of the 3x3 kernel (paper eq. 2).
 
-    Parameters
-    ----------
-    cost : Volume or float32 (H, W, D), device or host
-    weights : float32 (H, W, 9), device or host
-        From :func:`rbf_weights`.
-    t_max : int
-    overwrite_input : bool
-        Use ``cost`` as the second ping-pong buffer (two volumes at the peak, not three);
-        same result, ``cost`` is then clobbered (as ``kernels.cpu.rbf_filter``).
+    Ping-pong passes over two volumes; ``overwrite_input`` uses ``cost`` as the second
+    buffer (two volumes at the peak, not three), which it then clobbers.
 
-    Returns
-    -------
-    device array, float32, (H, W, D), or a Volume (the kind of ``cost``)
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.rbf_filter`.
     """
     flat, index, n_disp, dense_shape = _unpack(cost)
     d_weights = _dev(weights)
@@ -148,6 +135,8 @@ def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
 
     The ablation counterpart of RBF (paper Fig. 4): same kernel as eq. 3, larger
     support.  Returns a new device array (or Volume) of the kind of ``cost``.
+
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.bilateral_filter`.
     """
     flat, index, n_disp, dense_shape = _unpack(cost)
     d_img = _dev(img)

@@ -113,28 +113,7 @@ def _integral_images(left, right):
 def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None):
     """NCC cost volume ``(1 - NCC) / 2`` with box sums (docs/design.md, step 2).
 
-    The window is clipped to the part where both the left window around (u, v) and the
-    right window around (u - d, v) lie inside the image.  Cells with u - d < 0 or a flat
-    window cost 1.
-
-    Parameters
-    ----------
-    left, right : ndarray, float32, (H, W)
-        Grey images, 0-255 scale.
-    max_disparity : int
-        Largest disparity of the level (``n_disp = max_disparity + 1``).
-    window : int
-        Odd window size.
-    min_variance : float
-        Grey-level variance at or below which a window is flat.
-    index : ndarray, int32, (H, W, 3), optional
-        Bands to compute (:mod:`d3cli.kernels.volume`); default the full range.
-
-    Returns
-    -------
-    ndarray, float32, (H, W, max_disparity + 1)
-        Without ``index``; with it a :class:`Volume` of those bands.  A cell holds the
-        same value whatever band it is computed in.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.ncc_cost_volume`.
     """
     h, w = left.shape
     n_disp = int(max_disparity) + 1
@@ -467,21 +446,7 @@ def _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0,
 def cosine_cost_volume(fl, fr, nl, nr, max_disparity, index=None):
     """Deep-feature cost volume ``(1 - cos) / 2`` of one level (docs/design.md, step 2, features).
 
-    Parameters
-    ----------
-    fl, fr : ndarray, float32, (H, W, C)
-        L2-normalised feature maps of the left and right image at this level.
-    nl, nr : ndarray, float32, (H, W)
-        Their squared norms: 1, or 0 for a zero feature vector (cost 1).
-    max_disparity : int
-        The level's range is ``max_disparity + 1`` disparities.
-    index : ndarray, int32, (H, W, 3), optional
-        Bands to compute; default the full range.
-
-    Returns
-    -------
-    ndarray, float32, (H, W, max_disparity + 1), or a :class:`Volume` with ``index``
-        1 where u - d < 0 or a feature vector is zero.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.cosine_cost_volume`.
     """
     h, w = nl.shape
     n_disp = int(max_disparity) + 1
@@ -508,9 +473,7 @@ def _cosine_banded(fl, fr, nl, nr, index, n_cells):
 def invalidate_out_of_view(cost):
     """Set every cell whose right pixel u - d is outside the image back to 1, in place.
 
-    Aggregation averages such cells with valid neighbours and pulls them below 1; reset
-    after it, they keep their meaning: no match, never a winner (docs/design.md, step 2).
-    Returns ``cost`` (a Volume or an (H, W, D) array).
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.invalidate_out_of_view`.
     """
     flat, index, n_disp, _ = _unpack(cost)
     _invalidate(flat, index, int(n_disp))

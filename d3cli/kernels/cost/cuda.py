@@ -134,23 +134,7 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None
     every disparity of the level (one thread per disparity and row; cheap on a GPU),
     the costs only the cells of ``index``.
 
-    Parameters
-    ----------
-    left, right : float32 (H, W), device or host
-        Grey images, 0-255 scale.
-    max_disparity : int
-        Largest disparity of the level (``n_disp = max_disparity + 1``).
-    window : int
-        Odd window size.
-    min_variance : float
-        Grey-level variance at or below which a window is flat (cost 1).
-    index : int32 (H, W, 3), host (uploaded here, once) or device, optional
-        Bands to compute (:mod:`d3cli.kernels.volume`); default the full range.
-
-    Returns
-    -------
-    device array, float32, (H, W, max_disparity + 1); with ``index`` a Volume
-        1 where u - d < 0 or a window is flat.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.ncc_cost_volume`.
     """
     d_left = _dev(left)
     d_right = _dev(right)
@@ -190,9 +174,7 @@ def invalidate_out_of_view(cost):
 
     A host ``cost`` is updated in place as well; returns the device array (or Volume).
 
-    Returns
-    -------
-    device array, float32, (H, W, D), or a Volume
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.invalidate_out_of_view`.
     """
     flat, index, n_disp, dense_shape = _unpack(cost)
     h, w = index.shape[0], index.shape[1]
@@ -215,7 +197,10 @@ def _cosine_kernel(fl, fr, nl, nr, index, cost):
 
 def cosine_cost_volume(fl, fr, nl, nr, max_disparity, index=None):
     """Deep-feature cost volume ``(1 - cos) / 2`` (see the CPU driver); a device array,
-    or a Volume with ``index``.  One thread per pixel."""
+    or a Volume with ``index``.  One thread per pixel.
+
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.cosine_cost_volume`.
+    """
     d_fl, d_fr, d_nl, d_nr = _dev(fl), _dev(fr), _dev(nl), _dev(nr)
     h, w = d_nl.shape
     n_disp = int(max_disparity) + 1

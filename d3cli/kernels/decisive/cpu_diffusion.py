@@ -221,29 +221,10 @@ def _build_frontier(changed, n_changed, listed, row_listed, active, h, w, kappa_
 def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweeps):
     """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 5-6).
 
-    Parameters
-    ----------
-    cost : Volume or ndarray, float32, (H, W, D)
-    disp0 : ndarray, int32, (H, W)
-        Sparse decisive map D_i^S (-1 undecided); not modified.
-    min_cost : ndarray, float32, (H, W), or None
-        Least cost of each pixel over its band (:func:`min_cost`); None: found by
-        ``pixel.diffuse_at`` for the few pixels whose candidate gets as far as the gap
-        test (no :func:`min_cost` pass over the whole volume).
-    max_gap : float
-        Accepted states cost at most min_cost + max_gap; < 0: off.
-    tau, kappa_d : int
-        Disparity tolerance and neighbourhood radius.
-    adversarial : bool
-        Allow decided pixels to switch to a strictly cheaper accepted candidate.
-    max_sweeps : int
-        Safeguard on the number of sweeps.
+    ``min_cost`` None: ``pixel.diffuse_at`` finds the least cost for the few pixels whose
+    candidate gets as far as the gap test (no :func:`min_cost` pass over the volume).
 
-    Returns
-    -------
-    disp : ndarray, int32, (H, W)
-    sweeps : int
-        Sweeps run (the last one changed nothing unless the safeguard stopped it).
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.diffuse`.
     """
     flat, index, _, _ = _unpack(cost)
     if min_cost is None:

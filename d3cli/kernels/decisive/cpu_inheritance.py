@@ -18,23 +18,7 @@ _inherit_patch_into = ops.inherit_patch_into
 def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
     """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
 
-    The patch tests (eq. 7-8) run once per coarse pixel and serve the four fine pixels
-    of its 2x2 patch; the pixel test (eq. 9) per fine pixel.
-
-    Parameters
-    ----------
-    cost : Volume or ndarray, float32, (H, W, D)
-        Cost volume of the finer level i.
-    coarse : ndarray, int32, (>= H // 2, >= W // 2)
-        Disparity map of level i + 1 (-1 undecided).
-    candidates : int
-        0: symmetric candidate sets; 1: the per-pixel sets of the paper
-        (``pixel.candidate_range``).
-
-    Returns
-    -------
-    ndarray, int32, (H, W)
-        Sparse map D_i^S.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.inherit`.
     """
     flat, index, _, _ = _unpack(cost)
     return _inherit(flat, index, coarse, bool(prc), float(dfm_pkrn_min), float(epsilon), int(candidates))

@@ -22,8 +22,7 @@ _right_wta = ops.right_wta
 def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None):
     """Sparse seed map (docs/design.md, step 4); int32 (H, W), -1 undecided.
 
-    ``skip`` (int32 (H, W), optional): pixels decided there (>= 0) are not examined and
-    stay -1 (the pipeline merges fresh seeds only where inheritance left a hole).
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.decisive_seeds`.
     """
     flat, index, n_disp, _ = _unpack(cost)
     has_skip = skip is not None

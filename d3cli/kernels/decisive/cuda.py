@@ -77,20 +77,7 @@ def _inherit_kernel(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates,
 def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
     """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
 
-    Parameters
-    ----------
-    cost : Volume or float32 (H, W, D), device or host
-        Cost volume of the finer level i (one thread per 2x2 patch, as the CPU's
-        ``pixel.inherit_quad``: the patch tests once for its four pixels).
-    coarse : int32 (>= H // 2, >= W // 2), device or host
-        Disparity map of level i + 1 (-1 undecided).
-    candidates : int
-        0: symmetric candidate sets; 1: the per-pixel sets of the paper.
-
-    Returns
-    -------
-    device array, int32, (H, W)
-        Sparse map D_i^S.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.inherit`.
     """
     flat, index, _, _ = _unpack(cost)
     h, w = int(index.shape[0]), int(index.shape[1])

@@ -103,28 +103,7 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     them against the previous map, then applies the changes (Jacobi).  The only
     download per sweep is the change counter.
 
-    Parameters
-    ----------
-    cost : Volume or float32 (H, W, D), device or host
-    disp0 : int32 (H, W), device or host
-        Sparse decisive map D_i^S (-1 undecided); not modified.
-    min_cost : float32 (H, W), device or host, or None
-        Least cost of each pixel (:func:`min_cost`); not read when ``max_gap < 0``;
-        None: computed here when the gap test needs it.
-    max_gap : float
-        Accepted states cost at most min_cost + max_gap; < 0: off.
-    tau, kappa_d : int
-        Disparity tolerance and neighbourhood radius.
-    adversarial : bool
-        Allow decided pixels to switch to a strictly cheaper accepted candidate.
-    max_sweeps : int
-        Safeguard on the number of sweeps.
-
-    Returns
-    -------
-    disp : device array, int32, (H, W)
-    sweeps : int
-        Sweeps run (the last one changed nothing unless the safeguard stopped it).
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.diffuse`.
     """
     d_cost, d_index, _, _ = _unpack(cost)
     disp = _copy(disp0) if _is_device(disp0) else _dev(disp0)  # a new map either way

@@ -24,17 +24,7 @@ _pt_restore_at = ops.pt_restore_at
 def pt_warp(right, a0, b1, b2, delta):
     """Right image warped by the road model (docs/design.md, step 6): ``R'(x, v) = R(x - s(x, v), v)``.
 
-    Parameters
-    ----------
-    right : ndarray, float32, (H, W)
-        Full-resolution grey right image.
-    a0, b1, b2, delta : float
-        Road model ``d = a0 + b1 v + b2 u`` and margin, full-resolution pixels.
-
-    Returns
-    -------
-    ndarray, float32, (H, W)
-        Bilinear samples; columns beyond the image replicate the border.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.pt_warp`.
     """
     h, w = right.shape
     out = np.empty((h, w), np.float32)
@@ -48,16 +38,7 @@ def pt_warp(right, a0, b1, b2, delta):
 def pt_restore(disp, a0, b1, b2, delta):
     """Full-range disparity from the disparity against the warped right image.
 
-    ``d = d' (1 - b2) + s(u, v)`` (exact inverse of :func:`pt_warp`); inf stays inf.
-
-    Parameters
-    ----------
-    disp : ndarray, float32, (H, W)
-        Disparity ``d'`` of the left image against ``pt_warp(right, ...)``.
-
-    Returns
-    -------
-    ndarray, float32, (H, W)
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.pt_restore`.
     """
     h, w = disp.shape
     out = np.empty((h, w), np.float32)

@@ -29,17 +29,7 @@ def _pt_warp_kernel(right, a0, b1, b2, delta, out):
 def pt_warp(right, a0, b1, b2, delta):
     """Right image warped by the road model (docs/design.md, step 6): ``R'(x, v) = R(x - s(x, v), v)``.
 
-    Parameters
-    ----------
-    right : float32 (H, W), device or host
-        Full-resolution grey right image.
-    a0, b1, b2, delta : float
-        Road model ``d = a0 + b1 v + b2 u`` and margin, full-resolution pixels.
-
-    Returns
-    -------
-    device array, float32, (H, W)
-        Bilinear samples; columns beyond the image replicate the border.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.pt_warp`.
     """
     d_right = _dev(right)
     return _per_pixel(_pt_warp_kernel, d_right.shape, np.float32, d_right, _f64(a0), _f64(b1), _f64(b2), _f64(delta))
@@ -57,14 +47,7 @@ def pt_restore(disp, a0, b1, b2, delta):
 
     ``d = d' (1 - b2) + s(u, v)`` (exact inverse of :func:`pt_warp`); inf stays inf.
 
-    Parameters
-    ----------
-    disp : float32 (H, W), device or host
-        Disparity ``d'`` of the left image against ``pt_warp(right, ...)``.
-
-    Returns
-    -------
-    device array, float32, (H, W)
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.pt_restore`.
     """
     d_disp = _dev(disp)
     return _per_pixel(_pt_restore_kernel, d_disp.shape, np.float32, d_disp, _f64(a0), _f64(b1), _f64(b2), _f64(delta))

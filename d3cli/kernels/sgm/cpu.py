@@ -20,17 +20,7 @@ _sgm_step = njit(cache=True, error_model="numpy", inline="always")(ops.sgm_step.
 def sgm_smooth(cost, p1, p2):
     """Mean of four semi-global path costs (left, right, down, up) of a volume.
 
-    Parameters
-    ----------
-    cost : Volume or ndarray, float32, (H, W, D)
-    p1, p2 : float
-        Penalties of a one-disparity step and of a larger jump, in cost units.
-
-    Returns
-    -------
-    Volume or ndarray
-        Same kind and band layout; each cell ``(L_left + L_right + L_down + L_up) / 4``
-        (:func:`pixel.sgm_step`), summed in that order.
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.sgm_smooth`.
     """
     flat, index, n_disp, dense = _unpack(cost)
     acc = np.zeros_like(flat)  # zeros: cells outside every visible band stay defined (0)

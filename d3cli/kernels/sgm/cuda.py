@@ -59,7 +59,10 @@ def _sgm_columns_kernel(cost, index, p1, p2, scratch, size, acc):
 
 def sgm_smooth(cost, p1, p2):
     """Mean of four semi-global path costs of a volume (as the CPU backend's): one thread
-    per row for the row paths, one per column for the column paths."""
+    per row for the row paths, one per column for the column paths.
+
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.sgm_smooth`.
+    """
     flat, index, n_disp, dense = _unpack(cost)
     h, w = int(index.shape[0]), int(index.shape[1])
     acc = _zeros(flat.shape[0], np.float32)  # cells outside every visible band stay 0
