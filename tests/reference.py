@@ -1,7 +1,7 @@
 """Slow, obviously-correct NumPy/Python references for the D3Stereo kernels.
 
 Written from the specification (the docstrings of ``d3cli/kernels/pixel.py`` and
-``d3cli/kernels/cpu.py``, and DESIGN.md section 1), not from the Numba code: every
+``d3cli/kernels/cpu.py``, and docs/design.md, 'Cost volumes'), not from the Numba code: every
 window, neighbour and candidate set is built explicitly, costs are computed in float64
 and nothing is vectorised cleverly.  Only for tiny inputs (a few thousand cells).
 
@@ -78,7 +78,7 @@ def ref_ncc_cost(left_window, right_window, min_variance):
 
 
 def ref_ncc_cost_volume(left, right, max_disparity, window, min_variance):
-    """NCC cost volume by direct per-window computation (DESIGN step 2).
+    """NCC cost volume by direct per-window computation (docs/design.md, step 2).
 
     The window around (u, v) is clipped to the rows inside the image and to the columns
     [max(u - r, d), min(u + r, W - 1)], where both the left window around u and the right
@@ -163,7 +163,7 @@ def ref_bilateral_filter(cost, img, radius, sigma_space, sigma_color):
 
 # ----------------------------------------------------------------------------- seeds
 def ref_seed(cost, v, u, pkrn_min, epsilon, lr_tolerance, exclusion):
-    """Decisive seed of one pixel (DESIGN step 4) or -1."""
+    """Decisive seed of one pixel (docs/design.md, step 4) or -1."""
     n_disp = cost.shape[2]
     d1, c1 = argmin_smallest([(d, float(cost[v, u, d])) for d in range(n_disp)])
     if c1 >= 1.0:
@@ -175,7 +175,7 @@ def ref_seed(cost, v, u, pkrn_min, epsilon, lr_tolerance, exclusion):
     if (c2 + epsilon) / (c1 + epsilon) < pkrn_min:
         return UNDECIDED
     # Left-right check: WTA of the right view at x = u - d1 over the cells that exist.
-    # A match whose right pixel is outside the image is no match (DESIGN step 2: such
+    # A match whose right pixel is outside the image is no match (docs/design.md, step 2: such
     # cells never win), even when aggregation has pulled its cost below 1.
     x = u - d1
     if x < 0:

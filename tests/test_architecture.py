@@ -108,10 +108,41 @@ def test_imports_point_one_way():
 
 
 def test_kernels_never_import_config_data_or_click():
-    for path in (PACKAGE / "kernels").glob("*.py"):
+    for path in (PACKAGE / "kernels").rglob("*.py"):
         text = path.read_text(encoding="utf-8")
         assert not re.search(r"^\s*(import|from)\s+(click|yaml)\b", text, re.M), path
         assert all(_room(t) in ("kernels", "errors") for _, t in _imports(path)), path
+
+
+#: The kernels' step packages and the kernels' shared modules they may import.
+KERNEL_STEPS = ("cost", "aggregation", "sgm", "decisive", "perspective")
+KERNEL_SHARED = {"pixel", "volume", "cache", "intrinsics", "cpu_common", "cuda_launch"}
+#: Outside d3cli, what a step module may import.
+KERNEL_STEP_LIBRARIES = {"__future__", "math", "platform", "types", "typing", "numba", "numpy", "llvmlite"}
+
+
+@pytest.mark.parametrize("step", KERNEL_STEPS)
+def test_kernel_steps_import_only_the_shared_kernel_modules(step):
+    """A step package (kernels/cost/, ...) imports its own modules, the kernels' shared
+    modules, errors, numba, numpy and llvmlite: never another step package, never a
+    backend facade (kernels/cpu.py, kernels/cuda.py)."""
+    folder = PACKAGE / "kernels" / step
+    assert (folder / "__init__.py").is_file()
+    bad = []
+    for path in sorted(folder.rglob("*.py")):
+        for line, target in _imports(path):
+            parts = target.split(".")
+            if parts[:3] == ["d3cli", "kernels", step] or target == "d3cli.errors":
+                continue
+            if parts[:2] == ["d3cli", "kernels"] and len(parts) == 3 and parts[2] in KERNEL_SHARED:
+                continue
+            bad.append(f"{path.relative_to(PACKAGE.parent)}:{line}: imports {target}")
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module] if isinstance(node, ast.ImportFrom) and not node.level else [])
+            bad += [f"{path.relative_to(PACKAGE.parent)}:{node.lineno}: imports {n}" for n in names
+                    if n.split(".")[0] not in KERNEL_STEP_LIBRARIES | {"d3cli"}]
+    assert bad == []
 
 
 def test_tests_use_no_private_name_of_the_package():

@@ -1,5 +1,5 @@
 """Keep freed memory in the process (glibc's ``mallopt``) so that the next volume does
-not fault in fresh pages (issue 10).
+not fault in fresh pages.
 
 Every pyramid level allocates its cost volume, integral images, weights and maps anew,
 and every pair does it again.  glibc serves blocks above its mmap threshold (128 KB,
@@ -7,13 +7,8 @@ adapting up to 32 MB) with ``mmap`` and returns them with ``munmap``; the next b
 the same size then takes a page fault per 4 KB page, each clearing the page
 (``clear_page_erms``: 10 % of the samples of the NCC kernel under ``perf``).  With the
 threshold at 1 GiB and the trim threshold at 1 GiB, freed blocks stay in the heap and
-are reused without faults.  Measured with ``scripts/bench_speed.py --reps 7 --no-memory``,
-two runs each way alternately on the quiet 2-core machine: PT-D3Stereo on the 720p road
-pair 3.22x / 2.93x SGBM's time before, 2.70x / 2.68x after; road full range 3.72x / 3.60x
--> 3.40x / 3.41x; Middlebury-Q 6.53x / 6.40x -> 6.03x / 5.95x (SGBM, in the same
-process, gains nothing measurable: 0.103 s either way).  The cost: the process keeps
-its peak heap instead of returning it between pairs (its peak, VmHWM, is what counts and
-moved from 365 to 393 MB on the road pair; SGBM's process 269 MB).
+are reused without faults (docs/performance.md has the measurement).  The cost: the
+process keeps its peak heap instead of returning it between pairs.
 
 Only glibc has ``mallopt``; elsewhere, or with ``D3STEREO_MALLOC=system``, or when the
 user set ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_`` themselves, nothing is

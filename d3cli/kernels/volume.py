@@ -1,4 +1,4 @@
-"""Cost volumes as bands of disparities per pixel (issue 10: fine levels search a band).
+"""Cost volumes as bands of disparities per pixel (fine levels search only a band).
 
 A volume is a flat float32 array ``cost`` plus an int32 (H, W, 3) ``index`` holding
 ``[off, lo, hi]`` per pixel: pixel (u, v) has the disparities ``lo <= d < hi`` and the

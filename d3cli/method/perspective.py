@@ -148,7 +148,7 @@ def _ransac(u, v, d, threshold, rng):
         return None
     sols = np.linalg.solve(a[usable], ds[picks[usable]][:, :, None])[:, :, 0]
     # numba loaded here, not at import: the PT-SGM baseline imports this module too
-    from ..kernels.road_fit import ransac_inlier_counts
+    from ..kernels.perspective.road_fit import ransac_inlier_counts
 
     counts = ransac_inlier_counts(np.ascontiguousarray(sols), np.ascontiguousarray(us), np.ascontiguousarray(vs),
                                   np.ascontiguousarray(ds), float(threshold))

@@ -1,10 +1,10 @@
-"""Run the CUDA parity tests (tests/kernels/test_cuda.py) under the CUDA simulator, and check the
+"""Run the CUDA parity tests (every room's test_cuda.py under tests/kernels) under the CUDA simulator, and check the
 backend selection without a GPU.
 
 The simulator must be switched on before numba is imported, so the CUDA tests run in a
 separate process with ``NUMBA_ENABLE_CUDASIM=1``; this process keeps the real CPU JIT.
 On a machine with a GPU run the same tests on hardware with
-``python -m pytest -m cuda tests/kernels/test_cuda.py``.
+``python -m pytest -m cuda tests/kernels``.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def test_cuda_kernels_match_cpu_under_the_simulator():
     except ImportError as exc:
         pytest.skip(f"numba.cuda cannot be imported ({exc}); install the cuda extra to run the CUDA tests")
     proc = _run(
-        ["-m", "pytest", "-q", "-m", "cuda", "tests/kernels/test_cuda.py", "-p", "no:cacheprovider"],
+        ["-m", "pytest", "-q", "-m", "cuda", "tests/kernels", "-p", "no:cacheprovider"],
         env_extra={"NUMBA_ENABLE_CUDASIM": "1"},
         timeout=600,
     )

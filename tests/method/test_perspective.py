@@ -99,7 +99,7 @@ def test_ransac_start_equals_the_loop_over_hypotheses_bit_for_bit(seed, outliers
 
 
 def test_ransac_inlier_counts_equal_the_numpy_expression_ties_included():
-    from d3cli.kernels.road_fit import ransac_inlier_counts
+    from d3cli.kernels.perspective.road_fit import ransac_inlier_counts
 
     rng = np.random.default_rng(2)
     us, vs = rng.uniform(0, 1000, 3000), rng.uniform(0, 500, 3000)

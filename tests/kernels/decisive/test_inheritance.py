@@ -152,7 +152,7 @@ def test_symmetric_is_the_default_of_the_driver():
                                   ref.ref_inherit(cost, coarse, True, 1.05, 1e-3))
 
 
-# ----------------------------------------------------------------------------- fast form (issue 10)
+# ----------------------------------------------------------------------------- fast form
 def narrow_banded_volume(rng, h, w, n_disp, *, levels=None):
     """A Volume with bands 1-7 disparities wide around a random true disparity (the fine
     levels' bands; patch windows d-2..d+2 often cross a band end), cost curves with a

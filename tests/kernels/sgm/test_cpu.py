@@ -1,4 +1,4 @@
-"""Semi-global smoothing of a cost volume (issue 16) against a NumPy reference.
+"""Semi-global smoothing of a cost volume against a NumPy reference.
 
 The reference states the path recursion literally, in float32 with the kernel's order of
 additions (paths left, right, down, up), so the kernel must equal it exactly.

@@ -1,0 +1,269 @@
+"""The backend contract: every function both kernel backends provide, written once.
+
+:mod:`d3cli.kernels.cpu` and :mod:`d3cli.kernels.cuda` are modules (``get_backend``
+returns one), each providing every method of :class:`Backend` under the same name, with
+the same arguments, shapes, dtypes and results; their own docstrings say only what is
+specific to their target.  The pipeline (:mod:`d3cli.method`) calls nothing else.
+
+Conventions
+-----------
+* Arrays are *backend arrays*: NumPy arrays on the CPU; on CUDA device arrays, and every
+  CUDA function also accepts host arrays, uploaded on the way in.  Results stay on the
+  backend; :meth:`Backend.to_host` brings any array back.
+* A cost volume is a :class:`d3cli.kernels.volume.Volume` (banded) or, for convenience
+  (tests, the ablation), a plain float32 (H, W, D) array; a function gives back the kind
+  it was given.  Cost is ``(1 - NCC) / 2`` (or the cosine counterpart) in [0, 1], lower is
+  better; a missing or flat match costs 1 and never wins.
+* Disparity maps are int32 (H, W) with -1 for undecided pixels; sub-pixel maps float32
+  with inf for undecided.
+* Integer results are equal on both backends; float results agree to rounding (CUDA may
+  contract a multiply-add into one FMA and its ``exp`` is not libm's).
+
+May import: nothing at run time (typing only).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+
+class Backend(Protocol):
+    """What :func:`d3cli.kernels.get_backend` returns: a module with these functions."""
+
+    def to_device(self, array) -> Any:
+        """C-contiguous array for the kernels (the CPU's memory is the device's).
+
+        The CPU returns a C-contiguous NumPy array; CUDA a device array (uploaded once).
+        """
+        ...
+
+    def to_host(self, array) -> Any:
+        """NumPy array of a backend array (identity on the CPU).
+
+        The CPU returns the array itself; CUDA downloads it.
+        """
+        ...
+
+    def ncc_cost_volume(self, left, right, max_disparity, window, min_variance, index=None) -> Any:
+        """NCC cost volume ``(1 - NCC) / 2`` with box sums (docs/design.md, step 2).
+
+        The window is clipped to the part where both the left window around (u, v) and the
+        right window around (u - d, v) lie inside the image.  Cells with u - d < 0 or a flat
+        window cost 1.
+
+        Parameters
+        ----------
+        left, right : ndarray, float32, (H, W)
+            Grey images, 0-255 scale.
+        max_disparity : int
+            Largest disparity of the level (``n_disp = max_disparity + 1``).
+        window : int
+            Odd window size.
+        min_variance : float
+            Grey-level variance at or below which a window is flat.
+        index : ndarray, int32, (H, W, 3), optional
+            Bands to compute (:mod:`d3cli.kernels.volume`); default the full range.
+
+        Returns
+        -------
+        ndarray, float32, (H, W, max_disparity + 1)
+            Without ``index``; with it a :class:`Volume` of those bands.  A cell holds the
+            same value whatever band it is computed in.
+        """
+        ...
+
+    def cosine_cost_volume(self, fl, fr, nl, nr, max_disparity, index=None) -> Any:
+        """Deep-feature cost volume ``(1 - cos) / 2`` of one level (docs/design.md, step 2, features).
+
+        Parameters
+        ----------
+        fl, fr : ndarray, float32, (H, W, C)
+            L2-normalised feature maps of the left and right image at this level.
+        nl, nr : ndarray, float32, (H, W)
+            Their squared norms: 1, or 0 for a zero feature vector (cost 1).
+        max_disparity : int
+            The level's range is ``max_disparity + 1`` disparities.
+        index : ndarray, int32, (H, W, 3), optional
+            Bands to compute; default the full range.
+
+        Returns
+        -------
+        ndarray, float32, (H, W, max_disparity + 1), or a :class:`Volume` with ``index``
+            1 where u - d < 0 or a feature vector is zero.
+        """
+        ...
+
+    def invalidate_out_of_view(self, cost) -> Any:
+        """Set every cell whose right pixel u - d is outside the image back to 1, in place.
+
+        Aggregation averages such cells with valid neighbours and pulls them below 1; reset
+        after it, they keep their meaning: no match, never a winner (docs/design.md, step 2).
+        Returns ``cost`` (a Volume or an (H, W, D) array).
+        """
+        ...
+
+    def rbf_weights(self, img, sigma_space, sigma_color) -> Any:
+        """Normalised 3x3 bilateral weights per pixel (paper eq. 3), computed once per level.
+
+        Returns float32 (H, W, 9); slot k is the neighbour (dy, dx) = (k // 3 - 1, k % 3 - 1);
+        neighbours outside the image get weight 0.
+        """
+        ...
+
+    def rbf_filter(self, cost, weights, t_max, overwrite_input=False) -> Any:
+        """Recursive bilateral filtering: ``t_max`` passes of the 3x3 kernel (paper eq. 2).
+
+        Parameters
+        ----------
+        cost : Volume or ndarray, float32, (H, W, D)
+        weights : ndarray, float32, (H, W, 9)
+            From :func:`rbf_weights`.
+        t_max : int
+        overwrite_input : bool
+            The pipeline no longer needs the raw volume: the backend may use ``cost``'s
+            memory (one volume fewer at the peak).  The result is the same.
+
+        Returns
+        -------
+        Volume or ndarray, float32, (H, W, D)
+            The same kind as ``cost``; ``cost``'s own array with ``overwrite_input``.
+        """
+        ...
+
+    def bilateral_filter(self, cost, img, radius, sigma_space, sigma_color) -> Any:
+        """One pass of a plain (2 radius + 1)^2 bilateral filter over every disparity slice.
+
+        The ablation counterpart of RBF (paper Fig. 4): same kernel as eq. 3, larger support.
+        A neighbour whose band lacks the disparity contributes the pixel's own cell (as in
+        :func:`rbf_filter`; never for a cell the later steps read).
+        """
+        ...
+
+    def sgm_smooth(self, cost, p1, p2) -> Any:
+        """Mean of four semi-global path costs (left, right, down, up) of a volume.
+
+        Parameters
+        ----------
+        cost : Volume or ndarray, float32, (H, W, D)
+        p1, p2 : float
+            Penalties of a one-disparity step and of a larger jump, in cost units.
+
+        Returns
+        -------
+        Volume or ndarray
+            Same kind and band layout; each cell ``(L_left + L_right + L_down + L_up) / 4``
+            (:func:`pixel.sgm_step`), summed in that order.
+        """
+        ...
+
+    def decisive_seeds(self, cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None) -> Any:
+        """Sparse seed map (docs/design.md, step 4); int32 (H, W), -1 undecided.
+
+        ``skip`` (int32 (H, W), optional): pixels decided there (>= 0) are not examined and
+        stay -1 (the pipeline merges fresh seeds only where inheritance left a hole).
+        """
+        ...
+
+    def diffuse(self, cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweeps) -> Any:
+        """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 5-6).
+
+        Parameters
+        ----------
+        cost : Volume or ndarray, float32, (H, W, D)
+        disp0 : ndarray, int32, (H, W)
+            Sparse decisive map D_i^S (-1 undecided); not modified.
+        min_cost : ndarray, float32, (H, W), or None
+            Least cost of each pixel over its band (:func:`min_cost`); not read when
+            ``max_gap < 0``; None: found by the backend where the gap test needs it.
+        max_gap : float
+            Accepted states cost at most min_cost + max_gap; < 0: off.
+        tau, kappa_d : int
+            Disparity tolerance and neighbourhood radius.
+        adversarial : bool
+            Allow decided pixels to switch to a strictly cheaper accepted candidate.
+        max_sweeps : int
+            Safeguard on the number of sweeps.
+
+        Returns
+        -------
+        disp : ndarray, int32, (H, W)
+        sweeps : int
+            Sweeps run (the last one changed nothing unless the safeguard stopped it).
+        """
+        ...
+
+    def inherit(self, cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0) -> Any:
+        """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
+
+        The patch tests (eq. 7-8) run once per coarse pixel and serve the four fine pixels
+        of its 2x2 patch; the pixel test (eq. 9) per fine pixel.
+
+        Parameters
+        ----------
+        cost : Volume or ndarray, float32, (H, W, D)
+            Cost volume of the finer level i.
+        coarse : ndarray, int32, (>= H // 2, >= W // 2)
+            Disparity map of level i + 1 (-1 undecided).
+        candidates : int
+            0: symmetric candidate sets; 1: the per-pixel sets of the paper
+            (``pixel.candidate_range``).
+
+        Returns
+        -------
+        ndarray, int32, (H, W)
+            Sparse map D_i^S.
+        """
+        ...
+
+    def min_cost(self, cost) -> Any:
+        """Least cost of every pixel over its band; float32 (H, W) (1 for an empty band).
+        """
+        ...
+
+    def subpixel(self, cost, disp) -> Any:
+        """Parabola sub-pixel refinement (docs/design.md, step 8); float32 (H, W), inf where undecided.
+        """
+        ...
+
+    def merge_sparse(self, primary, fallback) -> Any:
+        """``primary`` where decided (>= 0), else ``fallback``; int32 (H, W), a new map.
+        """
+        ...
+
+    def count_decided(self, disparity) -> Any:
+        """Number of decided pixels (>= 0) of an integer disparity map.
+        """
+        ...
+
+    def pt_warp(self, right, a0, b1, b2, delta) -> Any:
+        """Right image warped by the road model (docs/design.md, step 6): ``R'(x, v) = R(x - s(x, v), v)``.
+
+        Parameters
+        ----------
+        right : ndarray, float32, (H, W)
+            Full-resolution grey right image.
+        a0, b1, b2, delta : float
+            Road model ``d = a0 + b1 v + b2 u`` and margin, full-resolution pixels.
+
+        Returns
+        -------
+        ndarray, float32, (H, W)
+            Bilinear samples; columns beyond the image replicate the border.
+        """
+        ...
+
+    def pt_restore(self, disp, a0, b1, b2, delta) -> Any:
+        """Full-range disparity from the disparity against the warped right image.
+
+        ``d = d' (1 - b2) + s(u, v)`` (exact inverse of :func:`pt_warp`); inf stays inf.
+
+        Parameters
+        ----------
+        disp : ndarray, float32, (H, W)
+            Disparity ``d'`` of the left image against ``pt_warp(right, ...)``.
+
+        Returns
+        -------
+        ndarray, float32, (H, W)
+        """
+        ...

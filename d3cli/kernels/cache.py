@@ -1,0 +1,110 @@
+"""The numba cache of the kernels: where it lives, and dropping what an edit made stale.
+
+Numba keys a cached function on its own source file only.  The per-pixel functions are
+compiled (and inlined) into the CPU drivers of other files, and a step's per-pixel module
+inlines the shared helpers of ``pixel.py``; after an edit of any per-pixel module those
+caches would keep stale copies.  :func:`drop_stale` therefore hashes every per-pixel
+module (:data:`PIXEL_MODULES`) and deletes the cache of every module that inlines them
+(:data:`INLINING_MODULES`) when the hash changed.
+
+Imported (and :func:`prepare` run) by every kernels module that compiles with
+``cache=True``, before its first decorator: numba picks a function's cache folder when the
+decorator runs.  May import: numba and the standard library only.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+#: The kernels package folder.
+HERE = Path(__file__).resolve().parent
+#: Glob patterns (relative to the kernels folder) of the per-pixel modules.
+PIXEL_MODULES = ("pixel.py", "*/pixel.py", "*/pixel_*.py")
+#: Glob patterns of the modules whose cached functions inline per-pixel functions: the
+#: per-pixel modules themselves and every CPU driver module (named ``cpu*.py``).
+INLINING_MODULES = PIXEL_MODULES + ("cpu*.py", "*/cpu*.py")
+#: Name of the file, in the kernels folder's cache, holding the hash of the per-pixel modules.
+STAMP = "pixel.sha256"
+
+_prepared = False
+
+
+def _cache_folder(py_file: Path, cache_dir: str | None) -> Path:
+    """Where numba keeps the cache of the module ``py_file``."""
+    if cache_dir:
+        from numba.core.caching import UserProvidedCacheLocator
+
+        return Path(cache_dir) / UserProvidedCacheLocator.get_suitable_cache_subpath(str(py_file))
+    return py_file.parent / "__pycache__"
+
+
+def pixel_digest(root: Path = HERE) -> str:
+    """SHA-256 over the paths and contents of every per-pixel module under ``root``."""
+    digest = hashlib.sha256()
+    files = sorted({p for pattern in PIXEL_MODULES for p in root.glob(pattern)})
+    for path in files:
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def drop_stale(root: Path = HERE, cache_dir: str | None = None) -> bool:
+    """Delete the cached functions of every inlining module when a per-pixel module changed.
+
+    Parameters
+    ----------
+    root : Path
+        The kernels folder.
+    cache_dir : str or None
+        numba's ``NUMBA_CACHE_DIR`` (None or empty: the ``__pycache__`` beside each module).
+
+    Returns
+    -------
+    bool
+        Whether the caches were dropped (the stamp was missing or held another hash); the
+        stamp then holds the new hash.
+    """
+    digest = pixel_digest(root)
+    stamp = _cache_folder(root / "pixel.py", cache_dir) / STAMP
+    if stamp.exists() and stamp.read_text() == digest:
+        return False
+    modules = sorted({p for pattern in INLINING_MODULES for p in root.glob(pattern)})
+    for module in modules:
+        folder = _cache_folder(module, cache_dir)
+        for f in list(folder.glob(f"{module.stem}.*.nbi")) + list(folder.glob(f"{module.stem}.*.nbc")):
+            f.unlink()
+    stamp.parent.mkdir(parents=True, exist_ok=True)
+    stamp.write_text(digest)
+    return True
+
+
+def prepare() -> None:
+    """Pick a writable numba cache folder, then :func:`drop_stale` (once per process).
+
+    When the package's ``__pycache__`` cannot be written (a read-only install, a shared
+    site-packages), ``NUMBA_CACHE_DIR`` is set to ``$XDG_CACHE_HOME/d3stereo/numba``
+    (default ``~/.cache/d3stereo/numba``) before anything is compiled, so every process
+    (each ``--workers`` process too) loads the kernels from one cache instead of compiling
+    them again; a ``NUMBA_CACHE_DIR`` the user set is kept.
+    """
+    global _prepared
+    if _prepared:
+        return
+    _prepared = True
+    from numba import config as numba_config
+
+    cache = HERE / "__pycache__"
+    writable = os.access(cache if cache.is_dir() else HERE, os.W_OK)
+    if not writable and not numba_config.CACHE_DIR:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+        os.environ["NUMBA_CACHE_DIR"] = str(base / "d3stereo" / "numba")
+        numba_config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # numba read the variable at import already
+    try:
+        drop_stale(HERE, numba_config.CACHE_DIR)
+    except OSError:  # no writable cache anywhere: numba then compiles in every process
+        pass
+
+
+prepare()

@@ -1,0 +1,102 @@
+"""Per-pixel functions of the matching cost (pipeline step 2): NCC from window sums,
+the cosine cost of feature vectors.  Compiled for every target by :func:`build`
+(composed by :func:`d3cli.kernels.pixel.build_ops`)."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+
+
+# Longer than 80 lines by design: a factory whose length is the per-pixel functions it
+# compiles (each short); one closure scope is what lets the same source compile for the
+# CPU and for CUDA (calling an @njit function from a CUDA kernel fails in the simulator).
+def build(jit, shared):
+    """Compile this step's per-pixel functions with ``jit``.
+
+    Parameters
+    ----------
+    jit : callable
+        ``numba.njit(...)`` or ``numba.cuda.jit(device=True)``.
+    shared : types.SimpleNamespace
+        The shared functions of :func:`d3cli.kernels.pixel.build_shared`, compiled with the same ``jit``.
+
+    Returns
+    -------
+    types.SimpleNamespace
+        ``ncc_cost, cosine_cost, box_sum, ncc_window_cost``.
+    """
+
+    @jit
+    def ncc_cost(n, sl, sll, sr, srr, slr, min_variance):
+        """Matching cost ``(1 - NCC) / 2`` from window sums (docs/design.md, step 2).
+
+        ``n`` pixels; ``sl, sll`` sums of L and L^2; ``sr, srr`` of R and R^2; ``slr`` of
+        L*R (float64).  A window whose grey-level variance is <= ``min_variance`` is flat:
+        NCC is undefined there, cost 1.
+        """
+        if n <= 0:
+            return 1.0
+        inv = 1.0 / n
+        ml = sl * inv
+        mr = sr * inv
+        vl = sll * inv - ml * ml
+        vr = srr * inv - mr * mr
+        if vl <= min_variance or vr <= min_variance:
+            return 1.0
+        ncc = (slr * inv - ml * mr) / math.sqrt(vl * vr)
+        if ncc > 1.0:
+            ncc = 1.0
+        elif ncc < -1.0:
+            ncc = -1.0
+        return 0.5 * (1.0 - ncc)
+
+
+    @jit
+    def cosine_cost(fl, fr, nl, nr, v, u, d):
+        """Feature cost ``(1 - cos(f_L(u, v), f_R(u - d, v))) / 2`` (paper section III-A).
+
+        ``fl, fr`` are (H, W, C) L2-normalised feature maps of the level and ``nl, nr``
+        their (H, W) squared norms (1, or 0 where a feature vector is zero: "flat", cost
+        1 like a flat NCC window).  ``u - d < 0`` costs 1.  Accumulated in float64.
+        """
+        x = u - d
+        if x < 0 or nl[v, u] <= 0.0 or nr[v, x] <= 0.0:
+            return 1.0
+        dot = 0.0
+        for c in range(fl.shape[2]):
+            dot += float(fl[v, u, c]) * float(fr[v, x, c])
+        if dot > 1.0:
+            dot = 1.0
+        elif dot < -1.0:
+            dot = -1.0
+        return 0.5 * (1.0 - dot)
+
+
+    @jit
+    def box_sum(ii, r0, c0, r1, c1):
+        """Sum of rows r0..r1, columns c0..c1 (inclusive) from an (H+1, W+1) integral image."""
+        return ii[r1 + 1, c1 + 1] - ii[r0, c1 + 1] - ii[r1 + 1, c0] + ii[r0, c0]
+
+
+    @jit
+    def ncc_window_cost(ii_l, ii_ll, ii_r, ii_rr, v0, v1, c0, c1, d, slr, min_variance):
+        """Cost of a window clipped to rows v0..v1 and columns c0..c1 (right: c - d).
+
+        The left and right sums come from the (H+1, W+1) integral images of L, L^2, R and
+        R^2; ``slr`` is the window sum of L*R, which each driver keeps its own way.
+        """
+        n = (v1 - v0 + 1) * (c1 - c0 + 1)
+        sl = box_sum(ii_l, v0, c0, v1, c1)
+        sll = box_sum(ii_ll, v0, c0, v1, c1)
+        sr = box_sum(ii_r, v0, c0 - d, v1, c1 - d)
+        srr = box_sum(ii_rr, v0, c0 - d, v1, c1 - d)
+        return ncc_cost(n, sl, sll, sr, srr, slr, min_variance)
+
+    return SimpleNamespace(
+        ncc_cost=ncc_cost,
+        cosine_cost=cosine_cost,
+        box_sum=box_sum,
+        ncc_window_cost=ncc_window_cost,
+    )

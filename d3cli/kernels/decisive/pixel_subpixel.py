@@ -1,0 +1,56 @@
+"""Per-pixel function of the sub-pixel refinement: a parabola through three costs.
+Compiled for every target by :func:`build` (composed by
+:func:`d3cli.kernels.pixel.build_ops`)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from ..pixel import INF
+
+
+def build(jit, shared):
+    """Compile this step's per-pixel functions with ``jit``.
+
+    Parameters
+    ----------
+    jit : callable
+        ``numba.njit(...)`` or ``numba.cuda.jit(device=True)``.
+    shared : types.SimpleNamespace
+        The shared functions of :func:`d3cli.kernels.pixel.build_shared`, compiled with the same ``jit``.
+
+    Returns
+    -------
+    types.SimpleNamespace
+        ``subpixel_at``.
+    """
+    cost_or_inf = shared.cost_or_inf
+
+    @jit
+    def subpixel_at(cost, index, disp, v, u):
+        """Sub-pixel disparity by a parabola through C(d-1), C(d), C(d+1) (docs/design.md, step 8).
+
+        The offset is clamped to [-0.5, 0.5]; at the ends of the range or on a flat or
+        concave curve the integer disparity is returned; inf where undecided.
+        """
+        d = disp[v, u]
+        if d < 0:
+            return INF
+        c0 = cost_or_inf(cost, index, v, u, d - 1)
+        c1 = cost_or_inf(cost, index, v, u, d)
+        c2 = cost_or_inf(cost, index, v, u, d + 1)
+        if c0 == INF or c1 == INF or c2 == INF:
+            return float(d)  # an end of the range or of the band
+        denom = c0 + c2 - 2.0 * c1
+        if denom <= 0.0:
+            return float(d)
+        offset = 0.5 * (c0 - c2) / denom
+        if offset > 0.5:
+            offset = 0.5
+        elif offset < -0.5:
+            offset = -0.5
+        return d + offset
+
+    return SimpleNamespace(
+        subpixel_at=subpixel_at,
+    )

@@ -1,0 +1,91 @@
+"""LLVM intrinsics and inlined prefetch helpers shared by the CPU drivers:
+non-temporal stores and their fence, prefetch hints, the 16-lane splat of the vector
+intrinsics of :mod:`d3cli.kernels.aggregation.cpu_vector`."""
+
+from __future__ import annotations
+
+import platform
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
+
+from . import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
+
+
+@intrinsic
+def _store_nt(typingctx, arr, i, val):
+    """``arr.flat[i] = val`` (a C-contiguous array; val cast to its dtype) as a
+    non-temporal store: LLVM's ``!nontemporal`` hint, the line written around the caches
+    without being read first."""
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.gep(ary.data, [context.cast(builder, args[1], signature.args[1], types.intp)])
+        val = context.cast(builder, args[2], signature.args[2], signature.args[0].dtype)
+        store = builder.store(val, ptr)
+        store.set_metadata("nontemporal", builder.module.add_metadata([ir.Constant(ir.IntType(32), 1)]))
+        return context.get_dummy_value()
+
+    return types.void(arr, i, val), codegen
+
+
+#: Whether this machine is x86 (its non-temporal stores need an sfence).
+_X86 = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686")
+
+
+@intrinsic
+def _store_fence(typingctx):
+    """Order the non-temporal stores before (:func:`_store_nt`) before every later store:
+    x86's ``sfence``, where such stores are weakly ordered (nothing elsewhere)."""
+
+    def codegen(context, builder, signature, args):
+        if _X86:
+            fn = builder.module.declare_intrinsic("llvm.x86.sse.sfence", (), ir.FunctionType(ir.VoidType(), ()))
+            builder.call(fn, ())
+        return context.get_dummy_value()
+
+    return types.void(), codegen
+
+
+def _splat16(builder, x, ty):
+    """LLVM IR: a vector of 16 ``ty`` lanes, each ``x`` (for the vector intrinsics below)."""
+    undef = ir.Constant(ir.VectorType(ty, 16), ir.Undefined)
+    first = builder.insert_element(undef, x, ir.IntType(32)(0))
+    return builder.shuffle_vector(first, undef, ir.Constant(ir.VectorType(ir.IntType(32), 16), [0] * 16))
+
+
+@njit(cache=True, error_model="numpy")
+def _prefetch_band(cost, index, v, u):
+    """Prefetch the cells of pixel (u, v)'s band."""
+    off = index[v, u, 0]
+    _prefetch_cells(cost, off + index[v, u, 1], off + index[v, u, 2] - 1)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _prefetch_cells(cost, c0, c1):
+    """Prefetch the cells ``c0 .. c1`` of ``cost`` (c1 included): one per 64-byte line
+    from c0, and c1's."""
+    for c in range(c0, c1, 16):  # 16 cells: a 64-byte line
+        _prefetch(cost, c)
+    _prefetch(cost, c1)
+
+
+# ----------------------------------------------------------------------------- diffusion (step 5)
+@intrinsic
+def _prefetch(typingctx, arr, i):
+    """Hint that ``arr.flat[i]`` (a C-contiguous array) will be read soon: LLVM's
+    prefetch intrinsic, a no-op where the target has none.  A prefetch never faults: i
+    may lie past the end."""
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.gep(ary.data, [context.cast(builder, args[1], signature.args[1], types.intp)])
+        i8p = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        fn = builder.module.declare_intrinsic("llvm.prefetch", [i8p],
+                                              ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]))
+        # read, high temporal locality, data cache
+        builder.call(fn, [builder.bitcast(ptr, i8p), i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+
+    return types.void(arr, i), codegen

@@ -1,0 +1,155 @@
+"""The CPU matching cost (NCC, integral images, bands) against the slow references of
+tests/reference.py: costs to 1e-5 on small random inputs, known answers by hand."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+from tests import reference as ref
+from tests.volumes import random_images
+
+from d3cli.kernels import cpu
+from d3cli.kernels.volume import banded_index, to_dense
+
+COST_ATOL = 1e-5
+SHAPES = [(7, 9), (13, 11), (1, 12), (12, 1), (1, 1), (5, 6)]
+
+
+# ----------------------------------------------------------------------------- NCC cost
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("window", [1, 3, 5, 7])
+def test_ncc_cost_volume_matches_reference(shape, window):
+    rng = np.random.default_rng(hash((shape, window)) % 2**32)
+    left, right = random_images(rng, shape)
+    for max_disparity in (0, 3, 6):
+        got = cpu.ncc_cost_volume(left, right, max_disparity, window, 1e-2)
+        want = ref.ref_ncc_cost_volume(left, right, max_disparity, window, 1e-2)
+        assert got.shape == shape + (max_disparity + 1,) and got.dtype == np.float32
+        np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
+
+
+@pytest.mark.parametrize("window", [3, 9, 25])
+def test_ncc_cost_volume_running_row_sums_match_reference_across_row_blocks(window):
+    # 75 rows: the kernel's running row sums restart every 32 rows and add/subtract the
+    # rows entering/leaving the window in between; every row must still equal the
+    # float64 per-window reference, windows taller than a block included.
+    rng = np.random.default_rng(window)
+    left, right = random_images(rng, (75, 40))
+    got = cpu.ncc_cost_volume(left, right, 12, window, 1e-2)
+    want = ref.ref_ncc_cost_volume(left, right, 12, window, 1e-2)
+    np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
+
+
+def test_grid_bits():
+    img = np.full((3, 4), 17.0, np.float32)
+    assert cpu._grid_bits(img) == 6
+    img[2, 3] = 255.0 - 2.0**-6
+    assert cpu._grid_bits(img) == 6
+    img[1, 1] = 3.0 + 2.0**-7
+    assert cpu._grid_bits(img) == 20
+    img[0, 0] = -2.0**-20
+    assert cpu._grid_bits(img) == 20
+    for bad in (2.0**-21, 256.0, -256.0, np.nan, np.inf):
+        off = img.copy()
+        off[2, 0] = bad
+        assert cpu._grid_bits(off) == 64
+
+
+@pytest.mark.parametrize("window", [5, 25])
+def test_ncc_cost_volume_on_grid_images_does_not_depend_on_row_blocks(window):
+    # 8-bit left and 2^-20-grid right images (a warped right image): the driver's sums
+    # are exact, and it takes taller row blocks, as many as the threads allow; the
+    # costs must be the same bits whatever the blocks (one thread: other blocks than
+    # with all threads), and still match the reference.
+    rng = np.random.default_rng(window)
+    h, w = 300, 40
+    left = rng.integers(0, 256, (h, w)).astype(np.float32)
+    right = (rng.integers(0, 255 * 2**20, (h, w)) / 2.0**20).astype(np.float32)
+    assert cpu._grid_bits(left) == 6 and cpu._grid_bits(right) == 20
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = cpu.ncc_cost_volume(left, right, 12, window, 1e-2)
+    finally:
+        numba.set_num_threads(threads)
+    got = cpu.ncc_cost_volume(left, right, 12, window, 1e-2)
+    assert np.array_equal(one.view(np.uint32), got.view(np.uint32))
+    want = ref.ref_ncc_cost_volume(left, right, 12, window, 1e-2)
+    np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
+
+
+def test_ncc_cost_volume_with_flat_regions_matches_reference():
+    rng = np.random.default_rng(3)
+    left, right = random_images(rng, (13, 11))
+    left[2:9, 1:6] = 117.0  # flat windows inside: cost 1
+    right[5:, 6:] = 40.0
+    got = cpu.ncc_cost_volume(left, right, 5, 3, 0.5)
+    want = ref.ref_ncc_cost_volume(left, right, 5, 3, 0.5)
+    np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
+    assert (got[4:7, 2:5, :] == 1.0).all()
+
+
+@pytest.mark.parametrize("window", [3, 9])
+def test_banded_ncc_cost_volume_matches_reference(window):
+    # Bands constant over runs of columns (as the tiles of d3cli.method.band make them),
+    # narrow (<= cpu.NCC_NARROW unclipped cells: the row's one-loop slide) and wide (two
+    # loops) in turn along a row, empty ones, and bands clipped at both image borders:
+    # every stored cell equals the per-window reference.
+    rng = np.random.default_rng(window)
+    h, w, n_disp = 40, 70, 31
+    left, right = random_images(rng, (h, w))
+    lo = np.zeros((h, w), np.int64)
+    hi = np.zeros((h, w), np.int64)
+    for v in range(h):
+        u = 0
+        while u < w:
+            run = int(rng.integers(1, 12))
+            a = int(rng.integers(0, n_disp))
+            width = int(rng.choice([0, 1, 3, cpu.NCC_NARROW, cpu.NCC_NARROW + 1, 20]))
+            lo[v, u:u + run] = a
+            hi[v, u:u + run] = min(a + width, n_disp)
+            u += run
+    index, _ = banded_index(lo, hi)
+    got = cpu.ncc_cost_volume(left, right, n_disp - 1, window, 1e-2, index=index)
+    want = ref.ref_ncc_cost_volume(left, right, n_disp - 1, window, 1e-2)
+    dense = to_dense(got.cost, got.index, n_disp)
+    band = np.arange(n_disp)[None, None, :]
+    inside = (band >= lo[:, :, None]) & (band < hi[:, :, None])
+    assert np.isnan(dense[~inside]).all()
+    np.testing.assert_allclose(dense[inside], want[inside], rtol=0, atol=COST_ATOL)
+
+
+def test_ncc_identical_windows_cost_zero():
+    rng = np.random.default_rng(4)
+    left = rng.uniform(0, 255, (9, 15)).astype(np.float32)
+    shift = 3
+    right = rng.uniform(0, 255, left.shape).astype(np.float32)
+    right[:, : 15 - shift] = left[:, shift:]  # right (x) = left (x + shift)
+    cost = cpu.ncc_cost_volume(left, right, 5, 5, 1e-2)
+    np.testing.assert_allclose(cost[:, shift:, shift], 0.0, atol=COST_ATOL)
+
+
+def test_ncc_negated_windows_cost_one_and_missing_cells_one():
+    rng = np.random.default_rng(5)
+    left = rng.uniform(0, 255, (7, 12)).astype(np.float32)
+    right = 255.0 - left
+    cost = cpu.ncc_cost_volume(left, right, 4, 3, 1e-2)
+    np.testing.assert_allclose(cost[:, :, 0], 1.0, atol=COST_ATOL)
+    for u in range(4):  # u - d < 0: no right pixel
+        assert (cost[:, u, u + 1:] == 1.0).all()
+
+
+def test_ncc_affine_intensity_change_is_free():
+    rng = np.random.default_rng(6)
+    left = rng.uniform(0, 200, (7, 9)).astype(np.float32)
+    cost = cpu.ncc_cost_volume(left, 0.5 * left + 30.0, 2, 5, 1e-2)
+    np.testing.assert_allclose(cost[:, :, 0], 0.0, atol=COST_ATOL)
+
+
+def test_ncc_flat_window_costs_one():
+    rng = np.random.default_rng(7)
+    left = np.full((7, 9), 80.0, np.float32)
+    right = rng.uniform(0, 255, (7, 9)).astype(np.float32)
+    assert (cpu.ncc_cost_volume(left, right, 3, 5, 1e-2) == 1.0).all()
+    assert (cpu.ncc_cost_volume(right, left, 3, 5, 1e-2) == 1.0).all()
