@@ -1,21 +1,31 @@
-"""Compute kernels.  ``pixel.py`` holds the per-pixel math; ``cpu.py`` and ``cuda.py``
-compile it for their target and drive it.  :func:`get_backend` picks one.
-``volume.py`` is the banded volume layout, ``finishing.py`` and ``range_box.py`` the
-host-side step-8 kernels, ``road_fit.py`` the RANSAC scoring of step 6, ``allocator.py``
-the process's malloc settings (applied on import, below).  May import: ``errors`` only (``tests/test_architecture.py``)."""
+"""Compute kernels, by pipeline step, and the choice of backend.
+
+Each step package (``cost/``, ``aggregation/``, ``sgm/``, ``decisive/``, ``perspective/``,
+``finishing/``) holds the step's per-pixel math (``pixel*.py``: one body compiled for the CPU
+with ``numba.njit`` and for CUDA with ``numba.cuda.jit(device=True)``), its CPU driver and its
+CUDA driver side by side.  ``cpu.py`` and ``cuda.py`` are the two backends (thin facades over
+the steps), ``backend.py`` their contract; :func:`get_backend` picks one.  Shared pieces:
+``pixel.py`` (per-pixel helpers of several steps), ``volume.py`` (banded volume layout),
+``cache.py`` (numba cache folder, stale-cache drop), ``intrinsics.py`` (LLVM intrinsics),
+``cpu_common.py`` / ``cuda_launch.py`` (each target's compiled ops and launch helpers),
+``pool.py`` (task pool), ``allocator.py`` (malloc settings, applied on import below),
+``cuda_probe.py`` (the CUDA smoke test) and ``cuda_calls.py`` (launch and copy counter).
+May import: ``errors`` only, numba, numpy and llvmlite (``tests/test_architecture.py``).
+"""
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
+import warnings
 
 # Worker threads of numba's OpenMP layer sleep when a parallel loop ends instead of
 # spinning (GNU OpenMP's default).  The pipeline runs many short parallel loops with
-# serial steps in between; on a busy 2-core machine the spinning threads took the cores
-# those steps (and other processes, and --workers siblings) needed: PT-D3Stereo on a
-# 1280x720 road pair went from 6.2x to 4.0x SGBM's time, Middlebury-Q from 15.7x to 8.8x
-# (scripts/bench_speed.py, one loaded run each way).  Must be set before the OpenMP
-# runtime loads (the first parallel kernel call); a value the user set is kept.
+# serial steps in between; on a busy machine the spinning threads took the cores those
+# steps (and other processes, and --workers siblings) needed (docs/performance.md has the
+# measurement).  Must be set before the OpenMP runtime loads (the first parallel kernel
+# call); a value the user set is kept.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from ..errors import BackendUnavailable  # noqa: E402
@@ -31,27 +41,79 @@ log = logging.getLogger(__name__)
 SIMULATOR = "CUDA simulator (NUMBA_ENABLE_CUDASIM=1)"
 
 
-def _cuda_probe() -> tuple[str | None, str]:
-    """``(kind, reason)``: kind is "device", "simulator" or None (not usable); never raises."""
-    try:
-        from numba import config as numba_config
-        from numba import cuda  # numba-cuda provides the target
-    except Exception as exc:  # ImportError, or a broken CUDA install
-        return None, f"numba.cuda cannot be imported ({exc}); install the cuda extra: pip install 'd3stereo[cuda]'"
-    simulator = bool(getattr(numba_config, "ENABLE_CUDASIM", False))
-    if not simulator:
+def quiet_numba_cuda() -> None:
+    """Keep numba's CUDA warnings off the user's terminal.
+
+    numba warns on every launch of a small grid ("Grid size N will likely result in GPU
+    under-utilization") and on its deprecated device-array API; neither is the user's to act
+    on.  The low-occupancy check is switched off at its source (numba-cuda keeps its config in
+    ``numba.cuda.core.config``, numba's bundled target in ``numba.core.config``) and the warning
+    classes are ignored.
+    """
+    import importlib
+
+    for name in ("numba.cuda.core.config", "numba.core.config"):
         try:
-            if not cuda.is_available():
-                return None, "no CUDA driver or device found (numba.cuda.is_available() is False)"
-        except Exception as exc:
-            return None, f"CUDA initialisation failed ({exc})"
-    try:
-        from . import cuda as _cuda_backend  # noqa: F401
-    except ImportError as exc:
-        return None, f"the CUDA backend could not be loaded ({exc})"
+            importlib.import_module(name).CUDA_LOW_OCCUPANCY_WARNINGS = 0
+        except Exception:  # that numba has no such module
+            pass
+    for name, cls in (("numba.cuda.core.errors", "NumbaPerformanceWarning"),
+                      ("numba.core.errors", "NumbaPerformanceWarning"),
+                      ("numba.cuda.core.errors", "NumbaDeprecationWarning"),
+                      ("numba.core.errors", "NumbaDeprecationWarning"),
+                      ("numba.cuda.testing", "DeprecatedDeviceArrayApiWarning")):
+        try:
+            category = getattr(importlib.import_module(name), cls)
+        except Exception:
+            continue
+        warnings.filterwarnings("ignore", category=category)
+    warnings.filterwarnings("ignore", message=r"Grid size \d+ will likely result in GPU under-utilization")
+
+
+def _one_line(exc: BaseException) -> str:
+    """``Type: first line of the message`` (numba's errors run over many lines)."""
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+
+
+@functools.lru_cache(maxsize=1)
+def _cuda_probe() -> tuple[str | None, str]:
+    """``(kind, reason)``: kind is "device", "simulator" or None (not usable); never raises.
+
+    "Usable" means that the CUDA backend imported and one test kernel compiled, ran and
+    copied its result back (:mod:`d3cli.kernels.cuda_probe`); the answer is kept for the
+    process.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # numba's deprecation and performance chatter
+        try:
+            from numba import config as numba_config
+            from numba import cuda  # numba-cuda provides the target
+        except Exception as exc:  # ImportError, or a broken CUDA install
+            return None, (f"numba.cuda cannot be imported ({_one_line(exc)}); "
+                          "install the cuda extra: pip install 'd3stereo[cuda]'")
+        simulator = bool(getattr(numba_config, "ENABLE_CUDASIM", False))
+        if not simulator:
+            try:
+                if not cuda.is_available():
+                    return None, "no CUDA driver or device found (numba.cuda.is_available() is False)"
+            except Exception as exc:
+                return None, f"CUDA initialisation failed ({_one_line(exc)})"
+        try:
+            quiet_numba_cuda()
+            from . import cuda as _cuda_backend  # noqa: F401
+        except Exception as exc:  # e.g. numba-cuda 0.30 with numpy 2.5: AttributeError row_stack
+            return None, (f"the CUDA backend could not be loaded ({_one_line(exc)}); "
+                          "reinstall with pip install 'd3stereo[cuda]' (it pins a numpy that numba-cuda supports)")
+        try:
+            from .cuda_probe import launch_one
+
+            launch_one()
+        except Exception as exc:  # no NVVM/NVRTC, unsupported device, out of memory ...
+            return None, f"a test kernel could not run ({_one_line(exc)}); see the GPU section of the docs"
     if simulator:
         return "simulator", SIMULATOR
-    return "device", "CUDA device available"
+    return "device", "CUDA device available (a test kernel ran)"
 
 
 def cuda_status() -> tuple[bool, str]:
@@ -86,6 +148,13 @@ def device_description() -> str:
     except Exception as exc:  # a device that is listed but cannot be opened
         return f"CUDA device (details unavailable: {exc})"
     return f"{name}, compute capability {major}.{minor}, {total / 2**30:.1f} GiB"
+
+
+def _driver_present() -> bool:
+    """Whether an NVIDIA driver library is installed (a GPU machine whose CUDA stack is broken)."""
+    import ctypes.util
+
+    return ctypes.util.find_library("cuda") is not None or os.path.exists("/proc/driver/nvidia/version")
 
 
 def get_backend(name: str = "auto"):
@@ -125,5 +194,8 @@ def get_backend(name: str = "auto"):
 
     if kind == "simulator":
         reason = f"only the {SIMULATOR} is available, too slow for auto; pass --backend cuda to use it"
-    log.info("backend auto: using the CPU (%s)", reason)
+    if kind is None and _driver_present():
+        log.warning("backend auto: a CUDA driver is installed but CUDA cannot be used, running on the CPU: %s", reason)
+    else:
+        log.info("backend auto: using the CPU (%s)", reason)
     return cpu, "cpu"

@@ -188,7 +188,8 @@ class Backend(Protocol):
         -------
         disp : ndarray, int32, (H, W)
         sweeps : int
-            Sweeps run (the last one changed nothing unless the safeguard stopped it).
+            Sweeps run (the last one changed nothing unless the safeguard stopped it); on
+            CUDA a count left on the device, as :meth:`count_decided`'s.
         """
         ...
 
@@ -232,6 +233,15 @@ class Backend(Protocol):
 
     def count_decided(self, disparity) -> Any:
         """Number of decided pixels (>= 0) of an integer disparity map.
+
+        An ``int`` on the CPU; on CUDA a count left on the device (``int()`` reads it), so
+        that a pipeline level makes no copy to the host: :meth:`counts_to_host` reads many.
+        """
+        ...
+
+    def counts_to_host(self, values) -> list[int]:
+        """Plain ints of counts from :meth:`count_decided` and :meth:`diffuse` (its sweeps),
+        read from the device in one copy (per pool of counts) on CUDA.
         """
         ...
 

@@ -21,10 +21,14 @@ from pathlib import Path
 #: The kernels package folder.
 HERE = Path(__file__).resolve().parent
 #: Glob patterns (relative to the kernels folder) of the per-pixel modules.
-PIXEL_MODULES = ("pixel.py", "*/pixel.py", "*/pixel_*.py")
+PIXEL_MODULES = ("pixel.py", "*/pixel.py", "*/pixel_*.py",
+                 # finishing's inlined helpers: smoothing inlines exp.numpy_expf, range_box
+                 # inlines smoothing.at_least_zero
+                 "finishing/exp.py", "finishing/smoothing.py")
 #: Glob patterns of the modules whose cached functions inline per-pixel functions: the
-#: per-pixel modules themselves and every CPU driver module (named ``cpu*.py``).
-INLINING_MODULES = PIXEL_MODULES + ("cpu*.py", "*/cpu*.py")
+#: per-pixel modules themselves and every CPU and CUDA driver module (``cpu*.py``,
+#: ``cuda*.py``: the CUDA kernels are cached too, with the device functions linked in).
+INLINING_MODULES = PIXEL_MODULES + ("cpu*.py", "*/cpu*.py", "cuda*.py", "*/cuda*.py", "finishing/range_box.py")
 #: Name of the file, in the kernels folder's cache, holding the hash of the per-pixel modules.
 STAMP = "pixel.sha256"
 

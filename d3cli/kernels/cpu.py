@@ -40,3 +40,8 @@ def to_device(array):
 def to_host(array):
     """NumPy array of a backend array (identity on the CPU)."""
     return np.asarray(array)
+
+
+def counts_to_host(values):
+    """Plain ints of counts (the CPU's counts are ints already)."""
+    return [int(v) for v in values]

@@ -8,9 +8,8 @@ thread per pixel or per (pixel, disparity) cell.
 
 Every public function accepts device arrays or host arrays (uploaded on the way in).
 Results stay on the device, so the pipeline uploads the pair once and downloads the
-result once; :func:`to_host` brings any array back.  Within a level the only per-step
-downloads are single counters (:func:`count_decided`, the change counter of each
-diffusion sweep).
+result once; :func:`to_host` brings any array back.  Counts (decided pixels, diffusion
+sweeps) stay on the device too until :func:`counts_to_host` reads them all at once.
 
 Exactness: the drivers evaluate the same expressions in the same order as the CPU
 drivers (float64 window sums, float32 filter accumulation, Jacobi diffusion over the
@@ -30,6 +29,7 @@ from .cost.cuda import NCC_SCRATCH_BYTES, cosine_cost_volume, invalidate_out_of_
 from .cuda_launch import BLOCK_1D, BLOCK_2D, to_device, to_host
 from .decisive.cuda import count_decided, decisive_seeds, inherit, merge_sparse, min_cost, subpixel
 from .decisive.cuda_diffusion import diffuse
+from .device_counts import counts_to_host
 from .perspective.cuda import pt_restore, pt_warp
 from .sgm.cuda import sgm_smooth
 
@@ -40,6 +40,7 @@ __all__ = [
     "bilateral_filter",
     "cosine_cost_volume",
     "count_decided",
+    "counts_to_host",
     "decisive_seeds",
     "diffuse",
     "inherit",

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import cuda
 
+from . import cache as _cache  # noqa: F401  (drops stale cached kernels before any is loaded)
 from .pixel import build_ops
 from .volume import Volume, dense_index
 
@@ -78,7 +79,7 @@ def _copy(d_array):
     return out
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _fill_zero(flat):
     i = cuda.grid(1)
     if i < flat.shape[0]:

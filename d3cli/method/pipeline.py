@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,9 +35,10 @@ class DisparityResult:
         ``inf`` where invalid (only when hole filling is off).
     valid : ndarray, bool, (H, W)
         True where the method decided the disparity itself (before any filling).
-    levels : list of ndarray
+    levels : sequence of ndarray
         Per-level integer disparity maps (int32, -1 = undecided), finest first; empty for
-        baselines.  With the perspective transformation these are the narrow-range
+        baselines.  A map computed on a GPU is copied to the host when it is first read
+        (:class:`HostMaps`).  With the perspective transformation these are the narrow-range
         disparities d' against the warped right image (``info['pt']`` has the model).
     timings : dict of str to float
         Seconds per step.
@@ -52,6 +54,37 @@ class DisparityResult:
     timings: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+
+
+class HostMaps(Sequence):
+    """Backend maps read as NumPy arrays, each copied to the host when first indexed.
+
+    On the CPU the maps are NumPy arrays already; on CUDA a pair's per-level maps stay on
+    the device unless someone reads them (most batch runs do not), which saves a copy per
+    level.  Pickling (a result sent back from a worker process) copies them all.
+    """
+
+    def __init__(self, maps, to_host):
+        self._maps = list(maps)
+        self._to_host = to_host
+        self._host: dict[int, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return len(self._maps)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        i = range(len(self))[i]  # negative indices, IndexError
+        if i not in self._host:
+            self._host[i] = self._to_host(self._maps[i])
+        return self._host[i]
+
+    def __reduce__(self):
+        return list, (list(self),)
+
+    def __repr__(self) -> str:
+        return f"HostMaps({len(self)} maps)"
 
 
 def _grey(img: np.ndarray, name: str) -> np.ndarray:
@@ -70,6 +103,10 @@ def _as_0_255(img) -> np.ndarray:
     if arr.dtype == np.uint16:
         return arr.astype(np.float32) / np.float32(257.0)
     return arr.astype(np.float32)
+
+
+#: The per-level statistics that are counts (read from the device together).
+_COUNT_KEYS = ("seeds", "inherited", "decided", "sweeps")
 
 
 @dataclass
@@ -166,7 +203,7 @@ class D3Stereo:
         return DisparityResult(
             disparity=out,
             valid=valid,
-            levels=[backend.to_host(m) for m in match.level_maps],
+            levels=HostMaps(match.level_maps, backend.to_host),
             timings=timings,
             info=info,
             warnings=warnings,
@@ -255,7 +292,36 @@ class D3Stereo:
             level_maps.insert(0, disp)
             if level > stop_level:
                 cost = None  # free the coarse volume before the next, larger one
+        self._read_counts(per_level)
         return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level)
+
+    def _read_counts(self, per_level: list[dict]) -> None:
+        """Turn every level's counts into ints, all at once, and log the levels.
+
+        On CUDA the counts (seeds, inherited and decided pixels, sweeps) stay on the device
+        while the levels run, so that no level waits for a copy to the host; they are read
+        here together (``backend.counts_to_host``: one copy).
+        """
+        keys = [(stats, key) for stats in per_level for key in _COUNT_KEYS if key in stats]
+        for (stats, key), value in zip(keys, self.backend.counts_to_host([s[k] for s, k in keys])):
+            stats[key] = value
+        for stats in per_level:
+            shape = stats["shape"]
+            stats["decided_share"] = stats.pop("decided") / float(shape[0] * shape[1])
+            coarsest = "inherited" not in stats
+            log.debug(
+                "level %d %s: %s %d, %d sweeps, %.1f%% decided; cost %.3fs, %s %.3fs, diffusion %.3fs",
+                stats["level"],
+                "x".join(map(str, shape)),
+                "seeds" if coarsest else "inherited",
+                stats.get("seeds", stats.get("inherited", 0)),
+                stats["sweeps"],
+                100 * stats["decided_share"],
+                stats["time_cost"],
+                "seeds" if coarsest else "inheritance",
+                stats["time_decide"],
+                stats["time_diffusion"],
+            )
 
     def _match_level(self, left, right, coarser, *, level: int, coarsest: bool, dmax: int, stop_level: int,
                      features):
@@ -293,25 +359,12 @@ class D3Stereo:
                 backend=backend,
             )
         t3 = time.perf_counter()
-        stats.update(
-            sweeps=int(sweeps),
-            decided_share=backend.count_decided(disp) / float(shape[0] * shape[1]),
+        stats.update(  # counts may still be on the device: _read_counts makes them ints
+            sweeps=sweeps,
+            decided=backend.count_decided(disp),
             time_cost=t1 - t0,
             time_decide=t2 - t1,
             time_diffusion=t3 - t2,
-        )
-        log.debug(
-            "level %d %s: %s %d, %d sweeps, %.1f%% decided; cost %.3fs, %s %.3fs, diffusion %.3fs",
-            level + 1,
-            "x".join(map(str, shape)),
-            "seeds" if coarsest else "inherited",
-            stats.get("seeds", stats.get("inherited", 0)),
-            sweeps,
-            100 * stats["decided_share"],
-            t1 - t0,
-            "seeds" if coarsest else "inheritance",
-            t2 - t1,
-            t3 - t2,
         )
         return disp, cost, stats
 

@@ -14,7 +14,7 @@ _rbf_weight = ops.rbf_weight
 
 
 # ----------------------------------------------------------------------------- aggregation (step 3)
-@cuda.jit
+@cuda.jit(cache=True)
 def _rbf_weights_kernel(img, inv_ss2, inv_sc2, weights):
     u, v = cuda.grid(2)
     h = img.shape[0]
@@ -53,7 +53,7 @@ def rbf_weights(img, sigma_space, sigma_color):
     return weights
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _rbf_pass(src, dst, index, weights):
     """One pass of eq. 2; one thread per pixel, float32 accumulation in slot order as on
     the CPU; a neighbour whose band lacks the disparity contributes the pixel's own cell
@@ -101,7 +101,7 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
     return _pack(src, index, n_disp, dense_shape)
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _bilateral_kernel(cost, index, img, radius, inv_ss2, inv_sc2, out):
     u, v = cuda.grid(2)
     h = index.shape[0]

@@ -35,50 +35,63 @@ def _index_and_cells(index, h, w, n_disp):
 
 
 # ----------------------------------------------------------------------------- NCC cost (step 2)
-@cuda.jit
-def _row_prefix(img, power, rows):
-    """rows[y, x] = sum of img[y, :x + 1] ** power in float64 (one thread per row)."""
-    y = cuda.grid(1)
-    if y < img.shape[0]:
-        row = 0.0
-        for x in range(img.shape[1]):
-            val = numba.float64(img[y, x])
-            if power == 1:
-                row += val
-            else:
-                row += val * val
-            rows[y, x] = row
+@cuda.jit(cache=True)
+def _row_prefixes(left, right, rows):
+    """rows[k, y, x]: running sum of row y up to x of L, L^2, R, R^2 (k = 0..3), float64.
 
-
-@cuda.jit
-def _column_prefix(rows, ii):
-    """(H+1, W+1) integral image from row prefix sums (one thread per column of ``ii``).
-
-    ``ii[y + 1, x + 1] = ii[y, x + 1] + rows[y, x]``: the CPU's recurrence, hence the
-    same float64 values.
+    One thread per (image and power, row), all four in one launch; each row is summed left to
+    right as on the CPU, so the sums are the CPU's bit for bit.
     """
-    x = cuda.grid(1)
-    if x < ii.shape[1]:
-        acc = 0.0
-        ii[0, x] = acc
-        for y in range(rows.shape[0]):
-            if x > 0:
-                acc = acc + rows[y, x - 1]
-            ii[y + 1, x] = acc
+    i = cuda.grid(1)
+    h = left.shape[0]
+    if i >= 4 * h:
+        return
+    k = i // h
+    y = i - k * h
+    acc = 0.0
+    for x in range(left.shape[1]):
+        val = numba.float64(left[y, x]) if k < 2 else numba.float64(right[y, x])
+        if k % 2 == 0:
+            acc += val
+        else:
+            acc += val * val
+        rows[k, y, x] = acc
 
 
-def _integral_image(d_img, power):
-    h, w = d_img.shape
-    rows = cuda.device_array((h, w), np.float64)
-    ii = cuda.device_array((h + 1, w + 1), np.float64)
-    blocks, threads = _grid_1d(h)
-    _row_prefix[blocks, threads](d_img, power, rows)
-    blocks, threads = _grid_1d(w + 1)
-    _column_prefix[blocks, threads](rows, ii)
-    return ii
+@cuda.jit(cache=True)
+def _column_prefixes(rows, ii):
+    """(4, H+1, W+1) integral images from the row sums; one thread per (image, column).
+
+    ``ii[k, y + 1, x + 1] = ii[k, y, x + 1] + rows[k, y, x]``: the CPU's recurrence, hence the
+    same float64 values; the zero first row and column are written here too.
+    """
+    i = cuda.grid(1)
+    n_cols = ii.shape[2]
+    if i >= 4 * n_cols:
+        return
+    k = i // n_cols
+    x = i - k * n_cols
+    acc = 0.0
+    ii[k, 0, x] = acc
+    for y in range(rows.shape[1]):
+        if x > 0:
+            acc = acc + rows[k, y, x - 1]
+        ii[k, y + 1, x] = acc
 
 
-@cuda.jit
+def _integral_images(d_left, d_right):
+    """Integral images of L, L^2, R and R^2 (float64, (H+1, W+1) each) in two launches."""
+    h, w = d_left.shape
+    rows = cuda.device_array((4, h, w), np.float64)
+    ii = cuda.device_array((4, h + 1, w + 1), np.float64)
+    blocks, threads = _grid_1d(4 * h)
+    _row_prefixes[blocks, threads](d_left, d_right, rows)
+    blocks, threads = _grid_1d(4 * (w + 1))
+    _column_prefixes[blocks, threads](rows, ii)
+    return ii[0], ii[1], ii[2], ii[3]
+
+
+@cuda.jit(cache=True)
 def _cross_prefix(left, right, r, v_start, n_rows, prefix):
     """prefix[b, u + 1, d]: sum over columns <= u of the window-column sums of L(y, u) R(y, u - d).
 
@@ -103,7 +116,7 @@ def _cross_prefix(left, right, r, v_start, n_rows, prefix):
         prefix[b, u + 1, d] = prefix[b, u, d] + s
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _ncc_band(ii_l, ii_ll, ii_r, ii_rr, prefix, index, r, v_start, n_rows, min_variance, cost):
     """Costs of the bands of a band of rows; one thread per (column, row of the band)."""
     u, b = cuda.grid(2)
@@ -143,10 +156,7 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None
     dense = index is None
     d_index, n_cells = _index_and_cells(index, h, w, n_disp)
     r = int(window) // 2
-    ii_l = _integral_image(d_left, 1)
-    ii_ll = _integral_image(d_left, 2)
-    ii_r = _integral_image(d_right, 1)
-    ii_rr = _integral_image(d_right, 2)
+    ii_l, ii_ll, ii_r, ii_rr = _integral_images(d_left, d_right)
     cost = cuda.device_array(n_cells, np.float32)
     band = max(1, min(h, int(NCC_SCRATCH_BYTES) // ((w + 1) * n_disp * 8)))
     prefix = cuda.device_array((band, w + 1, n_disp), np.float64)
@@ -160,7 +170,7 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None
     return _pack(cost, d_index, n_disp, (h, w, n_disp) if dense else None)
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _invalidate(cost, index):
     u, v = cuda.grid(2)
     if v < index.shape[0] and u < index.shape[1]:
@@ -186,7 +196,7 @@ def invalidate_out_of_view(cost):
 
 
 # ----------------------------------------------------------------------------- feature cost
-@cuda.jit
+@cuda.jit(cache=True)
 def _cosine_kernel(fl, fr, nl, nr, index, cost):
     u, v = cuda.grid(2)
     if v < index.shape[0] and u < index.shape[1]:

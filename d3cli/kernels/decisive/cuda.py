@@ -8,7 +8,8 @@ import numba
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import _dev, _f64, _grid_2d, _is_device, _per_pixel, _unpack, _zeros, ops
+from ..cuda_launch import _dev, _f64, _grid_2d, _is_device, _per_pixel, _unpack, ops
+from ..device_counts import DeviceCount, next_slot
 from ..pixel import UNDECIDED
 
 
@@ -25,7 +26,7 @@ _subpixel_at = ops.subpixel_at
 
 
 # ----------------------------------------------------------------------------- seeds (step 4)
-@cuda.jit
+@cuda.jit(cache=True)
 def _seeds_kernel(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip, has_skip, out):
     u, v = cuda.grid(2)
     if v < index.shape[0] and u < index.shape[1]:
@@ -39,14 +40,14 @@ def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None):
     """Sparse seed map (docs/design.md, step 4); int32 (H, W), -1 undecided; ``skip`` as on the CPU."""
     flat, index, n_disp, _ = _unpack(cost)
     has_skip = skip is not None
-    d_skip = _dev(skip) if has_skip else _zeros(1, np.int32).reshape(1, 1)
+    d_skip = _dev(skip) if has_skip else cuda.device_array((1, 1), np.int32)  # never read
     return _per_pixel(
         _seeds_kernel, index.shape, np.int32, flat, index, n_disp, _f64(pkrn_min), _f64(epsilon),
         int(lr_tolerance), int(exclusion), d_skip, has_skip,
     )
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _min_cost_kernel(cost, index, out):
     u, v = cuda.grid(2)
     if v < index.shape[0] and u < index.shape[1]:
@@ -66,7 +67,7 @@ def _least_costs(flat, index):
 
 
 # ----------------------------------------------------------------------------- inheritance (step 7)
-@cuda.jit
+@cuda.jit(cache=True)
 def _inherit_kernel(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates, out):
     """One thread per 2x2 patch: the patch tests once for its four fine pixels."""
     pu, pv = cuda.grid(2)
@@ -89,7 +90,7 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)
-@cuda.jit
+@cuda.jit(cache=True)
 def _subpixel_kernel(cost, index, disp, out):
     u, v = cuda.grid(2)
     if v < disp.shape[0] and u < disp.shape[1]:
@@ -103,7 +104,7 @@ def subpixel(cost, disp):
     return _per_pixel(_subpixel_kernel, d_disp.shape, np.float32, flat, index, d_disp)
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _merge_kernel(primary, fallback, out):
     u, v = cuda.grid(2)
     if v < primary.shape[0] and u < primary.shape[1]:
@@ -119,19 +120,24 @@ def merge_sparse(primary, fallback):
     return _per_pixel(_merge_kernel, d_primary.shape, np.int32, d_primary, _dev(fallback))
 
 
-@cuda.jit
-def _count_kernel(disp, counter):
+@cuda.jit(cache=True)
+def _count_kernel(disp, counts, slot):
     u, v = cuda.grid(2)
     if v < disp.shape[0] and u < disp.shape[1] and disp[v, u] >= 0:
-        cuda.atomic.add(counter, 0, 1)
+        cuda.atomic.add(counts, slot, 1)
 
 
-def count_decided(disparity) -> int:
-    """Number of decided pixels (>= 0) of an integer disparity map (one scalar download)."""
+def count_decided(disparity):
+    """Number of decided pixels (>= 0) of an integer disparity map, left on the device.
+
+    Returns a :class:`~d3cli.kernels.device_counts.DeviceCount` (``int()`` of it, or
+    :func:`counts_to_host` of many, downloads); a host map is counted on the host.
+    """
     if not _is_device(disparity):
         return int(np.count_nonzero(np.asarray(disparity) >= 0))
     h, w = disparity.shape
-    counter = _zeros(1, np.int64)
+    pool, slot = next_slot()
     blocks, threads = _grid_2d(w, h)
-    _count_kernel[blocks, threads](disparity, counter)
-    return int(counter.copy_to_host()[0])
+    _count_kernel[blocks, threads](disparity, pool.array, slot)
+    return DeviceCount(pool, slot)
+

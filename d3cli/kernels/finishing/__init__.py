@@ -23,16 +23,17 @@ write disjoint cells, so the results do not depend on the thread count.  This pa
 re-exports the public kernels of its modules: ``finishing.fill_inside(...)`` and
 ``finishing.fill.fill_inside(...)`` are the same function.
 
-May import: ``d3cli.kernels.pool``, ``d3cli.kernels.cpu`` (only for the numba cache folder it
-chooses on import), numba, numpy and llvmlite; no other kernel step.
+May import: ``d3cli.kernels.pool``, ``d3cli.kernels.cache`` (the numba cache folder, chosen on
+import), numba, numpy and llvmlite; no other kernel step.
 """
 
 from __future__ import annotations
 
-# cpu.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
-# when it is imported; the decorators of this package's modules read that setting, so it
-# must run first (a package's __init__ runs before any of its modules).
-from .. import cpu as _cpu  # noqa: F401,E402  (import for its side effect)
+# cache.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
+# and drops stale cached functions when it is imported; the decorators of this package's
+# modules read that setting, so it must run first (a package's __init__ runs before any of
+# its modules).
+from .. import cache as _cache  # noqa: F401,E402  (import for its side effect)
 from . import exp, fill, occlusion, range_box, smoothing, speckle  # noqa: E402
 from .exp import numpy_exp, numpy_expf  # noqa: E402
 from .fill import (copy_nearest_rows, fill_inside, fill_rows_smaller_side, keep_valid,  # noqa: E402

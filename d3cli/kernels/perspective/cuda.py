@@ -19,7 +19,7 @@ _pt_restore_at = ops.pt_restore_at
 
 
 # ----------------------------------------------------------------------------- perspective transformation (step 6)
-@cuda.jit
+@cuda.jit(cache=True)
 def _pt_warp_kernel(right, a0, b1, b2, delta, out):
     x, v = cuda.grid(2)
     if v < right.shape[0] and x < right.shape[1]:
@@ -35,7 +35,7 @@ def pt_warp(right, a0, b1, b2, delta):
     return _per_pixel(_pt_warp_kernel, d_right.shape, np.float32, d_right, _f64(a0), _f64(b1), _f64(b2), _f64(delta))
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _pt_restore_kernel(disp, a0, b1, b2, delta, out):
     u, v = cuda.grid(2)
     if v < disp.shape[0] and u < disp.shape[1]:

@@ -43,14 +43,14 @@ def _sgm_line(cost, index, line, along_rows, p1, p2, scratch, size, acc, forward
         a, b = b, a
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _sgm_rows_kernel(cost, index, p1, p2, scratch, size, acc):
     v = cuda.grid(1)
     if v < index.shape[0]:
         _sgm_line(cost, index, v, True, p1, p2, scratch, size, acc, 0, 1)  # the first path stores
 
 
-@cuda.jit
+@cuda.jit(cache=True)
 def _sgm_columns_kernel(cost, index, p1, p2, scratch, size, acc):
     u = cuda.grid(1)
     if u < index.shape[1]:

@@ -53,8 +53,14 @@ def diffusion_cases():
     ]
 
 
+@pytest.mark.parametrize("cooperative", [True, False], ids=["one-kernel", "host-loop"])
 @pytest.mark.parametrize("settings", DIFFUSION_SETTINGS, ids=lambda s: "-".join(f"{k}{v}" for k, v in s.items()))
-def test_diffusion_matches_cpu(gpu, settings):
+def test_diffusion_matches_cpu(gpu, settings, cooperative, monkeypatch):
+    """Both ways of running the sweeps: one cooperative kernel per level, and the fallback
+    host loop (one launch per phase) where cooperative launches are unavailable."""
+    from d3cli.kernels.decisive import cuda_diffusion
+
+    monkeypatch.setattr(cuda_diffusion, "COOPERATIVE", cooperative)
     args = (settings["max_gap"], settings["tau"], settings["kappa_d"], settings["adversarial"], 100000)
     for cost, disp in diffusion_cases():
         least = cpu.min_cost(cost)
