@@ -22,6 +22,7 @@ from tests.kernels.cuda_fixtures import COST_ATOL, H, W, gpu, host, small_blocks
 from tests.volumes import random_images, sparse_map
 
 from d3cli.kernels import cpu, cuda_status
+from d3cli.kernels.device_counts import POOL_SLOTS
 from d3cli.kernels.volume import Volume
 
 pytestmark = pytest.mark.cuda
@@ -83,8 +84,8 @@ class TransferSpy:
 
 def test_a_level_stays_on_the_device(gpu, monkeypatch):
     """Cost, aggregation, seeds, diffusion, inheritance and sub-pixel on device arrays:
-    one upload (the band index, built on the host), and only counters (<= 2 numbers)
-    come back to the host."""
+    two uploads (the band index, built on the host, and the zeroed slots of the counts),
+    nothing comes back until the counts are read, then all of them in one copy."""
     from d3cli.kernels.volume import dense_index
 
     rng = np.random.default_rng(40)
@@ -100,9 +101,11 @@ def test_a_level_stays_on_the_device(gpu, monkeypatch):
     merged = gpu.merge_sparse(fine, seeds)
     n_decided = gpu.count_decided(merged)
     sub = gpu.subpixel(cost, merged)
-    assert spy.uploads == [(H, W, 3)]
-    assert sweeps >= 2 and all(n <= 2 for n in spy.downloads) and len(spy.downloads) == sweeps + 2
-    assert n_decided == int((gpu.to_host(merged) >= 0).sum()) > 0
+    assert spy.uploads == [(H, W, 3), (POOL_SLOTS,)]
+    assert spy.downloads == []
+    sweeps, n_decided = gpu.counts_to_host([sweeps, n_decided])
+    assert spy.downloads == [POOL_SLOTS]
+    assert sweeps >= 2 and n_decided == int((gpu.to_host(merged) >= 0).sum()) > 0
     assert np.isfinite(gpu.to_host(sub)).sum() == n_decided
 
 
@@ -120,12 +123,13 @@ def test_pipeline_on_cuda_equals_cpu(gpu, monkeypatch):
     want, got = results["cpu"], results["cuda"]
     n_levels = len(want.levels)
     # one upload of the pair (its pyramid), and per level its band index (stored cells;
-    # below the coarsest also the visible bands), built on the host from the coarser map;
-    # big downloads: those coarser maps, the level maps and the result
+    # below the coarsest also the visible bands), built on the host from the coarser map,
+    # and the zeroed slots of the counts; downloads: those coarser maps, the result, the
+    # counts once (the level maps only when read, below)
     images = [level.shape for level in want.levels] * 2
     indexes = [level.shape + (3,) for level in want.levels] + [level.shape + (3,) for level in want.levels[:-1]]
-    assert sorted(spy.uploads) == sorted(images + indexes)
-    assert len([n for n in spy.downloads if n > 2]) <= 2 * n_levels + 1
+    assert sorted(spy.uploads) == sorted(images + indexes + [(POOL_SLOTS,)])
+    assert len(spy.downloads) <= (n_levels - 1) + 2 + 1
     assert got.info["backend"] == "cuda"
     assert len(got.levels) == len(want.levels) >= 2
     for level_got, level_want in zip(got.levels, want.levels):
