@@ -1,65 +1,100 @@
-"""CUDA driver of the semi-global smoothing: one thread per line.  The contract:
-:mod:`d3cli.kernels.backend`."""
+"""CUDA driver of the semi-global smoothing: one block of 32 threads per image line, the
+line's disparities across the threads.  The contract: :mod:`d3cli.kernels.backend`."""
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import _grid_1d, _pack, _unpack, _zeros, ops
+from ..cuda_launch import _pack, _unpack, _zeros
 
-
-_sgm_step = ops.sgm_step
+#: Threads per line: a warp, the band's disparities spread over them (as libSGM does).
+LANES = 32
+#: Size of the block's shared minimum buffer (LANES may be set lower, never higher).
+MAX_LANES = 32
 
 
 # ----------------------------------------------------------------------------- semi-global smoothing
+# One path step of a pixel is ``pixel.sgm_step``'s arithmetic, cell by cell, with the band
+# spread over the block's threads instead of a loop: the previous pixel's least path cost is
+# a block-wide minimum (exact in any order), each cell's new cost the same float32
+# expression in the same order, so the result equals the CPU's bit for bit (the tests
+# compare them).  The line's two path buffers are in ``scratch`` (L(d) at base + d + 1, as
+# ``sgm_step``'s); a cell outside the previous pixel's band reads as inf by a bounds test
+# rather than from inf-filled sentinels (on the CPU they keep the loop branch-free), which
+# spares a reset of the buffer and a barrier per pixel.
 @cuda.jit(device=True)
-def _all_inf(buffer, start, stop):
-    for k in range(start, stop):
-        buffer[k] = np.inf
+def _previous(scratch, a, d, plo, phi):
+    """L(q, d) of the previous pixel, inf outside its band ``[plo, phi)``."""
+    if plo <= d and d < phi:
+        return scratch[a + d + 1]
+    return numba.float32(np.inf)
 
 
 @cuda.jit(device=True)
-def _sgm_line(cost, index, line, along_rows, p1, p2, scratch, size, acc, forward_mode, backward_mode):
-    """Both paths along one row (``along_rows``) or column of the image, forward then
-    backward, with the line's two path buffers in ``scratch`` (``pixel.sgm_step``'s layout,
-    inf outside the band); ``*_mode`` as the step's ``mode``."""
+def _sgm_path(cost, index, line, along_rows, backward, p1, p2, scratch, size, acc, mode, partial):
+    lane = cuda.threadIdx.x
+    lanes = cuda.blockDim.x
     n = index.shape[1] if along_rows else index.shape[0]
-    start = 2 * size * line
-    a, b = start, start + size
-    _all_inf(scratch, start, start + 2 * size)
-    plo, phi = 0, 0
+    a = 2 * size * line
+    b = a + size
+    plo = 0
+    phi = 0
+    quarter = numba.float32(0.25)
     for i in range(n):
-        v, u = (line, i) if along_rows else (i, line)
-        _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, forward_mode)
-        plo, phi = index[v, u, 1], index[v, u, 2]
-        a, b = b, a
-    _all_inf(scratch, start, start + 2 * size)
-    plo, phi = 0, 0
-    for i in range(n):
-        v, u = (line, n - 1 - i) if along_rows else (n - 1 - i, line)
-        _sgm_step(cost, index, v, u, (scratch, a), plo, phi, (scratch, b), p1, p2, acc, backward_mode)
-        plo, phi = index[v, u, 1], index[v, u, 2]
+        j = n - 1 - i if backward else i
+        v = line if along_rows else j
+        u = j if along_rows else line
+        off = index[v, u, 0]
+        lo = index[v, u, 1]
+        hi = index[v, u, 2]
+        m = numba.float32(np.inf)
+        for k in range(plo + lane, phi, lanes):
+            x = scratch[a + k + 1]
+            m = x if x < m else m
+        partial[lane] = m
+        cuda.syncthreads()
+        pm = numba.float32(np.inf)
+        for k in range(lanes):
+            x = partial[k]
+            pm = x if x < pm else pm
+        for d in range(lo + lane, hi, lanes):
+            el = cost[off + d]
+            if pm != np.inf:
+                x = _previous(scratch, a, d, plo, phi)  # L(q, d)
+                jump = pm + p2
+                best = x if x < jump else jump
+                y = _previous(scratch, a, d - 1, plo, phi) + p1  # L(q, d - 1) + P1
+                best = y if y < best else best
+                y = _previous(scratch, a, d + 1, plo, phi) + p1  # L(q, d + 1) + P1
+                best = y if y < best else best
+                el = el + (best - pm)
+            scratch[b + d + 1] = el
+            if mode == 0:
+                acc[off + d] = el
+            elif mode == 1:
+                acc[off + d] += el
+            else:
+                acc[off + d] = (acc[off + d] + el) * quarter
+        cuda.syncthreads()  # the pixel's costs are written, the previous ones and partial read
+        plo = lo
+        phi = hi
         a, b = b, a
 
 
 @cuda.jit(cache=True)
-def _sgm_rows_kernel(cost, index, p1, p2, scratch, size, acc):
-    v = cuda.grid(1)
-    if v < index.shape[0]:
-        _sgm_line(cost, index, v, True, p1, p2, scratch, size, acc, 0, 1)  # the first path stores
-
-
-@cuda.jit(cache=True)
-def _sgm_columns_kernel(cost, index, p1, p2, scratch, size, acc):
-    u = cuda.grid(1)
-    if u < index.shape[1]:
-        _sgm_line(cost, index, u, False, p1, p2, scratch, size, acc, 1, 2)  # the last one scales
+def _sgm_lines_kernel(cost, index, along_rows, p1, p2, scratch, size, acc, forward_mode, backward_mode):
+    """Both paths of one row (``along_rows``) or column per block: forward, then backward."""
+    line = cuda.blockIdx.x
+    partial = cuda.shared.array(MAX_LANES, numba.float32)
+    _sgm_path(cost, index, line, along_rows, False, p1, p2, scratch, size, acc, forward_mode, partial)
+    _sgm_path(cost, index, line, along_rows, True, p1, p2, scratch, size, acc, backward_mode, partial)
 
 
 def sgm_smooth(cost, p1, p2):
-    """Mean of four semi-global path costs of a volume (as the CPU backend's): one thread
-    per row for the row paths, one per column for the column paths.
+    """Mean of four semi-global path costs of a volume (as the CPU backend's): a block per
+    row for the row paths, then a block per column for the column paths.
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.sgm_smooth`.
     """
@@ -68,9 +103,8 @@ def sgm_smooth(cost, p1, p2):
     acc = _zeros(flat.shape[0], np.float32)  # cells outside every visible band stay 0
     p1, p2 = np.float32(p1), np.float32(p2)
     size = n_disp + 2
-    scratch = cuda.device_array(2 * size * max(h, w), np.float32)  # inf-filled by the kernels
-    blocks, threads = _grid_1d(h)
-    _sgm_rows_kernel[blocks, threads](flat, index, p1, p2, scratch, size, acc)
-    blocks, threads = _grid_1d(w)
-    _sgm_columns_kernel[blocks, threads](flat, index, p1, p2, scratch, size, acc)
+    scratch = cuda.device_array(2 * size * max(h, w), np.float32)  # read only where written
+    lanes = min(int(LANES), MAX_LANES)
+    _sgm_lines_kernel[h, lanes](flat, index, True, p1, p2, scratch, size, acc, 0, 1)  # the first path stores
+    _sgm_lines_kernel[w, lanes](flat, index, False, p1, p2, scratch, size, acc, 1, 2)  # the last one scales
     return _pack(acc, index, n_disp, dense)

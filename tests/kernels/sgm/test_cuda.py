@@ -14,6 +14,18 @@ from d3cli.kernels.volume import Volume
 pytestmark = pytest.mark.cuda
 
 
+@pytest.fixture(autouse=True)
+def few_lanes(gpu, monkeypatch):
+    """Under the simulator, 4 threads per line instead of a warp's 32: every thread runs as
+    Python there, and bands wider than 4 still exercise the stride over the lanes."""
+    from numba import config
+
+    from d3cli.kernels.sgm import cuda as sgm_cuda
+
+    if config.ENABLE_CUDASIM:
+        monkeypatch.setattr(sgm_cuda, "LANES", 4)
+
+
 @pytest.mark.parametrize("n_disp, levels", [(1, None), (6, 4)])
 def test_sgm_smooth_matches_cpu(gpu, n_disp, levels):
     rng = np.random.default_rng(29)
