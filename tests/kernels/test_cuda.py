@@ -186,7 +186,9 @@ def test_banded_level_matches_cpu(gpu, rbf):
     np.testing.assert_array_equal(host(gpu, gpu.decisive_seeds(got, 1.05, 1e-3, 1, 0, skip=gpu.to_device(skip))),
                                   cpu.decisive_seeds(want, 1.05, 1e-3, 1, 0, skip=skip))
     least = cpu.min_cost(want)
-    np.testing.assert_array_equal(host(gpu, gpu.min_cost(got)), least)
+    # the least costs are costs: equal to COST_ATOL (on a GPU the aggregation's multiply-adds
+    # are fused, so the last bit differs in about a third of the cells; exact in the simulator)
+    np.testing.assert_allclose(host(gpu, gpu.min_cost(got)), least, rtol=0, atol=COST_ATOL)
     start = sparse_map(rng, (H, W), 10, share=0.2)
     disp_want, sweeps_want = cpu.diffuse(want, start, least, 0.1, 1, 1, True, 1000)
     disp_got, sweeps_got = gpu.diffuse(got, start, gpu.min_cost(got), 0.1, 1, 1, True, 1000)
