@@ -186,6 +186,16 @@ def build_ops(jit):
         drivers inherit with ``inherit_quad`` (one 2x2 patch, each cell read once); the
         per-pixel form ``inherit_at`` states eq. 7-9 literally and the tests hold the two
         to each other.
+
+    Notes
+    -----
+    The protocol of the steps' factories: each step's ``pixel*.py`` has
+    ``build(jit, shared) -> SimpleNamespace`` that defines its per-pixel functions, decorated
+    with ``jit``, inside one closure, where they may call each other and ``shared`` (the
+    namespace of :func:`build_shared`, compiled with the same ``jit``).  One closure scope is
+    what lets the same source compile for the CPU and for CUDA (calling an ``@njit`` function
+    from a CUDA kernel fails in the simulator), which is also why a factory is as long as
+    the functions it holds (over 80 lines by design).
     """
     # Imported here: the step modules import this module's constants.
     from .aggregation import pixel as aggregation

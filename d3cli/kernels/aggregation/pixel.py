@@ -10,20 +10,7 @@ from types import SimpleNamespace
 
 
 def build(jit, shared):
-    """Compile this step's per-pixel functions with ``jit``.
-
-    Parameters
-    ----------
-    jit : callable
-        ``numba.njit(...)`` or ``numba.cuda.jit(device=True)``.
-    shared : types.SimpleNamespace
-        The shared functions of :func:`d3cli.kernels.pixel.build_shared`, compiled with the same ``jit``.
-
-    Returns
-    -------
-    types.SimpleNamespace
-        ``rbf_weight``.
-    """
+    """``rbf_weight`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
 
     @jit
     def rbf_weight(dy, dx, i_p, i_q, inv_sigma_space2, inv_sigma_color2):

@@ -9,24 +9,9 @@ from types import SimpleNamespace
 from ..pixel import INF, UINT, UNDECIDED
 
 
-# Longer than 80 lines by design: a factory whose length is the per-pixel functions it
-# compiles (each short); one closure scope is what lets the same source compile for the
-# CPU and for CUDA (calling an @njit function from a CUDA kernel fails in the simulator).
+# Over 80 lines by design, as every step's factory (see d3cli.kernels.pixel.build_ops).
 def build(jit, shared):
-    """Compile this step's per-pixel functions with ``jit``.
-
-    Parameters
-    ----------
-    jit : callable
-        ``numba.njit(...)`` or ``numba.cuda.jit(device=True)``.
-    shared : types.SimpleNamespace
-        The shared functions of :func:`d3cli.kernels.pixel.build_shared`, compiled with the same ``jit``.
-
-    Returns
-    -------
-    types.SimpleNamespace
-        ``seed_candidate, right_wta, seed_at``.
-    """
+    """``seed_candidate, right_wta, seed_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
     least = shared.least
     least_two = shared.least_two
     first_at = shared.first_at

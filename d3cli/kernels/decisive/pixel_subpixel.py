@@ -10,20 +10,7 @@ from ..pixel import INF
 
 
 def build(jit, shared):
-    """Compile this step's per-pixel functions with ``jit``.
-
-    Parameters
-    ----------
-    jit : callable
-        ``numba.njit(...)`` or ``numba.cuda.jit(device=True)``.
-    shared : types.SimpleNamespace
-        The shared functions of :func:`d3cli.kernels.pixel.build_shared`, compiled with the same ``jit``.
-
-    Returns
-    -------
-    types.SimpleNamespace
-        ``subpixel_at``.
-    """
+    """``subpixel_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
     cost_or_inf = shared.cost_or_inf
 
     @jit

@@ -11,20 +11,7 @@ from ..pixel import INF
 
 
 def build(jit, shared):
-    """Compile this step's per-pixel functions with ``jit``.
-
-    Parameters
-    ----------
-    jit : callable
-        ``numba.njit(...)`` or ``numba.cuda.jit(device=True)``.
-    shared : types.SimpleNamespace
-        The shared functions of :func:`d3cli.kernels.pixel.build_shared`, compiled with the same ``jit``.
-
-    Returns
-    -------
-    types.SimpleNamespace
-        ``pt_shift, bilinear_at, pt_restore_at``.
-    """
+    """``pt_shift, bilinear_at, pt_restore_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
 
     @jit
     def pt_shift(a0, b1, b2, delta, v, u):

@@ -11,24 +11,9 @@ import numpy as np
 from ..pixel import INF, UINT
 
 
-# Longer than 80 lines by design: a factory whose length is the per-pixel functions it
-# compiles (each short); one closure scope is what lets the same source compile for the
-# CPU and for CUDA (calling an @njit function from a CUDA kernel fails in the simulator).
+# Over 80 lines by design, as every step's factory (see d3cli.kernels.pixel.build_ops).
 def build(jit, shared):
-    """Compile this step's per-pixel functions with ``jit``.
-
-    Parameters
-    ----------
-    jit : callable
-        ``numba.njit(...)`` or ``numba.cuda.jit(device=True)``.
-    shared : types.SimpleNamespace
-        The shared functions of :func:`d3cli.kernels.pixel.build_shared`, compiled with the same ``jit``.
-
-    Returns
-    -------
-    types.SimpleNamespace
-        ``sgm_step``.
-    """
+    """``sgm_step`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
 
     @jit
     def sgm_step(cost, index, v, u, prev, plo, phi, cur, p1, p2, acc, mode):
