@@ -194,6 +194,28 @@ def _rbf_run(out, d0, ring, o0, o1, o2, o3, o4, o5, o6, o7, o8, weights, v, u0, 
             b += np.uint64(band)
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _rbf_pixel_borrowing(out, at, ring, ra, rh, rb, own, row_start, index, nbr, weights, v, u, lo, hi):
+    """One pixel of :func:`_rbf_row` some of whose neighbours lack a disparity of its band:
+    where the nine neighbours' cells lie and which disparities each holds (``nbr``), then
+    the cells in vectors of 16 (:func:`_rbf_cells_borrowing`)."""
+    h, w, _ = index.shape
+    band = hi - lo
+    for k in range(9):
+        y = min(max(v + k // 3 - 1, 0), h - 1)
+        x = min(max(u + k % 3 - 1, 0), w - 1)
+        r = ra if k < 3 else (rh if k < 6 else rb)
+        # [a0, a1): the disparities the neighbour holds; its cells at disparities
+        # lo .. hi - 1 would lie from nbr[3k] on
+        a0 = min(max(lo, index[y, x, 1]), hi)
+        a1 = max(min(hi, index[y, x, 2]), a0)
+        nbr[3 * k] = r + index[y, x, 0] - row_start[y] + lo
+        nbr[3 * k + 1] = a0 - lo
+        nbr[3 * k + 2] = a1 - lo
+    for c0 in range(0, band, 16):
+        _rbf_cells_borrowing(out, at, ring, own, nbr, weights, v, u, c0, band)
+
+
 @njit(cache=True, error_model="numpy")
 def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end, weights):
     """New values of row v, written into ``out`` (cell ``(v, u, d)`` at ``out[shift +
@@ -217,8 +239,6 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
     this never happens for a cell the later steps read, it only keeps the halo cells
     finite.
     """
-    # Longer than 80 lines: one compiled kernel whose loops were tuned together for speed
-    # (docs/performance.md); a split is a separate change, to be measured and md5-checked.
     h, w, _ = index.shape
     ym = max(v - 1, 0)
     yp = min(v + 1, h - 1)
@@ -268,19 +288,8 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
                      band, room)
             u += 1
             continue
-        for k in range(9):
-            y = min(max(v + k // 3 - 1, 0), h - 1)
-            x = min(max(u + k % 3 - 1, 0), w - 1)
-            r = ra if k < 3 else (rh if k < 6 else rb)
-            # [a0, a1): the disparities the neighbour holds; its cells at disparities
-            # lo .. hi - 1 would lie from nbr[3k] on
-            a0 = min(max(lo, index[y, x, 1]), hi)
-            a1 = max(min(hi, index[y, x, 2]), a0)
-            nbr[3 * k] = r + index[y, x, 0] - row_start[y] + lo
-            nbr[3 * k + 1] = a0 - lo
-            nbr[3 * k + 2] = a1 - lo
-        for c0 in range(0, band, 16):
-            _rbf_cells_borrowing(out, shift + off + lo, ring, rh + o4 + lo, nbr, weights, v, u, c0, band)
+        _rbf_pixel_borrowing(out, shift + off + lo, ring, ra, rh, rb, rh + o4 + lo, row_start, index, nbr, weights,
+                             v, u, lo, hi)
         u += 1
 
 

@@ -12,28 +12,12 @@ from ..pixel import UINT
 
 
 # ----------------------------------------------------------------------------- band search
-@njit(parallel=True, cache=True, error_model="numpy")
-def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
-    """Stored and visible indexes of a finer level's banded volume (host side, any backend).
-
-    The rules are those of :mod:`d3cli.method.band` (its docstring explains them; its
-    tests hold a NumPy reference): per tile ``[2 min dc - margin, 2 max dc + margin]``
-    over the decided coarse pixels under it (the full range when none is); visible per
-    pixel the hull of that over its tile and the eight around it; stored per pixel the
-    hull of the visible bands of the tiles within ``halo``.
-
-    Returns
-    -------
-    store, visible : ndarray, int32, (h, w, 3)
-    n_cells : int
-    """
-    # Longer than 80 lines: one compiled kernel whose loops were tuned together for speed
-    # (docs/performance.md); a split is a separate change, to be measured and md5-checked.
-    ch, cw = coarse.shape
-    nty = (h + tile - 1) // tile
-    ntx = (w + tile - 1) // tile
-    # Per column, once (no integer divisions per pixel): the coarse column, the
-    # tile column and the tile columns within the halo.
+# The construction in phases, each one compiled loop; band_indexes (plain Python) runs them
+# in turn.  Integer arithmetic only: the phases give the same indexes as one loop nest.
+@njit(cache=True, error_model="numpy")
+def _column_tables(w, tile, halo, cw, ntx):
+    """Per column, once (no integer divisions per pixel): the coarse column, the tile
+    column and the first and last tile columns within the halo."""
     col_cu = np.empty(w, np.int64)
     col_tx = np.empty(w, np.int64)
     col_tx0 = np.empty(w, np.int64)
@@ -43,6 +27,14 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
         col_tx[u] = u // tile
         col_tx0[u] = min(max((u - halo) // tile, 0), ntx - 1)
         col_tx1[u] = min(max((u + halo) // tile, 0), ntx - 1)
+    return col_cu, col_tx, col_tx0, col_tx1
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _tile_bands(coarse, h, w, n_disp, margin, tile, nty, ntx, col_cu, col_tx):
+    """Each tile's own band ``[2 min dc - margin, 2 max dc + margin]`` over the decided
+    coarse pixels under it (the full range when none is)."""
+    ch = coarse.shape[0]
     own_lo = np.zeros((nty, ntx), np.int64)
     own_hi = np.full((nty, ntx), n_disp, np.int64)
     for ty in prange(nty):  # one tile row per task: no two tasks touch a tile
@@ -73,7 +65,13 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
                 hi = min(max(2 * t_max[tx] + margin + 1, 1), n_disp)
                 own_lo[ty, tx] = lo
                 own_hi[ty, tx] = max(hi, lo + 1)
-    # each tile's band: the hull over itself and the eight tiles around it
+    return own_lo, own_hi
+
+
+@njit(cache=True, error_model="numpy")
+def _neighbour_hulls(own_lo, own_hi):
+    """Each tile's visible band: the hull over itself and the eight tiles around it."""
+    nty, ntx = own_lo.shape
     t_lo = own_lo.copy()
     t_hi = own_hi.copy()
     for ty in range(nty):
@@ -82,17 +80,28 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
                 for xx in range(max(tx - 1, 0), min(tx + 1, ntx - 1) + 1):
                     t_lo[ty, tx] = min(t_lo[ty, tx], own_lo[yy, xx])
                     t_hi[ty, tx] = max(t_hi[ty, tx], own_hi[yy, xx])
-    # Runs of columns with the same tiles (own and within the halo) have the same bands
-    # in a row: per row the stored band of each run and the row's cells first, then the
-    # bands and offsets written once per pixel, instead of a second pass over the
-    # stored bands for the offsets.
-    seg = np.empty(w + 1, np.int64)  # run k: columns seg[k] .. seg[k + 1] - 1
+    return t_lo, t_hi
+
+
+@njit(cache=True, error_model="numpy")
+def _column_runs(w, col_tx, col_tx0, col_tx1):
+    """Runs of columns with the same tiles (own and within the halo), which have the same
+    bands in a row: run k is columns seg[k] .. seg[k + 1] - 1; (seg, n_seg)."""
+    seg = np.empty(w + 1, np.int64)
     n_seg = 0
     for u in range(w):
         if u == 0 or col_tx0[u] != col_tx0[u - 1] or col_tx1[u] != col_tx1[u - 1] or col_tx[u] != col_tx[u - 1]:
             seg[n_seg] = u
             n_seg += 1
     seg[n_seg] = w
+    return seg, n_seg
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _stored_runs(h, tile, halo, nty, seg, n_seg, col_tx, col_tx0, col_tx1, t_lo, t_hi):
+    """Per row the stored band of each run (the hull of the visible bands of the tiles
+    within ``halo``) and the cells of the rows before it (prefix sums, row_cells[h] the
+    total)."""
     seg_lo = np.empty((h, n_seg), np.int64)
     seg_hi = np.empty((h, n_seg), np.int64)
     row_cells = np.zeros(h + 1, np.int64)
@@ -116,11 +125,18 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
         row_cells[v + 1] = total
     for v in range(h):
         row_cells[v + 1] += row_cells[v]
+    return seg_lo, seg_hi, row_cells
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _write_indexes(h, w, tile, seg, n_seg, col_tx, t_lo, t_hi, seg_lo, seg_hi, row_cells):
+    """The stored and visible indexes, the bands and offsets written once per pixel (the
+    cells packed pixel after pixel).  The visible bands with streaming stores (_store_nt):
+    they are read only after the level's cost and aggregation, which evict them anyway; the
+    stored ones go to the NCC next, from the caches."""
     store = np.empty((h, w, 3), np.int32)
     visible = np.empty((h, w, 3), np.int32)
-    # The visible bands with streaming stores (_store_nt): they are read only after the
-    # level's cost and aggregation, which evict them anyway; the stored ones go to the NCC next, from the caches.
-    for v in prange(h):  # the cells are packed pixel after pixel
+    for v in prange(h):
         ty = v // tile
         base = row_cells[v]
         sv = store[v]
@@ -145,4 +161,30 @@ def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
                 _store_nt(vf, UINT(3 * u + 2), v_hi)
             base += size * (u1 - u0)
         _store_fence()
-    return store, visible, row_cells[h]
+    return store, visible
+
+
+def band_indexes(coarse, h, w, n_disp, margin, tile, halo):
+    """Stored and visible indexes of a finer level's banded volume (host side, any backend).
+
+    The rules are those of :mod:`d3cli.method.band` (its docstring explains them; its
+    tests hold a NumPy reference): per tile ``[2 min dc - margin, 2 max dc + margin]``
+    over the decided coarse pixels under it (the full range when none is); visible per
+    pixel the hull of that over its tile and the eight around it; stored per pixel the
+    hull of the visible bands of the tiles within ``halo``.
+
+    Returns
+    -------
+    store, visible : ndarray, int32, (h, w, 3)
+    n_cells : int
+    """
+    ch, cw = coarse.shape
+    nty = (h + tile - 1) // tile
+    ntx = (w + tile - 1) // tile
+    col_cu, col_tx, col_tx0, col_tx1 = _column_tables(w, tile, halo, cw, ntx)
+    own_lo, own_hi = _tile_bands(coarse, h, w, n_disp, margin, tile, nty, ntx, col_cu, col_tx)
+    t_lo, t_hi = _neighbour_hulls(own_lo, own_hi)
+    seg, n_seg = _column_runs(w, col_tx, col_tx0, col_tx1)
+    seg_lo, seg_hi, row_cells = _stored_runs(h, tile, halo, nty, seg, n_seg, col_tx, col_tx0, col_tx1, t_lo, t_hi)
+    store, visible = _write_indexes(h, w, tile, seg, n_seg, col_tx, t_lo, t_hi, seg_lo, seg_hi, row_cells)
+    return store, visible, int(row_cells[h])

@@ -305,16 +305,12 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
     from column to column while the band stays the same and the window is not clipped,
     and is summed afresh otherwise.  The window means and variances of unclipped windows
     are computed once per column (:func:`_window_stats`), not once per cell.  The cells
-    of unclipped windows are done in two passes over the row: the first leaves each
-    cell's numerator ``slr / n - m_l m_r`` and ``v_l v_r`` (-1: a flat window) in the
-    row buffers ``num``, ``den``; the second, one loop over the row's contiguous cells,
-    takes the square root and the division (a band of 5-7 cells is shorter than a
-    vector; a row of cells is not).  Operation for operation this is :func:`pixel.ncc_cost`, so the values are the
-    same bits.  Cells of clipped windows (the image borders) get their ``num``, ``den``
-    from their own box sums (:func:`_clipped_terms`) before that second pass.
-    """
-    # Longer than 80 lines: one compiled kernel whose loops were tuned together for speed
-    # (docs/performance.md); a split is a separate change, to be measured and md5-checked.
+    of unclipped windows are done in two passes: the first leaves each cell's numerator
+    ``slr / n - m_l m_r`` and ``v_l v_r`` (-1: flat) in ``num``, ``den``; the second
+    (:func:`_costs_from_terms`) runs over the row's contiguous cells (a band of 5-7 cells is
+    shorter than a vector; a row is not).  Operation for operation this is
+    :func:`pixel.ncc_cost`: the same bits.  Clipped windows (the image borders) get their
+    ``num``, ``den`` from their own box sums (:func:`_clipped_terms`)."""
     v0 = max(0, v - r)
     v1 = min(h - 1, v + r)
     n_full = (v1 - v0 + 1) * (2 * r + 1)
@@ -381,8 +377,14 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
             run_hi = -1
     if clipped:
         _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0, v1, w, r, min_variance)
-    out = cost[start:start + n_row]
-    for j in range(n_row):
+    _costs_from_terms(cost[start:start + n_row], num, den)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _costs_from_terms(out, num, den):
+    """The second pass of :func:`_ncc_row`: ``(1 - NCC) / 2`` of the row's cells from their
+    numerators and variance products, one loop over the contiguous cells."""
+    for j in range(out.shape[0]):
         den_j = den[j]
         ncc = num[j] / np.sqrt(den_j)
         if ncc > 1.0:
