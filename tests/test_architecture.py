@@ -118,7 +118,7 @@ def test_kernels_never_import_config_data_or_click():
 KERNEL_STEPS = ("cost", "aggregation", "sgm", "decisive", "perspective", "finishing")
 KERNEL_SHARED = {"pixel", "volume", "cache", "intrinsics", "cpu_common", "cuda_launch", "device_counts", "pool"}
 #: Outside d3cli, what a step module may import.
-KERNEL_STEP_LIBRARIES = {"__future__", "math", "platform", "types", "typing", "numba", "numpy", "llvmlite"}
+KERNEL_STEP_LIBRARIES = {"__future__", "logging", "math", "platform", "types", "typing", "numba", "numpy", "llvmlite"}
 
 
 @pytest.mark.parametrize("step", KERNEL_STEPS)
