@@ -119,13 +119,24 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
             result.warnings.append(clipped_warning(written["png_clipped"]))
         scores, eval_error = _score(pair, left, right, result.disparity, pair_dir) if evaluate else (None, None)
         write_panel(pair_dir, pair.name, left, scores)  # panel.png: the pair at a glance
+        for text in result.warnings:
+            log.warning("%s: %s", pair.name, text)
+        stored = _stored_result(pair, method, settings, fingerprint, result, (height, width), dmax, written, scores,
+                                eval_error, time.perf_counter() - t0)
+        write_json(pair_dir / RESULT_FILE, stored)  # last: marks the pair complete
     except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
+        # (one block from the first output to result.json: a Ctrl-C between the two left
+        # outputs without a result.json behind)
         remove_pair_files(pair_dir, remove_folder=True)
         raise
-    for text in result.warnings:
-        log.warning("%s: %s", pair.name, text)
-    wall = time.perf_counter() - t0
-    stored = {
+    return stored
+
+
+def _stored_result(pair, method, settings, fingerprint, result, shape, dmax, written, scores, eval_error,
+                   wall) -> dict:
+    """What result.json records of a computed pair."""
+    height, width = shape
+    return {
         "pair": pair.name,
         "family": pair.family,
         "method": method,
@@ -142,12 +153,6 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
         "info": result.info,
         "warnings": list(result.warnings),
     }
-    try:
-        write_json(pair_dir / RESULT_FILE, stored)  # last: marks the pair complete
-    except BaseException:
-        remove_pair_files(pair_dir, remove_folder=True)
-        raise
-    return stored
 
 
 def _resolve_range(pair, width: int, override: int | None) -> tuple[int, str | None]:

@@ -137,3 +137,33 @@ def test_ctrl_c_while_the_lock_is_taken_leaves_no_lock(tmp_path, pairs_root, mon
     assert result.output.strip().splitlines()[-1] == "Interrupted; rerun the same command to resume"
     assert not (out / LOCK_FILE).exists()
     assert signal.getsignal(signal.SIGTERM) == term_before  # the batch's SIGTERM handler is gone again
+
+
+def test_ctrl_c_between_a_pairs_outputs_and_its_result_json_leaves_no_half_pair(tmp_path, pairs_root, monkeypatch):
+    """A Ctrl-C after a pair's maps and panel are written, while its warnings are logged and
+    before result.json: the pair folder goes (it held outputs without result.json before)."""
+    real = d3cli.batch.runner.compute_pair
+    real_log = d3cli.batch.runner.log
+
+    def with_a_warning(method, cfg, left, right, *, max_disparity, **kwargs):
+        result = real(method, cfg, left, right, max_disparity=max_disparity, **kwargs)
+        result.warnings.append("a warning of this test")
+        return result
+
+    class InterruptedLog:
+        def __getattr__(self, name):
+            return getattr(real_log, name)
+
+        def warning(self, message, *args):
+            if "a warning of this test" in args:
+                raise KeyboardInterrupt
+            real_log.warning(message, *args)
+
+    monkeypatch.setattr(d3cli.batch.runner, "compute_pair", with_a_warning)
+    monkeypatch.setattr(d3cli.batch.runner, "log", InterruptedLog())
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["run", str(pairs_root), "-o", str(out), "--method", "sgbm"])
+    assert result.exit_code == 130, result.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["interrupted"] is True and run["pairs"] == []
+    assert [p.name for p in out.iterdir() if p.is_dir()] == []
