@@ -114,7 +114,6 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     e = html.escape
     out = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{e(title)}</title>'
            f"<style>{_CSS}</style></head><body><h1>{e(title)}</h1>"]
-    counts = summary["counts"]
     out.append(f"<p>{e(counts_sentence(summary))} Metric definitions: README section “Metrics (exact definitions)”; _all = all pixels with "
                  "ground truth, _noc = non-occluded mask.</p>")
     # Summary table

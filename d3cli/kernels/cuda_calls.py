@@ -52,16 +52,6 @@ class CudaCalls:
     seconds: defaultdict = field(default_factory=lambda: defaultdict(float))
     timing: bool = False
 
-    def table(self, limit: int = 20) -> str:
-        """The kernels by launches (and time when timed), one line each."""
-        lines = [f"launches {self.launches}, device-to-host copies {self.device_to_host}, "
-                 f"host-to-device copies {self.host_to_device}"]
-        names = sorted(self.by_kernel, key=lambda k: (-self.seconds.get(k, 0.0), -self.by_kernel[k], k))
-        for name in names[:limit]:
-            extra = f" {1e3 * self.seconds[name]:9.3f} ms" if self.timing else ""
-            lines.append(f"  {self.by_kernel[name]:6d} x {name}{extra}")
-        return "\n".join(lines)
-
 
 def _kernel_name(kernel) -> str:
     fn = getattr(kernel, "py_func", None) or getattr(kernel, "fn", None) or kernel

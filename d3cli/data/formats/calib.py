@@ -9,7 +9,7 @@ import re
 
 import numpy as np
 
-from .images import _existing_file, _read_bytes, image_size
+from .images import _existing_file, _read_bytes
 
 
 # Keys read_calib may return, with the numeric type of each.

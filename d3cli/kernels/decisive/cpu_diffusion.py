@@ -9,7 +9,6 @@ from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
 from ..cpu_common import _unpack, ops
-from .cpu_maps import min_cost
 from ..intrinsics import _prefetch_cells
 from ..pixel import UINT, UNDECIDED
 
