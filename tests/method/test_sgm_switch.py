@@ -13,6 +13,7 @@ from d3cli.kernels import cpu
 from d3cli.method.cost import level_cost
 
 SGM = ["aggregation.sgm_p1=0.3", "aggregation.sgm_p2=1.2"]
+OFF = ["aggregation.sgm_p1=0", "aggregation.sgm_p2=0"]
 
 
 def _pair():
@@ -22,7 +23,7 @@ def _pair():
 
 def test_the_finest_level_cost_is_the_smoothed_aggregated_cost():
     left, right, _ = _pair()
-    plain = level_cost(left, right, level=0, max_disparity=16, cfg=load_config(None), backend=cpu)
+    plain = level_cost(left, right, level=0, max_disparity=16, cfg=load_config(None, OFF), backend=cpu)
     smoothed = level_cost(left, right, level=0, max_disparity=16, cfg=load_config(None, SGM), backend=cpu)
     want = cpu.sgm_smooth(plain, 0.3, 1.2)
     np.testing.assert_array_equal(smoothed.index, plain.index)
@@ -33,7 +34,7 @@ def test_the_finest_level_cost_is_the_smoothed_aggregated_cost():
 def test_coarser_levels_are_not_smoothed():
     left, right, _ = _pair()
     half = (left[::2, ::2].copy(), right[::2, ::2].copy())
-    plain = level_cost(*half, level=1, max_disparity=16, cfg=load_config(None), backend=cpu)
+    plain = level_cost(*half, level=1, max_disparity=16, cfg=load_config(None, OFF), backend=cpu)
     other = level_cost(*half, level=1, max_disparity=16, cfg=load_config(None, SGM), backend=cpu)
     np.testing.assert_array_equal(other.cost, plain.cost)
 
@@ -49,4 +50,9 @@ def test_a_textured_constant_shift_is_still_found_exactly():
 def test_kitti_config_turns_it_on():
     cfg = load_config(Path(__file__).resolve().parents[2] / "configs" / "kitti.yaml")
     assert (cfg.aggregation.sgm_p1, cfg.aggregation.sgm_p2) == (0.3, 1.2)
-    assert load_config(None).aggregation.sgm_p2 == 0.0  # the defaults stay the paper's method
+    assert (load_config(None).aggregation.sgm_p1, load_config(None).aggregation.sgm_p2) == (0.3, 1.2)
+
+
+def test_paper_config_turns_it_off():
+    cfg = load_config(Path(__file__).resolve().parents[2] / "configs" / "paper.yaml")
+    assert (cfg.aggregation.sgm_p1, cfg.aggregation.sgm_p2) == (0.0, 0.0)
