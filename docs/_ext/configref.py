@@ -37,23 +37,36 @@ def _field_docs(cls) -> dict[str, tuple[str, str]]:
     """``{field: (annotation source, meaning)}`` of one dataclass, from its source.
 
     The meaning is the comment on the field's line(s), preceded by the block of comment
-    lines directly above it (fields documented by a paragraph of comments).
+    lines directly above it (fields documented by a paragraph of comments).  A field with
+    no comment of its own right after a commented one (no blank line between) belongs to
+    that field's comment when the comment is a paragraph above it, names the field, or the
+    two names differ in their last letter only (``cx``, ``cy``): its meaning is then
+    ``see <that field>``.
     """
     source = inspect.getsource(cls)
     lines = source.splitlines()
     comments = _comments(source)
     out = {}
+    head = None  # the commented field that the fields below it share a paragraph with
     for stmt in ast.parse(source).body[0].body:
         if not (isinstance(stmt, ast.AnnAssign) and isinstance(stmt.target, ast.Name)):
+            head = None
             continue
+        if not lines[stmt.lineno - 2].strip():
+            head = None
         above = []
         n = stmt.lineno - 1
         while n >= 1 and lines[n - 1].strip().startswith("#"):
             above.insert(0, comments[n])
             n -= 1
         beside = [comments[k] for k in range(stmt.lineno, stmt.end_lineno + 1) if k in comments]
-        text = " ".join(above + beside).replace(" ... ...", "")
-        out[stmt.target.id] = (ast.get_source_segment(source, stmt.annotation), text)
+        name = stmt.target.id
+        text = " ".join(above + beside)
+        if text:
+            head = (name, text, bool(above))
+        elif head is not None and (head[2] or name in head[1] or name[:-1] == head[0][:-1]):
+            text = f"see {head[0]}"
+        out[name] = (ast.get_source_segment(source, stmt.annotation), text)
     return out
 
 
@@ -68,6 +81,13 @@ def _yaml(value) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return str(value)
+
+
+def _meaning(section: str, text: str) -> list[nodes.Node]:
+    """The meaning cell; ``see KEY`` becomes a reference to the row of that key."""
+    if text.startswith("see ") and " " not in text[4:]:
+        return [nodes.Text("see "), nodes.literal(text=f"{section}.{text[4:]}")]
+    return [nodes.Text(text)]
 
 
 def _table(header: list[str], rows: list[list[nodes.Node]], widths: list[int]) -> nodes.table:
@@ -125,7 +145,7 @@ class ConfigReference(SphinxDirective):
                     [nodes.literal(text=annotation)],
                     [nodes.literal(text=_yaml(default))],
                     [nodes.Text(check[1] if check else "")],
-                    [nodes.Text(meaning)],
+                    _meaning(sec.name, meaning),
                 ])
             node += _table(["key", "type", "default", "accepted", "meaning"], rows, [18, 12, 10, 18, 42])
             out.append(node)
