@@ -76,3 +76,10 @@ def test_readme_starts_with_the_two_commands_for_a_fresh_machine():
         'python3 -m venv .venv && . .venv/bin/activate && pip install -e ".[test]" && d3stereo run --eval -o out\n'
         "python -m pytest -q\n"
     )
+
+
+def test_readme_picture_is_in_the_repository_and_small():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    pictures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", readme)
+    assert pictures == ["docs/_static/panel-motorcycle.png"]
+    assert (ROOT / pictures[0]).stat().st_size < 300_000
