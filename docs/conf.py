@@ -69,5 +69,5 @@ html_theme = "alabaster"
 html_static_path = ["_static"]
 html_title = f"d3stereo {release}"
 html_theme_options = {"description": "Decisive disparity diffusion stereo matching", "fixed_sidebar": True}
-# No search index download, no external fonts: the site works offline.
+# The site is the rendered pages only (the Markdown sources are in the repository).
 html_copy_source = False
