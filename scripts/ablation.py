@@ -18,7 +18,7 @@ What a switch means (README "Reproducing the paper"):
 
 Usage::
 
-    python scripts/ablation.py ../shared/data --family middlebury --table b   # Table I(b)
+    python scripts/ablation.py DATA --family middlebury --table b   # Table I(b)
     d3stereo synth /tmp/road6 --n 6 --seed 0 --width 640 --height 360
     python scripts/ablation.py /tmp/road6 --table a --set cost.window=25      # Table I(a)
 

@@ -28,6 +28,7 @@ repository root (the references are imported from ``tests/``)::
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -143,7 +144,8 @@ def main(argv=None) -> int:
     from d3cli.method import refinement
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
+    parser.add_argument("--data", default=os.environ.get("D3STEREO_DATA", ""),
+                        help="data folder holding the real pairs (default: $D3STEREO_DATA)")
     parser.add_argument("--cases", nargs="+", default=["road", "road-full", "middlebury"],
                         choices=sorted(bench_speed.CASES))
     parser.add_argument("--reps", type=int, default=7)

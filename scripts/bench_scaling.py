@@ -11,7 +11,7 @@ Example (the figures in README "Scaling out")::
 
     python -m d3cli synth /tmp/synth8 --n 8 --seed 0 --width 640 --height 360 -q
     python scripts/bench_scaling.py /tmp/synth8 --reps 3 --dask
-    python scripts/bench_scaling.py ../shared/data --reps 3 --dask
+    python scripts/bench_scaling.py DATA --reps 3 --dask
 
 ``--start spawn`` (or fork, forkserver) sets ``D3STEREO_POOL_START`` for the pool runs,
 to compare how the workers start.

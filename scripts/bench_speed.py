@@ -30,7 +30,7 @@ Cases (``--cases``, default all that exist)::
 
 Usage::
 
-    PYTHONPATH=. python scripts/bench_speed.py --data ../shared/data --markdown
+    PYTHONPATH=. python scripts/bench_speed.py --data DATA --markdown
     PYTHONPATH=. python scripts/bench_speed.py --cases road road-full --reps 7
 """
 
@@ -161,8 +161,9 @@ def _spawn(spec: dict) -> dict | None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"),
-                        help="folder holding the real pairs (default ../shared/data)")
+    parser.add_argument("--data", default=os.environ.get("D3STEREO_DATA", ""),
+                        help="data folder holding the real pairs (default: $D3STEREO_DATA; cases "
+                             "whose pair is not there are skipped)")
     parser.add_argument("--cases", nargs="+", default=None, choices=sorted(CASES),
                         help=f"cases to run (default: {' '.join(DEFAULT_CASES)})")
     parser.add_argument("--reps", type=int, default=5, help="alternating repetitions after the warm-up")

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import time
@@ -103,8 +104,8 @@ def _print(row: dict) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", default=str(bench_speed.ROOT.parent / "shared" / "data"),
-                        help="folder with the benchmark pairs")
+    parser.add_argument("--data", default=os.environ.get("D3STEREO_DATA", ""),
+                        help="data folder with the benchmark pairs (default: $D3STEREO_DATA)")
     parser.add_argument("--cases", nargs="+", default=["road", "kitti"], choices=sorted(CASES))
     parser.add_argument("--reps", type=int, default=5, help="untimed-inside calls for the median wall time")
     parser.add_argument("--seed", type=int, default=3, help="seed of the synthetic road pairs")

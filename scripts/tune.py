@@ -5,7 +5,7 @@ d3stereo on the pairs with ground truth and ranked by mean EPE and mean PEP2.
 
 Usage (the sweep behind configs/default.yaml)::
 
-    python scripts/tune.py ../shared/data --family middlebury \\
+    python scripts/tune.py DATA --family middlebury \\
         --grid seeds.pkrn_min=1.2,1.5,2.0 --grid diffusion.max_gap=-1,0.02,0.05,0.1 \\
         --grid seeds.every_level=false,true
 """

@@ -238,7 +238,13 @@ class Config:
         return out
 
     def level_window(self, level: int) -> int:
-        """NCC window size at ``level`` (0 = full resolution)."""
+        """NCC window size at ``level`` (0 = full resolution).
+
+        Parameters
+        ----------
+        level : int
+            Pyramid level, 0 at full resolution.
+        """
         lw = self.cost.level_windows
         if lw:
             return lw[min(level, len(lw) - 1)]

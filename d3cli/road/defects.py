@@ -62,6 +62,7 @@ class Defect:
     outline_px: tuple = ()
 
     def to_dict(self) -> dict:
+        """Plain dict of every field (tuples as lists), as written to defects.json."""
         out = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
         out["outline_px"] = [[list(p) for p in poly] for poly in self.outline_px]
         return out

@@ -25,14 +25,20 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class RoadPlane:
-    """``n . P + c = 0``; ``normal`` (3,) unit, ``offset`` c > 0 (camera height, metres)."""
+    """``n.P + c = 0``; ``normal`` (3,) unit, ``offset`` c > 0 (camera height, metres)."""
 
     normal: tuple[float, float, float]
     offset: float
     inlier_share: float
 
     def height(self, points: np.ndarray) -> np.ndarray:
-        """Signed height (metres, + toward the camera side) of (N, 3) points."""
+        """Signed height (metres, + toward the camera side) of (N, 3) points.
+
+        Parameters
+        ----------
+        points : ndarray
+            (N, 3) points in the left camera frame, metres.
+        """
         return np.asarray(points, np.float64) @ np.asarray(self.normal) + self.offset
 
     def to_info(self) -> dict:
@@ -140,7 +146,19 @@ def seen_by_both(disparity: np.ndarray) -> np.ndarray:
 
 
 def height_map(disparity: np.ndarray, valid: np.ndarray, camera: Camera, plane: RoadPlane) -> np.ndarray:
-    """Signed height above ``plane`` per pixel, float32 (H, W) metres, inf where no estimate."""
+    """Signed height above ``plane`` per pixel, float32 (H, W) metres, inf where no estimate.
+
+    Parameters
+    ----------
+    disparity : ndarray
+        float32 (H, W) disparity map, pixels.
+    valid : ndarray
+        bool (H, W): pixels to back-project.
+    camera : Camera
+        Focal length, baseline and principal point.
+    plane : RoadPlane
+        The fitted road plane.
+    """
     points, index = disparity_to_points(disparity, valid, camera)
     out = np.full(np.shape(disparity), np.inf, np.float32)
     out[index[:, 0], index[:, 1]] = plane.height(points)

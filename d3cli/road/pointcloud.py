@@ -197,7 +197,13 @@ def write_ply(path, points: np.ndarray, colours: np.ndarray | None = None) -> Pa
 
 
 def read_ply(path) -> tuple[np.ndarray, np.ndarray | None]:
-    """Read a PLY written by :func:`write_ply`: float32 (N, 3) points, uint8 (N, 3) colours or None."""
+    """Read a PLY written by :func:`write_ply`: float32 (N, 3) points, uint8 (N, 3) colours or None.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.ply`` file.
+    """
     data = Path(path).read_bytes()
     end = data.index(b"end_header\n") + len(b"end_header\n")
     lines = data[:end].decode("ascii").splitlines()

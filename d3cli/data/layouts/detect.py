@@ -15,7 +15,13 @@ from .road import _road_splits, _stereo_road_pairs, _udtiri_pairs
 
 
 def detect_layout(folder: str | os.PathLike) -> str | None:
-    """Name the layout of ``folder`` (one of :data:`LAYOUTS`), or None when unknown."""
+    """Name the layout of ``folder`` (one of :data:`LAYOUTS`), or None when unknown.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The dataset folder (or a pair folder).
+    """
     folder = _abs(folder)
     files = _files_by_lower_name(folder)
     if _find_view(files, "left") is not None or _find_view(files, "right") is not None:

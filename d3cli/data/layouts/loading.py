@@ -108,6 +108,11 @@ def pair_image_size(pair: Pair, *, both: bool = False):
 def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
     """Read the two views of a pair.
 
+    Parameters
+    ----------
+    pair : Pair
+        A pair from :func:`discover` or :func:`load_manifest`.
+
     Returns
     -------
     left, right : ndarray

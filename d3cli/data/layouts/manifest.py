@@ -114,6 +114,11 @@ def _manifest_pair(entry: Any, index: int, root: Path, defaults: dict, manifest:
 def load_manifest(path: str | os.PathLike) -> list[Pair]:
     """Read a manifest YAML (format in ``data_manifests/README.md``) into pairs.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The manifest file; its ``root:`` is relative to the file's folder.
+
     Raises
     ------
     InputError

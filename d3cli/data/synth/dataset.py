@@ -232,6 +232,17 @@ def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, 
     temporary name and renamed.  The same (seed, index, size) always gives the same
     pair; ``render_pair(seed=<pair_seed in SOURCE.txt>, ...)`` reproduces it.
 
+    Parameters
+    ----------
+    out_dir : str or os.PathLike
+        Folder of the pair folders; created when missing.
+    n : int
+        Number of pairs.
+    seed : int
+        Seed of the whole set; each pair gets its own seed from it.
+    width, height : int
+        Image size in pixels.
+
     Returns
     -------
     list of Path
