@@ -73,26 +73,40 @@ def sort_key(row: Mapping) -> tuple:
     return (1, 0.0)
 
 
+def _bin_of(value: float, lo: float, hi: float, bins: int) -> int:
+    """Bin (0 .. bins - 1) of ``value`` in ``bins`` equal bins over [lo, hi]; all in the middle one when lo == hi.
+
+    Halves are compared so that ``hi - lo`` cannot overflow (values of +-1.7e308), and no
+    width is added to an empty range (``lo + 1.0 == lo`` from 1e16 on).
+    """
+    span = hi / 2 - lo / 2
+    if not span > 0:
+        return bins // 2
+    return min(bins - 1, int((value / 2 - lo / 2) / span * bins))
+
+
 def histogram_svg(values: list[float], *, label: str, bins: int = 12, width: int = 480, height: int = 160) -> str:
-    """Inline SVG bar chart of ``values`` (``bins`` equal bins between min and max)."""
+    """Inline SVG bar chart of the finite ``values`` (``bins`` equal bins between min and max)."""
+    values = [float(v) for v in values if math.isfinite(float(v))]
     if not values:
         return "<p>No per-pair errors to plot (no ground truth).</p>"
     lo, hi = min(values), max(values)
-    hi = hi if hi > lo else lo + 1.0
     counts = [0] * bins
     for v in values:
-        counts[min(bins - 1, int((v - lo) / (hi - lo) * bins))] += 1
+        counts[_bin_of(v, lo, hi, bins)] += 1
     top = max(counts)
     bar_w = (width - 40) / bins
-    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height + 30}" role="img">']
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height + 34}" role="img">']
     for i, c in enumerate(counts):
         h = (height - 10) * c / top
         x = 30 + i * bar_w
+        # Bounds as lo + i (hi - lo) / bins, in halves (no overflow).
+        a, b = (2 * (lo / 2 + k * (hi / 2 - lo / 2) / bins) for k in (i, i + 1))
         parts.append(f'<rect x="{x:.1f}" y="{height - h:.1f}" width="{bar_w - 2:.1f}" height="{h:.1f}" fill="#4575b4">'
-                     f'<title>{lo + i * (hi - lo) / bins:.3g}-{lo + (i + 1) * (hi - lo) / bins:.3g}: {c}</title></rect>')
-    parts.append(f'<text x="30" y="{height + 14}" font-size="11">{lo:.3g}</text>')
-    parts.append(f'<text x="{width - 10}" y="{height + 14}" font-size="11" text-anchor="end">{hi:.3g}</text>')
-    parts.append(f'<text x="{width / 2}" y="{height + 26}" font-size="11" text-anchor="middle">'
+                     f'<title>{a:.3g}-{b:.3g}: {c}</title></rect>')
+    parts.append(f'<text x="30" y="{height + 15}" font-size="13">{lo:.3g}</text>')
+    parts.append(f'<text x="{width - 10}" y="{height + 15}" font-size="13" text-anchor="end">{hi:.3g}</text>')
+    parts.append(f'<text x="{width / 2}" y="{height + 30}" font-size="13" text-anchor="middle">'
                  f'{html.escape(label)} (pairs per bin, max {top})</text></svg>')
     return "".join(parts)
 

@@ -111,3 +111,11 @@ def test_road_section_lists_every_defect_and_the_batch_totals(tmp_path):
 def test_no_road_section_without_road_outputs(tmp_path):
     text = write_report_html(tmp_path, [{"pair": "a", "status": "ok", "epe": 1.0}], title="t").read_text()
     assert 'id="road"' not in text
+
+
+def test_histogram_of_equal_values_near_the_float_limit():
+    svg = histogram_svg([3e38, 3e38], label="EPE [px]", bins=4)
+    assert svg.count("<rect") == 4 and svg.count(": 2</title>") == 1 and svg.count(": 0</title>") == 3
+    assert ">3e+38</text>" in svg
+    svg = histogram_svg([-1.7e308, 1.7e308], label="EPE [px]", bins=2)  # the span overflows float64
+    assert svg.count(": 1</title>") == 2
