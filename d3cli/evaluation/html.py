@@ -20,9 +20,10 @@ from pathlib import Path
 from urllib.parse import quote
 
 from ..data.formats import atomic_write
+from .definitions import EVALUATED, MEANS, PIXEL_SETS, metric
 from .report import jsonable
 from .summary import summarize
-from .tables import counts_sentence
+from .tables import counts_sentence, one_line
 
 REPORT_FILE = "report.html"
 
@@ -39,7 +40,7 @@ table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding
 th{background:#eee;cursor:pointer}td:first-child,td:nth-child(2),td:nth-child(3){text-align:left}
 .cards{display:flex;flex-wrap:wrap;gap:10px}.card{width:420px}.card img{width:100%;border:1px solid #999}
 .card.road{width:640px}.card.road table{font-size:12px}.low{color:#b60}
-.failed{color:#b00}pre{background:#f6f6f6;padding:.5em;max-height:30em;overflow:auto}
+.failed{color:#b00}dt{font-weight:bold}dd{margin:0 0 .4em 1.5em}pre{background:#f6f6f6;padding:.5em;max-height:30em;overflow:auto}
 """
 
 _JS = """
@@ -128,11 +129,11 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     e = html.escape
     out = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{e(title)}</title>'
            f"<style>{_CSS}</style></head><body><h1>{e(title)}</h1>"]
-    out.append(f"<p>{e(counts_sentence(summary))} Metric definitions: README section “Metrics (exact definitions)”; _all = all pixels with "
-                 "ground truth, _noc = non-occluded mask.</p>")
+    out.append(f"<p>{e(counts_sentence(summary))} {e(PIXEL_SETS)} Every column is defined "
+               '<a href="#definitions">below</a>; click a column head to sort.</p>')
     # Summary table
     out.append('<h2>Pairs</h2><table class="sortable"><thead><tr><th>pair</th><th>family</th><th>status</th>'
-               + "".join(f"<th>{e(c)}</th>" for c in columns) + "</tr></thead><tbody>")
+               + "".join(_head(c) for c in columns) + "</tr></thead><tbody>")
     for r in rows:
         cls = ' class="failed"' if r.get("status") == "failed" else ""
         cells = "".join(f'<td data-v="{_num(r.get(c)) if _num(r.get(c)) is not None else ""}">{_fmt(r.get(c))}</td>'
@@ -144,7 +145,7 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     # Family means
     fam_cols = [c for c in columns if c in summary["overall"]["means"]]
     out.append('<h2>Means per family</h2><table class="sortable"><thead><tr><th>family</th><th>ok</th>'
-               + "".join(f"<th>{e(c)}</th>" for c in fam_cols) + "</tr></thead><tbody>")
+               + "".join(_head(c) for c in fam_cols) + "</tr></thead><tbody>")
     groups = [*summary["families"].items(), ("overall", summary["overall"])]
     for name, group in groups:
         out.append(f"<tr><td>{e(name)}</td><td>{group.get('ok', 0)}</td>"
@@ -153,14 +154,16 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     # Histogram
     key = "epe" if any(_num(r.get("epe")) is not None for r in rows) else "psnr"
     values = [_num(r.get(key)) for r in rows if _num(r.get(key)) is not None]
-    out.append(f"<h2>Histogram of per-pair {e(key)}</h2>" + histogram_svg(values, label=key))
+    out.append(f"<h2>Histogram of per-pair {e(metric(key).label)}</h2>" + histogram_svg(values, label=metric(key).label))
+    out.extend(failed_section(summary))
     out.extend(road_section(out_dir, rows))
     # Thumbnails, worst first
     out.append("<h2>Pairs by error (worst first)</h2><div class=\"cards\">")
     for r in sorted(rows, key=sort_key):
         folder = out_dir / r["pair"]
         pics = [p for p in PAIR_PICTURES if (folder / p).is_file()]
-        figure = " ".join(f"{c} {_fmt(r.get(c))}" for c in ("epe", "d1_all", "a90_noc") if _num(r.get(c)) is not None)
+        figure = ", ".join(f"{metric(c).name} {metric(c).format(_num(r.get(c)))}" for c in ("epe", "d1_all", "a90_noc")
+                           if _num(r.get(c)) is not None)
         out.append(f'<div class="card" id="{e(r["pair"])}"><b>{e(r["pair"])}</b> {e(figure)}<br>')
         if pics:
             thumb = f"{r['pair']}/{pics[0]}"
@@ -170,10 +173,43 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
             out.append(f"<i>{e(str(r.get('error') or 'no pictures'))}</i>")
         out.append("</div>")
     out.append("</div>")
+    out.extend(definitions_section([*columns, *(c for c in ("d1_all", "a90_noc") if c not in columns)]))
     out.append("<h2>Config</h2><pre>" + e(json.dumps(jsonable(config or {}), indent=2, sort_keys=True)) + "</pre>")
     out.append("<h2>Versions</h2><pre>" + e(json.dumps(jsonable(versions or {}), indent=2, sort_keys=True)) + "</pre>")
     out.append(f"<script>{_JS}</script></body></html>\n")
     return "\n".join(out)
+
+
+def _head(key: str) -> str:
+    """A column head: the name with its unit, the definition as its tooltip."""
+    m = metric(key)
+    return f'<th title="{html.escape(m.definition)}">{html.escape(m.label)}</th>'
+
+
+def failed_section(summary: Mapping) -> list[str]:
+    """HTML listing every failed pair with its error, and every left-out pair with its reason; [] when none."""
+    e = html.escape
+    parts = []
+    for key, title, field in (("failures", "Failed pairs", "error"), ("skipped", "Left-out pairs", "reason")):
+        items = summary.get(key) or []
+        if items:
+            parts.append(f'<h2 id="{key}">{title}</h2><ul class="failed">')
+            parts += [f"<li><b>{e(str(item['pair']))}</b>: {e(one_line(item[field] or 'no message'))}</li>"
+                      for item in items]
+            parts.append("</ul>")
+    return parts
+
+
+def definitions_section(keys: Iterable[str]) -> list[str]:
+    """HTML of the "Definitions" section: how the pixels are chosen, the means, then each column of ``keys``."""
+    e = html.escape
+    parts = ['<h2 id="definitions">Definitions</h2>', f"<p>{e(EVALUATED)} {e(PIXEL_SETS)} {e(MEANS)}</p><dl>"]
+    for key in dict.fromkeys(keys):
+        m = metric(key)
+        if m.definition:
+            parts.append(f"<dt>{e(m.label)}</dt><dd>{e(m.definition)}</dd>")
+    parts.append("</dl>")
+    return parts
 
 
 #: Per-pair road files (d3cli.road.report writes them; read here, not imported: the
@@ -219,10 +255,9 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
              "<p>Depth: below the surrounding road surface (the median height of a ring of road "
              "around the defect); area: of the road plane covered; volume: to fill it up to the "
              "surrounding surface; decided: share of the defect's pixels the method decided itself "
-             "(not filled); low confidence = few decided pixels. Definitions: README section "
-             "“Road inspection outputs”.</p>",
+             "(not filled); low confidence = few decided pixels.</p>",
              '<table><thead><tr><th>pairs with a road report</th><th>with defects</th><th>potholes</th>'
-             "<th>bumps</th><th>low confidence</th><th>pothole area m²</th><th>pothole volume l</th>"
+             "<th>bumps</th><th>low confidence</th><th>pothole area [m²]</th><th>pothole volume [l]</th>"
              "<th>deepest pothole</th></tr></thead><tbody>",
              _road_totals_row(done, len(reports))]
     if (out_dir / "defects.csv").is_file():
@@ -271,7 +306,8 @@ def _road_totals_row(done: list, n_reports: int) -> str:
 def _road_card(out_dir: Path, pair: str, data: Mapping) -> list[str]:
     """HTML of one pair's card in :func:`road_section`: thumbnail, links and defects table."""
     e = html.escape
-    cols = ("id", "kind", "depth mm (bump: height)", "mean mm", "area m²", "volume l", "decided", "confidence")
+    cols = ("id", "kind", "depth [mm] (bump: height)", "mean depth [mm]", "area [m²]", "volume [l]", "decided [%]",
+            "confidence")
     folder = out_dir / pair
     parts = []
     n_pits = sum(d.get("kind") == "pothole" for d in data["defects"])
