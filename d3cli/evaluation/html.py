@@ -60,9 +60,12 @@ def _num(value) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def _fmt(value) -> str:
+def _fmt(value, key: str | None = None) -> str:
+    """A table cell: the metric's decimals (3 for an unknown key, 1 from 100 on); empty when missing."""
     v = _num(value)
-    return "" if v is None else f"{v:.3f}" if abs(v) < 100 else f"{v:.1f}"
+    if v is None:
+        return ""
+    return f"{v:.{metric(key).decimals if key else 3 if abs(v) < 100 else 1}f}"
 
 
 def sort_key(row: Mapping) -> tuple:
@@ -132,16 +135,7 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     out.append(f"<p>{e(counts_sentence(summary))} {e(PIXEL_SETS)} Every column is defined "
                '<a href="#definitions">below</a>; click a column head to sort.</p>')
     # Summary table
-    out.append('<h2>Pairs</h2><table class="sortable"><thead><tr><th>pair</th><th>family</th><th>status</th>'
-               + "".join(_head(c) for c in columns) + "</tr></thead><tbody>")
-    for r in rows:
-        cls = ' class="failed"' if r.get("status") == "failed" else ""
-        cells = "".join(f'<td data-v="{_num(r.get(c)) if _num(r.get(c)) is not None else ""}">{_fmt(r.get(c))}</td>'
-                        for c in columns)
-        link = f'<a href="#{e(r["pair"])}">{e(r["pair"])}</a>' if (out_dir / r["pair"]).is_dir() else e(r["pair"])
-        out.append(f"<tr{cls}><td>{link}</td><td>{e(str(r.get('family') or ''))}</td>"
-                   f"<td title=\"{e(str(r.get('error') or ''))}\">{e(str(r.get('status')))}</td>{cells}</tr>")
-    out.append("</tbody></table>")
+    out.extend(_pairs_table(out_dir, rows, columns))
     # Family means
     fam_cols = [c for c in columns if c in summary["overall"]["means"]]
     out.append('<h2>Means per family</h2><table class="sortable"><thead><tr><th>family</th><th>ok</th>'
@@ -149,7 +143,7 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     groups = [*summary["families"].items(), ("overall", summary["overall"])]
     for name, group in groups:
         out.append(f"<tr><td>{e(name)}</td><td>{group.get('ok', 0)}</td>"
-                   + "".join(f"<td>{_fmt(group['means'].get(c))}</td>" for c in fam_cols) + "</tr>")
+                   + "".join(f"<td>{_fmt(group['means'].get(c), c)}</td>" for c in fam_cols) + "</tr>")
     out.append("</tbody></table>")
     # Histogram
     key = "epe" if any(_num(r.get("epe")) is not None for r in rows) else "psnr"
@@ -180,6 +174,26 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     return "\n".join(out)
 
 
+def _pairs_table(out_dir: Path, rows: list[dict], columns: list[str]) -> list[str]:
+    """HTML of the "Pairs" table: name (linking to its card), family, status (linking to its message), figures."""
+    e = html.escape
+    out: list[str] = []
+    out.append('<h2>Pairs</h2><table class="sortable"><thead><tr><th>pair</th><th>family</th><th>status</th>'
+               + "".join(_head(c) for c in columns) + "</tr></thead><tbody>")
+    for r in rows:
+        cls = ' class="failed"' if r.get("status") == "failed" else ""
+        cells = "".join(f'<td data-v="{_num(r.get(c)) if _num(r.get(c)) is not None else ""}">{_fmt(r.get(c), c)}</td>'
+                        for c in columns)
+        link = f'<a href="#{e(r["pair"])}">{e(r["pair"])}</a>' if (out_dir / r["pair"]).is_dir() else e(r["pair"])
+        status = e(str(r.get("status")))
+        if r.get("status") in ("failed", "skipped"):  # the message is listed below the tables
+            status = f'<a href="#{"failures" if r.get("status") == "failed" else "skipped"}">{status}</a>'
+        out.append(f"<tr{cls}><td>{link}</td><td>{e(str(r.get('family') or ''))}</td>"
+                   f"<td title=\"{e(str(r.get('error') or ''))}\">{status}</td>{cells}</tr>")
+    out.append("</tbody></table>")
+    return out
+
+
 def _head(key: str) -> str:
     """A column head: the name with its unit, the definition as its tooltip."""
     m = metric(key)
@@ -194,8 +208,10 @@ def failed_section(summary: Mapping) -> list[str]:
         items = summary.get(key) or []
         if items:
             parts.append(f'<h2 id="{key}">{title}</h2><ul class="failed">')
-            parts += [f"<li><b>{e(str(item['pair']))}</b>: {e(one_line(item[field] or 'no message'))}</li>"
-                      for item in items]
+            for item in items:
+                pair, text = str(item["pair"]), one_line(item[field] or "no message")
+                text = text[len(pair) + 2:] if text.startswith(f"{pair}: ") else text  # the name once
+                parts.append(f"<li><b>{e(pair)}</b>: {e(text)}</li>")
             parts.append("</ul>")
     return parts
 

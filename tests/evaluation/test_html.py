@@ -135,7 +135,8 @@ def test_columns_have_names_with_units_and_are_defined_in_the_page(tmp_path):
     assert "<dd>Middlebury bad-2: 100 x share of the pixels with e &gt; 2 px.</dd>" in definitions
     assert "a pixel without an estimate counts as d = 0" in definitions and "README" not in text
     failed = text[text.index('<h2 id="failures">Failed pairs</h2>'):text.index('<h2 id="definitions">')]
-    assert "<li><b>b</b>: b: right.png: not a PNG file; fix it</li>" in failed
+    assert "<li><b>b</b>: right.png: not a PNG file; fix it</li>" in failed  # the pair named once
+    assert '<td title="b: right.png: not a PNG file;\n  fix it"><a href="#failures">failed</a></td>' in text
     assert '<h2 id="skipped">Left-out pairs</h2><ul class="failed">\n<li><b>c</b>: no right image</li>' in failed
     assert "<b>a</b> EPE 1.250 px, D1 (all) 4.00 %, A90 (non-occ.) 2.000 px<br>" in text
     assert "<h2>Histogram of per-pair EPE [px]</h2>" in text
