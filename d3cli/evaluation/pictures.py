@@ -166,8 +166,10 @@ def panel(title: str, tiles: list[tuple[str, np.ndarray]], *, tile_width: int = 
     """Tiles side by side (each scaled to ``tile_width``) under a title line; captions above each.
 
     Captions and title are wrapped to the width they have; their text is as tall as
-    :func:`legend.text_px` gives for one tile.
+    :func:`legend.text_px` gives for one tile.  Tiles are never scaled up beyond the widest
+    picture: a small pair's legends would grow larger than its pictures.
     """
+    tile_width = max(1, min(tile_width, max(np.asarray(img).shape[1] for _, img in tiles)))
     fitted = [(caption, _fit(img, tile_width)) for caption, img in tiles]
     height = max(img.shape[0] for _, img in fitted)
     px = legend.text_px(tile_width)

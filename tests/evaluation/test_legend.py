@@ -85,9 +85,10 @@ def test_overlay_and_panel_text_is_at_least_12_px():
     assert min(ink_rows(out[96:])) >= 12
     tiles = [("left", left), ("validity (red filled, blue none)", out)]
     panel = pictures.panel("pair   EPE 1.23 px", tiles, tile_width=480)
-    head = panel[: np.argmax((panel[:, :480, 0] < 10).all(axis=1))]  # white head above the black tiles
+    assert panel.shape[1] == 2 * 160 + 6  # not scaled up: the legends keep their size
+    head = panel[: np.argmax((panel[:, :160, 0] < 10).all(axis=1))]  # white head above the black tiles
     assert min(ink_rows(head, dark=True)) >= 12
-    caption = panel[head.shape[0]: head.shape[0] + 20, :480]
+    caption = panel[head.shape[0]: head.shape[0] + 20, :160]
     assert min(ink_rows(caption)) >= 12
 
 
