@@ -63,11 +63,14 @@ def robust_range(disp: np.ndarray, percentiles=ROBUST_PERCENTILES) -> tuple[floa
 def _turbo(disp: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
     """:func:`colorize_disparity` of ``disp`` over ``[vmin, vmax]``, for any finite range.
 
-    The position in the range is computed here in float64: colorize_disparity's float32
-    ``(d - vmin) / (vmax - vmin)`` overflows for values or ranges near 3e38.
+    colorize_disparity computes ``(d - vmin) / (vmax - vmin)`` in float32, which
+    overflows for ends beyond about 1e30 or a range under 1 px with values near 3e38;
+    such ranges are mapped to [0, 1] in float64 here first (twice as slow, same colours).
     """
     if not vmax > vmin:
         raise ValueError(f"a disparity picture needs vmax > vmin, got vmin={vmin}, vmax={vmax}")
+    if vmax - vmin >= 1.0 and max(abs(vmin), abs(vmax)) < 1e30:
+        return colorize_disparity(disp, vmin, vmax)
     d = np.asarray(disp, dtype=np.float64)
     t = np.clip((d - float(vmin)) / (float(vmax) - float(vmin)), 0.0, 1.0)
     return colorize_disparity(np.where(np.isfinite(d), t, np.inf).astype(np.float32), 0.0, 1.0)

@@ -80,3 +80,10 @@ def test_a_range_wider_than_float32_colours_without_overflow():
     turbo = colorize_disparity(np.array([[0.0, 0.5, 1.0]]), 0.0, 1.0)[0]
     np.testing.assert_array_equal(pic[0, :3], turbo)
     assert tuple(pic[0, 3]) == (0, 0, 0)
+
+
+@pytest.mark.filterwarnings("error")
+def test_a_narrow_range_over_huge_values_colours_without_overflow():
+    disp = np.array([[3e38, 10.0, 10.25, 10.5]], np.float32)
+    pic = pictures.disparity_picture(disp, 10.0, 10.5, how="fixed range")
+    np.testing.assert_array_equal(pic[0, :4], colorize_disparity(np.array([[1.0, 0.0, 0.5, 1.0]]), 0.0, 1.0)[0])
