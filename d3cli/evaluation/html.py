@@ -343,7 +343,7 @@ def _road_card(out_dir: Path, pair: str, data: Mapping) -> list[str]:
                 (d.get("mean_depth_mm"), f"{_num(d.get('mean_depth_mm')) or 0.0:.1f}"),
                 (d.get("area_m2"), f"{_num(d.get('area_m2')) or 0.0:.4f}"),
                 (d.get("volume_l"), f"{_num(d.get('volume_l')) or 0.0:.2f}"),
-                (d.get("decided_share"), f"{100 * (_num(d.get('decided_share')) or 0.0):.0f} %"),
+                (d.get("decided_share"), f"{100 * (_num(d.get('decided_share')) or 0.0):.0f}"),
                 (None, "low" if low_d else "ok")]
         cells = "".join(f'<td data-v="{_num(v) if _num(v) is not None else ""}">{e(t)}</td>' for v, t in vals)
         row_cls = ' class="low"' if low_d else ""

@@ -102,7 +102,7 @@ def test_road_section_lists_every_defect_and_the_batch_totals(tmp_path):
     # Cards: deepest pothole first, one table row per defect with its figures.
     assert road.index('id="road-deep pair"') < road.index('id="road-shallow"')
     card = road[road.index('id="road-deep pair"'):road.index('id="road-shallow"')]
-    assert card.count("<tr") == 4 and "61.5" in card and "3.25" in card and "20 %" in card
+    assert card.count("<tr") == 4 and "61.5" in card and "3.25" in card and ">20</td>" in card
     assert card.count(">low<") == 1 and 'href="deep%20pair/defects.png"' in card
     assert "No defects: flat (no defects: the scene is not road-like)" in road
     assert "nocam (no road report)" in road and 'href="defects.csv"' in road
