@@ -13,6 +13,11 @@ from dataclasses import dataclass
 from .metrics import BAD_THRESHOLDS, D1_PIXELS, D1_RELATIVE, PEP_THRESHOLDS, QUANTILES, pep_key
 
 
+#: From this magnitude on, values are written in exponent notation ("3.000e+38"):
+#: 39 digits of a 3e38 px error help nobody.
+HUGE = 1e7
+
+
 @dataclass(frozen=True)
 class Metric:
     """How one metric column is named, shown and defined.
@@ -46,7 +51,9 @@ class Metric:
         """``value`` with this metric's decimals and unit ("1.234 px"); "n/a" for a missing value."""
         if value is None or (isinstance(value, float) and math.isnan(value)):
             return "n/a"
-        text = f"{float(value):.{self.decimals}f}" if math.isfinite(float(value)) else str(float(value))
+        value = float(value)
+        text = (str(value) if not math.isfinite(value) else f"{value:.3e}" if abs(value) >= HUGE
+                else f"{value:.{self.decimals}f}")
         return f"{text} {self.unit}" if self.unit else text
 
 

@@ -23,7 +23,7 @@ from ..data.formats import atomic_write
 from .definitions import EVALUATED, MEANS, PIXEL_SETS, metric
 from .report import jsonable
 from .summary import summarize
-from .tables import counts_sentence, one_line
+from .tables import HUGE, counts_sentence, one_line
 
 REPORT_FILE = "report.html"
 
@@ -65,6 +65,8 @@ def _fmt(value, key: str | None = None) -> str:
     v = _num(value)
     if v is None:
         return ""
+    if abs(v) >= HUGE:
+        return f"{v:.3e}"
     return f"{v:.{metric(key).decimals if key else 3 if abs(v) < 100 else 1}f}"
 
 

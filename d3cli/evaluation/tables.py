@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 
-from .definitions import EVALUATED, MEANS, METRICS
+from .definitions import EVALUATED, HUGE, MEANS, METRICS
 from .summary import (
     DISPARITY_COLUMNS,
     METRIC_COLUMNS,
@@ -252,5 +252,7 @@ def _format_value(key: str, value) -> str:
         return MISSING
     if math.isinf(number):
         return "inf" if number > 0 else "-inf"
+    if abs(number) >= HUGE:
+        return f"{number:.3e}"
     return f"{number:.{DECIMALS.get(key, 3)}f}"
 

@@ -271,3 +271,13 @@ def test_format_table_is_fixed_width():
 
 def test_metric_columns_order():
     assert METRIC_COLUMNS[:6] == ["epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density"]
+
+
+def test_huge_values_are_written_in_exponent_notation(tmp_path):
+    from d3cli.evaluation.html import write_report_html
+
+    rows = [{"pair": "a", "family": "k", "status": "ok", "epe": 3e38, "pep_3": 100.0, "time_s": 1.0}]
+    _, md = write_summary(tmp_path, rows, method="m")
+    assert "| a | ok | 3.000e+38 | 100.00 | 1.00 |" in md.read_text().splitlines()
+    page = write_report_html(tmp_path, rows, title="t").read_text()
+    assert '<td data-v="3e+38">3.000e+38</td>' in page and "<b>a</b> EPE 3.000e+38 px<br>" in page
