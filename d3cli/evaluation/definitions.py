@@ -115,7 +115,8 @@ METRICS: dict[str, Metric] = {
     "coverage": Metric("coverage", "%", 2, "cov%", (
         "100 x share of all pixels with an estimate whose match lies inside the right image.")),
     **_benchmark_metrics(),
-    "time_s": Metric("time", "s", 2, "time_s", "Wall time of the pair in the run that made its map: reading, matching, writing and scoring."),
+    "time_s": Metric("time", "s", 2, "time_s", (
+        "Wall time of the pair in the run that made its map: reading, matching, writing and scoring.")),
 }
 
 

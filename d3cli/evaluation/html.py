@@ -150,7 +150,8 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     # Histogram
     key = "epe" if any(_num(r.get("epe")) is not None for r in rows) else "psnr"
     values = [_num(r.get(key)) for r in rows if _num(r.get(key)) is not None]
-    out.append(f"<h2>Histogram of per-pair {e(metric(key).label)}</h2>" + histogram_svg(values, label=metric(key).label))
+    label = metric(key).label
+    out.append(f"<h2>Histogram of per-pair {e(label)}</h2>" + histogram_svg(values, label=label))
     out.extend(failed_section(summary))
     out.extend(road_section(out_dir, rows))
     # Thumbnails, worst first
