@@ -2,6 +2,8 @@
 
 All drawing is OpenCV (no matplotlib): a 720p pair's pictures and panel take about
 0.3 s in memory (0.32 s measured on the shared 2-core machine).  Images are RGB uint8 (H, W, 3).
+Text, colour bars and legends come from :mod:`d3cli.data.legend` (letters >= 12 px,
+a title with the unit on every bar, the unit on every tick label).
 """
 
 from __future__ import annotations
