@@ -6,6 +6,8 @@ bundled samples.
 - ``layouts``: discovery of pairs in every supported layout and manifests, ground
   truth loading, disparity ranges;
 - ``synth``: ray-cast synthetic road pairs with exact ground truth (``d3stereo synth``);
+- ``legend``: text, colour bars and legends of every picture (letters >= 12 px, titles
+  with units);
 - ``samples/``: the bundled sample pairs (``d3stereo run`` without INPUT).
 
 Inside: ``formats`` imports nothing else of ``data``; ``layouts`` and ``synth`` import

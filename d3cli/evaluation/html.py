@@ -20,9 +20,10 @@ from pathlib import Path
 from urllib.parse import quote
 
 from ..data.formats import atomic_write
+from .definitions import EVALUATED, MEANS, PIXEL_SETS, metric
 from .report import jsonable
 from .summary import summarize
-from .tables import counts_sentence
+from .tables import HUGE, counts_sentence, one_line
 
 REPORT_FILE = "report.html"
 
@@ -39,7 +40,7 @@ table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding
 th{background:#eee;cursor:pointer}td:first-child,td:nth-child(2),td:nth-child(3){text-align:left}
 .cards{display:flex;flex-wrap:wrap;gap:10px}.card{width:420px}.card img{width:100%;border:1px solid #999}
 .card.road{width:640px}.card.road table{font-size:12px}.low{color:#b60}
-.failed{color:#b00}pre{background:#f6f6f6;padding:.5em;max-height:30em;overflow:auto}
+.failed{color:#b00}dt{font-weight:bold}dd{margin:0 0 .4em 1.5em}pre{background:#f6f6f6;padding:.5em;max-height:30em;overflow:auto}
 """
 
 _JS = """
@@ -59,9 +60,14 @@ def _num(value) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def _fmt(value) -> str:
+def _fmt(value, key: str | None = None) -> str:
+    """A table cell: the metric's decimals (3 for an unknown key, 1 from 100 on); empty when missing."""
     v = _num(value)
-    return "" if v is None else f"{v:.3f}" if abs(v) < 100 else f"{v:.1f}"
+    if v is None:
+        return ""
+    if abs(v) >= HUGE:
+        return f"{v:.3e}"
+    return f"{v:.{metric(key).decimals if key else 3 if abs(v) < 100 else 1}f}"
 
 
 def sort_key(row: Mapping) -> tuple:
@@ -73,26 +79,40 @@ def sort_key(row: Mapping) -> tuple:
     return (1, 0.0)
 
 
+def _bin_of(value: float, lo: float, hi: float, bins: int) -> int:
+    """Bin (0 .. bins - 1) of ``value`` in ``bins`` equal bins over [lo, hi]; all in the middle one when lo == hi.
+
+    Halves are compared so that ``hi - lo`` cannot overflow (values of +-1.7e308), and no
+    width is added to an empty range (``lo + 1.0 == lo`` from 1e16 on).
+    """
+    span = hi / 2 - lo / 2
+    if not span > 0:
+        return bins // 2
+    return min(bins - 1, int((value / 2 - lo / 2) / span * bins))
+
+
 def histogram_svg(values: list[float], *, label: str, bins: int = 12, width: int = 480, height: int = 160) -> str:
-    """Inline SVG bar chart of ``values`` (``bins`` equal bins between min and max)."""
+    """Inline SVG bar chart of the finite ``values`` (``bins`` equal bins between min and max)."""
+    values = [float(v) for v in values if math.isfinite(float(v))]
     if not values:
         return "<p>No per-pair errors to plot (no ground truth).</p>"
     lo, hi = min(values), max(values)
-    hi = hi if hi > lo else lo + 1.0
     counts = [0] * bins
     for v in values:
-        counts[min(bins - 1, int((v - lo) / (hi - lo) * bins))] += 1
+        counts[_bin_of(v, lo, hi, bins)] += 1
     top = max(counts)
     bar_w = (width - 40) / bins
-    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height + 30}" role="img">']
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height + 34}" role="img">']
     for i, c in enumerate(counts):
         h = (height - 10) * c / top
         x = 30 + i * bar_w
+        # Bounds as lo + i (hi - lo) / bins, in halves (no overflow).
+        a, b = (2 * (lo / 2 + k * (hi / 2 - lo / 2) / bins) for k in (i, i + 1))
         parts.append(f'<rect x="{x:.1f}" y="{height - h:.1f}" width="{bar_w - 2:.1f}" height="{h:.1f}" fill="#4575b4">'
-                     f'<title>{lo + i * (hi - lo) / bins:.3g}-{lo + (i + 1) * (hi - lo) / bins:.3g}: {c}</title></rect>')
-    parts.append(f'<text x="30" y="{height + 14}" font-size="11">{lo:.3g}</text>')
-    parts.append(f'<text x="{width - 10}" y="{height + 14}" font-size="11" text-anchor="end">{hi:.3g}</text>')
-    parts.append(f'<text x="{width / 2}" y="{height + 26}" font-size="11" text-anchor="middle">'
+                     f'<title>{a:.3g}-{b:.3g}: {c}</title></rect>')
+    parts.append(f'<text x="30" y="{height + 15}" font-size="13">{lo:.3g}</text>')
+    parts.append(f'<text x="{width - 10}" y="{height + 15}" font-size="13" text-anchor="end">{hi:.3g}</text>')
+    parts.append(f'<text x="{width / 2}" y="{height + 30}" font-size="13" text-anchor="middle">'
                  f'{html.escape(label)} (pairs per bin, max {top})</text></svg>')
     return "".join(parts)
 
@@ -114,39 +134,33 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
     e = html.escape
     out = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{e(title)}</title>'
            f"<style>{_CSS}</style></head><body><h1>{e(title)}</h1>"]
-    out.append(f"<p>{e(counts_sentence(summary))} Metric definitions: README section “Metrics (exact definitions)”; _all = all pixels with "
-                 "ground truth, _noc = non-occluded mask.</p>")
+    out.append(f"<p>{e(counts_sentence(summary))} {e(PIXEL_SETS)} Every column is defined "
+               '<a href="#definitions">below</a>; click a column head to sort.</p>')
     # Summary table
-    out.append('<h2>Pairs</h2><table class="sortable"><thead><tr><th>pair</th><th>family</th><th>status</th>'
-               + "".join(f"<th>{e(c)}</th>" for c in columns) + "</tr></thead><tbody>")
-    for r in rows:
-        cls = ' class="failed"' if r.get("status") == "failed" else ""
-        cells = "".join(f'<td data-v="{_num(r.get(c)) if _num(r.get(c)) is not None else ""}">{_fmt(r.get(c))}</td>'
-                        for c in columns)
-        link = f'<a href="#{e(r["pair"])}">{e(r["pair"])}</a>' if (out_dir / r["pair"]).is_dir() else e(r["pair"])
-        out.append(f"<tr{cls}><td>{link}</td><td>{e(str(r.get('family') or ''))}</td>"
-                   f"<td title=\"{e(str(r.get('error') or ''))}\">{e(str(r.get('status')))}</td>{cells}</tr>")
-    out.append("</tbody></table>")
+    out.extend(_pairs_table(out_dir, rows, columns))
     # Family means
     fam_cols = [c for c in columns if c in summary["overall"]["means"]]
     out.append('<h2>Means per family</h2><table class="sortable"><thead><tr><th>family</th><th>ok</th>'
-               + "".join(f"<th>{e(c)}</th>" for c in fam_cols) + "</tr></thead><tbody>")
+               + "".join(_head(c) for c in fam_cols) + "</tr></thead><tbody>")
     groups = [*summary["families"].items(), ("overall", summary["overall"])]
     for name, group in groups:
         out.append(f"<tr><td>{e(name)}</td><td>{group.get('ok', 0)}</td>"
-                   + "".join(f"<td>{_fmt(group['means'].get(c))}</td>" for c in fam_cols) + "</tr>")
+                   + "".join(f"<td>{_fmt(group['means'].get(c), c)}</td>" for c in fam_cols) + "</tr>")
     out.append("</tbody></table>")
     # Histogram
     key = "epe" if any(_num(r.get("epe")) is not None for r in rows) else "psnr"
     values = [_num(r.get(key)) for r in rows if _num(r.get(key)) is not None]
-    out.append(f"<h2>Histogram of per-pair {e(key)}</h2>" + histogram_svg(values, label=key))
+    label = metric(key).label
+    out.append(f"<h2>Histogram of per-pair {e(label)}</h2>" + histogram_svg(values, label=label))
+    out.extend(failed_section(summary))
     out.extend(road_section(out_dir, rows))
     # Thumbnails, worst first
     out.append("<h2>Pairs by error (worst first)</h2><div class=\"cards\">")
     for r in sorted(rows, key=sort_key):
         folder = out_dir / r["pair"]
         pics = [p for p in PAIR_PICTURES if (folder / p).is_file()]
-        figure = " ".join(f"{c} {_fmt(r.get(c))}" for c in ("epe", "d1_all", "a90_noc") if _num(r.get(c)) is not None)
+        figure = ", ".join(f"{metric(c).name} {metric(c).format(_num(r.get(c)))}" for c in ("epe", "d1_all", "a90_noc")
+                           if _num(r.get(c)) is not None)
         out.append(f'<div class="card" id="{e(r["pair"])}"><b>{e(r["pair"])}</b> {e(figure)}<br>')
         if pics:
             thumb = f"{r['pair']}/{pics[0]}"
@@ -156,10 +170,65 @@ def report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: str,
             out.append(f"<i>{e(str(r.get('error') or 'no pictures'))}</i>")
         out.append("</div>")
     out.append("</div>")
+    out.extend(definitions_section([*columns, *(c for c in ("d1_all", "a90_noc") if c not in columns)]))
     out.append("<h2>Config</h2><pre>" + e(json.dumps(jsonable(config or {}), indent=2, sort_keys=True)) + "</pre>")
     out.append("<h2>Versions</h2><pre>" + e(json.dumps(jsonable(versions or {}), indent=2, sort_keys=True)) + "</pre>")
     out.append(f"<script>{_JS}</script></body></html>\n")
     return "\n".join(out)
+
+
+def _pairs_table(out_dir: Path, rows: list[dict], columns: list[str]) -> list[str]:
+    """HTML of the "Pairs" table: name (linking to its card), family, status (linking to its message), figures."""
+    e = html.escape
+    out: list[str] = []
+    out.append('<h2>Pairs</h2><table class="sortable"><thead><tr><th>pair</th><th>family</th><th>status</th>'
+               + "".join(_head(c) for c in columns) + "</tr></thead><tbody>")
+    for r in rows:
+        cls = ' class="failed"' if r.get("status") == "failed" else ""
+        cells = "".join(f'<td data-v="{_num(r.get(c)) if _num(r.get(c)) is not None else ""}">{_fmt(r.get(c), c)}</td>'
+                        for c in columns)
+        link = f'<a href="#{e(r["pair"])}">{e(r["pair"])}</a>' if (out_dir / r["pair"]).is_dir() else e(r["pair"])
+        status = e(str(r.get("status")))
+        if r.get("status") in ("failed", "skipped"):  # the message is listed below the tables
+            status = f'<a href="#{"failures" if r.get("status") == "failed" else "skipped"}">{status}</a>'
+        out.append(f"<tr{cls}><td>{link}</td><td>{e(str(r.get('family') or ''))}</td>"
+                   f"<td title=\"{e(str(r.get('error') or ''))}\">{status}</td>{cells}</tr>")
+    out.append("</tbody></table>")
+    return out
+
+
+def _head(key: str) -> str:
+    """A column head: the name with its unit, the definition as its tooltip."""
+    m = metric(key)
+    return f'<th title="{html.escape(m.definition)}">{html.escape(m.label)}</th>'
+
+
+def failed_section(summary: Mapping) -> list[str]:
+    """HTML listing every failed pair with its error, and every left-out pair with its reason; [] when none."""
+    e = html.escape
+    parts = []
+    for key, title, field in (("failures", "Failed pairs", "error"), ("skipped", "Left-out pairs", "reason")):
+        items = summary.get(key) or []
+        if items:
+            parts.append(f'<h2 id="{key}">{title}</h2><ul class="failed">')
+            for item in items:
+                pair, text = str(item["pair"]), one_line(item[field] or "no message")
+                text = text[len(pair) + 2:] if text.startswith(f"{pair}: ") else text  # the name once
+                parts.append(f"<li><b>{e(pair)}</b>: {e(text)}</li>")
+            parts.append("</ul>")
+    return parts
+
+
+def definitions_section(keys: Iterable[str]) -> list[str]:
+    """HTML of the "Definitions" section: how the pixels are chosen, the means, then each column of ``keys``."""
+    e = html.escape
+    parts = ['<h2 id="definitions">Definitions</h2>', f"<p>{e(EVALUATED)} {e(PIXEL_SETS)} {e(MEANS)}</p><dl>"]
+    for key in dict.fromkeys(keys):
+        m = metric(key)
+        if m.definition:
+            parts.append(f"<dt>{e(m.label)}</dt><dd>{e(m.definition)}</dd>")
+    parts.append("</dl>")
+    return parts
 
 
 #: Per-pair road files (d3cli.road.report writes them; read here, not imported: the
@@ -205,10 +274,9 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
              "<p>Depth: below the surrounding road surface (the median height of a ring of road "
              "around the defect); area: of the road plane covered; volume: to fill it up to the "
              "surrounding surface; decided: share of the defect's pixels the method decided itself "
-             "(not filled); low confidence = few decided pixels. Definitions: README section "
-             "“Road inspection outputs”.</p>",
+             "(not filled); low confidence = few decided pixels.</p>",
              '<table><thead><tr><th>pairs with a road report</th><th>with defects</th><th>potholes</th>'
-             "<th>bumps</th><th>low confidence</th><th>pothole area m²</th><th>pothole volume l</th>"
+             "<th>bumps</th><th>low confidence</th><th>pothole area [m²]</th><th>pothole volume [l]</th>"
              "<th>deepest pothole</th></tr></thead><tbody>",
              _road_totals_row(done, len(reports))]
     if (out_dir / "defects.csv").is_file():
@@ -257,7 +325,8 @@ def _road_totals_row(done: list, n_reports: int) -> str:
 def _road_card(out_dir: Path, pair: str, data: Mapping) -> list[str]:
     """HTML of one pair's card in :func:`road_section`: thumbnail, links and defects table."""
     e = html.escape
-    cols = ("id", "kind", "depth mm (bump: height)", "mean mm", "area m²", "volume l", "decided", "confidence")
+    cols = ("id", "kind", "depth [mm] (bump: height)", "mean depth [mm]", "area [m²]", "volume [l]", "decided [%]",
+            "confidence")
     folder = out_dir / pair
     parts = []
     n_pits = sum(d.get("kind") == "pothole" for d in data["defects"])
@@ -277,7 +346,7 @@ def _road_card(out_dir: Path, pair: str, data: Mapping) -> list[str]:
                 (d.get("mean_depth_mm"), f"{_num(d.get('mean_depth_mm')) or 0.0:.1f}"),
                 (d.get("area_m2"), f"{_num(d.get('area_m2')) or 0.0:.4f}"),
                 (d.get("volume_l"), f"{_num(d.get('volume_l')) or 0.0:.2f}"),
-                (d.get("decided_share"), f"{100 * (_num(d.get('decided_share')) or 0.0):.0f} %"),
+                (d.get("decided_share"), f"{100 * (_num(d.get('decided_share')) or 0.0):.0f}"),
                 (None, "low" if low_d else "ok")]
         cells = "".join(f'<td data-v="{_num(v) if _num(v) is not None else ""}">{e(t)}</td>' for v, t in vals)
         row_cls = ' class="low"' if low_d else ""

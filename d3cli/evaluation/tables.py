@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 
+from .definitions import EVALUATED, HUGE, MEANS, METRICS
 from .summary import (
     DISPARITY_COLUMNS,
     METRIC_COLUMNS,
@@ -20,49 +21,14 @@ from .summary import (
     summarize_group,
 )
 
-LABELS = {
-    "epe": "EPE (px)",
-    "pep_0.5": "PEP 0.5 (%)",
-    "pep_1": "PEP 1 (%)",
-    "pep_2": "PEP 2 (%)",
-    "pep_3": "PEP 3 (%)",
-    "density": "density (%)",
-    "mse": "MSE",
-    "psnr": "PSNR (dB)",
-    "ssim": "SSIM",
-    "coverage": "coverage (%)",
-    "time_s": "time (s)",
-}
+#: Column names with units ("EPE [px]"), as report.html names them too (:mod:`.definitions`).
+LABELS = {key: m.label for key, m in METRICS.items()}
 
 #: Short labels for the fixed-width terminal table.
-SHORT_LABELS = {
-    "epe": "EPE",
-    "pep_0.5": "PEP0.5",
-    "pep_1": "PEP1",
-    "pep_2": "PEP2",
-    "pep_3": "PEP3",
-    "density": "dens%",
-    "mse": "MSE",
-    "psnr": "PSNR",
-    "ssim": "SSIM",
-    "coverage": "cov%",
-    "time_s": "time_s",
-}
+SHORT_LABELS = {key: m.short for key, m in METRICS.items()}
 
 #: Decimals shown per key: 3 for EPE (px), 2 for percentages.
-DECIMALS = {
-    "epe": 3,
-    "pep_0.5": 2,
-    "pep_1": 2,
-    "pep_2": 2,
-    "pep_3": 2,
-    "density": 2,
-    "mse": 2,
-    "psnr": 2,
-    "ssim": 4,
-    "coverage": 2,
-    "time_s": 2,
-}
+DECIMALS = {key: m.decimals for key, m in METRICS.items()}
 
 MISSING = "n/a"
 
@@ -92,11 +58,7 @@ def summary_markdown(summary: Mapping, rows: Iterable[Mapping]) -> str:
         "",
         counts_sentence(summary),
         "",
-        "Means over the ok pairs that have the value. EPE in px; PEP(δ) = % of pixels with "
-        "|d - gt| > δ px over pixels with valid ground truth (a pixel without an estimate "
-        "counts as an error of |gt|); density = % of those pixels with an estimate. "
-        "Photometric scores compare the left image with the warped right image over the "
-        "covered pixels.",
+        f"{MEANS} The columns are defined at the end.",
         "",
     ]
     for family, group in summary["families"].items():
@@ -112,6 +74,8 @@ def summary_markdown(summary: Mapping, rows: Iterable[Mapping]) -> str:
     if summary.get("warnings"):
         lines += ["", "## Warnings", "", "Maps of these pairs may be wrong; see each pair's result.json.", ""]
         lines += [f"- {item['pair']}: {one_line(item['warning'])}" for item in summary["warnings"]]
+    lines += ["", "## Definitions", "", EVALUATED, ""]
+    lines += [f"- **{LABELS[key]}**: {METRICS[key].definition}" for key in keys]
     return "\n".join(lines) + "\n"
 
 
@@ -288,5 +252,7 @@ def _format_value(key: str, value) -> str:
         return MISSING
     if math.isinf(number):
         return "inf" if number > 0 else "-inf"
+    if abs(number) >= HUGE:
+        return f"{number:.3e}"
     return f"{number:.{DECIMALS.get(key, 3)}f}"
 

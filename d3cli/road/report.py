@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from ..data.formats import atomic_write, write_image, write_pfm
+from ..data.legend import put_text, text_px, text_size, vertical_colour_bar
 from .defects import find_defects
 from .plane import fit_road_plane, height_map, seen_by_both
 from .pointcloud import Camera, disparity_to_points
@@ -55,17 +56,10 @@ def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
 
     img = (ramp(t) * 255).astype(np.uint8)
     img[~finite] = 96
-    bar_w = max(60, w // 12)
-    bar = np.full((h, bar_w, 3), 255, np.uint8)
-    top, bottom = int(0.05 * h), int(0.95 * h)
-    ys = np.arange(top, bottom)
-    vals = 1 - 2 * (ys - top) / max(bottom - top - 1, 1)  # + at the top
-    bar[top:bottom, 4:bar_w // 3] = (ramp(vals)[:, None, :] * 255).astype(np.uint8)
-    scale = max(0.3, h / 1200)
-    for frac, label in ((0.0, f"+{range_mm:g}"), (0.5, "0 mm"), (1.0, f"-{range_mm:g}")):
-        y = int(top + frac * (bottom - top - 1))
-        cv2.putText(bar, label, (bar_w // 3 + 3, min(max(y + 5, 12), h - 2)), cv2.FONT_HERSHEY_SIMPLEX,
-                    scale, (0, 0, 0), 1, cv2.LINE_AA)
+    ticks = [(0.5 - v / (2 * range_mm), f"{v:+g} mm" if v else "0 mm") for v in (range_mm, range_mm / 2, 0.0,
+                                                                              -range_mm / 2, -range_mm)]
+    bar = vertical_colour_bar(h, (ramp(np.linspace(1.0, -1.0, 256)) * 255).astype(np.uint8), ticks,
+                              "height above road plane [mm]; grey: no estimate")
     return np.concatenate([img, bar], axis=1)
 
 
@@ -78,21 +72,20 @@ def defects_overlay(left: np.ndarray, defects, labels_shape, regions) -> np.ndar
         img = np.repeat(img[:, :, None], 3, axis=2)
     out = np.ascontiguousarray(img[:, :, :3]).copy()
     thick = max(1, out.shape[0] // 360)
-    scale = max(0.5, out.shape[0] / 900)
+    scale = text_px(out.shape[1])  # cap height in px
     for d, mask in zip(defects, regions):
         colour = (255, 0, 0) if d.kind == "pothole" else (255, 220, 0)
         contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         cv2.drawContours(out, contours, -1, colour, thick)
         sign = "-" if d.kind == "pothole" else "+"
-        text = f"#{d.id} {sign}{d.max_depth_mm:.0f}mm" + ("?" if d.low_confidence else "")
+        text = f"#{d.id} {sign}{d.max_depth_mm:.0f} mm" + ("?" if d.low_confidence else "")
         # Above the outline; below it where the outline touches the top border (the label
         # was cut off there), clamped into the image.
-        (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thick + 2)
+        tw, th = text_size(text, scale)
         u0, v0, _, v1 = (int(x) for x in d.bbox_px)
         y = v0 - 4 if v0 - 4 - th >= 0 else v1 + th + 4
         org = (min(max(u0, 0), max(out.shape[1] - tw, 0)), min(max(y, th + 2), out.shape[0] - 3))
-        cv2.putText(out, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), thick + 2, cv2.LINE_AA)
-        cv2.putText(out, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, colour, thick, cv2.LINE_AA)
+        put_text(out, text, org, scale, colour, outline=(0, 0, 0))
     return out
 
 

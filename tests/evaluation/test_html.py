@@ -102,7 +102,7 @@ def test_road_section_lists_every_defect_and_the_batch_totals(tmp_path):
     # Cards: deepest pothole first, one table row per defect with its figures.
     assert road.index('id="road-deep pair"') < road.index('id="road-shallow"')
     card = road[road.index('id="road-deep pair"'):road.index('id="road-shallow"')]
-    assert card.count("<tr") == 4 and "61.5" in card and "3.25" in card and "20 %" in card
+    assert card.count("<tr") == 4 and "61.5" in card and "3.25" in card and ">20</td>" in card
     assert card.count(">low<") == 1 and 'href="deep%20pair/defects.png"' in card
     assert "No defects: flat (no defects: the scene is not road-like)" in road
     assert "nocam (no road report)" in road and 'href="defects.csv"' in road
@@ -111,3 +111,48 @@ def test_road_section_lists_every_defect_and_the_batch_totals(tmp_path):
 def test_no_road_section_without_road_outputs(tmp_path):
     text = write_report_html(tmp_path, [{"pair": "a", "status": "ok", "epe": 1.0}], title="t").read_text()
     assert 'id="road"' not in text
+
+
+def test_histogram_of_equal_values_near_the_float_limit():
+    svg = histogram_svg([3e38, 3e38], label="EPE [px]", bins=4)
+    assert svg.count("<rect") == 4 and svg.count(": 2</title>") == 1 and svg.count(": 0</title>") == 3
+    assert ">3e+38</text>" in svg
+    svg = histogram_svg([-1.7e308, 1.7e308], label="EPE [px]", bins=2)  # the span overflows float64
+    assert svg.count(": 1</title>") == 2
+
+
+def test_columns_have_names_with_units_and_are_defined_in_the_page(tmp_path):
+    rows = [{"pair": "a", "family": "k", "status": "ok", "epe": 1.25, "d1_all": 4.0, "bad_2_noc": 7.5,
+             "pep_3": 3.0, "a90_noc": 2.0, "time_s": 1.5},
+            {"pair": "b", "family": "k", "status": "failed", "error": "b: right.png: not a PNG file;\n  fix it"},
+            {"pair": "c", "family": "k", "status": "skipped", "error": "no right image"}]
+    text = write_report_html(tmp_path, rows, title="t").read_text()
+    heads = re.findall(r'<th title="[^"]*">([^<]*)</th>', text[:text.index("<h2>Means per family")])
+    assert heads == ["EPE [px]", "D1 (all) [%]", "bad 2 (non-occ.) [%]", "A90 (non-occ.) [px]", "PEP 3 [%]", "time [s]"]
+    d1_definition = "KITTI outliers: 100 x share of the pixels with e &gt; 3 px and e &gt; 5 % of gt."
+    assert f'<th title="{d1_definition}">D1 (all) [%]</th>' in text
+    definitions = text[text.index('<h2 id="definitions">'):text.index("<h2>Config")]
+    assert re.findall(r"<dt>(.*?)</dt>", definitions) == heads
+    assert "<dd>Middlebury bad-2: 100 x share of the pixels with e &gt; 2 px.</dd>" in definitions
+    assert "a pixel without an estimate counts as d = 0" in definitions and "README" not in text
+    failed = text[text.index('<h2 id="failures">Failed pairs</h2>'):text.index('<h2 id="definitions">')]
+    assert "<li><b>b</b>: right.png: not a PNG file; fix it</li>" in failed  # the pair named once
+    assert '<td title="b: right.png: not a PNG file;\n  fix it"><a href="#failures">failed</a></td>' in text
+    assert '<h2 id="skipped">Left-out pairs</h2><ul class="failed">\n<li><b>c</b>: no right image</li>' in failed
+    assert "<b>a</b> EPE 1.250 px, D1 (all) 4.00 %, A90 (non-occ.) 2.000 px<br>" in text
+    assert "<h2>Histogram of per-pair EPE [px]</h2>" in text
+
+
+def test_summary_md_names_the_columns_as_the_page_does_and_defines_them(tmp_path):
+    from d3cli.evaluation.report import write_summary
+
+    rows = [{"pair": "a", "family": "k", "status": "ok", "epe": 1.0, "pep_3": 2.0, "time_s": 1.0}]
+    _, md = write_summary(tmp_path, rows, method="m")
+    lines = md.read_text().splitlines()
+    assert "| pair | status | EPE [px] | PEP 3 [%] | time [s] |" in lines
+    tail = lines[lines.index("## Definitions"):]
+    assert tail[4:] == ["- **EPE [px]**: End-point error: mean of e, over the non-occluded pixels where a mask "
+                        "exists, else all.",
+                        "- **PEP 3 [%]**: Percentage of error pixels: 100 x share of EPE's pixels with e > 3 px.",
+                        "- **time [s]**: Wall time of the pair in the run that made its map: reading, matching, "
+                        "writing and scoring."]

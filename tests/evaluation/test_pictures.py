@@ -46,3 +46,44 @@ def test_panel_puts_tiles_side_by_side():
     tiles = [("a", np.zeros((50, 100, 3), np.uint8)), ("b", np.zeros((20, 40), np.uint8))]
     out = pictures.panel("title", tiles, tile_width=64)
     assert out.shape[1] == 64 * 2 + 6 and out.dtype == np.uint8
+
+
+@pytest.mark.filterwarnings("error")
+def test_values_near_the_float32_limit_give_pictures_and_no_warning():
+    big = np.float32(3e38)
+    gt = np.full((4, 6), big, np.float32)
+    pred = gt.copy()
+    pred[0] = 1.0  # error ~3e38: n = min(e / 3, 20 e / gt) = 20 -> the last bin
+    pred[1] = -big  # error ~6e38, beyond float32
+    rgb = pictures.kitti_error_image(pred, gt, noc_mask=np.ones(gt.shape))
+    assert tuple(rgb[0, 0]) == tuple(rgb[1, 0]) == (165, 0, 38)
+    assert tuple(rgb[2, 0]) == (49, 54, 149)  # exact
+    assert pictures.error_picture(pred, gt).shape[1] == 6
+
+
+@pytest.mark.filterwarnings("error")
+def test_a_constant_map_of_3e38_gets_a_range_and_a_picture():
+    disp = np.full((8, 10), 3e38, np.float32)
+    lo, hi = pictures.robust_range(disp)
+    assert lo == float(np.float32(3e38)) and hi == pytest.approx(lo * (1 + 1e-6)) and hi > lo
+    pic = pictures.disparity_picture(disp, lo, hi, how="1-99th percentile")
+    assert tuple(pic[0, 0]) == tuple(colorize_disparity(np.zeros((1, 1)), 0.0, 1.0)[0, 0])  # the low end
+    near_max = np.full((2, 2), np.finfo(np.float32).max, np.float32)
+    lo, hi = pictures.robust_range(near_max)
+    assert hi == float(np.finfo(np.float32).max) and lo < hi
+
+
+@pytest.mark.filterwarnings("error")
+def test_a_range_wider_than_float32_colours_without_overflow():
+    disp = np.array([[-3e38, 0.0, 3e38, np.inf]], np.float32)
+    pic = pictures.disparity_picture(disp, -3e38, 3e38, how="fixed range")
+    turbo = colorize_disparity(np.array([[0.0, 0.5, 1.0]]), 0.0, 1.0)[0]
+    np.testing.assert_array_equal(pic[0, :3], turbo)
+    assert tuple(pic[0, 3]) == (0, 0, 0)
+
+
+@pytest.mark.filterwarnings("error")
+def test_a_narrow_range_over_huge_values_colours_without_overflow():
+    disp = np.array([[3e38, 10.0, 10.25, 10.5]], np.float32)
+    pic = pictures.disparity_picture(disp, 10.0, 10.5, how="fixed range")
+    np.testing.assert_array_equal(pic[0, :4], colorize_disparity(np.array([[1.0, 0.0, 0.5, 1.0]]), 0.0, 1.0)[0])

@@ -173,8 +173,8 @@ def test_summary_markdown_tables_and_failures(tmp_path):
     for family in ("kitti2012", "middlebury2014", "road", "Overall", "Failed pairs", "Skipped pairs"):
         assert f"## {family}" in lines
     header = (
-        "| pair | status | EPE (px) | PEP 0.5 (%) | PEP 1 (%) | PEP 2 (%) | PEP 3 (%) | density (%) "
-        "| MSE | PSNR (dB) | SSIM | coverage (%) | time (s) |"
+        "| pair | status | EPE [px] | PEP 0.5 [%] | PEP 1 [%] | PEP 2 [%] | PEP 3 [%] | density [%] "
+        "| MSE | PSNR [dB] | SSIM | coverage [%] | time [s] |"
     )
     assert header in lines
     no_photo = "| n/a | n/a | n/a | n/a |"
@@ -227,29 +227,29 @@ def test_side_by_side_layout():
     assert lines[1] == "| --- | --- | ---: | ---: |"
     assert lines[2:11] == [
         "| kitti2012 | pairs with gt | 2 | 2 |",
-        "|  | EPE (px) | 1.500 | 2.500 |",
-        "|  | PEP 0.5 (%) | 50.00 | 70.00 |",
-        "|  | PEP 1 (%) | 25.00 | 35.00 |",
-        "|  | PEP 2 (%) | 15.00 | 20.00 |",
-        "|  | PEP 3 (%) | 10.00 | 12.50 |",
-        "|  | density (%) | 80.00 | 60.00 |",
-        "|  | time (s) | 3.00 | 0.38 |",
+        "|  | EPE [px] | 1.500 | 2.500 |",
+        "|  | PEP 0.5 [%] | 50.00 | 70.00 |",
+        "|  | PEP 1 [%] | 25.00 | 35.00 |",
+        "|  | PEP 2 [%] | 15.00 | 20.00 |",
+        "|  | PEP 3 [%] | 10.00 | 12.50 |",
+        "|  | density [%] | 80.00 | 60.00 |",
+        "|  | time [s] | 3.00 | 0.38 |",
         "| middlebury2014 | pairs with gt | 1 | 0 |",
     ]
-    assert "|  | EPE (px) | 0.500 | n/a |" in lines
+    assert "|  | EPE [px] | 0.500 | n/a |" in lines
     family_cells = [line.split(" | ")[0][2:] for line in lines[2:] if not line.startswith("|  |")]
     assert family_cells == ["kitti2012", "middlebury2014", "road", "**overall**"]
     road = lines.index("| road | pairs with gt | 0 | 0 |")
     overall = lines.index("| **overall** | pairs with gt | 3 | 2 |")
     assert lines[road + 1 : overall] == [  # no method has ground truth here: no EPE rows
         "|  | MSE | 10.00 | n/a |",
-        "|  | PSNR (dB) | 38.12 | n/a |",
+        "|  | PSNR [dB] | 38.12 | n/a |",
         "|  | SSIM | 0.9000 | n/a |",
-        "|  | coverage (%) | 95.00 | n/a |",
-        "|  | time (s) | 3.00 | n/a |",
+        "|  | coverage [%] | 95.00 | n/a |",
+        "|  | time [s] | 3.00 | n/a |",
     ]
-    assert lines[overall + 1] == "|  | EPE (px) | 1.167 | 2.500 |"
-    assert lines[-1] == "|  | time (s) | 2.50 | 0.38 |"
+    assert lines[overall + 1] == "|  | EPE [px] | 1.167 | 2.500 |"
+    assert lines[-1] == "|  | time [s] | 2.50 | 0.38 |"
 
 
 # ------------------------------------------------------------------------ terminal
@@ -271,3 +271,13 @@ def test_format_table_is_fixed_width():
 
 def test_metric_columns_order():
     assert METRIC_COLUMNS[:6] == ["epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density"]
+
+
+def test_huge_values_are_written_in_exponent_notation(tmp_path):
+    from d3cli.evaluation.html import write_report_html
+
+    rows = [{"pair": "a", "family": "k", "status": "ok", "epe": 3e38, "pep_3": 100.0, "time_s": 1.0}]
+    _, md = write_summary(tmp_path, rows, method="m")
+    assert "| a | ok | 3.000e+38 | 100.00 | 1.00 |" in md.read_text().splitlines()
+    page = write_report_html(tmp_path, rows, title="t").read_text()
+    assert '<td data-v="3e+38">3.000e+38</td>' in page and "<b>a</b> EPE 3.000e+38 px<br>" in page

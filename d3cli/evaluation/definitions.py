@@ -1,0 +1,125 @@
+"""Names, units and exact definitions of every metric column, for people reading a report.
+
+One table (:data:`METRICS`) that report.html's column headers and definitions section,
+summary.md's tables and the terminal table all read, so a column has the same name and
+unit everywhere ("EPE [px]", "bad 2 (non-occ.) [%]", "PEP 3 [%]").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .metrics import BAD_THRESHOLDS, D1_PIXELS, D1_RELATIVE, PEP_THRESHOLDS, QUANTILES, pep_key
+
+
+#: From this magnitude on, values are written in exponent notation ("3.000e+38"):
+#: 39 digits of a 3e38 px error help nobody.
+HUGE = 1e7
+
+
+@dataclass(frozen=True)
+class Metric:
+    """How one metric column is named, shown and defined.
+
+    Attributes
+    ----------
+    name : str
+        Name with its pixel set, without the unit ("bad 2 (non-occ.)").
+    unit : str
+        Unit ("px", "%", "dB", "s"); empty for a pure number.
+    decimals : int
+        Decimals shown in tables.
+    short : str
+        Column head of the fixed-width terminal table.
+    definition : str
+        One sentence that says exactly how the value is computed.
+    """
+
+    name: str
+    unit: str
+    decimals: int
+    short: str
+    definition: str
+
+    @property
+    def label(self) -> str:
+        """``name [unit]``, or the name alone when there is no unit."""
+        return f"{self.name} [{self.unit}]" if self.unit else self.name
+
+    def format(self, value: float) -> str:
+        """``value`` with this metric's decimals and unit ("1.234 px"); "n/a" for a missing value."""
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            return "n/a"
+        value = float(value)
+        text = (str(value) if not math.isfinite(value) else f"{value:.3e}" if abs(value) >= HUGE
+                else f"{value:.{self.decimals}f}")
+        return f"{text} {self.unit}" if self.unit else text
+
+
+#: The pixels every disparity figure is computed over, and how a missing estimate counts.
+EVALUATED = ("Over the pixels with finite, positive ground truth; e = |d - gt|, and a pixel "
+             "without an estimate counts as d = 0 (an error of gt).")
+#: What the two pixel sets of the benchmark figures are.
+PIXEL_SETS = ("(all) = every pixel with ground truth; (non-occ.) = those inside the non-occlusion "
+              "mask (KITTI disp_noc, Middlebury mask0nocc); no mask: the (non-occ.) figures are empty.")
+#: How the per-family and overall rows are made.
+MEANS = ("Means: plain means of the per-pair values over the ok pairs that have the value; "
+         "failed pairs are listed, never averaged in.")
+
+_MASK_NAMES = {"all": "all", "noc": "non-occ."}
+
+
+def _benchmark_metrics() -> dict[str, Metric]:
+    """The KITTI/Middlebury figures of :func:`d3cli.evaluation.metrics.benchmark_metrics`."""
+    out: dict[str, Metric] = {}
+    for mask, where in _MASK_NAMES.items():
+        out[f"d1_{mask}"] = Metric(f"D1 ({where})", "%", 2, f"D1{mask}", (
+            f"KITTI outliers: 100 x share of the pixels with e > {D1_PIXELS:g} px and e > "
+            f"{100 * D1_RELATIVE:g} % of gt."))
+        for t in BAD_THRESHOLDS:
+            out[f"bad_{t:g}_{mask}"] = Metric(f"bad {t:g} ({where})", "%", 2, f"bad{t:g}{mask}", (
+                f"Middlebury bad-{t:g}: 100 x share of the pixels with e > {t:g} px."))
+        out[f"avgerr_{mask}"] = Metric(f"avg. error ({where})", "px", 3, f"avg{mask}", "Mean of e.")
+        out[f"rms_{mask}"] = Metric(f"RMS ({where})", "px", 3, f"rms{mask}", "Root of the mean of e squared.")
+        for q in QUANTILES:
+            k = round(q * 100)
+            out[f"a{k}_{mask}"] = Metric(f"A{k} ({where})", "px", 3, f"A{k}{mask}", (
+                f"Error quantile: the smallest e with at least {k} % of the pixels at or below it."))
+    for part, what in (("bg", "background (KITTI object map 0)"), ("fg", "foreground (object map > 0)")):
+        out[f"d1_{part}"] = Metric(f"D1 ({part})", "%", 2, f"D1{part}", f"D1 over the {what} pixels with ground truth.")
+    return out
+
+
+def _pixel_metrics() -> dict[str, Metric]:
+    """EPE, PEP and density of :func:`d3cli.evaluation.metrics.disparity_errors`."""
+    out = {"epe": Metric("EPE", "px", 3, "EPE", (
+        "End-point error: mean of e, over the non-occluded pixels where a mask exists, else all."))}
+    for t in PEP_THRESHOLDS:
+        out[pep_key(t)] = Metric(f"PEP {t:g}", "%", 2, f"PEP{t:g}", (
+            f"Percentage of error pixels: 100 x share of EPE's pixels with e > {t:g} px."))
+    out["density"] = Metric("density", "%", 2, "dens%", "100 x share of EPE's pixels that have an estimate.")
+    return out
+
+
+#: Every metric column: key -> :class:`Metric`.
+METRICS: dict[str, Metric] = {
+    **_pixel_metrics(),
+    "mse": Metric("MSE", "", 2, "MSE", (
+        "Photometric: mean squared difference (0-255 scale) between the left image and the right "
+        "image warped into the left view with the estimate, over the covered pixels.")),
+    "psnr": Metric("PSNR", "dB", 2, "PSNR", "10 log10(255^2 / MSE)."),
+    "ssim": Metric("SSIM", "", 4, "SSIM", (
+        "Structural similarity of the left and the warped right image (Gaussian window, sigma 1.5), "
+        "mean over the covered pixels.")),
+    "coverage": Metric("coverage", "%", 2, "cov%", (
+        "100 x share of all pixels with an estimate whose match lies inside the right image.")),
+    **_benchmark_metrics(),
+    "time_s": Metric("time", "s", 2, "time_s", (
+        "Wall time of the pair in the run that made its map: reading, matching, writing and scoring.")),
+}
+
+
+def metric(key: str) -> Metric:
+    """The :class:`Metric` of a column; an unknown key is its own name, with no unit or definition."""
+    return METRICS.get(key) or Metric(key, "", 3, key, "")
