@@ -19,7 +19,7 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, load_config
+from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, bundled_configs, load_config, resolve_config
 from .errors import D3Error, interrupt_behind, raise_terminated
 
 log = logging.getLogger("d3cli")
@@ -171,7 +171,8 @@ def main():
 @click.option("--backend", type=click.Choice(BACKENDS), default=None,
               help="Compute backend [default: run.backend of the config, auto].")
 @click.option("-c", "--config", "config_path", type=click.Path(path_type=Path), default=None,
-              help=f"YAML config file, or a name (road, kitti, middlebury) looked up in configs/; "
+              help=f"YAML config file, or a bundled config's name (road, kitti, middlebury, paper, default; "
+                   f"see `d3stereo configs`); "
                    f"else ${CONFIG_ENV} or ./{LOCAL_CONFIG}.")
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
               help="Override one config value; repeatable.")
@@ -271,22 +272,14 @@ def _say_where(folder: Path, with_summary: bool = True) -> None:
 
 
 def config_by_name(config_path):
-    """``-c road`` -> ``configs/road.yaml``: a bare name (no suffix, no folder) that is not a file.
-
-    Searched in ``./configs/`` and then in the ``configs/`` folder of the source checkout
-    this package runs from (configs are not bundled in a wheel); otherwise the value is
-    returned unchanged, so the usual "file not found" error names it.
+    """``-c road`` -> the bundled ``d3cli/configs/road.yaml`` unless a file ``road`` (or,
+    for a bare name, ``./road.yaml``) exists (:func:`d3cli.config.resolve_config`); a
+    value that names nothing is returned unchanged, so the usual "not found" error names it.
     """
     if config_path is None:
         return None
-    given = Path(config_path)
-    if given.exists() or given.suffix or len(given.parts) != 1:
-        return config_path
-    for folder in (Path.cwd() / "configs", Path(__file__).resolve().parent.parent / "configs"):
-        candidate = folder / f"{given.name}.yaml"
-        if candidate.is_file():
-            return candidate
-    return config_path
+    resolved, how = resolve_config(config_path)
+    return config_path if how == "file" and resolved == config_path else resolved
 
 
 def _color_range(text: str) -> tuple[float, float]:
@@ -402,6 +395,16 @@ def info():
                  f"(searched -c, ${CONFIG_ENV}, ./{LOCAL_CONFIG})")
     lines.append(f"samples {samples_dir()}")
     click.echo("\n".join(lines))
+
+
+# ----------------------------------------------------------------------------- configs
+@main.command()
+def configs():
+    """The bundled configs (-c NAME) and the file each name resolves to from here."""
+    for name, bundled in bundled_configs().items():
+        resolved, how = resolve_config(name)
+        where = f"{bundled} (bundled)" if how == "bundled" else f"{Path(resolved).resolve()} (local file, wins)"
+        click.echo(f"{name:<11} {where}")
 
 
 def _numba_threads() -> str:
