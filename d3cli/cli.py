@@ -374,6 +374,31 @@ def synth(out_dir, n, seed, width, height, verbose, quiet):
         click.echo(f"wrote {len(written)} pairs to {out_dir}")
 
 
+# ----------------------------------------------------------------------------- export
+@main.command()
+@click.argument("out_dir", type=click.Path(path_type=Path))
+@click.option("--format", "fmt", type=click.Choice(("kitti", "middeval3")), required=True,
+              help="kitti: disp_0/<name>_10.png; middeval3: <Split>/<Scene>/disp0<ALG>.pfm and time<ALG>.txt.")
+@click.option("-o", "--out", "submission", type=click.Path(path_type=Path), required=True,
+              help="Folder for the submission (outside OUT_DIR).")
+@click.option("--algorithm", default="D3Stereo", show_default=True, metavar="ALG",
+              help="Algorithm name in MiddEval3's file names.")
+@click.option("--split", default=None, metavar="SPLIT",
+              help="MiddEval3 split (e.g. trainingQ) of pairs whose input path names none.")
+@_verbosity
+def export(out_dir, fmt, submission, algorithm, split, verbose, quiet):
+    """Write the benchmark submission layout of the complete pairs of a run's OUT_DIR."""
+    from .batch.export import export_submission
+
+    _setup_logging(verbose, quiet)
+    done = export_submission(out_dir, submission, fmt, algorithm=algorithm, split=split)
+    if done.incomplete:
+        click.echo(f"skipped {len(done.incomplete)} pair folders without a complete result: "
+                   f"{', '.join(done.incomplete)}", err=True)
+    if not quiet:
+        click.echo(f"wrote {len(done.pairs)} pairs ({fmt}, {len(done.files)} files) to {submission}")
+
+
 # ----------------------------------------------------------------------------- info
 @main.command()
 def info():
