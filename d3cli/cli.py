@@ -210,10 +210,6 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
     KITTI root, a manifest YAML, or two image files.
     """
-    from . import batch
-    from .data import layouts as datasets
-    from .evaluation import report
-
     _setup_logging(verbose, quiet)
     if max_disparity is not None and not 0 < max_disparity <= MAX_CONFIG_INT:
         # bounded like every integer setting: the kernels take 32-bit scalars
@@ -225,6 +221,13 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     if road_report:
         cfg = replace(cfg, road=replace(cfg.road, report=True))
     method = cfg.run.method
+    from .kernels.cachedir import announce
+
+    announce(method)  # a cold cache: say so before the imports below (numba: a second or more)
+    from . import batch
+    from .data import layouts as datasets
+    from .evaluation import report
+
     if method == "sgbm" and cfg.run.backend == "cuda":
         log.warning("--backend cuda: sgbm runs on OpenCV's CPU implementation")
     if method in ("elas", "pandora-sgm"):
