@@ -281,8 +281,7 @@ def config_by_name(config_path):
     """
     if config_path is None:
         return None
-    resolved, how = resolve_config(config_path)
-    return config_path if how == "file" and resolved == config_path else resolved
+    return resolve_config(config_path)[0]
 
 
 def _color_range(text: str) -> tuple[float, float]:
