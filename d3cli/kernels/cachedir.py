@@ -26,7 +26,7 @@ HERE = Path(__file__).resolve().parent
 COMPILE_RECORD = "compile.json"
 #: A cold compile of the default config where no record exists yet: seconds on one core
 #: of a quiet machine and top-level kernels compiled (measured with numba 0.68).
-COLD_ESTIMATE = {"seconds": 80.0, "kernels": 95}
+COLD_ESTIMATE = {"seconds": 80.0, "kernels": 125}
 #: The methods that run the numba kernels (the others compile nothing of ours).
 KERNEL_METHODS = ("d3stereo", "pt-sgm")
 #: Level of the compile notice and progress lines: above WARNING, so a default logging
