@@ -19,7 +19,7 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, load_config
+from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, bundled_configs, load_config, resolve_config
 from .errors import D3Error, interrupt_behind, raise_terminated
 
 log = logging.getLogger("d3cli")
@@ -171,7 +171,8 @@ def main():
 @click.option("--backend", type=click.Choice(BACKENDS), default=None,
               help="Compute backend [default: run.backend of the config, auto].")
 @click.option("-c", "--config", "config_path", type=click.Path(path_type=Path), default=None,
-              help=f"YAML config file, or a name (road, kitti, middlebury) looked up in configs/; "
+              help=f"YAML config file, or a bundled config's name (road, kitti, middlebury, paper, default; "
+                   f"see `d3stereo configs`); "
                    f"else ${CONFIG_ENV} or ./{LOCAL_CONFIG}.")
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
               help="Override one config value; repeatable.")
@@ -209,10 +210,6 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
     KITTI root, a manifest YAML, or two image files.
     """
-    from . import batch
-    from .data import layouts as datasets
-    from .evaluation import report
-
     _setup_logging(verbose, quiet)
     if max_disparity is not None and not 0 < max_disparity <= MAX_CONFIG_INT:
         # bounded like every integer setting: the kernels take 32-bit scalars
@@ -224,6 +221,13 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     if road_report:
         cfg = replace(cfg, road=replace(cfg.road, report=True))
     method = cfg.run.method
+    from .kernels.cachedir import announce
+
+    announce(method)  # a cold cache: say so before the imports below (numba: a second or more)
+    from . import batch
+    from .data import layouts as datasets
+    from .evaluation import report
+
     if method == "sgbm" and cfg.run.backend == "cuda":
         log.warning("--backend cuda: sgbm runs on OpenCV's CPU implementation")
     if method in ("elas", "pandora-sgm"):
@@ -271,22 +275,13 @@ def _say_where(folder: Path, with_summary: bool = True) -> None:
 
 
 def config_by_name(config_path):
-    """``-c road`` -> ``configs/road.yaml``: a bare name (no suffix, no folder) that is not a file.
-
-    Searched in ``./configs/`` and then in the ``configs/`` folder of the source checkout
-    this package runs from (configs are not bundled in a wheel); otherwise the value is
-    returned unchanged, so the usual "file not found" error names it.
+    """``-c road`` -> the bundled ``d3cli/configs/road.yaml`` unless a file ``road`` (or,
+    for a bare name, ``./road.yaml``) exists (:func:`d3cli.config.resolve_config`); a
+    value that names nothing is returned unchanged, so the usual "not found" error names it.
     """
     if config_path is None:
         return None
-    given = Path(config_path)
-    if given.exists() or given.suffix or len(given.parts) != 1:
-        return config_path
-    for folder in (Path.cwd() / "configs", Path(__file__).resolve().parent.parent / "configs"):
-        candidate = folder / f"{given.name}.yaml"
-        if candidate.is_file():
-            return candidate
-    return config_path
+    return resolve_config(config_path)[0]
 
 
 def _color_range(text: str) -> tuple[float, float]:
@@ -381,6 +376,31 @@ def synth(out_dir, n, seed, width, height, verbose, quiet):
         click.echo(f"wrote {len(written)} pairs to {out_dir}")
 
 
+# ----------------------------------------------------------------------------- export
+@main.command()
+@click.argument("out_dir", type=click.Path(path_type=Path))
+@click.option("--format", "fmt", type=click.Choice(("kitti", "middeval3")), required=True,
+              help="kitti: disp_0/<name>_10.png; middeval3: <Split>/<Scene>/disp0<ALG>.pfm and time<ALG>.txt.")
+@click.option("-o", "--out", "submission", type=click.Path(path_type=Path), required=True,
+              help="Folder for the submission (outside OUT_DIR).")
+@click.option("--algorithm", default="D3Stereo", show_default=True, metavar="ALG",
+              help="Algorithm name in MiddEval3's file names.")
+@click.option("--split", default=None, metavar="SPLIT",
+              help="MiddEval3 split (e.g. trainingQ) of pairs whose input path names none.")
+@_verbosity
+def export(out_dir, fmt, submission, algorithm, split, verbose, quiet):
+    """Write the benchmark submission layout of the complete pairs of a run's OUT_DIR."""
+    from .batch.export import export_submission
+
+    _setup_logging(verbose, quiet)
+    done = export_submission(out_dir, submission, fmt, algorithm=algorithm, split=split)
+    if done.incomplete:
+        click.echo(f"skipped {len(done.incomplete)} pair folders without a complete result: "
+                   f"{', '.join(done.incomplete)}", err=True)
+    if not quiet:
+        click.echo(f"wrote {len(done.pairs)} pairs ({fmt}, {len(done.files)} files) to {submission}")
+
+
 # ----------------------------------------------------------------------------- info
 @main.command()
 def info():
@@ -402,6 +422,16 @@ def info():
                  f"(searched -c, ${CONFIG_ENV}, ./{LOCAL_CONFIG})")
     lines.append(f"samples {samples_dir()}")
     click.echo("\n".join(lines))
+
+
+# ----------------------------------------------------------------------------- configs
+@main.command()
+def configs():
+    """The bundled configs (-c NAME) and the file each name resolves to from here."""
+    for name, bundled in bundled_configs().items():
+        resolved, how = resolve_config(name)
+        where = f"{bundled} (bundled)" if how == "bundled" else f"{Path(resolved).resolve()} (local file, wins)"
+        click.echo(f"{name:<11} {where}")
 
 
 def _numba_threads() -> str:

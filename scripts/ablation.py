@@ -3,7 +3,7 @@
 Prints a Markdown table: one row per switch combination, in the paper's order (Table
 I(a): PT, PRC, RBF, ARS, 9 rows, on road pairs; Table I(b): PRC, RBF, ARS, 8 rows), then
 the additions of this implementation, each turned on alone on top of the full method,
-and all of them (= configs/default.yaml's choices).  Columns: PEP 0.5 / 1 / 2 %, EPE,
+and all of them (= the bundled default.yaml's choices).  Columns: PEP 0.5 / 1 / 2 %, EPE,
 mean seconds per pair, and the paper's figures for the same row.
 
 What a switch means (README "Reproducing the paper"):
@@ -22,7 +22,7 @@ Usage::
     d3stereo synth /tmp/road6 --n 6 --seed 0 --width 640 --height 360
     python scripts/ablation.py /tmp/road6 --table a --set cost.window=25      # Table I(a)
 
-``-c`` (default configs/paper.yaml, the method as published) may be given more than once:
+``-c`` (default the bundled config ``paper``, the method as published) may be given more than once:
 later files override earlier ones.  ``--every N`` keeps every N-th pair (sorted by name),
 a deterministic subset for slow machines.
 """
@@ -33,17 +33,15 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 from benchmark import evaluate_pairs, family_means
 
 from d3cli import load_config
-from d3cli.config import read_yaml_lines
+from d3cli.config import read_yaml_lines, resolve_config
 from d3cli.data.layouts import discover
 from d3cli.errors import D3Error
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER_CONFIG = ROOT / "configs" / "paper.yaml"
+PAPER_CONFIG = "paper"  # the bundled d3cli/configs/paper.yaml
 
 SWITCHES = {"PT": "pt.enabled", "PRC": "inheritance.prc", "RBF": "aggregation.rbf", "ARS": "pyramid.ars"}
 
@@ -86,7 +84,7 @@ ALL_ADDITIONS = [s for _, sets in ADDITIONS for s in sets]
 
 def file_overrides(path) -> list[str]:
     """A YAML config file as ``section.key=value`` overrides (to stack several files)."""
-    data, _ = read_yaml_lines(path)
+    data, _ = read_yaml_lines(resolve_config(path)[0])
     return [f"{section}.{key}={json.dumps(value)}" for section, keys in (data or {}).items()
             for key, value in (keys or {}).items()]
 
@@ -134,7 +132,7 @@ def main(argv=None) -> int:
     parser.add_argument("inputs", nargs="+", help="dataset folders, manifests or pair folders")
     parser.add_argument("--table", choices=("a", "b"), default="b", help="a: PT, PRC, RBF, ARS; b: PRC, RBF, ARS")
     parser.add_argument("-c", "--config", action="append", default=[],
-                        help="YAML config (default configs/paper.yaml); repeat to stack files")
+                        help="YAML config or bundled name (default paper); repeat to stack files")
     parser.add_argument("--set", action="append", default=[], help="section.key=value applied to every row")
     parser.add_argument("--family", action="append", default=[], help="keep families starting with this")
     parser.add_argument("--every", type=int, default=1, help="keep every N-th pair (sorted by name)")

@@ -4,7 +4,7 @@
 Usage::
 
     python -m d3cli synth /tmp/road-synth --n 6 --seed 0
-    python -m d3cli run /tmp/road-synth -c configs/road.yaml --road-report -o /tmp/road-out
+    python -m d3cli run /tmp/road-synth -c road --road-report -o /tmp/road-out
     python scripts/bench_road.py /tmp/road-synth /tmp/road-out [--min-gt-depth-mm 20]
 
 Matching (one ground-truth pothole to at most one detection, one detection to at most one

@@ -21,12 +21,12 @@ forced to 5 on every case with ``--sgbm-block 5``, as in issue 10's table).
 
 Cases (``--cases``, default all that exist)::
 
-    road          1280x720 synthetic road pair (d3cli.data.synth.render_pair), configs/road.yaml
+    road          1280x720 synthetic road pair (d3cli.data.synth.render_pair), config road
     road-full     the same pair, default config (PT off: full range)
-    middlebury    middlebury2014-adirondack-Q, configs/middlebury.yaml
-    kitti         kitti2015-000000_10, configs/kitti.yaml
-    road-1440     2560x1440 synthetic road pair, configs/road.yaml
-    road-2160     3840x2160 synthetic road pair, configs/road.yaml (issue 10: PT within 4 GB)
+    middlebury    middlebury2014-adirondack-Q, config middlebury
+    kitti         kitti2015-000000_10, config kitti
+    road-1440     2560x1440 synthetic road pair, config road
+    road-2160     3840x2160 synthetic road pair, config road (issue 10: PT within 4 GB)
 
 Usage::
 
@@ -48,12 +48,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 CASES = {
-    "road": {"synth": [1280, 720], "config": "configs/road.yaml"},
+    "road": {"synth": [1280, 720], "config": "road"},
     "road-full": {"synth": [1280, 720], "config": None},
-    "middlebury": {"pair": "middlebury2014-adirondack-Q", "config": "configs/middlebury.yaml"},
-    "kitti": {"pair": "kitti2015-000000_10", "config": "configs/kitti.yaml"},
-    "road-1440": {"synth": [2560, 1440], "config": "configs/road.yaml"},
-    "road-2160": {"synth": [3840, 2160], "config": "configs/road.yaml"},
+    "middlebury": {"pair": "middlebury2014-adirondack-Q", "config": "middlebury"},
+    "kitti": {"pair": "kitti2015-000000_10", "config": "kitti"},
+    "road-1440": {"synth": [2560, 1440], "config": "road"},
+    "road-2160": {"synth": [3840, 2160], "config": "road"},
 }
 DEFAULT_CASES = ("road", "road-full", "middlebury", "kitti")
 
@@ -99,7 +99,7 @@ def _config(spec: dict):
     if spec.get("sgbm_block"):
         overrides.append(f"sgbm.block_size={spec['sgbm_block']}")
     overrides += spec.get("overrides", [])
-    cfg_path = spec["config"] and str(ROOT / spec["config"])
+    cfg_path = spec["config"]  # a bundled config's name, or None
     return load_config(cfg_path, overrides)
 
 

@@ -19,10 +19,10 @@ Usage::
 
     python scripts/benchmark.py DATA                      # d3 and sgbm, pairs with gt
     python scripts/benchmark.py DATA --family middlebury   # families by prefix
-    python scripts/benchmark.py /tmp/synth12 -c configs/road.yaml \\
+    python scripts/benchmark.py /tmp/synth12 -c road \\
         --methods d3stereo+pt,d3stereo,sgbm,pt-sgm --markdown          # the road table
     python scripts/benchmark.py DATA --family road --photometric \\
-        -c configs/road.yaml --methods d3stereo+pt,d3stereo,sgbm,pt-sgm
+        -c road --methods d3stereo+pt,d3stereo,sgbm,pt-sgm
     python scripts/benchmark.py DATA --methods d3,sgbm,elas,pandora-sgm --markdown  # peers
 
 The first d3stereo call compiles (or loads cached) kernels; a warm-up call on a tiny

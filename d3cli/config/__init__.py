@@ -3,7 +3,8 @@
 A configuration is built in three layers, later ones winning:
 
 1. the defaults written in the dataclasses (``sections``),
-2. a YAML file (``-c FILE``; ``configs/default.yaml`` documents every key),
+2. a YAML file (``-c FILE``) or a bundled config (``-c road``; ``d3cli/configs/default.yaml``
+   documents every key),
 3. ``--set section.key=value`` overrides (values parsed as YAML scalars).
 
 Unknown sections or keys, wrong types and out-of-range values raise
@@ -21,7 +22,7 @@ May import: :mod:`d3cli.errors` only (and PyYAML); every other room may import t
 
 from ..errors import ConfigError
 from .checks import MAX_CONFIG_INT, QUOTE_CHARS, quote
-from .load import config_from_dict, load_config
+from .load import bundled_configs, config_from_dict, load_config, resolve_config
 from .sections import (
     BACKENDS,
     METHODS,
@@ -76,6 +77,7 @@ __all__ = [
     "RunConfig",
     "SeedConfig",
     "SGBMConfig",
+    "bundled_configs",
     "config_from_dict",
     "load_config",
     "parse_override",
@@ -84,4 +86,5 @@ __all__ = [
     "read_bounded",
     "read_yaml",
     "read_yaml_lines",
+    "resolve_config",
 ]

@@ -1,6 +1,6 @@
 """The configuration's sections: one frozen dataclass per YAML section, with every default.
 
-``configs/default.yaml`` documents every key; :mod:`d3cli.config.checks` holds the range
+``d3cli/configs/default.yaml`` documents every key; :mod:`d3cli.config.checks` holds the range
 checks and :mod:`d3cli.config.load` builds a :class:`Config` from a file and ``--set``.
 """
 

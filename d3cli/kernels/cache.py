@@ -18,6 +18,8 @@ import hashlib
 import os
 from pathlib import Path
 
+from .cachedir import choose_cache_dir, module_cache_folder
+
 #: The kernels package folder.
 HERE = Path(__file__).resolve().parent
 #: Glob patterns (relative to the kernels folder) of the per-pixel modules.
@@ -37,11 +39,7 @@ _prepared = False
 
 def _cache_folder(py_file: Path, cache_dir: str | None) -> Path:
     """Where numba keeps the cache of the module ``py_file``."""
-    if cache_dir:
-        from numba.core.caching import UserProvidedCacheLocator
-
-        return Path(cache_dir) / UserProvidedCacheLocator.get_suitable_cache_subpath(str(py_file))
-    return py_file.parent / "__pycache__"
+    return module_cache_folder(py_file, cache_dir or "")
 
 
 def pixel_digest(root: Path = HERE) -> str:
@@ -99,12 +97,10 @@ def prepare() -> None:
     _prepared = True
     from numba import config as numba_config
 
-    cache = HERE / "__pycache__"
-    writable = os.access(cache if cache.is_dir() else HERE, os.W_OK)
-    if not writable and not numba_config.CACHE_DIR:
-        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-        os.environ["NUMBA_CACHE_DIR"] = str(base / "d3stereo" / "numba")
-        numba_config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # numba read the variable at import already
+    chosen = numba_config.CACHE_DIR or choose_cache_dir(HERE)  # the same choice the CLI's notice made
+    if chosen != numba_config.CACHE_DIR:
+        os.environ["NUMBA_CACHE_DIR"] = chosen
+        numba_config.CACHE_DIR = chosen  # numba read the variable at import already
     try:
         drop_stale(HERE, numba_config.CACHE_DIR)
     except OSError:  # no writable cache anywhere: numba then compiles in every process

@@ -19,7 +19,7 @@ of the full range (Middlebury adirondack / a 1280x720 road pair at full range): 
 44 % / 17 %, tile 64 66 % / 27 % (tile 16 with margin 4: 38 % / 15 %).  Full range wherever any coarse pixel is undecided gives back
 exactly 1.583 but leaves nearly every tile at the full range.  Defaults: tile 32,
 margin 2.  Measured with ``scripts/benchmark.py ../shared/data --family middlebury -c
-configs/middlebury.yaml --methods d3 --set pyramid.band_tile=... --set
+middlebury --methods d3 --set pyramid.band_tile=... --set
 pyramid.band_margin=...``.
 
 Exactness.  Aggregation (RBF, ``t_max`` passes of a 3x3 kernel, or a plain bilateral

@@ -254,7 +254,7 @@ def restored_validity(valid: np.ndarray, narrow: np.ndarray, restored: np.ndarra
     * estimates at either end of the narrow range (``narrow <= 0`` or ``>= narrow_range``):
       the true disparity most likely lies outside the band (obstacle, kerb, deep
       pothole); a clipped value would be wrong (measured: EPE 0.317 vs 0.340 kept, see
-      configs/road.yaml);
+      d3cli/configs/road.yaml);
     * restored disparities whose match ``u - d`` falls left of the right image;
     * negative restored disparities: disparities are >= 0 by contract, and a negative one
       comes from a wrong narrow match where the shift ``s(u, v)`` is below zero (far road,

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -50,10 +52,10 @@ class DisparityResult:
 
     disparity: np.ndarray
     valid: np.ndarray
-    levels: list = field(default_factory=list)
-    timings: dict = field(default_factory=dict)
-    info: dict = field(default_factory=dict)
-    warnings: list = field(default_factory=list)
+    levels: Sequence[np.ndarray] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
 
 class HostMaps(Sequence):
@@ -133,11 +135,12 @@ class D3Stereo:
     >>> result = D3Stereo(load_config()).compute(left, right, max_disparity=64)  # doctest: +SKIP
     """
 
-    def __init__(self, cfg: Config | None = None):
+    def __init__(self, cfg: Config | None = None) -> None:
         self.cfg = cfg if cfg is not None else Config()
         self.backend, self.backend_name = get_backend(self.cfg.run.backend)
 
-    def compute(self, left, right, *, max_disparity: int | None = None, pair_dir=None) -> DisparityResult:
+    def compute(self, left: np.ndarray, right: np.ndarray, *, max_disparity: int | None = None,
+                pair_dir: str | os.PathLike | None = None) -> DisparityResult:
         """Estimate the left-view disparity map of a rectified pair.
 
         Parameters

@@ -100,7 +100,7 @@ class DefectTuning:
         errors: ``se = sigma_h sqrt(noise_cell_px / max(n, noise_cell_px))``.
         ``noise_cell_px`` is the correlation area of the disparity error: its integral
         ``sum rho`` measured 670-940 px on the sun/dusk synth pairs (cost window 25,
-        smoothing radius 15 of configs/road.yaml).  5 standard errors: the map holds
+        smoothing radius 15 of d3cli/configs/road.yaml).  5 standard errors: the map holds
         ~10^3 such cells per kind, and the errors of the noisy pairs have heavier tails
         than a Gaussian (the usual 5-sigma allowance for looking everywhere).
     split_smooth_px : float

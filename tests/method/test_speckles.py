@@ -16,7 +16,7 @@ import pytest
 from d3cli import ConfigError, D3Stereo, load_config
 from d3cli.method.refinement import fill_holes, speckles
 
-CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+CONFIGS = Path(__file__).resolve().parents[2] / "d3cli" / "configs"
 
 
 def reference_speckles(disp, valid, max_size, max_diff):

@@ -135,7 +135,10 @@ def _evaluate_all(cost, index, disp0, min_cost, max_gap, disp, tau, kappa_d, adv
     costs.
     """
     h, w = disp0.shape
-    for v in prange(h):
+    for prange_v in prange(h):
+        # int64 as the frontier passes it (a prange index is uint64): one compiled variant
+        # of the per-pixel functions instead of two, a shorter first compile
+        v = np.int64(prange_v)
         n = 0
         # tau = kappa_d = 1 (the defaults) as constants: the compiler unrolls the
         # neighbour loops

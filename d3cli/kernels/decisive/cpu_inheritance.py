@@ -28,7 +28,10 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
 def _inherit(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates):
     h, w, _ = index.shape
     out = np.empty((h, w), np.int32)
-    for pv in prange((h + 1) // 2):
+    for prange_pv in prange((h + 1) // 2):
+        # int64 as every other caller passes (a prange index is uint64): one compiled
+        # variant of each row kernel instead of two, a shorter first compile
+        pv = np.int64(prange_pv)
         # The test variant as constants in each branch: the compiler specialises the
         # inlined tests (measured faster than one generic call).
         if prc and candidates == 0:
