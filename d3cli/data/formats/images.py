@@ -5,6 +5,7 @@ conversion, and the atomic image writer.
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
 import cv2
@@ -30,14 +31,54 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".tif", ".t
 _LUMA_RGB = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 
 
+#: What a non-regular file is, by the type bits of its mode.
+_SPECIAL_KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+                  (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def special_file_kind(path: str | os.PathLike) -> str | None:
+    """What ``path`` is when it exists but is neither a regular file nor a folder, else None.
+
+    A FIFO would block the reader forever and ``/dev/zero`` never ends, so inputs are
+    typed by ``stat`` before they are opened; the text names the link too
+    (``"a link to /dev/zero, a character device"``).
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kind = next((text for test, text in _SPECIAL_KINDS if test(mode)), "a special file")
+    if os.path.islink(path):
+        return f"a link to {os.readlink(path)}, {kind}"
+    return kind
+
+
 def _existing_file(path: str | os.PathLike, what: str = "file") -> Path:
-    """Return ``path`` as a Path, raising InputError when it is missing or a folder."""
+    """Return ``path`` as a Path, raising InputError when it is missing, a folder, or no
+    regular file (a FIFO, a device: named as such, never opened)."""
     path = Path(path)
     if not path.exists():
         raise InputError(where_what_fix(str(path), f"{what} not found", "check the path"))
     if path.is_dir():
         raise InputError(where_what_fix(str(path), "is a folder, not a file", "give the file itself"))
+    kind = special_file_kind(path)
+    if kind is not None:
+        raise InputError(where_what_fix(str(path), f"not a regular file ({kind})", "give the file itself"))
     return path
+
+
+def regular_file(path: str | os.PathLike, what: str = "file") -> Path:
+    """``path`` as a Path when it is an existing regular file (or a link to one).
+
+    Raises
+    ------
+    InputError
+        ``<path>: <what> not found``, ``is a folder, not a file`` or ``not a regular file
+        (a FIFO)`` (a device, a socket, a link to one), each with the fix.
+    """
+    return _existing_file(path, what)
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -58,6 +99,8 @@ def image_size(path: str | os.PathLike) -> tuple[int, int] | None:
     """
     from PIL import Image  # header parsing only; OpenCV has no header-only reader
 
+    if special_file_kind(path) is not None:
+        return None  # never opened (a FIFO would block); the reader names it
     try:
         with Image.open(path) as image:  # lazy: reads the header, decodes nothing
             return int(image.size[0]), int(image.size[1])

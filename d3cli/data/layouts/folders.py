@@ -25,7 +25,8 @@ def _source_lines(path: Path) -> dict[str, str]:
     Keys start in column 0: indented lines continue the previous free-text value.
     """
     values: dict[str, str] = {}
-    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+    text = formats.regular_file(path, "SOURCE.txt").read_bytes().decode("utf-8", errors="replace")
+    for line in text.splitlines():
         match = re.match(r"^([A-Za-z_]\w*)\s*:\s*(.*?)\s*$", line)
         if match:
             values.setdefault(match.group(1).lower(), match.group(2))

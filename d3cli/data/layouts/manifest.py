@@ -12,6 +12,7 @@ from typing import Any
 
 from ...config import MAX_CONFIG_INT, parse_yaml, quote, read_bounded
 from ...errors import InputError, where_what_fix
+from .. import formats
 from .detect import expand_layout
 from .folders import _canonical_invalid
 from .pair import DEFAULT_KEYS, LAYOUTS, MANIFEST_KEYS, PAIR_KEYS, Pair, _SAFE_NAME, _abs, family_from_name
@@ -79,6 +80,9 @@ def _whole_number(value) -> int | None:
 
 def _manifest_path(root: Path, value: str, key: str, where: str) -> Path:
     path = _abs(root / os.path.expanduser(value))
+    kind = "a folder" if path.is_dir() else formats.special_file_kind(path)
+    if kind is not None:
+        raise InputError(where_what_fix(where, f"{key} is not a regular file ({kind}): {path}", "give the file itself"))
     if not path.is_file():
         raise InputError(
             where_what_fix(where, f"{key} file not found: {path}", f"fix the path (relative to root {root})")
