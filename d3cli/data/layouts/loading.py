@@ -11,6 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ...config.checks import value_origin
 from ...errors import InputError, where_what_fix
 from .. import formats
 from .pair import Pair
@@ -243,6 +244,11 @@ def resolve_max_disparity(pair: Pair, width: int, override: int | None = None) -
     """
     if override is not None:
         if isinstance(override, bool) or not isinstance(override, (int, np.integer)) or not 0 < override < width:
+            origin = value_origin(override, "")
+            if origin:  # from a config file or --set, not from --max-disparity
+                raise InputError(where_what_fix(
+                    origin, f"{int(override)} must be in [1, {width - 1}] for pair {pair.name} (image width {width})",
+                    "set a smaller value there, or pass --max-disparity"))
             raise InputError(
                 where_what_fix(
                     pair.name,
