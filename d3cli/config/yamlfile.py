@@ -94,7 +94,8 @@ def read_yaml(path: str | os.PathLike) -> Any:
 
 
 def _key_lines(node, loader) -> dict[tuple, int]:
-    """1-based lines of the top two levels of mapping keys of a composed YAML node."""
+    """1-based lines of the top two levels of mapping keys of a composed YAML node, and of
+    the items of top-level lists."""
     lines: dict[tuple, int] = {(): node.start_mark.line + 1}
     if not isinstance(node, yaml.MappingNode):
         return lines
@@ -103,6 +104,9 @@ def _key_lines(node, loader) -> dict[tuple, int]:
             continue
         section = loader.construct_object(key_node)
         lines[(section,)] = key_node.start_mark.line + 1
+        if isinstance(value_node, yaml.SequenceNode):  # a manifest's pairs: (section, index) -> line
+            for index, item in enumerate(value_node.value):
+                lines[(section, index)] = item.start_mark.line + 1
         if isinstance(value_node, yaml.MappingNode):
             for sub_key, _ in value_node.value:
                 if isinstance(sub_key, yaml.ScalarNode):
@@ -119,7 +123,8 @@ def read_yaml_lines(path: str | os.PathLike) -> tuple[Any, dict[tuple, int]]:
         The parsed document (None for an empty file).
     lines : dict
         ``()`` -> line of the document, ``(section,)`` and ``(section, key)`` -> the
-        1-based line where that key is written.
+        1-based line where that key is written; ``(section, index)`` -> the line of
+        item ``index`` of a top-level list.
 
     Raises
     ------

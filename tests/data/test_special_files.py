@@ -149,3 +149,24 @@ def test_a_symlink_loop_in_a_dataset_is_warned_once(pairs_root, caplog):
     assert [pair.name for pair in pairs] == ["a", "b", "c"]
     warnings_ = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert warnings_ == [f"{loop}: skipped (Too many levels of symbolic links); fix or remove the link"]
+
+
+@pytest.mark.parametrize("value", ["inf", "1e400", "nan", "0", "-2"])
+def test_source_txt_gt_scale_out_of_range_names_source_txt(pairs_root, value):
+    source = pairs_root / "a" / "SOURCE.txt"
+    source.write_text(f"gt_scale: {value}\n")
+    with pytest.raises(InputError) as info:
+        datasets.read_pair_folder(pairs_root / "a")
+    assert str(info.value) == f"{source}: gt_scale must be a finite number > 0, got {value}; fix the value"
+
+
+def test_duplicate_names_in_a_manifest_name_their_lines(tmp_path, pairs_root):
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"root: {pairs_root}\npairs:\n"
+                        "  - name: x\n    left: a/left.png\n    right: a/right.png\n"
+                        "  - name: y\n    left: b/left.png\n    right: b/right.png\n"
+                        "  - name: x\n    left: c/left.png\n    right: c/right.png\n")
+    with pytest.raises(InputError) as info:
+        datasets.discover([manifest])
+    assert str(info.value) == (f"{manifest}: pair name 'x' is used twice (pairs[0] at line 3 and pairs[2] at "
+                               "line 9); give each pair its own name")

@@ -47,8 +47,8 @@ def _source_number(source: dict[str, str], key: str, path: Path, kind=float):
         raise InputError(
             where_what_fix(str(path), f"{key}: {word!r} is not a number", f"write e.g. '{key}: 256' or '{key}: -'")
         ) from None
-    if not value > 0:
-        raise InputError(where_what_fix(str(path), f"{key} must be > 0, got {word}", "fix the value"))
+    if not (value > 0 and math.isfinite(value)):  # inf would reach the reader, named as the ground truth's fault
+        raise InputError(where_what_fix(str(path), f"{key} must be a finite number > 0, got {word}", "fix the value"))
     return value
 
 
