@@ -170,3 +170,16 @@ def test_duplicate_names_in_a_manifest_name_their_lines(tmp_path, pairs_root):
         datasets.discover([manifest])
     assert str(info.value) == (f"{manifest}: pair name 'x' is used twice (pairs[0] at line 3 and pairs[2] at "
                                "line 9); give each pair its own name")
+
+
+@pytest.mark.parametrize("width, expected", [(2, 1), (3, 1), (4, 1), (8, 2)])
+def test_narrow_images_get_the_range_they_allow(pairs_root, width, expected):
+    pair = datasets.Pair(name="n", left=pairs_root / "a" / "left.png", right=pairs_root / "a" / "right.png")
+    assert datasets.resolve_max_disparity(pair, width) == expected
+
+
+def test_one_pixel_wide_images_have_no_range(pairs_root):
+    pair = datasets.Pair(name="n", left=pairs_root / "a" / "left.png", right=pairs_root / "a" / "right.png")
+    with pytest.raises(InputError) as info:
+        datasets.resolve_max_disparity(pair, 1)
+    assert str(info.value) == "n: an image 1 pixel wide has no disparity to search; give images at least 2 pixels wide"
