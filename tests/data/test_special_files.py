@@ -183,3 +183,19 @@ def test_one_pixel_wide_images_have_no_range(pairs_root):
     with pytest.raises(InputError) as info:
         datasets.resolve_max_disparity(pair, 1)
     assert str(info.value) == "n: an image 1 pixel wide has no disparity to search; give images at least 2 pixels wide"
+
+
+def test_pair_folders_beside_a_stereo_road_pair_both_run(tmp_path, make_pair_folder, caplog):
+    from ..helpers import textured_pair, write_png
+
+    root = tmp_path / "mixed"
+    make_pair_folder(root, "p")
+    left, right, _ = textured_pair(4)
+    for side, image in (("left", left), ("right", right)):
+        (root / side).mkdir()
+        write_png(root / side / "0001.png", image)
+    with caplog.at_level("WARNING"):
+        pairs = datasets.discover([root])
+    assert [pair.name for pair in pairs] == ["p", "stereo-road-0001"]
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{root}: holds a stereo-road dataset and pair folders (p); running both"]
