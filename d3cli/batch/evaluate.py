@@ -107,12 +107,7 @@ def method_names(pred_dirs: Sequence[Path]) -> list[str]:
     twice a number (``out``, ``out-2``).  Never a path: each report folder is
     ``-o/<name>``, so a name must not lead out of it.
     """
-    from_run = []
-    for folder in pred_dirs:
-        try:
-            from_run.append(json.loads((Path(folder) / RUN_FILE).read_text(encoding="utf-8")).get("method"))
-        except (OSError, ValueError, AttributeError):
-            from_run.append(None)
+    from_run = [_json_value(Path(folder) / RUN_FILE, "method") for folder in pred_dirs]
     parts = [Path(os.path.realpath(folder)).parts[1:] or ("predictions",) for folder in pred_dirs]
     names = []
     for index, name in enumerate(from_run):
@@ -154,8 +149,8 @@ def find_prediction(pred_dir: str | os.PathLike, pair_name: str) -> Path | None:
     pred_dir = Path(pred_dir)
     for suffix in PREDICTION_SUFFIXES:
         for candidate in (pred_dir / pair_name / f"disp{suffix}", pred_dir / f"{pair_name}{suffix}"):
-            if candidate.is_file():
-                return candidate
+            if candidate.is_file() or io.special_file_kind(candidate) is not None:
+                return candidate  # a FIFO or device: refused by its reader, naming it
     return None
 
 
@@ -217,10 +212,20 @@ def _load_images(pair):
 
 def _stored_time(pair_dir: Path) -> float | None:
     """The wall time recorded by the run that made a prediction, if any."""
-    try:
-        return json.loads((pair_dir / RESULT_FILE).read_text(encoding="utf-8"))["timings"]["wall"]
-    except (OSError, ValueError, KeyError, TypeError):
+    timings = _json_value(pair_dir / RESULT_FILE, "timings")
+    return timings.get("wall") if isinstance(timings, dict) else None
+
+
+def _json_value(path: Path, key: str):
+    """``key`` of the JSON object in ``path``, or None; only a regular file is opened (a
+    FIFO named run.json in a prediction folder would block the evaluation)."""
+    if not path.is_file():  # is_file: a regular file (or a link to one), never a FIFO
         return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data.get(key) if isinstance(data, dict) else None
 
 
 def common_pairs(pred_dirs: Sequence[Path], pairs: Sequence) -> tuple[list, list[str]]:

@@ -152,3 +152,20 @@ def test_report_folder_beside_the_pairs_is_accepted(tmp_path, pairs_root):
         io.write_kitti_png(flat / f"{pair.name}.png", gt_of(pair))
     outcome = evaluate_folders([flat], pairs, out_dir=pairs_root / "report", progress=False)
     assert outcome["n_failed"] == 0
+
+
+def test_fifos_in_a_prediction_folder_are_named_never_opened(tmp_path, pairs_root):
+    pairs = datasets.discover([pairs_root])
+    pred = tmp_path / "pred"
+    for pair in pairs:
+        (pred / pair.name).mkdir(parents=True)
+        io.write_pfm(pred / pair.name / "disp.pfm", gt_of(pair))
+        os.mkfifo(pred / pair.name / "result.json")
+    os.mkfifo(pred / "run.json")
+    (pred / "a" / "disp.pfm").unlink()
+    os.mkfifo(pred / "a" / "disp.pfm")
+    outcome = evaluate_folders([pred], pairs, out_dir=tmp_path / "rep", progress=False)
+    rows = outcome["results"]["pred"]
+    assert [r["status"] for r in rows] == ["failed", "ok", "ok"]
+    assert rows[0]["error"] == f"{pred / 'a' / 'disp.pfm'}: not a regular file (a FIFO); give the file itself"
+    assert rows[1]["time_s"] is None
