@@ -265,7 +265,11 @@ def test_left_image_that_cannot_be_read(tmp_path, kind):
         left.symlink_to(folder / "gone.png")
     else:
         left.symlink_to(left)
-    _failed_pair(tmp_path, f"{folder}: found a right image but no left image; add left.png or remove the folder")
+    # A folder or a FIFO exists: named as what it is (it was taken for a missing left image).
+    message = {"folder": f"{left}: is a folder, not a file; give the file itself",
+               "fifo": f"{left}: not a regular file (a FIFO); give the file itself"}.get(
+        kind, f"{folder}: found a right image but no left image; add left.png or remove the folder")
+    _failed_pair(tmp_path, message)
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root reads files whatever their mode")
