@@ -257,7 +257,9 @@ def check_report_folder(out: Path, pred_dirs: Sequence[Path], pairs: Sequence) -
     inputs = [(f"the prediction folder {folder}", Path(os.path.realpath(folder))) for folder in pred_dirs]
     for pair in pairs:
         files = [getattr(pair, key, None) for key in ("left", "right", "gt", "nocc", "calib")]
-        for folder in sorted({Path(os.path.realpath(f)).parent for f in files if f is not None}):
+        real = [Path(os.path.realpath(f)) for f in files if f is not None]
+        # A broken pair's left/right is its folder itself (Pair.error), not a file in it.
+        for folder in sorted({path if path.is_dir() else path.parent for path in real}):
             inputs.append((f"the folder of pair {pair.name}'s files {folder}", folder))
     for what, folder in inputs:
         relation = ("is" if root == folder else "is inside" if folder in root.parents

@@ -145,13 +145,16 @@ def test_report_folder_overlapping_the_inputs_is_refused(tmp_path, pairs_root, w
 
 
 def test_report_folder_beside_the_pairs_is_accepted(tmp_path, pairs_root):
+    (pairs_root / "broken").mkdir()
+    (pairs_root / "broken" / "right.png").write_bytes((pairs_root / "a" / "right.png").read_bytes())
     pairs = datasets.discover([pairs_root])
+    assert [pair.name for pair in pairs if pair.error] == ["broken"]  # its folder is not pairs_root
     flat = tmp_path / "flat"
     flat.mkdir()
-    for pair in pairs:
+    for pair in (pair for pair in pairs if pair.error is None):
         io.write_kitti_png(flat / f"{pair.name}.png", gt_of(pair))
     outcome = evaluate_folders([flat], pairs, out_dir=pairs_root / "report", progress=False)
-    assert outcome["n_failed"] == 0
+    assert outcome["n_failed"] == 0 and outcome["not_compared"] == ["broken"]
 
 
 def test_fifos_in_a_prediction_folder_are_named_never_opened(tmp_path, pairs_root):
