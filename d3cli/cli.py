@@ -14,7 +14,6 @@ import os
 import platform
 import signal
 import sys
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -154,7 +153,6 @@ def route_library_warnings(verbose: bool) -> None:
         Whether the command runs with ``-v`` (the root logger then shows DEBUG).
     """
     logging.captureWarnings(True)
-    warnings.simplefilter("default")  # each distinct warning once, not once per pixel row
     channel = logging.getLogger("py.warnings")
     channel.filters = [_AsDebug()]
     channel.setLevel(logging.DEBUG if verbose else logging.WARNING)
