@@ -24,7 +24,10 @@ def reference(pair_u8):
 
 @pytest.mark.parametrize("scale", [1 / 255, 1.0, 4095 / 255])
 def test_float_images_give_the_maps_of_their_8_bit_pair(pair_u8, reference, scale):
-    left, right = (view.astype(np.float32) * np.float32(scale) for view in pair_u8)
+    if scale < 1:  # k / 255 * 255 gives k back exactly in float32
+        left, right = (view.astype(np.float32) / np.float32(255) for view in pair_u8)
+    else:
+        left, right = (view.astype(np.float32) * np.float32(scale) for view in pair_u8)
     if scale > 1:
         left, right = np.round(left), np.round(right)  # 12-bit counts
     result = D3Stereo(load_config()).compute(left, right, max_disparity=16)
@@ -37,7 +40,8 @@ def test_float_images_give_the_maps_of_their_8_bit_pair(pair_u8, reference, scal
 
 
 def test_negative_float_images_are_refused(pair_u8):
-    left, right = (view.astype(np.float32) / 255 - 0.5 for view in pair_u8)
+    left, right = (view.astype(np.float32) / 255 for view in pair_u8)
+    left[0, 0] = -0.5
     with pytest.raises(InputError) as info:
         D3Stereo(load_config()).compute(left, right, max_disparity=16)
     assert str(info.value) == ("pair: negative intensities (down to -0.5) in a float image; give intensities >= 0 "
