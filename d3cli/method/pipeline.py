@@ -161,7 +161,10 @@ class D3Stereo:
         Parameters
         ----------
         left, right : ndarray, (H, W) or (H, W, C), any integer or float dtype
-            Rectified images; left (u, v) matches right (u - d, v) with d >= 0.
+            Rectified images; left (u, v) matches right (u - d, v) with d >= 0.  uint16
+            is divided by 257; two float views are read as float image files are:
+            values in [0, 1] scaled to 0-255, up to 255 as they are, larger ones as
+            integer counts of the smallest bit depth that holds them.
         max_disparity : int, optional, keyword-only
             Largest disparity searched at full resolution; default ``cfg.run.max_disparity``
             or, if that is unset, ``W // 4``.
@@ -177,8 +180,8 @@ class D3Stereo:
         Raises
         ------
         InputError
-            Shapes differ, an image is empty or not finite, or max_disparity is not in
-            [1, W - 1].
+            Shapes differ, an image is empty, not finite or (float) negative, or
+            max_disparity is not in [1, W - 1].
         """
         cfg = self.cfg
         timings: dict[str, float] = {}
