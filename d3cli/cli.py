@@ -9,6 +9,7 @@ Unexpected exceptions keep their traceback: they are bugs, not user mistakes.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import platform
 import signal
@@ -128,6 +129,33 @@ def _setup_logging(verbose: bool, quiet: bool) -> None:
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s", handlers=[_StderrHandler()], force=True)
     # numba logs its compiler passes at DEBUG; they drown the useful lines.
     logging.getLogger("numba").setLevel(max(level, logging.INFO))
+    route_library_warnings(verbose)
+
+
+class _AsDebug(logging.Filter):
+    """Turns a record into a DEBUG one: shown with -v only."""
+
+    def filter(self, record):
+        record.levelno, record.levelname = logging.DEBUG, "DEBUG"
+        return logging.getLogger().isEnabledFor(logging.DEBUG)
+
+
+def route_library_warnings(verbose: bool) -> None:
+    """Send Python warnings (numpy's ``RuntimeWarning: overflow``, a library's
+    DeprecationWarning) to the log at DEBUG instead of stderr.
+
+    On stderr a user sees only d3stereo's own ``Error:`` and ``WARNING:`` lines; what
+    a warning says about an input is d3stereo's to report.  ``-v`` shows them.
+
+    Parameters
+    ----------
+    verbose : bool
+        Whether the command runs with ``-v`` (the root logger then shows DEBUG).
+    """
+    logging.captureWarnings(True)
+    channel = logging.getLogger("py.warnings")
+    channel.filters = [_AsDebug()]
+    channel.setLevel(logging.DEBUG if verbose else logging.WARNING)
 
 
 def _verbosity(fn):
@@ -291,8 +319,8 @@ def _color_range(text: str) -> tuple[float, float]:
     except ValueError:
         raise click.BadParameter(f"expected MIN:MAX in pixels (e.g. 0:64), got {text!r}",
                                  param_hint="--color-range") from None
-    if not 0 <= low < high:
-        raise click.BadParameter(f"needs 0 <= MIN < MAX, got {text!r}", param_hint="--color-range")
+    if not (0 <= low < high and math.isfinite(high)):  # inf would make every colour black
+        raise click.BadParameter(f"needs 0 <= MIN < MAX, both finite, got {text!r}", param_hint="--color-range")
     return low, high
 
 

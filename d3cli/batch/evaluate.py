@@ -99,20 +99,45 @@ def _object_map(pair, shape):
 
 
 def method_names(pred_dirs: Sequence[Path]) -> list[str]:
-    """Column names for prediction folders: run.json's method when unique, else the folder name."""
-    from_run = []
-    for folder in pred_dirs:
-        try:
-            from_run.append(json.loads((Path(folder) / RUN_FILE).read_text(encoding="utf-8")).get("method"))
-        except (OSError, ValueError, AttributeError):
-            from_run.append(None)
+    """Column and folder names for prediction folders, unique and each one safe folder name.
+
+    run.json's method when no other folder has the same one, else the folder's name;
+    folders of the same name take as many parent folder names as tell them apart
+    (``exp1/out``, ``exp2/out`` -> ``exp1-out``, ``exp2-out``), the same folder given
+    twice a number (``out``, ``out-2``).  Never a path: each report folder is
+    ``-o/<name>``, so a name must not lead out of it.
+    """
+    from_run = [_json_value(Path(folder) / RUN_FILE, "method") for folder in pred_dirs]
+    parts = [Path(os.path.realpath(folder)).parts[1:] or ("predictions",) for folder in pred_dirs]
     names = []
-    for folder, name in zip(pred_dirs, from_run):
-        unique = name and from_run.count(name) == 1
-        names.append(name if unique else Path(folder).resolve().name)
-    if len(set(names)) < len(names):  # same folder names: fall back to the full paths
-        names = [str(Path(f)) for f in pred_dirs]
-    return names
+    for index, name in enumerate(from_run):
+        unique = isinstance(name, str) and name and from_run.count(name) == 1
+        names.append(datasets.safe_name(name) if unique else _distinct_tail(parts, index))
+    return _numbered(names)
+
+
+def _distinct_tail(parts: Sequence[tuple[str, ...]], index: int) -> str:
+    """The shortest tail of folder ``index``'s path that no other folder shares, as one name."""
+    own = parts[index]
+    others = [other for other in parts if other != own]  # the same folder twice is numbered instead
+    for depth in range(1, len(own) + 1):
+        if all(other[-depth:] != own[-depth:] for other in others):
+            break
+    return datasets.safe_name("-".join(own[-depth:]))
+
+
+def _numbered(names: list[str]) -> list[str]:
+    """``names`` with a repeat numbered: ``out``, ``out-2`` (the same folder given twice)."""
+    seen: set[str] = set()
+    result = []
+    for name in names:
+        candidate, number = name, 1
+        while candidate in seen:
+            number += 1
+            candidate = f"{name}-{number}"
+        seen.add(candidate)
+        result.append(candidate)
+    return result
 
 
 #: Prediction file suffixes that ``eval`` reads, in the order they are looked for.
@@ -124,8 +149,8 @@ def find_prediction(pred_dir: str | os.PathLike, pair_name: str) -> Path | None:
     pred_dir = Path(pred_dir)
     for suffix in PREDICTION_SUFFIXES:
         for candidate in (pred_dir / pair_name / f"disp{suffix}", pred_dir / f"{pair_name}{suffix}"):
-            if candidate.is_file():
-                return candidate
+            if candidate.is_file() or io.special_file_kind(candidate) is not None:
+                return candidate  # a FIFO or device: refused by its reader, naming it
     return None
 
 
@@ -187,10 +212,20 @@ def _load_images(pair):
 
 def _stored_time(pair_dir: Path) -> float | None:
     """The wall time recorded by the run that made a prediction, if any."""
-    try:
-        return json.loads((pair_dir / RESULT_FILE).read_text(encoding="utf-8"))["timings"]["wall"]
-    except (OSError, ValueError, KeyError, TypeError):
+    timings = _json_value(pair_dir / RESULT_FILE, "timings")
+    return timings.get("wall") if isinstance(timings, dict) else None
+
+
+def _json_value(path: Path, key: str):
+    """``key`` of the JSON object in ``path``, or None; only a regular file is opened (a
+    FIFO named run.json in a prediction folder would block the evaluation)."""
+    if not path.is_file():  # is_file: a regular file (or a link to one), never a FIFO
         return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data.get(key) if isinstance(data, dict) else None
 
 
 def common_pairs(pred_dirs: Sequence[Path], pairs: Sequence) -> tuple[list, list[str]]:
@@ -199,6 +234,38 @@ def common_pairs(pred_dirs: Sequence[Path], pairs: Sequence) -> tuple[list, list
     for pair in pairs:
         (kept if all(find_prediction(f, pair.name) for f in pred_dirs) else dropped).append(pair)
     return kept, [pair.name for pair in dropped]
+
+
+#: The fix of every report folder that overlaps the inputs.
+_OVERLAP_FIX = "give -o a new folder that holds no input and lies inside none (predictions and ground truth are only read)"
+
+
+def check_report_folder(out: Path, pred_dirs: Sequence[Path], pairs: Sequence) -> None:
+    """Refuse a report folder that is, holds or lies inside a prediction folder or a
+    folder of a pair's files (images, ground truth), compared by real path.
+
+    The reports (``summary.md``, ``metrics.csv``, ``<pair>/error.png``...) would
+    otherwise overwrite or join the user's data.  A new folder beside the pairs, inside
+    the dataset's root, is fine: no input lies in it.
+
+    Raises
+    ------
+    InputError
+        Naming ``out``, the folder it overlaps and the fix.
+    """
+    root = Path(os.path.realpath(out))
+    inputs = [(f"the prediction folder {folder}", Path(os.path.realpath(folder))) for folder in pred_dirs]
+    for pair in pairs:
+        files = [getattr(pair, key, None) for key in ("left", "right", "gt", "nocc", "calib")]
+        real = [Path(os.path.realpath(f)) for f in files if f is not None]
+        # A broken pair's left/right is its folder itself (Pair.error), not a file in it.
+        for folder in sorted({path if path.is_dir() else path.parent for path in real}):
+            inputs.append((f"the folder of pair {pair.name}'s files {folder}", folder))
+    for what, folder in inputs:
+        relation = ("is" if root == folder else "is inside" if folder in root.parents
+                    else "holds" if root in folder.parents else None)
+        if relation is not None:
+            raise InputError(where_what_fix(str(out), f"the report folder {relation} {what}", _OVERLAP_FIX))
 
 
 def evaluate_folders(
@@ -227,8 +294,8 @@ def evaluate_folders(
     Raises
     ------
     InputError
-        A prediction folder does not exist, lies inside ``out_dir``'s tree the other way
-        round (``out_dir`` inside a prediction folder), or no pair has a prediction
+        A prediction folder does not exist, ``out_dir`` overlaps a prediction or
+        ground-truth folder (:func:`check_report_folder`), or no pair has a prediction
         everywhere.
     """
     pred_dirs = [Path(p) for p in pred_dirs]
@@ -237,9 +304,7 @@ def evaluate_folders(
         if not folder.is_dir():
             raise InputError(where_what_fix(str(folder), "prediction folder not found",
                                             "give the -o folder of a `d3stereo run` or a folder of <pair>.png"))
-        if out.resolve() == folder.resolve() or folder.resolve() in out.resolve().parents:
-            raise InputError(where_what_fix(str(out), f"the report folder is inside the prediction folder {folder}",
-                                            "give -o a folder outside the predictions (they are only read)"))
+    check_report_folder(out, pred_dirs, pairs)
     compared, not_compared = common_pairs(pred_dirs, pairs)
     if not compared:
         raise InputError(where_what_fix(", ".join(map(str, pred_dirs)), "no pair has a prediction in every folder",

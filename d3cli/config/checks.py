@@ -246,7 +246,53 @@ def apply_mapping(cfg: Config, data: Mapping, where: str, lines: Mapping | None 
                     f"{at}: {dotted} must be {check[1]}, got {quote(value)}; "
                     f"fix the value of {dotted}"
                 )
-            changes[key] = value
+            changes[key] = _traced(value, where, at, dotted)
         new_sections[sec_name] = replace(new_sections.get(sec_name, getattr(cfg, sec_name)), **changes)
     return replace(cfg, **new_sections)
 
+
+
+# ----------------------------------------------------------------------------- origins
+#: Keys whose value is checked again later, against a pair or the machine (a pair's
+#: width, a CUDA device), where the message must name where the value was written, not
+#: the command-line option the user did not give.
+TRACED_KEYS = ("run.max_disparity", "run.backend")
+
+
+class _TracedInt(int):
+    """An int that remembers where it was set (``origin``); equal to and used as the int."""
+
+    origin = ""
+
+
+class _TracedStr(str):
+    """A str that remembers where it was set (``origin``); equal to and used as the str."""
+
+    origin = ""
+
+
+def _traced(value: Any, where: str, at: str, dotted: str) -> Any:
+    if dotted not in TRACED_KEYS or isinstance(value, bool) or not isinstance(value, (int, str)):
+        return value
+    traced = _TracedInt(value) if isinstance(value, int) else _TracedStr(value)
+    traced.origin = f"--set {dotted}" if where.startswith("--set") else f"{at}: {dotted}"
+    return traced
+
+
+def value_origin(value: Any, default: str) -> str:
+    """Where a config value was written (``configs/x.yaml:3: run.max_disparity``, ``--set
+    run.backend``), or ``default`` (the command-line option) for a value that did not
+    come from a config file or ``--set``.
+
+    Parameters
+    ----------
+    value : Any
+        A value of a :class:`Config` (see :data:`TRACED_KEYS`) or given directly.
+    default : str
+        What to name when the value carries no origin, e.g. ``"--max-disparity"``.
+
+    Returns
+    -------
+    str
+    """
+    return getattr(value, "origin", "") or default

@@ -1,4 +1,4 @@
-"""Reading YAML safely: bounded files, strict keys, YAML 1.2 numbers, ``--set`` values.
+"""Reading YAML safely: bounded files, strict keys, YAML 1.2 scalars, ``--set`` values.
 
 Config files and dataset manifests are read here: only small regular files, UTF-8 text,
 no duplicate or non-scalar keys, no alias bombs, no deep nesting; every problem is an
@@ -29,18 +29,39 @@ MAX_YAML_DEPTH = 100
 
 class _UniqueKeyLoader(yaml.SafeLoader):
     """SafeLoader that rejects duplicate and non-scalar keys (a silent override or an
-    unhashable key is a user error) and reads YAML 1.2 numbers such as ``1e-3``.
+    unhashable key is a user error) and reads plain scalars as YAML 1.2's core schema.
 
-    PyYAML implements YAML 1.1, where a float needs a dot (``1.0e-3``): ``1e-3`` would
-    be the string "1e-3" and fail as "must be a number".
+    PyYAML implements YAML 1.1: ``010`` is 8 (octal), ``1:30`` is 90 (sexagesimal),
+    ``yes``/``on`` are true, ``1_000`` is 1000, ``2001-12-14`` a date, and ``1e-3`` (no
+    dot) a string.  YAML 1.2, which the configuration reference promises, reads ``010``
+    as 10 and the others as strings (then refused as the wrong type, naming the key).
     """
 
 
-_UniqueKeyLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."),
+#: YAML 1.2 core schema: (tag, pattern, first characters).  Integers before floats:
+#: ``10`` matches both.
+_CORE_SCHEMA = (
+    ("tag:yaml.org,2002:null", r"^(?:~|null|Null|NULL|)$", ["~", "n", "N", ""]),
+    ("tag:yaml.org,2002:bool", r"^(?:true|True|TRUE|false|False|FALSE)$", list("tTfF")),
+    ("tag:yaml.org,2002:int", r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$", list("-+0123456789")),
+    ("tag:yaml.org,2002:float",
+     r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$",
+     list("-+0123456789.")),
+    ("tag:yaml.org,2002:merge", r"^<<$", ["<"]),  # anchors merged into mappings, as before
 )
+
+_UniqueKeyLoader.yaml_implicit_resolvers = {}
+for _tag, _pattern, _first in _CORE_SCHEMA:
+    _UniqueKeyLoader.add_implicit_resolver(_tag, re.compile(_pattern), _first)
+
+
+def _construct_int(loader, node):
+    """A YAML 1.2 integer: decimal (leading zeros allowed: ``010`` is 10), ``0o``, ``0x``."""
+    text = loader.construct_scalar(node)
+    return int(text, 0) if text[:2] in ("0o", "0x") else int(text, 10)
+
+
+_UniqueKeyLoader.add_constructor("tag:yaml.org,2002:int", _construct_int)
 
 
 def _construct_mapping(loader, node, deep=False):
@@ -73,7 +94,8 @@ def read_yaml(path: str | os.PathLike) -> Any:
 
 
 def _key_lines(node, loader) -> dict[tuple, int]:
-    """1-based lines of the top two levels of mapping keys of a composed YAML node."""
+    """1-based lines of the top two levels of mapping keys of a composed YAML node, and of
+    the items of top-level lists."""
     lines: dict[tuple, int] = {(): node.start_mark.line + 1}
     if not isinstance(node, yaml.MappingNode):
         return lines
@@ -82,6 +104,9 @@ def _key_lines(node, loader) -> dict[tuple, int]:
             continue
         section = loader.construct_object(key_node)
         lines[(section,)] = key_node.start_mark.line + 1
+        if isinstance(value_node, yaml.SequenceNode):  # a manifest's pairs: (section, index) -> line
+            for index, item in enumerate(value_node.value):
+                lines[(section, index)] = item.start_mark.line + 1
         if isinstance(value_node, yaml.MappingNode):
             for sub_key, _ in value_node.value:
                 if isinstance(sub_key, yaml.ScalarNode):
@@ -98,7 +123,8 @@ def read_yaml_lines(path: str | os.PathLike) -> tuple[Any, dict[tuple, int]]:
         The parsed document (None for an empty file).
     lines : dict
         ``()`` -> line of the document, ``(section,)`` and ``(section, key)`` -> the
-        1-based line where that key is written.
+        1-based line where that key is written; ``(section, index)`` -> the line of
+        item ``index`` of a top-level list.
 
     Raises
     ------

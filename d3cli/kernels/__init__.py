@@ -179,7 +179,10 @@ def get_backend(name: str = "auto"):
     kind, reason = _cuda_probe()
     if name == "cuda":
         if kind is None:
-            raise BackendUnavailable(f"--backend cuda: {reason}; use --backend cpu or auto")
+            origin = getattr(name, "origin", "")  # run.backend of a config file (config.checks.value_origin)
+            raise BackendUnavailable(f"{origin}: cuda cannot be used ({reason}); set it to cpu or auto there, "
+                                     "or pass --backend cpu"
+                                     if origin else f"--backend cuda: {reason}; use --backend cpu or auto")
         from . import cuda as cuda_backend
 
         if kind == "simulator":

@@ -97,9 +97,9 @@ def run_model(image: np.ndarray, cfg: FeaturesConfig) -> list[np.ndarray]:
     """
     if not cfg.model:
         raise ConfigError("cost.kind: features needs features.model (an ONNX file); set it or use cost.kind: ncc")
+    session = _session(cfg.model)  # first: a missing model is the mistake to name, not its outputs
     if not cfg.outputs:
         raise ConfigError(f"{cfg.model}: features.outputs is empty; list the model's feature outputs, finest first")
-    session = _session(cfg.model)
     names = [o.name for o in session.get_outputs()]
     missing = [name for name in cfg.outputs if name not in names]
     if missing:

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..config import Config
 from ..data.formats import to_grey
+from ..data.layouts import normalise_bit_depth
 from ..errors import InputError
 from ..kernels import finishing, get_backend
 from .band import band_indexes
@@ -99,6 +100,23 @@ def _grey(img: np.ndarray, name: str) -> np.ndarray:
     return to_grey(arr)
 
 
+def _float_images_scaled(left, right):
+    """Two float images on the 0-255 scale, by the rule float image files follow
+    (:func:`d3cli.data.layouts.normalise_bit_depth`): [0, 1] (scikit-image's convention)
+    times 255, up to 255 unchanged, larger values as integer counts; negative values are
+    an InputError.  Taken as 0-255 as they were, [0, 1] images gave a far worse map with
+    only "no decisive seeds" as a hint.  Other dtypes, or one float view, are unchanged.
+    """
+    arrays = [np.asarray(left), np.asarray(right)]
+    if any(arr.dtype.kind != "f" or arr.size == 0 for arr in arrays):
+        return left, right
+    for arr, name in zip(arrays, ("left", "right")):
+        if not np.isfinite(arr).all():
+            raise InputError(f"{name} image: contains NaN or inf values; pass finite intensities")
+    scaled_l, scaled_r, _ = normalise_bit_depth(*arrays, where="pair")
+    return scaled_l, scaled_r
+
+
 def _as_0_255(img) -> np.ndarray:
     """A raw image as float32 on the 0-255 scale, channels kept (the networks want colour)."""
     arr = np.asarray(img)
@@ -146,7 +164,10 @@ class D3Stereo:
         Parameters
         ----------
         left, right : ndarray, (H, W) or (H, W, C), any integer or float dtype
-            Rectified images; left (u, v) matches right (u - d, v) with d >= 0.
+            Rectified images; left (u, v) matches right (u - d, v) with d >= 0.  uint16
+            is divided by 257; two float views are read as float image files are:
+            values in [0, 1] scaled to 0-255, up to 255 as they are, larger ones as
+            integer counts of the smallest bit depth that holds them.
         max_disparity : int, optional, keyword-only
             Largest disparity searched at full resolution; default ``cfg.run.max_disparity``
             or, if that is unset, ``W // 4``.
@@ -162,12 +183,13 @@ class D3Stereo:
         Raises
         ------
         InputError
-            Shapes differ, an image is empty or not finite, or max_disparity is not in
-            [1, W - 1].
+            Shapes differ, an image is empty, not finite or (float) negative, or
+            max_disparity is not in [1, W - 1].
         """
         cfg = self.cfg
         timings: dict[str, float] = {}
         t_start = time.perf_counter()
+        left, right = _float_images_scaled(left, right)
         grey_l, grey_r, dmax = self._prepare(left, right, max_disparity)
         levels = usable_levels(grey_l.shape, cfg.pyramid.levels)
         backend = self.backend

@@ -79,5 +79,96 @@ def test_report_folder_inside_predictions_is_refused(tmp_path, pairs_root):
     flat = tmp_path / "flat"
     flat.mkdir()
     io.write_kitti_png(flat / "a.png", gt_of(pairs[0]))
-    with pytest.raises(InputError, match="inside the prediction folder"):
+    with pytest.raises(InputError, match="the report folder is inside the prediction folder"):
         evaluate_folders([flat], pairs, out_dir=flat / "rep", progress=False)
+
+
+def two_folders_named_out(tmp_path, pairs):
+    """exp1/out and exp2/out: two prediction folders with the same basename."""
+    folders = [tmp_path / "exp1" / "out", tmp_path / "exp2" / "out"]
+    for folder in folders:
+        folder.mkdir(parents=True)
+        for pair in pairs:
+            io.write_kitti_png(folder / f"{pair.name}.png", gt_of(pair))
+    return folders
+
+
+def test_same_basename_folders_get_distinct_relative_names(tmp_path, pairs_root):
+    pairs = datasets.discover([pairs_root])
+    folders = two_folders_named_out(tmp_path, pairs)
+    before = [snapshot(folder) for folder in folders]
+    outcome = evaluate_folders([str(f.resolve()) for f in folders], pairs, out_dir=tmp_path / "rep", progress=False)
+    assert sorted(outcome["results"]) == ["exp1-out", "exp2-out"]
+    assert [snapshot(folder) for folder in folders] == before  # nothing written into the predictions
+    for name in ("exp1-out", "exp2-out"):
+        assert (tmp_path / "rep" / name / "summary.json").is_file()
+        assert (tmp_path / "rep" / name / "report.html").is_file()
+
+
+def test_same_folder_twice_gets_numbered_names(tmp_path, pairs_root):
+    pairs = datasets.discover([pairs_root])
+    folder = two_folders_named_out(tmp_path, pairs)[0]
+    outcome = evaluate_folders([folder, folder], pairs, out_dir=tmp_path / "rep", progress=False)
+    assert sorted(outcome["results"]) == ["out", "out-2"]
+    assert snapshot(tmp_path / "rep").keys() >= {"out/summary.json", "out-2/summary.json"}
+
+
+def test_method_names_are_single_safe_folder_names(tmp_path):
+    from d3cli.batch.evaluate import method_names
+
+    folders = []
+    for i, method in enumerate(["../../escape", "/abs/path", "../../escape"]):
+        folder = tmp_path / f"m{i}" / "pred"
+        folder.mkdir(parents=True)
+        (folder / "run.json").write_text(json.dumps({"method": method}))
+        folders.append(folder)
+    assert method_names(folders) == ["m0-pred", "abs_path", "m2-pred"]
+
+
+@pytest.mark.parametrize("where", ["gt_root", "gt_pair", "inside_gt_pair", "pred", "parent_of_pred"])
+def test_report_folder_overlapping_the_inputs_is_refused(tmp_path, pairs_root, where):
+    pairs = datasets.discover([pairs_root])
+    flat = tmp_path / "preds" / "flat"
+    flat.mkdir(parents=True)
+    for pair in pairs:
+        io.write_kitti_png(flat / f"{pair.name}.png", gt_of(pair))
+    out = {"gt_root": pairs_root, "gt_pair": pairs_root / "a", "inside_gt_pair": pairs_root / "a" / "rep",
+           "pred": flat, "parent_of_pred": tmp_path / "preds"}[where]
+    before = snapshot(tmp_path)
+    with pytest.raises(InputError) as info:
+        evaluate_folders([flat], pairs, out_dir=out, progress=False)
+    assert snapshot(tmp_path) == before
+    message = str(info.value)
+    assert message.startswith(f"{out}: ")
+    assert message.endswith("; give -o a new folder that holds no input and lies inside none "
+                            "(predictions and ground truth are only read)")
+
+
+def test_report_folder_beside_the_pairs_is_accepted(tmp_path, pairs_root):
+    (pairs_root / "broken").mkdir()
+    (pairs_root / "broken" / "right.png").write_bytes((pairs_root / "a" / "right.png").read_bytes())
+    pairs = datasets.discover([pairs_root])
+    assert [pair.name for pair in pairs if pair.error] == ["broken"]  # its folder is not pairs_root
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    for pair in (pair for pair in pairs if pair.error is None):
+        io.write_kitti_png(flat / f"{pair.name}.png", gt_of(pair))
+    outcome = evaluate_folders([flat], pairs, out_dir=pairs_root / "report", progress=False)
+    assert outcome["n_failed"] == 0 and outcome["not_compared"] == ["broken"]
+
+
+def test_fifos_in_a_prediction_folder_are_named_never_opened(tmp_path, pairs_root):
+    pairs = datasets.discover([pairs_root])
+    pred = tmp_path / "pred"
+    for pair in pairs:
+        (pred / pair.name).mkdir(parents=True)
+        io.write_pfm(pred / pair.name / "disp.pfm", gt_of(pair))
+        os.mkfifo(pred / pair.name / "result.json")
+    os.mkfifo(pred / "run.json")
+    (pred / "a" / "disp.pfm").unlink()
+    os.mkfifo(pred / "a" / "disp.pfm")
+    outcome = evaluate_folders([pred], pairs, out_dir=tmp_path / "rep", progress=False)
+    rows = outcome["results"]["pred"]
+    assert [r["status"] for r in rows] == ["failed", "ok", "ok"]
+    assert rows[0]["error"] == f"{pred / 'a' / 'disp.pfm'}: not a regular file (a FIFO); give the file itself"
+    assert rows[1]["time_s"] is None

@@ -87,7 +87,7 @@ def test_wrong_type(tmp_path):
 
 def test_bool_is_not_an_integer(tmp_path):
     with pytest.raises(ConfigError, match="pyramid.levels must be an integer, got True"):
-        load_config(write(tmp_path, "pyramid:\n  levels: yes\n"))
+        load_config(write(tmp_path, "pyramid:\n  levels: true\n"))
 
 
 def test_out_of_range(tmp_path):

@@ -351,7 +351,7 @@ MANIFEST_ERRORS = [
     ("pairs: [{name: a\n  left: ]", r"m\.yaml:\d+: not valid YAML"),
     ("layout: kitty\n", r"unknown layout 'kitty'; use one of auto, pair-folders"),
     ("roots: .\npairs: []", r"m\.yaml: unknown key 'roots'"),
-    ("pairs: [{name: a, left: l.png, right: r.png}, {name: a, left: r.png, right: l.png}]", r"a: two different pairs share this name"),
+    ("pairs: [{name: a, left: l.png, right: r.png}, {name: a, left: r.png, right: l.png}]", r"pair name .a. is used twice \(pairs\[0\] at line 1 and pairs\[1\] at line 1\); give each pair its own name"),
 ]
 
 

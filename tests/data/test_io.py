@@ -273,7 +273,7 @@ def test_read_disparity_errors(tmp_path):
     with pytest.raises(InputError, match="disparity scale must be > 0"):
         io.read_disparity(tmp_path / "d.npy", scale=0)
     np.save(tmp_path / "v.npy", np.ones(5))
-    with pytest.raises(InputError, match="expected a 2-D numeric disparity array"):
+    with pytest.raises(InputError, match="expected a 2-D real-valued disparity array"):
         io.read_disparity(tmp_path / "v.npy")
     with pytest.raises(InputError, match="disparity file not found"):
         io.read_disparity(tmp_path / "missing.pfm")

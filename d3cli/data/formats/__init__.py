@@ -34,7 +34,8 @@ May import: :mod:`d3cli.errors` only (no config, no layouts, no synth).
 from __future__ import annotations
 
 from .atomic import DISK_FULL_ERRNOS, atomic_write, is_disk_full
-from .images import IMAGE_EXTENSIONS, MAX_IMAGE_PIXELS, image_size, read_image, to_grey, write_encoded, write_image
+from .images import (IMAGE_EXTENSIONS, MAX_IMAGE_PIXELS, image_size, read_image, regular_file, special_file_kind,
+                     to_grey, write_encoded, write_image)
 from .pfm import read_pfm, read_pfm_raw, write_pfm
 from .kitti_png import encode_kitti, read_kitti_png, write_kitti_png
 from .disparity import DISPARITY_EXTENSIONS, INVALID_CONVENTIONS, read_disparity, read_mask
@@ -60,6 +61,8 @@ __all__ = [
     "read_mask",
     "read_pfm",
     "read_pfm_raw",
+    "regular_file",
+    "special_file_kind",
     "to_grey",
     "write_encoded",
     "write_image",

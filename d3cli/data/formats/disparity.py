@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError, where_what_fix
-from .images import _decode_unchanged, _existing_file, _single_channel
+from .images import MAX_IMAGE_PIXELS, _decode_unchanged, _existing_file, _single_channel
 from .pfm import read_pfm
 
 
@@ -34,7 +34,36 @@ def _normalise_invalid(path: Path, invalid: str) -> str:
     return text
 
 
+def _npy_header(path: Path) -> tuple[tuple, np.dtype]:
+    """(shape, dtype) from a .npy header, checked against the file's size and
+    :data:`MAX_IMAGE_PIXELS` before anything is allocated (a 100-byte file can claim
+    900000x900000 floats: 3 TiB)."""
+    npy_format = np.lib.format
+    try:
+        with open(path, "rb") as fh:
+            version = npy_format.read_magic(fh)
+            reader = npy_format.read_array_header_1_0 if version == (1, 0) else npy_format.read_array_header_2_0
+            shape, _, dtype = reader(fh)
+            offset = fh.tell()
+    except (ValueError, OSError, EOFError) as exc:  # EOFError: an empty or truncated file
+        raise InputError(
+            where_what_fix(str(path), f"cannot read .npy file ({exc})", "give a NumPy array saved with np.save")
+        ) from None
+    count = math.prod(shape)
+    shape_text = "x".join(map(str, shape))
+    if count > MAX_IMAGE_PIXELS:
+        raise InputError(where_what_fix(str(path), f".npy header claims a {shape_text} array, more than "
+                                                   f"{MAX_IMAGE_PIXELS} values", "give a disparity map of the images' size"))
+    found = os.stat(path).st_size - offset
+    if not dtype.hasobject and found < count * dtype.itemsize:
+        raise InputError(where_what_fix(str(path), f"truncated .npy file: a {shape_text} {dtype} array needs "
+                                                   f"{count * dtype.itemsize} bytes, found {found}",
+                                        "re-download or re-write the file"))
+    return shape, dtype
+
+
 def _load_npy(path: Path) -> np.ndarray:
+    _npy_header(path)
     try:
         array = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:  # EOFError: an empty or truncated file
@@ -43,10 +72,14 @@ def _load_npy(path: Path) -> np.ndarray:
         ) from None
     if array.ndim == 3 and array.shape[2] == 1:
         array = array[:, :, 0]
-    if array.ndim != 2 or not np.issubdtype(array.dtype, np.number):
+    # Complex values have no disparity meaning (their cast to float drops the imaginary
+    # part with a ComplexWarning on stderr).
+    real = np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)
+    if array.ndim != 2 or not real:
         raise InputError(
             where_what_fix(
-                str(path), f"expected a 2-D numeric disparity array, got {array.dtype} {array.shape}", "save (H, W) floats"
+                str(path), f"expected a 2-D real-valued disparity array, got {array.dtype} {array.shape}",
+                "save (H, W) floats"
             )
         )
     return array

@@ -4,7 +4,13 @@ conversion, and the atomic image writer.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
+import re
+import stat
+import sys
+import tempfile
 from pathlib import Path
 
 import cv2
@@ -14,9 +20,19 @@ from ...errors import InputError, OutputError, where_what_fix
 from .atomic import atomic_write
 
 
-# OpenCV prints its own "[ WARN:0@...] PNG input buffer is incomplete" lines to stderr for
-# files that this module then reports as one Error naming the file: keep only errors.
-cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+log = logging.getLogger(__name__)
+
+# OpenCV prints its own "[ WARN:0@...] PNG input buffer is incomplete" and "[ERROR:0@...]
+# readHeader IHDR chunk shall be first" lines to stderr for files that this module then
+# reports as one Error naming the file: nothing of OpenCV's logging reaches the user.
+cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+
+#: Lines the image libraries write straight to file descriptor 2 (libpng's "libpng
+#: error: IDAT: invalid code lengths set", libjpeg's "Corrupt JPEG data", libtiff's,
+#: OpenCV's log): logged at DEBUG; any other line written meanwhile is passed on.
+_DECODER_LINE = re.compile(r"^(libpng |\[ ?(ERROR|WARN|INFO|DEBUG)|TIFF|JPEG|Corrupt JPEG|Premature end of JPEG)")
+#: Most bytes of decoder messages kept per image.
+_DECODER_TEXT_BYTES = 64_000
 
 
 #: Largest image decoded (pixels): 16384^2, ~1.6 GB as 16-bit RGB.
@@ -30,14 +46,54 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".tif", ".t
 _LUMA_RGB = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 
 
+#: What a non-regular file is, by the type bits of its mode.
+_SPECIAL_KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+                  (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def special_file_kind(path: str | os.PathLike) -> str | None:
+    """What ``path`` is when it exists but is neither a regular file nor a folder, else None.
+
+    A FIFO would block the reader forever and ``/dev/zero`` never ends, so inputs are
+    typed by ``stat`` before they are opened; the text names the link too
+    (``"a link to /dev/zero, a character device"``).
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kind = next((text for test, text in _SPECIAL_KINDS if test(mode)), "a special file")
+    if os.path.islink(path):
+        return f"a link to {os.readlink(path)}, {kind}"
+    return kind
+
+
 def _existing_file(path: str | os.PathLike, what: str = "file") -> Path:
-    """Return ``path`` as a Path, raising InputError when it is missing or a folder."""
+    """Return ``path`` as a Path, raising InputError when it is missing, a folder, or no
+    regular file (a FIFO, a device: named as such, never opened)."""
     path = Path(path)
     if not path.exists():
         raise InputError(where_what_fix(str(path), f"{what} not found", "check the path"))
     if path.is_dir():
         raise InputError(where_what_fix(str(path), "is a folder, not a file", "give the file itself"))
+    kind = special_file_kind(path)
+    if kind is not None:
+        raise InputError(where_what_fix(str(path), f"not a regular file ({kind})", "give the file itself"))
     return path
+
+
+def regular_file(path: str | os.PathLike, what: str = "file") -> Path:
+    """``path`` as a Path when it is an existing regular file (or a link to one).
+
+    Raises
+    ------
+    InputError
+        ``<path>: <what> not found``, ``is a folder, not a file`` or ``not a regular file
+        (a FIFO)`` (a device, a socket, a link to one), each with the fix.
+    """
+    return _existing_file(path, what)
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -58,6 +114,8 @@ def image_size(path: str | os.PathLike) -> tuple[int, int] | None:
     """
     from PIL import Image  # header parsing only; OpenCV has no header-only reader
 
+    if special_file_kind(path) is not None:
+        return None  # never opened (a FIFO would block); the reader names it
     try:
         with Image.open(path) as image:  # lazy: reads the header, decodes nothing
             return int(image.size[0]), int(image.size[1])
@@ -84,6 +142,37 @@ def _opencv_max_side() -> int:
     return min(limits)
 
 
+@contextlib.contextmanager
+def _decoder_messages_logged(path: Path):
+    """Catch what C libraries write to file descriptor 2 while decoding ``path``.
+
+    libpng reports a corrupt file with its own stderr line before OpenCV returns None,
+    and this module then raises one Error naming the file: the library's line is logged
+    at DEBUG (``-v`` shows it) instead of reaching the terminal.  Lines that are not a
+    decoder's (another thread's output) are written to stderr afterwards.
+    """
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no descriptor 2: nothing to guard
+        yield
+        return
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            text = sink.read(_DECODER_TEXT_BYTES).decode("utf-8", errors="replace")
+            for line in text.splitlines():
+                if _DECODER_LINE.match(line):
+                    log.debug("%s: decoder: %s", path, line.strip())
+                elif line.strip():
+                    os.write(2, (line + "\n").encode("utf-8", errors="replace"))
+
+
 def _decode_unchanged(path: Path) -> np.ndarray:
     """Decode an image file with OpenCV keeping bit depth and channels (BGR order)."""
     # imdecode on the raw bytes instead of imread(path): imread cannot open non-ASCII
@@ -104,7 +193,8 @@ def _decode_unchanged(path: Path) -> np.ndarray:
             "crop or downscale it (a stereo pair this wide is likely a mistake)"))
     data = np.frombuffer(_read_bytes(path), dtype=np.uint8)
     try:
-        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+        with _decoder_messages_logged(path):
+            image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     except cv2.error as exc:  # e.g. a header beyond OpenCV's own size limit
         # "OpenCV(4.9.0) /path/loadsave.cpp:77: error: (-215:Assertion failed) ... in function
         # '...'": the part after "error:" says what is wrong.

@@ -13,7 +13,7 @@ import numpy as np
 
 from ...errors import InputError, where_what_fix
 from .atomic import atomic_write
-from .images import _existing_file, _read_bytes
+from .images import MAX_IMAGE_PIXELS, _existing_file, _read_bytes
 
 
 _PFM_TOKEN = re.compile(rb"\s*(\S+)")
@@ -62,6 +62,24 @@ def _parse_pfm_header(path: Path, data: bytes) -> tuple[int, int, int, str, int]
     return channels, width, height, byte_order, offset
 
 
+#: Bytes of a PFM file that hold its header (identifier, size and scale lines).
+_HEADER_BYTES = 256
+
+
+def _check_claimed_size(path: Path) -> None:
+    """Refuse a header that claims more than :data:`MAX_IMAGE_PIXELS` pixels, from the
+    header alone: the file is not read (nor its raster allocated) before this."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_HEADER_BYTES)
+    except OSError as exc:
+        raise InputError(where_what_fix(str(path), f"cannot read file ({exc.strerror})", "check its permissions")) from None
+    _, width, height, _, _ = _parse_pfm_header(path, head)
+    if width * height > MAX_IMAGE_PIXELS:
+        raise InputError(where_what_fix(str(path), f"PFM header claims {width}x{height} pixels, more than "
+                                                   f"{MAX_IMAGE_PIXELS}", "give a disparity map of the images' size"))
+
+
 def read_pfm_raw(path: str | os.PathLike) -> np.ndarray:
     """Read every channel of a PFM file, top row first.
 
@@ -71,6 +89,7 @@ def read_pfm_raw(path: str | os.PathLike) -> np.ndarray:
         ``(H, W)`` for ``Pf`` files, ``(H, W, 3)`` for ``PF`` files; values bit-exact.
     """
     path = _existing_file(path, "PFM file")
+    _check_claimed_size(path)
     data = _read_bytes(path)
     channels, width, height, byte_order, offset = _parse_pfm_header(path, data)
     count = width * height * channels

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
@@ -12,6 +13,8 @@ from .kitti import _kitti_pairs, _kitti_splits, _kitti_views
 from .middlebury import _MIDDLEBURY_RES, _middlebury_pairs
 from .pair import LAYOUTS, Pair, _EXPECTED, _LAYOUT_FIX, _abs
 from .road import _road_splits, _stereo_road_pairs, _udtiri_pairs
+
+log = logging.getLogger(__name__)
 
 
 def detect_layout(folder: str | os.PathLike) -> str | None:
@@ -81,7 +84,8 @@ def expand_layout(folder: str | os.PathLike, layout: str = "auto") -> list[Pair]
         Unknown layout, no pairs, or an incomplete pair.
     """
     folder = _abs(folder)
-    if layout == "auto":
+    auto = layout == "auto"
+    if auto:
         detected = detect_layout(folder)
         if detected is None:
             n_images = _count_images(folder)
@@ -101,6 +105,19 @@ def expand_layout(folder: str | os.PathLike, layout: str = "auto") -> list[Pair]
             where_what_fix(str(folder), f"unknown layout {layout!r}", f"use one of auto, {', '.join(LAYOUTS)}")
         )
     pairs = _EXPANDERS[layout](folder)
+    if auto and layout not in ("pair", "pair-folders"):
+        pairs += _pair_folders_beside(folder, layout)
     if not pairs:
         raise _no_pairs_error(folder)
+    return pairs
+
+
+def _pair_folders_beside(folder: Path, layout: str) -> list[Pair]:
+    """Pair folders (``p/left.png``...) next to a dataset of another layout: run too, with
+    a warning, rather than dropped without a word (a Stereo-Road ``left/`` + ``right/``
+    pair hid them)."""
+    pairs = _pair_folders(folder)
+    if pairs:
+        log.warning("%s: holds a %s dataset and pair folders (%s); running both", folder, layout,
+                    ", ".join(pair.name for pair in pairs))
     return pairs

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Sequence
 
 from ...errors import InputError, where_what_fix
+from .. import formats
 from .detect import expand_layout
 from .files import _is_image, _missing_why
 from .manifest import load_manifest
@@ -73,6 +74,9 @@ def discover(inputs: Sequence[str | os.PathLike] | str | os.PathLike) -> list[Pa
             pairs += load_manifest(item)
         elif item.is_file() and _is_image(item):
             images.append(item)
+        elif formats.special_file_kind(item) is not None:
+            raise InputError(where_what_fix(str(item), f"not a regular file ({formats.special_file_kind(item)})",
+                                            "give the file itself"))
         elif item.exists():
             raise InputError(
                 where_what_fix(str(item), f"not a folder, manifest or image ({item.suffix or 'no extension'})", f"give {_EXPECTED}")

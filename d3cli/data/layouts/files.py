@@ -46,12 +46,44 @@ def _entries(folder: Path, keep) -> list[Path]:
             if keep(entry):
                 kept.append(Path(entry.path))
         except OSError as exc:
-            log.warning("%s: skipped (%s); fix or remove the link", entry.path, exc.strerror or exc)
+            # A folder is scanned several times (layout detection, then its pairs): one
+            # warning per bad entry, not one per scan.
+            if entry.path not in _WARNED:
+                _WARNED.add(entry.path)
+                log.warning("%s: skipped (%s); fix or remove the link", entry.path, exc.strerror or exc)
     return kept
 
 
+#: Entries already warned about in this process (see :func:`_entries`).
+_WARNED: set[str] = set()
+
+
 def _files_by_lower_name(folder: Path) -> dict[str, Path]:
-    return {path.name.lower(): path for path in _entries(folder, lambda entry: entry.is_file())}
+    """The file entries of ``folder`` by lower-case name.
+
+    Besides regular files: FIFOs, devices, links to them and folders named like a file
+    (``left.png/``), so that a view, a ground truth or a calib.txt that is no regular file
+    is found and then refused by its reader naming what it is, rather than taken for
+    missing (and its pair silently run without it).
+    """
+    return {path.name.lower(): path for path in _entries(folder, _is_file_like)}
+
+
+#: Suffixes of the files a layout looks up by name: a folder with one of them is a
+#: mistake to report, not a subfolder.
+_FILE_SUFFIXES = frozenset((*formats.IMAGE_EXTENSIONS, *formats.DISPARITY_EXTENSIONS, ".txt"))
+
+
+def _is_file_like(entry: os.DirEntry) -> bool:
+    if entry.is_dir():
+        return os.path.splitext(entry.name)[1].lower() in _FILE_SUFFIXES
+    return entry.is_file() or os.path.exists(entry.path)  # exists: a FIFO or device, not a broken link
+
+
+def _present(path: Path) -> bool:
+    """``path`` is a file or something a reader must refuse by name (a FIFO, a device):
+    an optional file (ground truth, calib.txt) that is no regular file is not dropped."""
+    return path.is_file() or formats.special_file_kind(path) is not None
 
 
 def _subfolders(folder: Path) -> list[Path]:

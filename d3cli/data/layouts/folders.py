@@ -25,7 +25,8 @@ def _source_lines(path: Path) -> dict[str, str]:
     Keys start in column 0: indented lines continue the previous free-text value.
     """
     values: dict[str, str] = {}
-    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+    text = formats.regular_file(path, "SOURCE.txt").read_bytes().decode("utf-8", errors="replace")
+    for line in text.splitlines():
         match = re.match(r"^([A-Za-z_]\w*)\s*:\s*(.*?)\s*$", line)
         if match:
             values.setdefault(match.group(1).lower(), match.group(2))
@@ -46,8 +47,8 @@ def _source_number(source: dict[str, str], key: str, path: Path, kind=float):
         raise InputError(
             where_what_fix(str(path), f"{key}: {word!r} is not a number", f"write e.g. '{key}: 256' or '{key}: -'")
         ) from None
-    if not value > 0:
-        raise InputError(where_what_fix(str(path), f"{key} must be > 0, got {word}", "fix the value"))
+    if not (value > 0 and math.isfinite(value)):  # inf would reach the reader, named as the ground truth's fault
+        raise InputError(where_what_fix(str(path), f"{key} must be a finite number > 0, got {word}", "fix the value"))
     return value
 
 

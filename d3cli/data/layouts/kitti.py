@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ...errors import InputError, where_what_fix
-from .files import _files_by_lower_name, _subfolder_map
+from .files import _files_by_lower_name, _present, _subfolder_map
 from .pair import Pair, safe_name
 
 
@@ -57,11 +57,11 @@ def _kitti_pairs(root: Path, year: int) -> list[Pair]:
                     name=safe_name(prefix + left.stem),
                     left=left,
                     right=right,
-                    gt=gt if gt.is_file() else None,
+                    gt=gt if _present(gt) else None,
                     gt_scale=256.0,
                     gt_invalid="zero",
-                    nocc=nocc if nocc.is_file() else None,
-                    calib=calib if calib.is_file() else None,
+                    nocc=nocc if _present(nocc) else None,
+                    calib=calib if _present(calib) else None,
                     max_disparity=None,
                     family=f"kitti{year}",
                 )

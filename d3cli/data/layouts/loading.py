@@ -11,6 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ...config.checks import value_origin
 from ...errors import InputError, where_what_fix
 from .. import formats
 from .pair import Pair
@@ -248,6 +249,11 @@ def resolve_max_disparity(pair: Pair, width: int, override: int | None = None) -
     """
     if override is not None:
         if isinstance(override, bool) or not isinstance(override, (int, np.integer)) or not 0 < override < width:
+            origin = value_origin(override, "")
+            if origin:  # from a config file or --set, not from --max-disparity
+                raise InputError(where_what_fix(
+                    origin, f"{int(override)} must be in [1, {width - 1}] for pair {pair.name} (image width {width})",
+                    "set a smaller value there, or pass --max-disparity"))
             raise InputError(
                 where_what_fix(
                     pair.name,
@@ -266,16 +272,11 @@ def resolve_max_disparity(pair: Pair, width: int, override: int | None = None) -
                 )
             )
         return int(pair.max_disparity)
+    if width < 2:
+        raise InputError(where_what_fix(pair.name, f"an image {width} pixel wide has no disparity to search",
+                                        "give images at least 2 pixels wide"))
     derived = _max_disparity_from_gt(pair) if pair.gt is not None else None
     if derived is None:
         derived = width // 4
-    derived = min(derived, width - 1)
-    if derived < 1:
-        raise InputError(
-            where_what_fix(
-                pair.name,
-                f"image width {width} leaves no disparity range (--max-disparity must be in [1, width-1])",
-                "give wider images",
-            )
-        )
-    return derived
+    # At least 1 (what --max-disparity 1 gives): width // 4 is 0 below 4 pixels.
+    return max(1, min(derived, width - 1))

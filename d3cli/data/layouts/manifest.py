@@ -12,16 +12,32 @@ from typing import Any
 
 from ...config import MAX_CONFIG_INT, parse_yaml, quote, read_bounded
 from ...errors import InputError, where_what_fix
+from .. import formats
 from .detect import expand_layout
 from .folders import _canonical_invalid
 from .pair import DEFAULT_KEYS, LAYOUTS, MANIFEST_KEYS, PAIR_KEYS, Pair, _SAFE_NAME, _abs, family_from_name
 
 
-def _read_manifest_yaml(path: Path) -> Any:
-    """The parsed manifest: a bounded regular file, safe YAML (no alias bombs, no
-    duplicate keys), every problem an InputError naming the file and the line."""
+def _read_manifest_yaml(path: Path) -> tuple[Any, dict]:
+    """The parsed manifest and its lines (see :func:`d3cli.config.parse_yaml`): a bounded
+    regular file, safe YAML (no alias bombs, no duplicate keys), every problem an
+    InputError naming the file and the line."""
     raw = read_bounded(str(path), what="manifest file", missing_fix="check the path", error=InputError)
-    return parse_yaml(raw, str(path), what="manifest file", error=InputError)[0]
+    return parse_yaml(raw, str(path), what="manifest file", error=InputError)
+
+
+def _check_unique_names(pairs: list[Pair], lines: dict, path: Path) -> None:
+    """Two entries of ``pairs:`` with one name: name both entries and their lines (the
+    generic message would suggest naming the pairs in a manifest, which they are)."""
+    first: dict[str, int] = {}
+    for index, pair in enumerate(pairs):
+        if pair.name in first:
+            earlier = first[pair.name]
+            raise InputError(where_what_fix(
+                str(path), f"pair name {pair.name!r} is used twice (pairs[{earlier}] at line "
+                           f"{lines.get(('pairs', earlier), '?')} and pairs[{index}] at line "
+                           f"{lines.get(('pairs', index), '?')})", "give each pair its own name"))
+        first[pair.name] = index
 
 
 def _check_value(key: str, value: Any, where: str) -> Any:
@@ -79,6 +95,9 @@ def _whole_number(value) -> int | None:
 
 def _manifest_path(root: Path, value: str, key: str, where: str) -> Path:
     path = _abs(root / os.path.expanduser(value))
+    kind = "a folder" if path.is_dir() else formats.special_file_kind(path)
+    if kind is not None:
+        raise InputError(where_what_fix(where, f"{key} is not a regular file ({kind}): {path}", "give the file itself"))
     if not path.is_file():
         raise InputError(
             where_what_fix(where, f"{key} file not found: {path}", f"fix the path (relative to root {root})")
@@ -126,7 +145,7 @@ def load_manifest(path: str | os.PathLike) -> list[Pair]:
         duplicate names; messages name the manifest and the pair index.
     """
     path = _abs(path)
-    doc = _read_manifest_yaml(path)
+    doc, lines = _read_manifest_yaml(path)
     if not isinstance(doc, dict):
         raise InputError(
             where_what_fix(str(path), "a manifest must be a mapping with root: and pairs: (or layout:)", "see data_manifests/README.md")
@@ -160,7 +179,9 @@ def load_manifest(path: str | os.PathLike) -> list[Pair]:
     entries = doc.get("pairs") or []
     if not isinstance(entries, list):
         raise InputError(where_what_fix(str(path), "pairs must be a list", "write pairs: then '- name: ...' entries"))
-    pairs += [_manifest_pair(entry, index, root, defaults, path) for index, entry in enumerate(entries)]
+    listed = [_manifest_pair(entry, index, root, defaults, path) for index, entry in enumerate(entries)]
+    _check_unique_names(listed, lines, path)
+    pairs += listed
     if not pairs:
         raise InputError(where_what_fix(str(path), "the manifest lists no pairs", "add entries under pairs:"))
     return pairs

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ...errors import InputError, where_what_fix
 from .. import formats
-from .files import _files_by_lower_name, _find_view, _is_image, _subfolder_map, _subfolders
+from .files import _files_by_lower_name, _find_view, _is_image, _present, _subfolder_map, _subfolders
 from .folders import _max_disparity_from_calib
 from .pair import Pair, safe_name
 
@@ -36,7 +36,7 @@ def _road_splits(root: Path) -> list[tuple[Path, str]]:
 def _matched_views(left_dir: Path, right_dir: Path) -> list[tuple[Path, Path]]:
     right_files = _files_by_lower_name(right_dir)
     matched = []
-    for left in sorted(path for path in left_dir.iterdir() if path.is_file() and _is_image(path)):
+    for left in sorted(path for path in _files_by_lower_name(left_dir).values() if _is_image(path)):
         right = _find_view(right_files, left.stem.lower())
         if right is None:
             raise InputError(
@@ -58,7 +58,7 @@ def _udtiri_pairs(root: Path) -> list[Pair]:
         for left, right in _matched_views(left_dir, right_dir):
             gt = None
             if gt_dir is not None:
-                gt = next((gt_dir / f"{left.stem}{ext}" for ext in (".npy", ".pfm") if (gt_dir / f"{left.stem}{ext}").is_file()), None)
+                gt = next((gt_dir / f"{left.stem}{ext}" for ext in (".npy", ".pfm") if _present(gt_dir / f"{left.stem}{ext}")), None)
             parts = ["udtiri", split_name, left.stem]
             pairs.append(
                 Pair(
@@ -80,10 +80,10 @@ def _stereo_road_pairs(root: Path) -> list[Pair]:
     for split, split_name in _road_splits(root):
         left_dir, right_dir = _road_view_folders(split)
         split_calib = split / "calib.txt"
-        shared_calib = split_calib if split_calib.is_file() else (root_calib if root_calib.is_file() else None)
+        shared_calib = split_calib if _present(split_calib) else (root_calib if _present(root_calib) else None)
         for left, right in _matched_views(left_dir, right_dir):
             own_calib = split / "calib" / f"{left.stem}.txt"
-            calib = own_calib if own_calib.is_file() else shared_calib
+            calib = own_calib if _present(own_calib) else shared_calib
             max_disparity = _max_disparity_from_calib(formats.read_calib(calib), None) if calib else None
             parts = ["stereo-road", split_name, left.stem]
             pairs.append(

@@ -250,6 +250,8 @@ def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, 
     """
     if int(n) < 1:
         raise InputError(where_what_fix("synth", f"--n is {n}", "ask for at least one pair"))
+    if int(seed) < 0:  # numpy's SeedSequence takes non-negative integers only
+        raise InputError(where_what_fix("synth", f"--seed is {seed}", "give a seed >= 0 (the same seed gives the same pairs)"))
     _check_size(width, height)
     out_dir = Path(out_dir)
     try:
