@@ -10,7 +10,7 @@ colourful disparity map.  Its typical symptoms are visible in the result itself:
 * many of the decided disparities piled up at the ends of the search range (a
   negative true disparity is clamped to 0; a too small range clamps at the top).
 
-Thresholds were measured on the 29 pairs of ``shared/data`` (defaults, CPU), each run
+Thresholds were measured on the 29 pairs of the development data folder (defaults, CPU), each run
 as given, swapped, and with the right image shifted down by 6 rows:
 
 ==========================  ===============  ==================  ==================

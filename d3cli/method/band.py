@@ -18,7 +18,7 @@ that its neighbourhood saw.  With each tile's own coarse values only (tile 32, m
 of the full range (Middlebury adirondack / a 1280x720 road pair at full range): tile 32
 44 % / 17 %, tile 64 66 % / 27 % (tile 16 with margin 4: 38 % / 15 %).  Full range wherever any coarse pixel is undecided gives back
 exactly 1.583 but leaves nearly every tile at the full range.  Defaults: tile 32,
-margin 2.  Measured with ``scripts/benchmark.py ../shared/data --family middlebury -c
+margin 2.  Measured with ``scripts/benchmark.py DATA --family middlebury -c
 middlebury --methods d3 --set pyramid.band_tile=... --set
 pyramid.band_margin=...``.
 

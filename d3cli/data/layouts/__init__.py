@@ -8,7 +8,7 @@ ground truth are read later by :func:`load_pair_images` and :func:`load_ground_t
 Layouts (``layout:`` name in a manifest, then what is expected on disk):
 
 ``pair-folders``
-    A folder of pair folders, the layout of ``shared/data``.  Each pair folder holds
+    A folder of pair folders, the layout of the Middlebury/KITTI development data.  Each pair folder holds
     ``left.<ext>`` and ``right.<ext>`` (png, jpg, ppm, pgm, tif, bmp), optionally
     ``disp_gt.<pfm|png|pgm|npy>``, a non-occlusion mask (``mask0nocc.png``,
     ``disp_gt_nocc.png``, ``nonocc.png``, ``mask_nonocc.png`` or KITTI's ``disp_noc.png``), ``calib.txt`` and a
