@@ -37,9 +37,18 @@ def ihdr_not_first(path):
     return path
 
 
+def _without_cli_handlers(monkeypatch):
+    """Drop the terminal handler a CLI test earlier in this process left on the root logger
+    (with ``-v`` it prints DEBUG); pytest's capture handlers stay.  A command sets up its
+    own handlers on every run."""
+    root = logging.getLogger()
+    monkeypatch.setattr(root, "handlers", [h for h in root.handlers if type(h).__module__.startswith("_pytest")])
+
+
 # libpng's line is caught and logged; OpenCV's own log is silenced at its source.
 @pytest.mark.parametrize("make, n_logged", [(corrupt_png, 1), (ihdr_not_first, 0)], ids=["idat", "ihdr"])
-def test_decoder_messages_are_logged_not_printed(tmp_path, capfd, caplog, make, n_logged):
+def test_decoder_messages_are_logged_not_printed(tmp_path, capfd, caplog, monkeypatch, make, n_logged):
+    _without_cli_handlers(monkeypatch)
     path = make(tmp_path / "left.png")
     with caplog.at_level(logging.DEBUG, logger="d3cli"):
         with pytest.raises(InputError, match=r"left\.png: cannot read image \(corrupt or not an image\)"):
@@ -49,7 +58,11 @@ def test_decoder_messages_are_logged_not_printed(tmp_path, capfd, caplog, make, 
     assert len(said) == n_logged and all(line.startswith(f"{path}: decoder: libpng error: ") for line in said)
 
 
-def test_library_warnings_go_to_the_debug_log(capsys, caplog):
+def test_library_warnings_go_to_the_debug_log(capsys, caplog, monkeypatch):
+    # an earlier test's capture may have been undone by pytest's own warning recorder:
+    # start from logging's initial state, as a command does
+    logging.captureWarnings(False)
+    _without_cli_handlers(monkeypatch)
     route_library_warnings(verbose=False)
     try:
         with caplog.at_level(logging.DEBUG):
