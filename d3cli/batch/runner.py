@@ -55,7 +55,7 @@ from ..evaluation.html import write_report_html
 from .records import BatchResult, write_run_json
 from .signals import (interrupts_unwrapped, mark_terminated, signals_deferred, signals_held,
                       sigterm_as_interrupt)
-from .staging import changed_files, clean_leftovers, discard, new_staging, publish
+from .staging import changed_files, clean_leftovers, discard, named_as_target, new_staging, publish
 from .steps import internal_message, step
 from .outputs import (
     ERROR_MAP,
@@ -141,11 +141,13 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
         # The extras asked for belong to the pair: one that fails leaves no pair behind.
         stored = write_extras(pair, staging, stored, cfg, pointcloud=pointcloud)
         publish(staging, pair_dir, PAIR_FILES)
-    except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
+    except BaseException as exc:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
         discard(staging, PAIR_FILES)
         # The old files are stale now (another fingerprint, or a failed check): as before
         # staging, a pair that could not be written leaves nothing.
         remove_pair_files(pair_dir, remove_folder=True)
+        if isinstance(exc, D3Error):
+            raise named_as_target(exc, staging, pair_dir) from None
         raise
     return stored
 

@@ -115,6 +115,17 @@ def discard(folder: Path, ours: Iterable[str]) -> None:
         log.warning("%s: left in place: it holds files d3stereo did not write", folder)
 
 
+def named_as_target(exc: BaseException, staging: Path, target: Path) -> BaseException:
+    """``exc`` with the staging folder's path replaced by the pair folder's in its message:
+    the user knows ``OUT/p1``, not the hidden folder it is written in first."""
+    text = str(exc)
+    if str(staging) not in text:
+        return exc
+    renamed = type(exc)(text.replace(str(staging), str(target)))
+    renamed.__dict__.update(exc.__dict__)  # errno (a full disk ends the batch), notes
+    return renamed
+
+
 def clean_leftovers(out: Path, names: Iterable[str], ours: Iterable[str]) -> int:
     """Remove the staging folders that killed runs left for the pairs ``names`` in ``out``.
 
