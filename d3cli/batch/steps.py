@@ -40,12 +40,20 @@ class InternalError(Exception):
         return f"internal error in {self.step} ({describe(self.cause)}); please report it"
 
 
+def type_name(exc: BaseException) -> str:
+    """``RuntimeError``, ``cv2.error``, ``MemoryError`` (for numpy's private ``_ArrayMemoryError``):
+    the first public class of ``exc``, with its package unless it is a built-in."""
+    cls = next((c for c in type(exc).__mro__ if not c.__qualname__.startswith("_")), type(exc))
+    package = cls.__module__.split(".")[0]
+    return cls.__qualname__ if package == "builtins" else f"{package}.{cls.__qualname__}"
+
+
 def describe(exc: BaseException) -> str:
     """``Type: message`` of ``exc`` on one line, at most :data:`MESSAGE_LIMIT` characters."""
     text = " ".join(str(exc).split())
     if len(text) > MESSAGE_LIMIT:
         text = text[:MESSAGE_LIMIT - 3] + "..."
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    return f"{type_name(exc)}: {text}" if text else type_name(exc)
 
 
 @contextlib.contextmanager

@@ -338,7 +338,9 @@ def test_files_of_the_user_in_a_pair_folder_stay_when_it_is_computed_again(tmp_p
 
 # ----------------------------------------------------------------------------- internal errors
 def _broken_road_report(*args, **kwargs):
-    raise RuntimeError("OpenCV(4.10) error: (-4:Insufficient memory) Failed to allocate\n3183098934643681 bytes")
+    import cv2
+
+    raise cv2.error("OpenCV(4.10) error: (-4:Insufficient memory) Failed to allocate\n3183098934643681 bytes")
 
 
 def test_an_internal_error_names_the_pair_and_the_step_and_stores_no_pair(tmp_path, two_pairs, monkeypatch):
@@ -347,7 +349,7 @@ def test_an_internal_error_names_the_pair_and_the_step_and_stores_no_pair(tmp_pa
     result = invoke("run", two_pairs, "-o", out, "--method", "sgbm", "--road-report")
     assert result.exit_code == 1 and "Traceback" not in result.output
     failed = [line for line in result.output.splitlines() if line.startswith("failed:")]
-    assert failed[0] == ("failed: a: internal error in road report (RuntimeError: OpenCV(4.10) error: "
+    assert failed[0] == ("failed: a: internal error in road report (cv2.error: OpenCV(4.10) error: "
                          "(-4:Insufficient memory) Failed to allocate 3183098934643681 bytes); please report it")
     assert not (out / "a").exists() and not (out / "b").exists()
     monkeypatch.undo()
@@ -371,12 +373,14 @@ def test_an_extra_failing_on_a_complete_pair_leaves_it_incomplete(tmp_path, two_
 
 def test_an_internal_error_while_matching_names_the_method(tmp_path, two_pairs, monkeypatch):
     def broken(*args, **kwargs):
-        raise IndexError("index 7 is out of bounds")
+        import numpy as np
+
+        np.empty((1 << 28, 1 << 28), np.float64)  # numpy's _ArrayMemoryError, a MemoryError
 
     monkeypatch.setattr(d3cli.batch.runner, "compute_pair", broken)
     result = invoke("run", two_pairs, "-o", tmp_path / "out", "--method", "sgbm")
-    assert ("failed: a: internal error in matching (sgbm) (IndexError: index 7 is out of bounds); "
-            "please report it") in result.output
+    assert ("failed: a: internal error in matching (sgbm) (MemoryError: Unable to allocate 512. PiB for an array "
+            "with shape (268435456, 268435456) and data type float64); please report it") in result.output
 
 
 # ----------------------------------------------------------------------------- SIGTERM
