@@ -24,6 +24,8 @@ import secrets
 from pathlib import Path
 from typing import Iterable
 
+from ..errors import OutputError, where_what_fix
+
 log = logging.getLogger(__name__)
 
 #: Marks a pair's staging folder: ``.<pair>.partial-XXXX`` beside ``<pair>``.
@@ -34,9 +36,21 @@ _AT_FDCWD = -100
 
 
 def new_staging(target: Path) -> Path:
-    """Create and return an empty staging folder for ``target`` (a pair's folder), beside it."""
-    target.parent.mkdir(parents=True, exist_ok=True)
-    return _new_folder(target.parent, f".{target.name}{PARTIAL}")
+    """Create and return an empty staging folder for ``target`` (a pair's folder), beside it.
+
+    Raises
+    ------
+    OutputError
+        When it cannot be created (its ``errno`` kept: a full disk ends the batch).
+    """
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        return _new_folder(target.parent, f".{target.name}{PARTIAL}")
+    except OSError as exc:
+        error = OutputError(where_what_fix(str(target), f"cannot create the pair's folder ({exc.strerror or exc})",
+                                           "free disk space or fix the permissions of the output folder, then rerun"))
+        error.errno = exc.errno
+        raise error from None
 
 
 def _new_folder(parent: Path, prefix: str) -> Path:

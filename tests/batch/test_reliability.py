@@ -436,3 +436,25 @@ def test_sigterm_after_the_summary_exits_143_and_says_so_in_run_json(tmp_path, t
     assert run["interrupted"] is True
     assert run["stop_reason"] == "terminated (SIGTERM) after the batch had finished"
     assert [p["status"] for p in run["pairs"]] == ["ok", "ok"]
+
+
+def test_a_full_disk_when_a_pair_folder_is_made_ends_the_batch_with_one_error(tmp_path, two_pairs, monkeypatch):
+    import errno
+    import pathlib
+
+    real = pathlib.Path.mkdir
+
+    def mkdir_full(self, *args, **kwargs):
+        if ".partial-" in self.name and self.name.startswith(".b."):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(pathlib.Path, "mkdir", mkdir_full)
+    out = tmp_path / "out"
+    result = invoke("run", two_pairs, "-o", out, "--method", "sgbm")
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert error_lines(result.output) == [
+        f"Error: {out / 'b'}: cannot create the pair's folder ({os.strerror(errno.ENOSPC)}); free disk space or fix "
+        "the permissions of the output folder, then rerun"]
+    assert run_json(out)["stop_reason"].startswith(f"{out / 'b'}: cannot create")
+    assert (out / "a" / "result.json").is_file()
