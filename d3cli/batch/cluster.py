@@ -42,8 +42,10 @@ def _one_line(exc: BaseException, limit: int = 200) -> str:
 async def _ask_identity(address: str, timeout: float):
     """Connect to ``address`` and ask it who it is (the scheduler's ``identity`` handler)."""
     from distributed.comm import connect
+    from distributed.security import Security
 
-    comm = await connect(address, timeout=timeout)
+    # The client's TLS settings from the dask config, as Client would use them (tls://).
+    comm = await connect(address, timeout=timeout, **Security().get_connection_args("client"))
     try:
         await comm.write({"op": "identity", "reply": True})
         return await comm.read()
