@@ -108,7 +108,8 @@ def _end_of_command() -> None:
     """
     if _own_process():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # the status is decided: exit with it
+        if not getattr(signal.getsignal(signal.SIGTERM), "after_batch", False):  # run's own: exits 143
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # the status is decided: exit with it
         exec("pass")  # noqa: S102 - clears the flag, see above
 
 
@@ -272,6 +273,9 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
                              config_source=source, pointcloud=pointcloud, workers=n_workers,
                              scheduler=scheduler, shard=shard_of, break_lock=break_lock)
     _batch_recorded()
+    if _own_process():  # a SIGTERM from now on still exits 143, recorded in run.json
+        batch.terminate_after_batch(result.run_json, f"Terminated (SIGTERM): {result.n_computed + result.n_skipped} "
+                                                     f"of {result.n_pairs} pairs done; rerun the same command to resume")
     if not quiet:
         # The counts as run.json has them: "skipped" = kept complete from an earlier run
         # (an ok result in the table), never a pair left out.

@@ -9,7 +9,10 @@
 - ``outputs``: the per-pair files, written atomically, read back, removed;
 - ``fingerprint``: what a stored result depends on (resume decisions), versions;
 - ``lock``: one run per output folder (one per shard with ``--shard``);
-- ``executors``: where pairs run - here, a local process pool, a Dask cluster; shards;
+- ``executors``: where pairs run - here, a local process pool; shards;
+- ``cluster``: the Dask executor (``--scheduler``), its scheduler probe;
+- ``staging``: a pair's folder written aside and renamed into place; file records checked on resume;
+- ``steps``: a pair's steps, so that an internal error names the step;
 - ``warmup``: compiling the numba kernels once before the first pair;
 - ``resources``: the memory check before a pair is computed.
 
@@ -24,6 +27,7 @@ from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock
 from .methods import compute_pair
 from .outputs import OUTPUT_FILES, RESULT_FILE, RUN_FILE
 from .runner import BatchInterrupted, BatchResult, run_batch
+from .signals import terminate_after_batch
 
 __all__ = [
     "BatchInterrupted",
@@ -45,4 +49,5 @@ __all__ = [
     "run_batch",
     "select_shard",
     "settings_fingerprint",
+    "terminate_after_batch",
 ]

@@ -14,7 +14,7 @@ writes ``run.json`` / the summary.
   two pairs of 640x360); the first worker compiles or loads the kernels, the others then
   load the cache it wrote.  At most 2 N pairs are in flight, so a huge manifest never
   becomes a huge queue.
-* :class:`DaskExecutor` - ``--scheduler tcp://HOST:PORT``: each pair a task on an existing
+* :class:`DaskExecutor` (:mod:`d3cli.batch.cluster`) - ``--scheduler tcp://HOST:PORT``: each pair a task on an existing
   ``dask.distributed`` cluster, submitted through a window of in-flight futures
   (``as_completed``), checked up front (scheduler reachable, workers present with the
   same d3stereo version, OUT writable from every worker).  A worker that dies mid-pair
@@ -23,7 +23,7 @@ writes ``run.json`` / the summary.
   inside the task, so it is recorded once and never retried.
 
 Ctrl-C: queued pairs are cancelled; pool workers ignore SIGINT and finish the pair they
-hold (whole pairs only, written atomically), Dask tasks in flight are cancelled (a
+hold (whole pairs only, written atomically; counted as done, :meth:`PoolExecutor.drain`), Dask tasks in flight are cancelled (a
 cancelled pair leaves no ``result.json``, so a rerun computes it again).
 """
 
@@ -34,25 +34,20 @@ import logging
 import os
 import signal
 import sys
-import tempfile
-import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
-from .. import __version__
 from ..data import formats as io
-from ..errors import ConfigError, D3Error, OutputError, where_what_fix
+from ..errors import ConfigError, D3Error
 from .warmup import warm_jit
 
 log = logging.getLogger(__name__)
 
-#: Environment variable naming the scheduler when --scheduler is not given (Dask's own name).
-SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
-#: Seconds to wait for the scheduler to answer, and for a first worker to join.
-CONNECT_TIMEOUT_S = 5
-WORKER_TIMEOUT_S = 30
+#: Most ``--workers`` processes accepted (multiprocessing's semaphores overflowed on a
+#: 20-digit count); a pool never has more workers than the batch has pairs.
+MAX_WORKERS = 1024
 
 
 def available_cores() -> int:
@@ -90,6 +85,9 @@ def parse_workers(value: str | int) -> int:
             n = 0
     if n < 1:
         raise ConfigError(f"--workers {value}: use a positive number of processes or 'auto'")
+    if n > MAX_WORKERS:
+        raise ConfigError(f"--workers {str(value)[:30]}: at most {MAX_WORKERS} processes; use 'auto' for one "
+                          f"per core ({available_cores()} here)")
     return n
 
 
@@ -140,6 +138,10 @@ class SerialExecutor:
 
     def warm(self, cfg, method) -> float:
         return warm_jit(cfg, method)
+
+    def drain(self) -> list:
+        """Pairs finished after an interruption: none here (the pair in progress is dropped)."""
+        return []
 
     def imap(self, task: Callable, pairs: Sequence) -> Iterator:
         """Yield ``(pair, task(pair))`` in order."""
@@ -309,6 +311,7 @@ class PoolExecutor:
         self.start_method = start_method
         self.current = None
         self._pool = None
+        self._pending: dict = {}  # future -> pair, submitted and not yet yielded
 
     def describe(self) -> dict:
         return {"mode": self.mode, "workers": self.workers, "threads_per_worker": self.threads,
@@ -354,7 +357,7 @@ class PoolExecutor:
         """Yield ``(pair, result)`` as pairs complete, largest pairs first, with at most
         2 x workers in flight."""
         todo = iter(largest_first(pairs))
-        pending = {}
+        pending = self._pending
 
         def submit_next() -> bool:
             pair = next(todo, None)
@@ -383,159 +386,33 @@ class PoolExecutor:
             for future in pending:
                 future.cancel()
 
-
-# ----------------------------------------------------------------------------- Dask
-def _worker_identity() -> dict:
-    """Runs on each Dask worker: the d3stereo it imports (proves it is importable)."""
-    import d3cli
-
-    return {"version": d3cli.__version__, "path": str(Path(d3cli.__file__).resolve().parent)}
-
-
-def _worker_probe(out: str) -> str:
-    """Runs on each Dask worker: create and delete a file in OUT; returns '' or the reason."""
-    try:
-        fd, probe = tempfile.mkstemp(dir=out, prefix=".d3stereo-worker-probe-")
-        os.close(fd)
-        os.remove(probe)
-    except OSError as exc:
-        return exc.strerror or str(exc)
-    return ""
+    def drain(self) -> list:
+        """``(pair, result)`` of the pairs that were running when the batch was interrupted
+        and that their workers finished since (they ignore Ctrl-C); call after leaving
+        the ``with`` block, which waits for them.  Their folders are complete, so the
+        interrupted message counts them."""
+        finished = [(pair, future.result()) for future, pair in self._pending.items()
+                    if future.done() and not future.cancelled() and future.exception() is None]
+        self._pending = {}
+        return finished
 
 
-class DaskExecutor:
-    """Pairs as tasks on a ``dask.distributed`` cluster reached at ``address``.
+def make_executor(workers: int = 1, scheduler: str | None = None, out: Path | None = None,
+                  n_pairs: int | None = None):
+    """The executor for ``--workers`` / ``--scheduler`` (scheduler wins; 1 worker is serial).
 
-    Parameters
-    ----------
-    address : str
-        Scheduler address, e.g. ``tcp://10.0.0.5:8786``.
-    out : Path
-        Output folder, absolute; must be the same path on every worker (shared filesystem).
-    connect_timeout, worker_timeout : float, keyword-only
-        Seconds to wait for the scheduler, and for a first worker.
+    A pool gets at most ``n_pairs`` workers: more would only start, load the kernels one
+    after the other and idle (``--workers 1000`` on two pairs kept 999 processes alive
+    long after both pairs were done).
     """
-
-    mode = "dask"
-
-    def __init__(self, address: str, out: Path, *, connect_timeout: float = CONNECT_TIMEOUT_S,
-                 worker_timeout: float = WORKER_TIMEOUT_S):
-        self.address, self.out = address, Path(out)
-        self.connect_timeout, self.worker_timeout = connect_timeout, worker_timeout
-        self.client = None
-        self.current = None
-        self.workers: dict = {}
-
-    def describe(self) -> dict:
-        return {"mode": self.mode, "scheduler": self.address, "workers": len(self.workers),
-                "threads": sum(self.workers.values())}
-
-    def __enter__(self):
-        try:
-            from distributed import Client
-        except ImportError:
-            raise ConfigError("--scheduler needs dask.distributed: pip install 'd3stereo[distributed]'") from None
-        try:
-            self.client = Client(self.address, timeout=self.connect_timeout, set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise ConfigError(where_what_fix(
-                f"--scheduler {self.address}", f"scheduler unreachable ({type(exc).__name__}: {exc})",
-                f"start one with `dask scheduler` or fix the address (also ${SCHEDULER_ENV})")) from None
-        try:
-            self._check_workers()
-        except BaseException:
-            self.client.close()
-            raise
-        return self
-
-    def __exit__(self, *exc):
-        self.client.close()
-        return False
-
-    def _check_workers(self) -> None:
-        """No worker, d3stereo missing or of another version, OUT not writable: ConfigError/OutputError."""
-        where = f"--scheduler {self.address}"
-        try:
-            self.client.wait_for_workers(1, timeout=self.worker_timeout)
-        except (TimeoutError, OSError):
-            raise ConfigError(where_what_fix(where, f"no worker joined within {self.worker_timeout:.0f} s",
-                                             "start workers with `dask worker ADDRESS`")) from None
-        self.workers = dict(self.client.nthreads())
-        found = self.client.run(_worker_identity, on_error="return")
-        for worker, identity in sorted(found.items()):
-            if isinstance(identity, BaseException):
-                raise ConfigError(where_what_fix(
-                    where, f"worker {worker} cannot import d3stereo ({type(identity).__name__}: {identity})",
-                    "install the same d3stereo on every worker (or set PYTHONPATH there)"))
-            if identity["version"] != __version__:
-                raise ConfigError(where_what_fix(
-                    where, f"worker {worker} has d3stereo {identity['version']}, this client {__version__}",
-                    "install the same version on the workers and here"))
-        probes = self.client.run(_worker_probe, str(self.out), on_error="return")
-        for worker, reason in sorted(probes.items()):
-            if isinstance(reason, BaseException) or reason:
-                raise OutputError(where_what_fix(
-                    str(self.out), f"worker {worker} cannot write the output folder ({reason})",
-                    "use -o on a filesystem shared by the client and every worker, writable by them"))
-
-    def warm(self, cfg, method) -> float:
-        """Compile (or load the cache) on every worker at once; the slowest worker's seconds."""
-        times = self.client.run(warm_jit, cfg, method)
-        return max(times.values(), default=0.0)
-
-    def imap(self, task: Callable, pairs: Sequence) -> Iterator:
-        """Yield ``(pair, result)`` as tasks complete, largest pairs first, with at most
-        2 x worker threads in flight."""
-        from distributed import as_completed
-        from distributed.client import FutureCancelledError
-        from distributed.scheduler import KilledWorker
-
-        window = max(2, 2 * sum(self.client.nthreads().values()))
-        todo = iter(largest_first(pairs))  # a large pair submitted last would run alone at the end
-        pending = {}
-
-        def submit_next():
-            pair = next(todo, None)
-            if pair is None:
-                return None
-            # pure=False: a rerun must compute again, never reuse a result the scheduler still holds;
-            # retries=0: deterministic failures come back as records, only a dead worker reschedules.
-            future = self.client.submit(task, pair, pure=False, retries=0,
-                                        key=f"d3stereo-{pair.name}-{time.time_ns()}")
-            pending[future.key] = (future, pair)
-            return future
-
-        first = [f for f in (submit_next() for _ in range(window)) if f is not None]
-        if not first:
-            return
-        completed = as_completed(first, loop=self.client.loop)
-        try:
-            for future in completed:
-                _, pair = pending.pop(future.key)
-                self.current = pair  # the pair an exception belongs to
-                try:
-                    result = future.result()
-                except KilledWorker:
-                    raise D3Error(f"{pair.name}: the workers running it died several times (out of memory?); "
-                                  "finished pairs are complete, rerun the same command to resume") from None
-                except FutureCancelledError:
-                    raise D3Error(f"{pair.name}: the task was cancelled on the cluster; rerun to resume") from None
-                self.current = None
-                future.release()
-                following = submit_next()
-                if following is not None:
-                    completed.add(following)
-                yield pair, result
-        finally:
-            if pending:  # Ctrl-C or an error: nothing queued keeps running for nobody
-                self.client.cancel([future for future, _ in pending.values()])
-                completed.clear()
-
-
-def make_executor(workers: int = 1, scheduler: str | None = None, out: Path | None = None):
-    """The executor for ``--workers`` / ``--scheduler`` (scheduler wins; 1 worker is serial)."""
     if scheduler:
         return DaskExecutor(scheduler, Path(out).resolve())
+    if n_pairs is not None and workers > max(1, n_pairs):
+        log.info("--workers %d: %d pair(s) to run, so %d worker process(es)", workers, n_pairs, max(1, n_pairs))
+        workers = max(1, n_pairs)
     if workers > 1:
         return PoolExecutor(workers)
     return SerialExecutor()
+
+
+from .cluster import CONNECT_TIMEOUT_S, SCHEDULER_ENV, WORKER_TIMEOUT_S, DaskExecutor  # noqa: E402 - re-exported

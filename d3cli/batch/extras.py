@@ -15,7 +15,8 @@ from ..data import formats as io, layouts as datasets
 from ..road.pointcloud import camera_from, save_pair_cloud
 from ..road.report import road_report
 from .fingerprint import cloud_fingerprint
-from .outputs import CLOUD_FILE, RESULT_FILE, write_json
+from .outputs import CLOUD_FILE, write_result
+from .steps import step
 
 log = logging.getLogger(__name__)
 
@@ -41,8 +42,7 @@ def _with_warnings(pair, pair_dir: Path, stored: dict, texts, *, changed: bool =
     for text in new:
         log.warning("%s: %s", pair.name, text)
     stored = {**stored, "warnings": [*stored.get("warnings", []), *new]}
-    write_json(pair_dir / RESULT_FILE, stored)
-    return stored
+    return write_result(pair_dir, stored)  # the sizes and hashes of the files added too
 
 
 def write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -> dict:
@@ -55,7 +55,8 @@ def write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -
     want_cloud = pointcloud and not cloud_done
     if not (want_cloud or cfg.road.report):
         return stored
-    left, camera, disparity, valid = _stored_map(pair, pair_dir, cfg)
+    with step("reading the stored map"):
+        left, camera, disparity, valid = _stored_map(pair, pair_dir, cfg)
     warnings = []
     if want_cloud:
         cloud_path.unlink(missing_ok=True)  # made with another camera: never left beside the new settings
@@ -65,11 +66,14 @@ def write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -
                         "or set camera.f and camera.baseline")
     elif want_cloud:
         depth_range = (cfg.camera.min_depth_m, cfg.camera.max_depth_m)
-        n_points = save_pair_cloud(cloud_path, disparity, valid, left, camera, depth_range=depth_range)
+        with step("the point cloud"):
+            n_points = save_pair_cloud(cloud_path, disparity, valid, left, camera, depth_range=depth_range)
         log.info("%s: cloud.ply with %d points", pair.name, n_points)
         stored = {**stored, "cloud": {"fingerprint": cloud_fp, "points": n_points,
                                       "depth_range_m": list(depth_range),
                                       "camera": dataclasses.asdict(camera)}}
     if cfg.road.report:  # all the logic in d3cli.road.report
-        warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road)[1]
-    return _with_warnings(pair, pair_dir, stored, warnings, changed=want_cloud)
+        with step("road report"):
+            warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road)[1]
+    # Rewritten after the road outputs too: result.json records the files' sizes and hashes.
+    return _with_warnings(pair, pair_dir, stored, warnings, changed=want_cloud or cfg.road.report)

@@ -8,6 +8,8 @@ only, so two runs can never both take over a stale lock.  A lock file nobody hol
 host that is gone (pid not running, or running but started at another time: a reused
 pid).  A record from another host, or from a live pid of this host, is never taken
 over: the error says to check that no run is writing, then rerun with ``--break-lock``.
+A lock name that is a symbolic link, a hard link or not a regular file is refused, never
+followed or written (it is not a lock file of d3stereo).
 ``--break-lock`` still never takes a lock that a running d3stereo holds.
 """
 
@@ -18,6 +20,7 @@ import json
 import logging
 import os
 import socket
+import stat
 import tempfile
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -176,6 +179,30 @@ def _refuse(out: Path, holder: dict | None, *, held: bool) -> OutputError:
                                                 "that may still be running", BREAK_HINT))
 
 
+def _open_lock_file(path: Path) -> int:
+    """Open (create) the lock file itself: never through a symbolic link, never a FIFO,
+    a device or a file with other names (a link ``OUT/.d3stereo.lock`` to a user's file
+    had the lock record written into that file)."""
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    try:
+        fd = os.open(path, flags, 0o644)
+    except OSError as exc:
+        if os.path.islink(path):
+            raise OutputError(where_what_fix(
+                str(path), f"is a symbolic link (to {os.readlink(path)}), not a lock file of d3stereo",
+                "remove the link (what it points to is left alone) and rerun")) from None
+        raise OutputError(where_what_fix(str(path), f"cannot create the lock file ({exc.strerror or exc})",
+                                         "choose another folder with -o or fix its permissions")) from None
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:
+        os.close(fd)
+        what = "is not a regular file" if not stat.S_ISREG(st.st_mode) else \
+            f"has {st.st_nlink} names (a hard link to another file)"
+        raise OutputError(where_what_fix(str(path), f"{what}, not a lock file of d3stereo",
+                                         "remove it (nothing else is touched) and rerun"))
+    return fd
+
+
 def acquire_lock(out: Path, name: str = LOCK_FILE, *, break_lock: bool = False) -> Lock:
     """Take ``out/<name>`` (default ``.d3stereo.lock``) for this process: see the module docstring.
 
@@ -207,11 +234,7 @@ def acquire_lock(out: Path, name: str = LOCK_FILE, *, break_lock: bool = False) 
     """
     path = out / name
     for _attempt in range(20):
-        try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as exc:
-            raise OutputError(where_what_fix(str(path), f"cannot create the lock file ({exc.strerror or exc})",
-                                             "choose another folder with -o or fix its permissions")) from None
+        fd = _open_lock_file(path)
         try:
             if not _flock(fd, path):
                 holder = _read_holder(fd)

@@ -19,7 +19,10 @@ Layout of an output folder ``OUT``::
     OUT/defects.csv              every defect of every pair (only with --road-report)
 
 Every file is written atomically, and ``result.json`` last: its presence means the pair
-is complete.
+is complete.  A pair is written into a staging folder ``OUT/.<pair>.partial-XXXX`` that
+replaces ``OUT/<pair>`` in one rename once complete (:mod:`d3cli.batch.staging`), and
+``result.json`` records the size and SHA-256 of every file of the pair (``"files"``),
+checked before a rerun skips it.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from ..data.formats import atomic_write, read_image, write_image, write_kitti_pn
 from ..evaluation import pictures
 from ..errors import OutputError, where_what_fix
 from ..evaluation.report import jsonable
+from .staging import file_records
 from ..road.report import CSV_FIELDS as DEFECTS_CSV_FIELDS
 from ..road.report import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE
 
@@ -55,36 +59,64 @@ SUMMARY_FILES = ("metrics.csv", "summary.json", "summary.md")
 #: Road inspection outputs of a pair (--road-report), made from its disparity map: stale
 #: once the map is computed again.
 ROAD_FILES = (HEIGHT_FILE, HEIGHT_COLOR_FILE, DEFECTS_JSON, DEFECTS_PNG)
+#: Every file d3stereo writes into a pair's folder (anything else there is the user's).
+PAIR_FILES = (RESULT_FILE, *OUTPUT_FILES, ERROR_MAP, CLOUD_FILE, PANEL_FILE, OVERLAY_FILE, *ROAD_FILES)
 
 
 def check_output_folder(out: Path, pairs) -> None:
-    """Refuse an output folder that overlaps the inputs (issue: a ground truth named
-    ``disp.png`` in the input folder was replaced by the prediction and then scored).
+    """Refuse an output folder whose writing could touch an input file (a ground truth
+    named ``disp.png`` in the input folder was once replaced by the prediction and then
+    scored; a link ``OUT/p1`` into the input pair had the user's files overwritten).
 
-    Each pair writes ``out/<pair>/``; that folder must neither be a folder holding one of
-    the pair's input files, nor lie inside one, nor contain one (compared by real path,
-    so links and ``..`` do not hide an overlap).
+    Compared by real path, so links and ``..`` hide nothing:
+
+    * no input file of any pair may lie inside OUT (nor be OUT itself);
+    * ``OUT/<pair>`` must not be a symbolic link leading outside OUT (it is replaced when
+      the pair is written, never written through, but a link into the inputs says the
+      folder was chosen wrongly);
+    * OUT may be a new folder inside the inputs' folder (``d3stereo run L.png R.png -o
+      out`` in the images' own folder): nothing is written next to the inputs.
 
     Raises
     ------
     OutputError
-        Naming the pair, the input folder and the fix.
+        Naming the folder, the pair and input concerned, and the fix.
     """
     root = Path(os.path.realpath(out))
     for pair in pairs:
-        target = root / pair.name
-        files = [getattr(pair, key, None) for key in ("left", "right", "gt", "nocc", "calib")]
-        for folder in {Path(os.path.realpath(f)).parent for f in files if f is not None}:
-            if target == folder or folder in target.parents or target in folder.parents:
+        entry = Path(out) / pair.name
+        target = Path(os.path.realpath(entry))
+        if entry.is_symlink() and root not in target.parents:
+            raise OutputError(where_what_fix(
+                str(entry), f"is a symbolic link leading outside the output folder (to {target})",
+                "remove the link (what it points to is left alone) or choose another -o folder"))
+        if not entry.is_symlink() and entry.exists() and not entry.is_dir():
+            raise OutputError(where_what_fix(str(entry), f"is a file, where pair {pair.name} writes its folder",
+                                             "move it away or choose another -o folder"))
+        for key in ("left", "right", "gt", "nocc", "calib"):
+            given = getattr(pair, key, None)
+            if given is None:
+                continue
+            real = Path(os.path.realpath(given))
+            if real == root or root in real.parents:
                 raise OutputError(where_what_fix(
-                    str(out), f"pair {pair.name} would write its outputs into or next to its own input files "
-                              f"({folder})", "choose an output folder outside the input data with -o"))
+                    str(out), f"the output folder holds input files of pair {pair.name} ({real})",
+                    "choose an output folder outside the input data with -o (a new folder beside the inputs is fine)"))
 
 
 def write_json(path: Path, data: dict) -> None:
     """Write ``data`` as indented JSON (NaN/inf as null), atomically."""
     text = json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n"
     atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+
+
+def write_result(folder: Path, stored: dict) -> dict:
+    """Write ``folder/result.json`` from ``stored`` with the size and SHA-256 of every file
+    of the pair now in ``folder`` (``"files"``, checked before a rerun skips the pair);
+    returns what was written."""
+    stored = {**stored, "files": file_records(folder, [n for n in PAIR_FILES if n != RESULT_FILE])}
+    write_json(folder / RESULT_FILE, stored)
+    return stored
 
 
 def read_result(pair_dir: Path) -> dict | None:
@@ -107,7 +139,7 @@ def remove_pair_files(pair_dir: Path, *, remove_folder: bool = False) -> None:
     """
     if not pair_dir.is_dir():
         return
-    names = (*OUTPUT_FILES, RESULT_FILE, ERROR_MAP, CLOUD_FILE, PANEL_FILE, OVERLAY_FILE, *ROAD_FILES)
+    names = PAIR_FILES  # result.json first: never a "complete" pair missing a file
     leftovers = [p for p in pair_dir.iterdir() if p.name.startswith(".") and ".tmp-" in p.name]
     for path in [pair_dir / name for name in names] + leftovers:
         try:

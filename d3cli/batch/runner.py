@@ -6,11 +6,15 @@ stored ``result.json`` is complete and was made with the same settings fingerpri
 stopped.
 
 One failing pair never stops a batch: its error is recorded (``run.json``, the
-summary) and the next pair runs.  Two things end a batch early:
+summary) and the next pair runs; an unexpected exception is reported as an internal
+error naming the pair and its step (:mod:`d3cli.batch.steps`).  A pair is skipped as
+complete only when its fingerprint matches and its files are as ``result.json``
+recorded them (sizes, SHA-256); otherwise it is computed again, with a warning.  Two things end a batch early:
 
-* Ctrl-C (KeyboardInterrupt): the pair in progress leaves no file behind (its temporary
-  files and any of its outputs already renamed are removed; ``result.json`` is written
-  last, so it never marks a half pair complete), ``run.json`` records the interruption,
+* Ctrl-C (KeyboardInterrupt): the pair in progress leaves no file behind (it is written
+  into a staging folder renamed into place once complete, :mod:`d3cli.batch.staging`; a
+  staging folder a killed run left is removed by the next run over the same pairs),
+  ``run.json`` records the interruption,
   and :class:`BatchInterrupted` says how many pairs are done.  Rerunning the same command
   resumes and gives byte-identical per-pair files.
 * A full disk (ENOSPC/EDQUOT on a write): every later pair would fail the same way, so
@@ -49,10 +53,13 @@ from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock, shard_
 from .methods import compute_pair
 from ..evaluation.html import write_report_html
 from .records import BatchResult, write_run_json
-from .signals import interrupts_unwrapped, signals_deferred, signals_held, sigterm_as_interrupt
+from .signals import (interrupts_unwrapped, mark_terminated, signals_deferred, signals_held,
+                      sigterm_as_interrupt)
+from .staging import changed_files, clean_leftovers, discard, named_as_target, new_staging, publish
+from .steps import internal_message, step
 from .outputs import (
     ERROR_MAP,
-    RESULT_FILE,
+    PAIR_FILES,
     RUN_FILE,
     check_output_folder,
     clipped_warning,
@@ -62,8 +69,8 @@ from .outputs import (
     remove_pair_files,
     remove_stale_summaries,
     write_disparity_outputs,
-    write_json,
     write_panel,
+    write_result,
 )
 
 log = logging.getLogger(__name__)
@@ -94,40 +101,53 @@ class BatchInterrupted(KeyboardInterrupt):
         return self.args[0]
 
 
-def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, settings, fingerprint) -> dict:
+def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, settings, fingerprint,
+              pointcloud=False) -> dict:
     """Compute, write and (optionally) score one pair; returns the stored result dict.
 
-    A ground truth that cannot be scored (unreadable, another size) fails the pair's
-    evaluation only: its maps are written and kept, ``evaluation_error`` says why.
+    Everything (maps, error map, panel, cloud and road outputs, result.json) is written
+    into a staging folder beside ``pair_dir`` that then replaces it in one rename
+    (:mod:`d3cli.batch.staging`): a kill at any moment leaves the old folder or the new
+    one, never a mix.  A ground truth that cannot be scored (unreadable, another size)
+    fails the pair's evaluation only: its maps are written and kept, ``evaluation_error``
+    says why.
     """
     t0 = time.perf_counter()
-    left, right = datasets.load_pair_images(pair)
+    with step("loading the images"):
+        left, right = datasets.load_pair_images(pair)
     height, width = left.shape[:2]
     dmax, range_note = _resolve_range(pair, width, max_disparity)
     resources.check_memory((height, width), dmax, cfg, method=method, where=pair.name)
-    result = compute_pair(method, cfg, left, right, max_disparity=dmax, pair_dir=Path(pair.left).parent)
+    with step(f"matching ({method})"):
+        result = compute_pair(method, cfg, left, right, max_disparity=dmax, pair_dir=Path(pair.left).parent)
     if range_note:
         result.warnings.insert(0, range_note)
     result.warnings.extend(diagnostics.suspicious_result(result, dmax))
+    staging = new_staging(pair_dir)
     try:
-        # An old result.json beside new, maybe half-written outputs would mark them complete;
-        # an old error map would describe another estimate.
-        remove_pair_files(pair_dir)
-        written = write_disparity_outputs(pair_dir, result.disparity, result.valid, left=left,
-                                          color_range=tuple(cfg.run.color_range) or None)
+        with step("writing the outputs"):
+            written = write_disparity_outputs(staging, result.disparity, result.valid, left=left,
+                                              color_range=tuple(cfg.run.color_range) or None)
         if written["png_clipped"]:  # said once per pair, kept in result.json
             result.warnings.append(clipped_warning(written["png_clipped"]))
-        scores, eval_error = _score(pair, left, right, result.disparity, pair_dir) if evaluate else (None, None)
-        write_panel(pair_dir, pair.name, left, scores)  # panel.png: the pair at a glance
+        scores, eval_error = _score(pair, left, right, result.disparity, staging) if evaluate else (None, None)
+        with step("the panel"):
+            write_panel(staging, pair.name, left, scores)  # panel.png: the pair at a glance
         for text in result.warnings:
             log.warning("%s: %s", pair.name, text)
         stored = _stored_result(pair, method, settings, fingerprint, result, (height, width), dmax, written, scores,
                                 eval_error, time.perf_counter() - t0)
-        write_json(pair_dir / RESULT_FILE, stored)  # last: marks the pair complete
-    except BaseException:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
-        # (one block from the first output to result.json: a Ctrl-C between the two left
-        # outputs without a result.json behind)
+        stored = write_result(staging, stored)
+        # The extras asked for belong to the pair: one that fails leaves no pair behind.
+        stored = write_extras(pair, staging, stored, cfg, pointcloud=pointcloud)
+        publish(staging, pair_dir, PAIR_FILES)
+    except BaseException as exc:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
+        discard(staging, PAIR_FILES)
+        # The old files are stale now (another fingerprint, or a failed check): as before
+        # staging, a pair that could not be written leaves nothing.
         remove_pair_files(pair_dir, remove_folder=True)
+        if isinstance(exc, D3Error):
+            raise named_as_target(exc, staging, pair_dir) from None
         raise
     return stored
 
@@ -191,16 +211,23 @@ def _score(pair, left, right, disparity, pair_dir: Path) -> tuple[dict | None, s
     return None, message
 
 
-def _reuse_pair(pair, pair_dir: Path, stored: dict, *, evaluate) -> dict:
-    """A complete earlier result; scored now from disp.pfm if it was stored unscored."""
+def _reuse_pair(pair, pair_dir: Path, stored: dict, *, cfg, evaluate, pointcloud) -> dict:
+    """A complete earlier result: scored now from disp.pfm if it was stored unscored, and
+    given the extras asked for.  An extra that fails leaves the pair incomplete (its files
+    removed), so a rerun computes it again rather than skipping it as complete."""
     if evaluate and not stored.get("metrics"):
         left, right = datasets.load_pair_images(pair)
         disparity = io.read_pfm(pair_dir / "disp.pfm")
         scores, eval_error = _score(pair, left, right, disparity, pair_dir)
         stored = {**stored, "metrics": scores, "evaluation_error": eval_error}
-        write_panel(pair_dir, pair.name, left, stored["metrics"])  # the panel, now with the error tile
-        write_json(pair_dir / RESULT_FILE, stored)
-    return stored
+        with step("the panel"):
+            write_panel(pair_dir, pair.name, left, stored["metrics"])  # the panel, now with the error tile
+        stored = write_result(pair_dir, stored)
+    try:
+        return write_extras(pair, pair_dir, stored, cfg, pointcloud=pointcloud)
+    except Exception:
+        remove_pair_files(pair_dir)
+        raise
 
 
 def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, method: str, evaluate: bool = False,
@@ -261,22 +288,46 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
     out, pairs = _prepare(pairs, out_dir, cfg=cfg, method=method, scheduler=scheduler, shard=shard)
     # SIGTERM handled before the lock file exists: a kill between the two left a lock behind.
     previous = sigterm_as_interrupt()
-    lock = None
     try:
-        # A Ctrl-C in the middle of taking the lock left the lock file behind: it is
-        # taken whole, and the interrupt raised once it is held (and released below).
-        with signals_deferred():
-            lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard), break_lock=break_lock)
-        executor = make_executor(workers, scheduler, out)
-        return _locked_batch(pairs, out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
-                             max_disparity=max_disparity, progress=progress, config_source=config_source,
-                             pointcloud=pointcloud, executor=executor, shard=shard)
+        batch = _lock_and_run(pairs, out, shard=shard, break_lock=break_lock, workers=workers, scheduler=scheduler,
+                              cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
+                              max_disparity=max_disparity, progress=progress, config_source=config_source,
+                              pointcloud=pointcloud)
     finally:
-        if lock is not None:
-            with signals_held():  # a Ctrl-C now would leave the lock behind
-                release_lock(lock)
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+    return batch
+
+
+def _lock_and_run(pairs: list, out: Path, *, shard, break_lock, workers, scheduler, **batch_args) -> BatchResult:
+    """Take OUT's (or the shard's) lock, run the batch, release the lock.
+
+    A SIGTERM after run.json recorded the batch complete (while the lock is released) is
+    recorded there too, and ends the command with 143 like any other.
+    """
+    lock = batch = None
+    try:
+        try:
+            # A Ctrl-C in the middle of taking the lock left the lock file behind: it is
+            # taken whole, and the interrupt raised once it is held (and released below).
+            with signals_deferred():
+                lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard),
+                                    break_lock=break_lock)
+            executor = make_executor(workers, scheduler, out, n_pairs=len(pairs))
+            batch = _locked_batch(pairs, out, executor=executor, shard=shard, **batch_args)
+        finally:
+            if lock is not None:
+                # A Ctrl-C now would leave the lock behind: held back, and after a complete
+                # batch delivered once the lock is gone (ignored, it was lost: exit 0).
+                with signals_deferred() if batch is not None else signals_held():
+                    release_lock(lock)
+    except Terminated:
+        if batch is None:
+            raise
+        mark_terminated(batch.run_json)
+        raise BatchInterrupted(batch.n_computed + batch.n_skipped, batch.n_pairs, batch.run_json,
+                               terminated=True) from None
+    return batch
 
 
 def _prepare(pairs: Sequence, out_dir, *, cfg: Config, method: str, scheduler: str | None,
@@ -324,6 +375,8 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     task = functools.partial(_pair_task, out=out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
                              max_disparity=max_disparity, settings=settings, pointcloud=pointcloud)
     order = {pair.name: i for i, pair in enumerate(pairs)}
+    # The staging folders of a killed run over these pairs (only these: shards share OUT).
+    clean_leftovers(out, order, PAIR_FILES)
     try:
         with interrupts_unwrapped(), executor:
             meta["execution"] = executor.describe()
@@ -347,6 +400,9 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
             finally:
                 bar.close()
     except KeyboardInterrupt as exc:
+        for _pair, (row, record) in executor.drain():  # pool workers finish the pair they hold
+            batch.rows.append(row)
+            records.append(record)
         raise _interrupted(batch, records, meta, executor.current, exc) from None
     except OutputError as exc:
         current = executor.current
@@ -417,22 +473,29 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
     """One pair of a batch -> (report row, run.json record).
 
     Raises only KeyboardInterrupt and the OutputError of a full disk; any other failure
-    becomes a ``failed`` row.
+    becomes a ``failed`` row (an unexpected exception: ``<pair>: internal error in
+    <step> (...); please report it``).
     """
     t0 = time.perf_counter()
     reused = False
     try:
-        # settings, the pair's input files and the feature files it reads
-        fingerprint = pair_fingerprint(settings, pair, feature_files(cfg, method, pair))
-        stored = None if overwrite else read_result(pair_dir)
+        with step("the resume check"):
+            # settings, the pair's input files and the feature files it reads
+            fingerprint = pair_fingerprint(settings, pair, feature_files(cfg, method, pair))
+            stored = None if overwrite else read_result(pair_dir)
+            if stored is not None and stored.get("fingerprint") == fingerprint:
+                changed = changed_files(pair_dir, stored.get("files"))
+                if changed is not None:  # a complete pair is skipped only as it was written
+                    log.warning("%s: %s; computing the pair again", pair.name, changed)
+                    stored = None
         if stored is not None and stored.get("fingerprint") == fingerprint:
             log.info("%s: complete, skipped (use --overwrite to compute it again)", pair.name)
-            stored = _reuse_pair(pair, pair_dir, stored, evaluate=evaluate)
+            stored = _reuse_pair(pair, pair_dir, stored, cfg=cfg, evaluate=evaluate, pointcloud=pointcloud)
             reused = True
         else:
             stored = _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
-                               max_disparity=max_disparity, settings=settings, fingerprint=fingerprint)
-        stored = write_extras(pair, pair_dir, stored, cfg, pointcloud=pointcloud)
+                               max_disparity=max_disparity, settings=settings, fingerprint=fingerprint,
+                               pointcloud=pointcloud)
     except D3Error as exc:
         if io.is_disk_full(exc):
             raise  # every later pair would fail the same way: the batch stops
@@ -441,8 +504,13 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
         interrupt = interrupt_behind(exc)
         if interrupt is not None:
             raise interrupt from None  # Ctrl-C inside a numba kernel: stop the batch
-        log.debug("%s: unexpected error", pair.name, exc_info=True)
-        return failed_row(pair, f"{pair.name}: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
+        log.debug("%s: internal error", pair.name, exc_info=True)
+        return failed_row(pair, internal_message(pair.name, exc), time.perf_counter() - t0)
+    return _pair_outcome(pair, stored, evaluate=evaluate, reused=reused)
+
+
+def _pair_outcome(pair, stored: dict, *, evaluate: bool, reused: bool):
+    """(report row, run.json record) of a pair whose folder is complete."""
     wall = stored.get("timings", {}).get("wall")
     if evaluate and stored.get("evaluation_error"):
         # The maps are complete and kept; only the evaluation failed.

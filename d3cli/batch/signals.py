@@ -3,14 +3,20 @@
 :func:`sigterm_as_interrupt` makes a scheduler's SIGTERM end the batch like Ctrl-C;
 :func:`signals_deferred` holds both back while the lock is taken or the kernels load;
 :func:`signals_held` ignores them while run.json records an interruption;
-:func:`interrupts_unwrapped` lets a Ctrl-C wrapped in another exception stop the batch.
+:func:`interrupts_unwrapped` lets a Ctrl-C wrapped in another exception stop the batch;
+:func:`terminate_after_batch` makes a SIGTERM after the batch still exit 143, recorded.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import json
+import os
 import signal
+import sys
 import threading
+from pathlib import Path
 
 from ..errors import interrupt_behind, raise_terminated
 
@@ -73,8 +79,51 @@ def signals_deferred():
     finally:
         for sig, handler in held.items():
             signal.signal(sig, handler)
-    if pending:
-        held[pending[0]](pending[0], None)
+        if pending:
+            # Also when the block failed: the workers of a pool killed by the same SIGTERM
+            # made it fail ("could not start"), and the interrupt is what happened.
+            held[pending[0]](pending[0], None)
+
+
+def terminate_after_batch(run_json, message: str, *, exit_status: int = 143) -> None:
+    """From the end of a batch to the exit of the process, make SIGTERM record itself in
+    ``run_json`` (``interrupted: true``, ``stop_reason``) and end the process with
+    ``exit_status`` after printing ``message``, as the README promises (143).
+
+    Until now SIGTERM was ignored once the command's status was decided, so one that came
+    while the summary lines were printed or Python shut down gave exit 0 and a run.json
+    saying nothing happened.  The handler exits at once (``os._exit``): the batch is
+    written and recorded, nothing is left to clean up.  An ``atexit`` hook gives a signal
+    that came after the command returned one more chance to be handled.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def handler(signum, frame):
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second one must not cut this short
+        try:
+            mark_terminated(run_json)
+            sys.stderr.write(message + "\n")
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(exit_status)
+
+    handler.after_batch = True  # the CLI leaves this handler in place at its end
+    signal.signal(signal.SIGTERM, handler)
+    atexit.register(lambda: None)  # bytecode run during shutdown: a pending SIGTERM is handled there
+
+
+def mark_terminated(run_json) -> None:
+    """Record in a finished batch's ``run_json`` that SIGTERM ended the process after it."""
+    from .outputs import write_json
+
+    try:
+        data = json.loads(Path(run_json).read_text(encoding="utf-8"))
+        data.update(interrupted=True, stop_reason="terminated (SIGTERM) after the batch had finished")
+        write_json(Path(run_json), data)
+    except Exception:  # noqa: BLE001 - the exit status still says it; never a traceback from a handler
+        pass
 
 
 def sigterm_as_interrupt():

@@ -14,7 +14,7 @@ def _digest(root):
             if p.is_file()}
 
 
-@pytest.mark.parametrize("where", ["root", "inside-pair", "pair-itself"])
+@pytest.mark.parametrize("where", ["root", "pair-itself"])
 def test_out_overlapping_the_input_is_refused_and_nothing_changes(tmp_path, make_pair_folder, where):
     root = tmp_path / "pairs"
     folder = make_pair_folder(root, "a")
@@ -22,14 +22,30 @@ def test_out_overlapping_the_input_is_refused_and_nothing_changes(tmp_path, make
     (folder / "SOURCE.txt").unlink()
     make_pair_folder(root, "b", seed=1)
     before = _digest(root)
-    out = {"root": root, "inside-pair": folder / "out", "pair-itself": folder}[where]
+    out = {"root": root, "pair-itself": folder}[where]
     inputs = [root] if where != "pair-itself" else [folder]
     result = CliRunner().invoke(main, ["run", *map(str, inputs), "-o", str(out), "--method", "sgbm", "--eval"])
     assert result.exit_code == 1 and "Traceback" not in result.output
     errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
-    assert len(errors) == 1 and "would write its outputs into or next to its own input files" in errors[0]
-    assert "choose an output folder outside the input data with -o" in errors[0]
+    assert errors == [f"Error: {out}: the output folder holds input files of pair a ({folder / 'left.png'}); "
+                      "choose an output folder outside the input data with -o (a new folder beside the inputs "
+                      "is fine)"]
     assert _digest(root) == before
+
+
+def test_a_new_output_folder_inside_a_pair_folder_leaves_the_inputs_alone(tmp_path, make_pair_folder):
+    """No input lies inside OUT, so nothing of the user's can be written over (it was
+    refused as "into or next to its own input files")."""
+    root = tmp_path / "pairs"
+    folder = make_pair_folder(root, "a")
+    (folder / "disp_gt.pfm").rename(folder / "disp.png")
+    (folder / "SOURCE.txt").unlink()
+    make_pair_folder(root, "b", seed=1)
+    before = _digest(root)
+    result = CliRunner().invoke(main, ["run", str(root), "-o", str(folder / "out"), "--method", "sgbm", "--eval"])
+    assert result.exit_code == 0, result.output
+    assert {k: v for k, v in _digest(root).items() if k.parts[:2] != ("a", "out")} == before
+    assert (folder / "out" / "a" / "disp.png").is_file()
 
 
 def test_a_separate_output_folder_is_fine(tmp_path, make_pair_folder):

@@ -104,11 +104,19 @@ SLOW_RUN = textwrap.dedent("""
 
 
 def _wait_for(path, proc, timeout=60.0):
+    """Wait until ``path`` exists (``path`` may be a glob pattern)."""
     deadline = time.monotonic() + timeout
-    while not path.exists():
+    while not list(Path(path.anchor).glob(str(path.relative_to(path.anchor)))):
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline, f"{path} did not appear"
         time.sleep(0.02)
+
+
+def pair_of(path) -> str:
+    """The pair a file being written belongs to: ``OUT/b/x`` or the staging folder's
+    ``OUT/.b.partial-XXXX/x`` -> ``b``."""
+    folder = Path(path).parent.name
+    return folder[1:folder.index(".partial-")] if ".partial-" in folder else folder
 
 
 def test_sigint_keeps_finished_pairs_and_rerun_is_byte_identical(tmp_path, four_pairs):
@@ -128,7 +136,7 @@ def test_sigint_keeps_finished_pairs_and_rerun_is_byte_identical(tmp_path, four_
         assert error_lines(second.output) == [
             f"Error: {out}: another d3stereo run (pid {proc.pid}) is writing here; "
             "wait for it or use another -o folder"]
-        _wait_for(out / "b" / "disp.pfm", proc)  # b is half written: Ctrl-C now
+        _wait_for(out / ".b.partial-*" / "disp.pfm", proc)  # b is half written: Ctrl-C now
         proc.send_signal(signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=60)
     finally:
@@ -141,6 +149,7 @@ def test_sigint_keeps_finished_pairs_and_rerun_is_byte_identical(tmp_path, four_
     assert not (out / "b").exists(), list((out / "b").iterdir())  # the partial pair left nothing
     assert not (out / "c").exists() and not (out / "d").exists()
     assert temp_files(out) == [] and not (out / LOCK_FILE).exists()
+    assert [p.name for p in out.iterdir() if ".partial-" in p.name] == []
     info = run_json(out)
     assert info["interrupted"] is True and info["stopped_at"] == "b"
     assert [p["pair"] for p in info["pairs"]] == ["a"] and info["n_total"] == 4
@@ -176,10 +185,10 @@ def test_keyboard_interrupt_in_process_exit_130_and_message(tmp_path, four_pairs
 def test_interrupt_while_writing_result_json_leaves_no_half_pair(tmp_path, four_pairs, monkeypatch):
     import d3cli.batch
 
-    real = d3cli.batch.runner.write_json
+    real = d3cli.batch.outputs.write_json
 
     def interrupt_on_b(path, data):
-        if Path(path).parent.name == "b" and Path(path).name == RESULT_FILE:
+        if pair_of(path) == "b" and Path(path).name == RESULT_FILE:
             def partial(tmp):
                 Path(tmp).write_text('{"pair": "b", "half')
                 raise KeyboardInterrupt
@@ -187,7 +196,7 @@ def test_interrupt_while_writing_result_json_leaves_no_half_pair(tmp_path, four_
             return d3cli.data.formats.atomic_write(path, partial)
         return real(path, data)
 
-    monkeypatch.setattr(d3cli.batch.runner, "write_json", interrupt_on_b)
+    monkeypatch.setattr(d3cli.batch.outputs, "write_json", interrupt_on_b)
     out = tmp_path / "out"
     assert invoke("run", four_pairs, "-o", out, "--method", "sgbm").exit_code == 130
     assert_complete(out / "a")
@@ -200,7 +209,7 @@ def test_disk_full_stops_the_batch_with_one_error_and_keeps_finished_pairs(tmp_p
     real = d3cli.data.formats.images.write_encoded
 
     def full_disk_on_b(path, image):
-        if Path(path).parent.name == "b":
+        if pair_of(path) == "b":
             Path(path).write_bytes(b"\x89PNG\r\n\x1a\n-half")
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         return real(path, image)
@@ -230,7 +239,7 @@ def test_other_write_errors_fail_only_that_pair(tmp_path, four_pairs, monkeypatc
     real = d3cli.data.formats.images.write_encoded
 
     def eio_on_c(path, image):
-        if Path(path).parent.name == "c":
+        if pair_of(path) == "c":
             raise OSError(errno.EIO, os.strerror(errno.EIO))
         return real(path, image)
 
