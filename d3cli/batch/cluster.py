@@ -173,10 +173,11 @@ class DaskExecutor:
         self._quiet = None
         self.current = None
         self.workers: dict = {}
+        self.gpu_slots = 0  # GPUs the workers declare (``dask worker --resources GPU=1``)
 
     def describe(self) -> dict:
         return {"mode": self.mode, "scheduler": self.address, "workers": len(self.workers),
-                "threads": sum(self.workers.values())}
+                "threads": sum(self.workers.values()), "gpus": self.gpu_slots}
 
     def __enter__(self):
         try:
@@ -218,6 +219,10 @@ class DaskExecutor:
             raise ConfigError(where_what_fix(where, f"no worker joined within {self.worker_timeout:.0f} s",
                                              "start workers with `dask worker ADDRESS`")) from None
         self.workers = dict(self.client.nthreads())
+        # Workers that declare a GPU resource (one worker per GPU, docs/gpu.md) get one pair
+        # per GPU at a time: a worker's threads would otherwise share its device.
+        declared = self.client.scheduler_info().get("workers", {})
+        self.gpu_slots = int(sum(float(info.get("resources", {}).get("GPU", 0)) for info in declared.values()))
         found = self.client.run(_worker_identity, on_error="return")
         for worker, identity in sorted(found.items()):
             if isinstance(identity, BaseException):
@@ -246,14 +251,17 @@ class DaskExecutor:
 
     def imap(self, task: Callable, pairs: Sequence) -> Iterator:
         """Yield ``(pair, result)`` as tasks complete, largest pairs first, with at most
-        2 x worker threads in flight."""
+        2 x worker threads in flight; where workers declare GPUs, each pair holds one GPU
+        (``resources={"GPU": 1}``) and 2 x GPUs are in flight."""
         from distributed import as_completed
         from distributed.client import FutureCancelledError
         from distributed.scheduler import KilledWorker
 
         from .executors import largest_first
 
-        window = max(2, 2 * sum(self.client.nthreads().values()))
+        slots = self.gpu_slots or sum(self.client.nthreads().values())
+        window = max(2, 2 * slots)
+        restrict = {"resources": {"GPU": 1}} if self.gpu_slots else {}
         todo = iter(largest_first(pairs))  # a large pair submitted last would run alone at the end
         pending = {}
 
@@ -264,7 +272,7 @@ class DaskExecutor:
             # pure=False: a rerun must compute again, never reuse a result the scheduler still holds;
             # retries=0: deterministic failures come back as records, only a dead worker reschedules.
             future = self.client.submit(task, pair, pure=False, retries=0,
-                                        key=f"d3stereo-{pair.name}-{time.time_ns()}")
+                                        key=f"d3stereo-{pair.name}-{time.time_ns()}", **restrict)
             pending[future.key] = (future, pair)
             return future
 
