@@ -3,7 +3,8 @@
 Builds offline (no intersphinx, no remote images) so that ``sphinx-build -W`` passes in CI
 without network access.  The pages are MyST Markdown; the API reference comes from the
 numpydoc docstrings of the package; the configuration reference is generated from the
-frozen dataclasses of :mod:`d3cli.config.sections` by the local ``configref`` extension.
+frozen dataclasses of :mod:`d3cli.config.sections` by the local ``configref`` extension,
+the metric columns from :mod:`d3cli.evaluation.definitions` by ``metricref``.
 """
 
 import sys
@@ -28,6 +29,7 @@ extensions = [
     "sphinx.ext.mathjax",
     "numpydoc",
     "configref",
+    "metricref",
 ]
 
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
