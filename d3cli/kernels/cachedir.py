@@ -24,9 +24,11 @@ HERE = Path(__file__).resolve().parent
 #: Name of the file, in the kernels folder's cache, recording the last cold compile per
 #: method: ``{"d3stereo": {"seconds": 77.0, "kernels": 95}}``.
 COMPILE_RECORD = "compile.json"
-#: A cold compile of the default config where no record exists yet: seconds on one core
-#: of a quiet machine and top-level kernels compiled (measured with numba 0.68).
-COLD_ESTIMATE = {"seconds": 80.0, "kernels": 125}
+#: A cold compile where no record exists yet: seconds on a quiet 2-core machine and
+#: top-level kernels compiled (numba 0.68; the samples with the default config, whose
+#: semi-global smoothing adds its kernels, and road.yaml: 206 functions, 360 s at a load
+#: of 6, about 77 s for 141 functions on a quiet machine before the smoothing).
+COLD_ESTIMATE = {"seconds": 120.0, "kernels": 200}
 #: The methods that run the numba kernels (the others compile nothing of ours).
 KERNEL_METHODS = ("d3stereo", "pt-sgm")
 #: Level of the compile notice and progress lines: above WARNING, so a default logging
@@ -140,7 +142,7 @@ def record_compile(method: str, seconds: float, kernels: int, root: Path = HERE,
 
 
 def compile_notice(method: str) -> str:
-    """``compiling the kernels for this machine, once (about 80 s); cached in DIR``: the
+    """``compiling the kernels for this machine, once (about 120 s); cached in DIR``: the
     seconds of this machine's last cold compile of ``method``, else :data:`COLD_ESTIMATE`."""
     estimate = compile_estimate(method)
     return (f"compiling the kernels for this machine, once (about {estimate['seconds']:.0f} s); "
