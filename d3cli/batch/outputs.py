@@ -284,10 +284,11 @@ def remove_stale_summaries(out: Path) -> list[str]:
 
 
 def panel_title(name: str, scores: dict | None) -> str:
-    """``pair  EPE 1.23  D1 4.5%  bad2 7.8%  A90 2.1`` (the figures that exist)."""
+    """``pair   EPE 1.23 px   D1 4.50%   bad2noc 7.80%   A90noc 2.10 px   PSNR 30.00 dB`` (the
+    figures that exist; every one with its unit)."""
     parts = [name]
-    for key, label, unit in (("epe", "EPE", ""), ("d1_all", "D1", "%"), ("bad_2_noc", "bad2noc", "%"),
-                             ("a90_noc", "A90noc", ""), ("psnr", "PSNR", "dB")):
+    for key, label, unit in (("epe", "EPE", " px"), ("d1_all", "D1", "%"), ("bad_2_noc", "bad2noc", "%"),
+                             ("a90_noc", "A90noc", " px"), ("psnr", "PSNR", " dB")):
         value = (scores or {}).get(key)
         if isinstance(value, (int, float)) and np.isfinite(value):
             parts.append(f"{label} {value:.2f}{unit}")

@@ -64,3 +64,10 @@ def test_png_clipped_counts_what_disp_png_cannot_hold(tmp_path):
     assert kitti_clipped(disp) == 3
     written = write_disparity_outputs(tmp_path / "p", disp, np.isfinite(disp))
     assert written["png_clipped"] == 3
+
+
+def test_the_panel_title_gives_every_figure_its_unit():
+    from d3cli.batch.outputs import panel_title
+
+    title = panel_title("p", {"epe": 1.234, "d1_all": 4.5, "bad_2_noc": 7.8, "a90_noc": 2.1, "psnr": 30.0, "mse": 3.0})
+    assert title == "p   EPE 1.23 px   D1 4.50%   bad2noc 7.80%   A90noc 2.10 px   PSNR 30.00 dB"
