@@ -317,8 +317,8 @@ def test_out_below_a_file(tmp_path):
 def test_out_inside_the_input(tmp_path):
     folder = _pair(tmp_path / "in" / "p")
     _check(tmp_path, ["run", tmp_path / "in", "-o", folder, "--method", "sgbm"], code=1,
-           error=f"Error: {folder}: pair p would write its outputs into or next to its own input files ({folder}); "
-                 "choose an output folder outside the input data with -o")
+           error=f"Error: {folder}: the output folder holds input files of pair p ({folder / 'left.png'}); "
+                 "choose an output folder outside the input data with -o (a new folder beside the inputs is fine)")
 
 
 # ----------------------------------------------------------------------------- signals
