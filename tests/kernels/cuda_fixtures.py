@@ -33,6 +33,12 @@ def small_blocks(gpu, monkeypatch):
 
     monkeypatch.setattr(cuda_launch, "BLOCK_2D", (4, 4))
     monkeypatch.setattr(cuda_launch, "BLOCK_1D", 8)
+    from numba import config
+
+    if config.ENABLE_CUDASIM:  # the smoothing (on by default) with 4 lanes a line: the simulator runs each as Python
+        from d3cli.kernels.sgm import cuda as sgm_cuda
+
+        monkeypatch.setattr(sgm_cuda, "LANES", 4)
 
 
 def host(gpu, array):
