@@ -203,9 +203,13 @@ def find_defects(
 def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, tuning: DefectTuning) -> _Scene:
     """The per-map quantities of :func:`find_defects`: filtered heights, footprints, noise."""
     shape = height.shape
+    footprint = plane_footprint(shape, camera, plane)
+    # A pixel whose ray misses the road plane (beyond its horizon: footprint 0) sees no
+    # road, so it has no height above the road: a failed map's plane can put a
+    # horizon inside the image, and regions there have no plane area or pixel size.
+    height = np.where(footprint > 0, height, np.inf).astype(np.float32)
     finite = np.isfinite(height)
     smooth = _median_filled(height, tuning.median_px)
-    footprint = plane_footprint(shape, camera, plane)
     v_all, u_all = np.mgrid[0:shape[0], 0:shape[1]]
     ring_px, local_noise_px = road.ring_px, tuning.local_noise_px
     kernel_ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
@@ -446,7 +450,9 @@ def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarr
     largest shelf first (:func:`_terrace_pieces`)."""
     # Opening disc: half the radius of the smallest part, in pixels at the part's distance.
     pixel_m = float(np.sqrt(np.median(footprint[part])))
-    radius_px = max(2, int(round(0.5 * np.sqrt(min_part_m2 / np.pi) / max(pixel_m, 1e-9))))
+    # A disc wider than the part's box opens it away whatever its size: capping it there
+    # changes nothing and bounds the element by the image.
+    radius_px = int(np.clip(round(0.5 * np.sqrt(min_part_m2 / np.pi) / max(pixel_m, 1e-9)), 2, max(part.shape)))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
     # Candidate levels: the shelf is widest just above a floor (a raised-cosine or any
     # rounded wall is flat where it meets the floor, so the bands above the floor are wide
