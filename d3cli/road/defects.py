@@ -22,9 +22,11 @@ Definitions (what the numbers in defects.json mean):
   stereo noise (``noise_cell_px`` pixels per independent error).
 * ``volume_l``: sum over the region grown by the ring of ``footprint * max(depth, 0)``,
   litres (1 l = 1e-3 m^3): the material needed to fill it up to the surrounding surface.
-* ``decided_share``: share of the region's pixels whose disparity the method decided
-  itself (valid.png), not filled; below ``min_decided_share`` the defect is flagged
-  ``low_confidence``.
+* ``decided_share``: share of the region's pixels (and of the pixels without an estimate
+  that it encloses) whose disparity the method decided itself (valid.png), not filled;
+  below ``min_decided_share`` the defect is flagged ``low_confidence``.
+* ``at_border``: the region reaches the image border; such a defect is ``low_confidence``
+  too (what lies beyond is unmeasured: depth, area and volume are lower bounds).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from ..config import RoadConfig
 from .plane import RoadPlane, plane_footprint
@@ -57,6 +60,9 @@ class Defect:
     volume_l: float
     decided_share: float
     low_confidence: bool
+    # The region reaches the image border: the part beyond is unmeasured, so depth, area
+    # and volume are lower bounds (and a mismatched far field often ends there).
+    at_border: bool = False
     # Exterior outline of each connected part of the region: polygons of (u, v) pixel
     # vertices (cv2.approxPolyDP, 1 px), largest part first.
     outline_px: tuple = ()
@@ -195,7 +201,8 @@ def find_defects(
     for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
         found += _find_kind(scene, kind, sign, thr_mm)
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
-    defects = [Defect(id=i + 1, kind=kind, low_confidence=d["decided_share"] < road.min_decided_share, **d)
+    defects = [Defect(id=i + 1, kind=kind, **d,
+                      low_confidence=d["decided_share"] < road.min_decided_share or d["at_border"])
                for i, (kind, _, d) in enumerate(found)]
     return (defects, [r for _, r, _ in found]) if return_regions else defects
 
@@ -276,7 +283,9 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     mean_raw = float(np.mean(depth[region & finite])) if n_px else 0.0
     if mean_raw < tuning.mean_noise_k * sigma_h * np.sqrt(tuning.noise_cell_px / max(n_px, tuning.noise_cell_px)):
         return None
-    share = float(s.decided[region].mean())
+    # Pixels without any estimate that the region encloses are unmeasured parts of it.
+    enclosed = ndimage.binary_fill_holes(region)
+    share = float((s.decided & finite)[enclosed].mean())
     if share < road.min_region_decided_share and s.map_decided >= road.min_decided_share:
         return None  # measured on filled pixels: the hole filling's extrapolation, no depth
     zone = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & finite
@@ -294,6 +303,7 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
         mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
         volume_l=vol * 1e3,
         decided_share=share,
+        at_border=bool(region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any()),
         outline_px=outline(region),
     )
 
