@@ -21,6 +21,7 @@ from ..data.formats import atomic_write, write_image, write_pfm
 from .defects import find_defects
 from .plane import fit_road_plane, height_map, seen_by_both
 from .pointcloud import Camera, disparity_to_points
+from .severity import pothole_severity, survey_summary
 
 log = logging.getLogger(__name__)
 
@@ -29,8 +30,10 @@ HEIGHT_COLOR_FILE = "height_color.png"
 DEFECTS_JSON = "defects.json"
 DEFECTS_PNG = "defects.png"
 DEFECTS_CSV = "defects.csv"
+SURVEY_JSON = "road_survey.json"
 CSV_FIELDS = ("pair", "id", "kind", "u", "v", "x_m", "y_m", "z_m", "area_m2", "max_depth_mm",
-              "mean_depth_mm", "volume_l", "decided_share", "low_confidence")
+              "mean_depth_mm", "volume_l", "decided_share", "low_confidence", "diameter_mm", "severity",
+              "equivalent_potholes")
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -147,34 +150,42 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         if decided_share < road_cfg.min_decided_share:
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
             defects = [d.__class__(**{**d.__dict__, "low_confidence": True}) for d in defects]
-    items = [d.to_dict() for d in defects]
+    # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
+    items = [{**d.to_dict(), **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})}
+             for d in defects]
     _write_json(pair_dir / DEFECTS_JSON, {
         "plane": plane.to_info(), "decided_share": decided_share, "road_like": not fallback,
         "definitions": "depth: below the median height of the surrounding road ring, mm; area_m2: "
                        "area of the road plane covered by the region; volume_l: fill volume up to the "
-                       "surrounding surface", "defects": items, "warnings": warnings})
+                       "surrounding surface; severity: ASTM D6433 pothole level from max depth and the "
+                       "equivalent-circle diameter_mm of the area", "defects": items, "warnings": warnings})
     write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, height.shape, regions))
     log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
     return items, warnings
 
 
-def write_defects_csv(out: Path, pair_dirs) -> Path | None:
-    """``OUT/defects.csv``: every defect of every pair folder with a defects.json; None if none has one."""
+def write_defects_csv(out: Path, pair_dirs, *, frame_spacing_m: float = 0.0) -> Path | None:
+    """``OUT/defects.csv``: every defect of every pair folder with a defects.json, and
+    ``OUT/road_survey.json`` (:func:`d3cli.road.severity.survey_summary` of those pairs);
+    None if none has one."""
     rows = []
+    per_pair = {}
     seen = False
     for pair_dir in pair_dirs:
         path = Path(pair_dir) / DEFECTS_JSON
         if not path.is_file():
             continue
         seen = True
-        for d in json.loads(path.read_text(encoding="utf-8")).get("defects", []):
+        per_pair[Path(pair_dir).name] = json.loads(path.read_text(encoding="utf-8")).get("defects", [])
+        for d in per_pair[Path(pair_dir).name]:
             rows.append({"pair": Path(pair_dir).name, "id": d["id"], "kind": d["kind"],
                          "u": round(d["centroid_px"][0], 1), "v": round(d["centroid_px"][1], 1),
                          "x_m": round(d["centroid_m"][0], 4), "y_m": round(d["centroid_m"][1], 4),
                          "z_m": round(d["centroid_m"][2], 4), "area_m2": round(d["area_m2"], 5),
                          "max_depth_mm": round(d["max_depth_mm"], 1), "mean_depth_mm": round(d["mean_depth_mm"], 1),
                          "volume_l": round(d["volume_l"], 3), "decided_share": round(d["decided_share"], 3),
-                         "low_confidence": d["low_confidence"]})
+                         "low_confidence": d["low_confidence"], "diameter_mm": d.get("diameter_mm", ""),
+                         "severity": d.get("severity") or "", "equivalent_potholes": d.get("equivalent_potholes", "")})
     if not seen:
         return None
     buf = _io.StringIO()
@@ -182,4 +193,5 @@ def write_defects_csv(out: Path, pair_dirs) -> Path | None:
     writer.writeheader()
     writer.writerows(rows)
     text = buf.getvalue()
+    _write_json(Path(out) / SURVEY_JSON, survey_summary(per_pair, frame_spacing_m=frame_spacing_m))
     return atomic_write(Path(out) / DEFECTS_CSV, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
