@@ -127,6 +127,7 @@ class DefectTuning:
     split_smooth_px: float = 12.0
     split_terrace: bool = True
     local_noise_px: int = 80
+    peak_px: int = 9
 
 
 @dataclass(frozen=True)
@@ -259,10 +260,14 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     road, tuning, finite, footprint = s.road, s.tuning, s.finite, s.footprint
     if footprint[comp].sum() < 0.25 * road.min_area_m2:
         return None  # cannot pass the area test even with its rim
-    grown = cv2.dilate(comp.astype(np.uint8), s.kernel_gap).astype(bool)
-    ring = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite & ~other
+    # The reference ring lies beyond the walls: a ring drawn right outside the part deeper
+    # than the threshold sat on a gentle wall (a cone's or a bowl's) and took the
+    # reference, and with it depth, area and volume, millimetres too low.
+    whole = _with_walls(s, comp, sign, thr_mm)
+    grown = cv2.dilate(whole.astype(np.uint8), s.kernel_gap).astype(bool)
+    ring = cv2.dilate(whole.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite & ~other
     if ring.sum() < 10:
-        ring = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite
+        ring = cv2.dilate(whole.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite
     if ring.sum() < 10:
         return None
     ref = float(np.median(s.height[ring]))
@@ -273,7 +278,7 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     area = float(footprint[region].sum())
     if area < road.min_area_m2 or not region.any():
         return None
-    peak = float(np.percentile(depth_s[region], 98))
+    peak = _peak(depth_s[region], tuning.peak_px)
     sigma_h = _local_sigma_h(s, comp, region)
     if peak < tuning.noise_k * sigma_h:
         return None
@@ -288,7 +293,7 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     share = float((s.decided & finite)[enclosed].mean())
     if share < road.min_region_decided_share and s.map_decided >= road.min_decided_share:
         return None  # measured on filled pixels: the hole filling's extrapolation, no depth
-    zone = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & finite
+    zone = grown & finite
     vol = float((footprint[zone] * np.clip(depth_s[zone], 0, None)).sum())
     w = footprint[region]
     vs, us = s.v_all[region], s.u_all[region]
@@ -306,6 +311,35 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
         at_border=bool(region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any()),
         outline_px=outline(region),
     )
+
+
+def _peak(depth: np.ndarray, peak_px: int) -> float:
+    """Maximum depth: the mean of the ``peak_px`` deepest (median-filtered) pixels."""
+    k = min(max(int(peak_px), 1), depth.size)
+    return float(np.mean(np.partition(depth, depth.size - k)[depth.size - k:]))
+
+
+def _with_walls(s: _Scene, comp: np.ndarray, sign: float, thr_mm: float) -> np.ndarray:
+    """``comp`` grown down its walls: the connected pixels around it still deeper than a
+    quarter of the threshold, or twice the map's height noise (``split_noise / noise_k``)
+    where that is more, at most ``4 ring_px`` pixels out (noise must not carry it away)."""
+    low = max(0.25 * thr_mm * 1e-3, 2.0 * s.split_noise / s.tuning.noise_k)
+    reach = 4 * s.road.ring_px
+    v, u = np.nonzero(comp)
+    box = (slice(max(v.min() - reach, 0), v.max() + reach + 1), slice(max(u.min() - reach, 0), u.max() + reach + 1))
+    with np.errstate(invalid="ignore"):
+        wall = (s.finite[box] & (sign * s.smooth[box] > low)).astype(np.uint8)
+    seed = comp[box].astype(np.uint8)
+    # Geodesic dilation: 8-connected steps through the wall pixels.
+    kernel = np.ones((3, 3), np.uint8)
+    for _ in range(reach):
+        grown = cv2.dilate(seed, kernel) & (wall | seed)
+        if np.array_equal(grown, seed):
+            break
+        seed = grown
+    out = np.zeros_like(comp)
+    out[box] = seed.astype(bool)
+    return out
 
 
 def _local_sigma_h(s: _Scene, comp: np.ndarray, region: np.ndarray) -> float:

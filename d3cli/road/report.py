@@ -21,6 +21,7 @@ from ..data.formats import atomic_write, write_image, write_pfm
 from .defects import find_defects
 from .plane import fit_road_plane, height_map, seen_by_both
 from .pointcloud import Camera, disparity_to_points
+from .rematch import NOISE_M, WINDOWS, rematch
 from .severity import pothole_severity, survey_summary
 
 log = logging.getLogger(__name__)
@@ -100,7 +101,8 @@ def defects_overlay(left: np.ndarray, defects, labels_shape, regions) -> np.ndar
 
 
 def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided: np.ndarray,
-                camera: Camera | None, info: dict, road_cfg) -> tuple[list[dict], list[str]]:
+                camera: Camera | None, info: dict, road_cfg, *, right: np.ndarray | None = None
+                ) -> tuple[list[dict], list[str]]:
     """Write the road outputs of one pair into ``pair_dir``.
 
     Parameters
@@ -118,6 +120,10 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         The pair's result info; ``info['pt']['fallback']`` True (not road-like): height
         outputs but no defects, and a warning.
     road_cfg : RoadConfig
+    right : ndarray, optional, keyword-only
+        The right image.  Given, the disparity inside each defect (grown by its ring) is
+        matched again with a small window (:mod:`d3cli.road.rematch`) and the defects are
+        measured on that; disp.pfm is not changed.
 
     Returns
     -------
@@ -137,8 +143,6 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     if plane is None:
         return [], ["no road report: too few points for a road plane"]
     height = height_map(disparity, finite, camera, plane)
-    write_pfm(pair_dir / HEIGHT_FILE, height)
-    write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
     pt = (info or {}).get("pt")
     fallback = bool(pt and pt.get("fallback"))
     decided_share = float(decided.mean()) if decided.size else 0.0
@@ -147,10 +151,15 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         defects, regions = [], []
     else:
         defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
+        if right is not None and regions:
+            height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
+            defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
         if decided_share < road_cfg.min_decided_share:
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
             defects = [d.__class__(**{**d.__dict__, "low_confidence": True}) for d in defects]
     # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
+    write_pfm(pair_dir / HEIGHT_FILE, height)
+    write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
     items = [{**d.to_dict(), **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})}
              for d in defects]
     _write_json(pair_dir / DEFECTS_JSON, {
@@ -162,6 +171,42 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, height.shape, regions))
     log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
     return items, warnings
+
+
+def _rematched_height(left, right, disparity, finite, regions, camera: Camera, plane, road_cfg) -> np.ndarray:
+    """Height map with the disparity inside each defect (grown by two rings: the ring gives
+    the reference height) matched again (:mod:`d3cli.road.rematch`), with the smallest
+    window of :data:`~d3cli.road.rematch.WINDOWS` whose heights scatter by at most
+    ``NOISE_M`` on the outer ring (flat road, against the stored map) and inside; a defect
+    no window measures that cleanly keeps the stored map."""
+    ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
+    stored = height_map(disparity, finite, camera, plane)
+    out = disparity.copy()
+    for region in regions:
+        inner = cv2.dilate(region.astype(np.uint8), ring).astype(bool)
+        zone = cv2.dilate(inner.astype(np.uint8), ring).astype(bool) & finite
+        band = zone & ~inner
+        for window in WINDOWS:
+            new = rematch(left, right, disparity, zone, window=window)
+            h_new = height_map(new, finite, camera, plane)
+            # Noise on the flat road around (against the stored map) and inside the defect
+            # (against the new map smoothed over a few windows: the floor is often darker
+            # and noisier than the road).
+            smooth = cv2.GaussianBlur(np.where(zone, h_new, 0.0).astype(np.float32), (0, 0), window)
+            weight = cv2.GaussianBlur(zone.astype(np.float32), (0, 0), window)
+            keep = inner & zone & np.isfinite(h_new)  # a re-match at d <= 0 has no height
+            inside = h_new[keep] - (smooth / np.maximum(weight, 1e-6))[keep]
+            diff = (h_new - stored)[band & np.isfinite(h_new)]
+            if diff.size and inside.size and max(_mad(diff), _mad(inside)) <= NOISE_M:
+                out[zone] = new[zone]
+                break
+        # else: no window matches the defect cleanly (a dark, noisy pair): the stored,
+        # smoothed map is the better measurement there.
+    return height_map(out, finite, camera, plane)
+
+
+def _mad(x: np.ndarray) -> float:
+    return 1.4826 * float(np.median(np.abs(x - np.median(x))))
 
 
 def write_defects_csv(out: Path, pair_dirs, *, frame_spacing_m: float = 0.0) -> Path | None:
