@@ -19,8 +19,8 @@ import numpy as np
 #: the step of the search (pixels; parabola interpolation between steps).
 WINDOW, REACH, STEP = 9, 3.0, 0.25
 #: Windows tried, smallest first: a noisy (dark) pair needs a larger one.  The first whose
-#: heights on the flat road around the defect scatter (1.4826 MAD) by at most ``NOISE_M``
-#: metres from the stored map's is used (the last one otherwise).
+#: heights on the road around the defect scatter (1.4826 MAD of the high-pass residual) by
+#: at most ``NOISE_M`` metres is used; none: the stored map is kept.
 WINDOWS, NOISE_M = (9, 13, 17, 25), 1.5e-3
 
 

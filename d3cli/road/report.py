@@ -177,27 +177,17 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     """Height map with the disparity inside each defect (grown by two rings: the ring gives
     the reference height) matched again (:mod:`d3cli.road.rematch`), with the smallest
     window of :data:`~d3cli.road.rematch.WINDOWS` whose heights scatter by at most
-    ``NOISE_M`` on the outer ring (flat road, against the stored map) and inside; a defect
-    no window measures that cleanly keeps the stored map."""
+    ``NOISE_M`` on the outer ring (:func:`_highpass_noise`); a defect no window measures
+    that cleanly keeps the stored map."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
-    stored = height_map(disparity, finite, camera, plane)
     out = disparity.copy()
     for region in regions:
         inner = cv2.dilate(region.astype(np.uint8), ring).astype(bool)
         zone = cv2.dilate(inner.astype(np.uint8), ring).astype(bool) & finite
-        band = zone & ~inner
+        band = zone & ~inner  # flat road: its high-pass residual is matching noise only
         for window in WINDOWS:
             new = rematch(left, right, disparity, zone, window=window)
-            h_new = height_map(new, finite, camera, plane)
-            # Noise on the flat road around (against the stored map) and inside the defect
-            # (against the new map smoothed over a few windows: the floor is often darker
-            # and noisier than the road).
-            smooth = cv2.GaussianBlur(np.where(zone, h_new, 0.0).astype(np.float32), (0, 0), window)
-            weight = cv2.GaussianBlur(zone.astype(np.float32), (0, 0), window)
-            keep = inner & zone & np.isfinite(h_new)  # a re-match at d <= 0 has no height
-            inside = h_new[keep] - (smooth / np.maximum(weight, 1e-6))[keep]
-            diff = (h_new - stored)[band & np.isfinite(h_new)]
-            if diff.size and inside.size and max(_mad(diff), _mad(inside)) <= NOISE_M:
+            if _highpass_noise(height_map(new, finite, camera, plane), band, window) <= NOISE_M:
                 out[zone] = new[zone]
                 break
         # else: no window matches the defect cleanly (a dark, noisy pair): the stored,
@@ -205,8 +195,18 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     return height_map(out, finite, camera, plane)
 
 
-def _mad(x: np.ndarray) -> float:
-    return 1.4826 * float(np.median(np.abs(x - np.median(x))))
+def _highpass_noise(height: np.ndarray, zone: np.ndarray, window: int) -> float:
+    """Robust spread (1.4826 MAD, metres) over ``zone`` (flat road) of the heights minus
+    their Gaussian smoothing over a window: the matching noise; inf when nothing is
+    measured."""
+    keep = zone & np.isfinite(height)  # a re-match at d <= 0 has no height
+    if keep.sum() < 10:
+        return np.inf
+    values = np.where(keep, height, 0.0).astype(np.float32)
+    smooth = cv2.GaussianBlur(values, (0, 0), window) / np.maximum(
+        cv2.GaussianBlur(keep.astype(np.float32), (0, 0), window), 1e-6)
+    resid = (values - smooth)[keep]
+    return 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
 
 
 def write_defects_csv(out: Path, pair_dirs, *, frame_spacing_m: float = 0.0) -> Path | None:
