@@ -131,7 +131,7 @@ def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_insid
     errors = []
     for gid, d in hits.items():
         g = by_id[gid]
-        errors.append({"pair": gt_dir.name, "id": gid, "gt_depth_mm": g["depth_mm"],
+        errors.append({"pair": gt_dir.name, "id": gid, "shape": g.get("shape", "classic"), "gt_depth_mm": g["depth_mm"],
                        "depth": abs(d["max_depth_mm"] - g["depth_mm"]) / g["depth_mm"],
                        "area": abs(d["area_m2"] - g["area_m2"]) / g["area_m2"] if g["area_m2"] > 0 else np.nan,
                        "volume": abs(d["volume_l"] - g["volume_l"]) / g["volume_l"],
@@ -139,8 +139,30 @@ def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_insid
                        "signed_area": (d["area_m2"] - g["area_m2"]) / g["area_m2"] if g["area_m2"] > 0 else np.nan})
     return {"pair": gt_dir.name, "gt": len(counted), "found": len(counted & set(hits)), "predicted": len(pits),
             "matched": len(hits), "duplicates": dup, "false": false,
+            "gt_shapes": [by_id[i].get("shape", "classic") for i in sorted(counted)],
+            "found_shapes": [by_id[i].get("shape", "classic") for i in sorted(counted & set(hits))],
             "bumps": sum(d["kind"] == "bump" for d in preds), "false_bumps": false_bumps, "errors": errors,
             "has_report": pred_path.is_file()}
+
+
+def family_table(rows: list) -> list[dict]:
+    """Per pothole family (defects_gt.json ``shape``) and overall: ground truth, found,
+    recall and the median relative errors (|depth|, signed depth, |area|, |volume|)."""
+    shapes = sorted({s for r in rows for s in r.get("gt_shapes", [])})
+    table = []
+    for shape in [*shapes, "overall"]:
+        def keep(s):
+            return shape == "overall" or s == shape
+        gt = sum(keep(s) for r in rows for s in r.get("gt_shapes", []))
+        found = sum(keep(s) for r in rows for s in r.get("found_shapes", []))
+        errs = [e for r in rows for e in r["errors"] if keep(e.get("shape", "classic"))]
+
+        def med(key, errs=errs):
+            return float(np.nanmedian([e[key] for e in errs])) if errs else float("nan")
+        table.append({"family": shape, "gt": gt, "found": found, "recall": found / gt if gt else float("nan"),
+                      "depth": med("depth"), "signed_depth": med("signed_depth"), "area": med("area"),
+                      "volume": med("volume")})
+    return table
 
 
 def main(argv=None) -> int:
@@ -198,8 +220,15 @@ def main(argv=None) -> int:
           f"false + duplicates, most in one pair: {summary['max_spurious_in_a_pair']})")
     print(f"median error: depth {100 * summary['median_depth_error']:.1f} %  "
           f"area {100 * summary['median_area_error']:.1f} %  volume {100 * summary['median_volume_error']:.1f} %")
+    table = family_table(rows)
+    print("| family | gt | found | recall | median abs depth err | median signed depth err | median abs area err "
+          "| median abs volume err |\n|---|---|---|---|---|---|---|---|")
+    for t in table:
+        print(f"| {t['family']} | {t['gt']} | {t['found']} | {100 * t['recall']:.0f} % | {100 * t['depth']:.1f} % | "
+              f"{100 * t['signed_depth']:+.1f} % | {100 * t['area']:.1f} % | {100 * t['volume']:.1f} % |")
     if args.json:
-        args.json.write_text(json.dumps({"summary": summary, "pairs": rows}, indent=2, default=float))
+        args.json.write_text(json.dumps({"summary": summary, "families": table, "pairs": rows}, indent=2,
+                                        default=float))
     return 0
 
 

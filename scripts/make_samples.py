@@ -9,11 +9,9 @@ SOURCE.txt), kept small so CI stays fast and the wheel stays light (< 1.5 MB):
   (``skimage.data.stereo_motorcycle()``, already 1/4 of full size), halved again:
   images by area averaging, ground truth by a valid-aware 2x2 reduction (see
   :func:`halve_disparity`) divided by 2.
-- ``road``: a synthetic road surface with exact ground truth: a textured plane whose
-  disparity is linear in the row (the v-disparity line of a flat road) with a smooth
-  pothole-like depression.  Both views sample one high-resolution texture painted on
-  the surface; the right view is rendered by exact inverse warping (each right pixel
-  finds the surface point it sees by fixed-point iteration of ``u = u' + d(u, v)``).
+- ``road``: a `d3stereo synth` road pair (:func:`d3cli.data.synth.render_pair`, sun,
+  asphalt, one pothole) with its exact ground truth and calibration (focal length,
+  baseline), so ``d3stereo run --road-report`` shows the pothole measured.
 """
 
 from __future__ import annotations
@@ -44,10 +42,10 @@ gt_invalid: inf
 """
 
 ROAD_SOURCE = """\
-provenance: synthetic road surface made by scripts/make_samples.py (seed 2024): a textured plane with disparity
-  linear in the row (d = {d_top} px at the top row to {d_bottom} px at the bottom row) and a smooth pothole-like
-  depression ({depth} px deep at its centre); right view rendered by exact inverse warping of a 4x supersampled
-  texture; ground truth exact at pixel centres, inf where the match falls outside the right image.
+provenance: synthetic road made by scripts/make_samples.py with d3cli.data.synth.render_pair(seed={seed},
+  width={width}, height={height}, variant='sun', material='asphalt', potholes=1): ray-cast stereo pair with
+  exact ground truth; calib.txt holds the rig (focal length and baseline), so --road-report measures the
+  pothole: {shape}, {depth:.1f} mm deep, {area:.3f} m^2 deeper than 10 mm, {volume:.2f} l.
 licence: CC0 (generated data)
 family: synth
 gt_scale: 1
@@ -111,85 +109,29 @@ def make_motorcycle(folder: Path) -> None:
 
 # ----------------------------------------------------------------------------- road
 ROAD_SIZE = (240, 320)  # (height, width)
-D_TOP, D_BOTTOM = 6.0, 30.0
-POTHOLE = {"u": 190.0, "v": 170.0, "ru": 38.0, "rv": 16.0, "depth": 3.0}
-SUPERSAMPLE = 4
+ROAD_SEED = 2035  # one bowl-shaped pothole, 51.7 mm deep, 0.128 m^2, in the middle of the view
 
 
-def road_disparity(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Left-view disparity (px) of the road at continuous coordinates (u, v).
+def make_road(folder: Path, *, seed: int = ROAD_SEED) -> None:
+    """A `d3stereo synth` road pair (sun, asphalt, one pothole) with its rig's calibration,
+    so that ``--road-report`` measures the pothole in millimetres."""
+    from d3cli.data.synth import render_pair
 
-    A plane (linear in v) minus a smooth bowl ``depth * (1 - r^2)^2`` inside the
-    pothole ellipse: deeper surface, smaller disparity.
-    """
-    height = ROAD_SIZE[0]
-    plane = D_TOP + (D_BOTTOM - D_TOP) * v / (height - 1)
-    r2 = ((u - POTHOLE["u"]) / POTHOLE["ru"]) ** 2 + ((v - POTHOLE["v"]) / POTHOLE["rv"]) ** 2
-    bowl = np.where(r2 < 1.0, POTHOLE["depth"] * (1.0 - r2) ** 2, 0.0)
-    return plane - bowl
-
-
-def road_texture(rng: np.random.Generator, height: int, width: int) -> np.ndarray:
-    """Asphalt-like texture at SUPERSAMPLE x resolution: multi-scale noise, 0-255 float32."""
-    s = SUPERSAMPLE
-    tex = np.zeros((height * s, width * s), np.float32)
-    for sigma, weight in ((0.7 * s, 1.0), (2.0 * s, 0.6), (8.0 * s, 0.5)):
-        noise = rng.standard_normal(tex.shape).astype(np.float32)
-        layer = cv2.GaussianBlur(noise, (0, 0), sigma)
-        tex += weight * layer / (layer.std() + 1e-6)
-    tex = 110.0 + 28.0 * tex / tex.std()
-    return np.clip(tex, 0, 255).astype(np.float32)
-
-
-def _sample(tex: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Bilinear texture lookup at image coordinates (pixel centres at integers)."""
-    s = SUPERSAMPLE
-    map_x = ((u + 0.5) * s - 0.5).astype(np.float32)
-    map_y = ((v + 0.5) * s - 0.5).astype(np.float32)
-    return cv2.remap(tex, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-
-
-def _render(tex: np.ndarray, view: str) -> np.ndarray:
-    """Render one view as the mean of SUPERSAMPLE^2 texture samples per pixel (area sampling)."""
     height, width = ROAD_SIZE
-    s = SUPERSAMPLE
-    offsets = (np.arange(s) + 0.5) / s - 0.5
-    acc = np.zeros((height, width), np.float64)
-    vv, uu = np.mgrid[0:height, 0:width].astype(np.float64)
-    for dy in offsets:
-        for dx in offsets:
-            u, v = uu + dx, vv + dy
-            if view == "right":
-                # The surface point seen at right (u', v) has left u = u' + d(u, v);
-                # |dd/du| < 1 makes the fixed-point iteration converge.
-                x = u + road_disparity(u, v)
-                for _ in range(30):
-                    x = u + road_disparity(x, v)
-                u = x
-            acc += _sample(tex, u, v)
-    return acc / (s * s)
-
-
-def make_road(folder: Path, *, seed: int = 2024) -> None:
-    height, width = ROAD_SIZE
-    rng = np.random.default_rng(seed)
-    margin = int(D_BOTTOM) + 4  # texture must also cover what only the right view sees
-    tex_full = road_texture(rng, height, width + margin)
-    left = _render(tex_full, "left")
-    right = _render(tex_full, "right")
-    # Mild sensor noise, independent per view.
-    left = np.clip(np.rint(left + rng.normal(0, 1.0, left.shape)), 0, 255).astype(np.uint8)
-    right = np.clip(np.rint(right + rng.normal(0, 1.0, right.shape)), 0, 255).astype(np.uint8)
-    vv, uu = np.mgrid[0:height, 0:width].astype(np.float64)
-    gt = road_disparity(uu, vv)
-    gt[uu - gt < 0] = np.inf  # the match would lie left of the right image
+    pair = render_pair(seed=seed, width=width, height=height, variant="sun", material="asphalt", potholes=1)
     folder.mkdir(parents=True, exist_ok=True)
-    write_image(folder / "left.png", left)
-    write_image(folder / "right.png", right)
-    write_pfm(folder / "disp_gt.pfm", gt.astype(np.float32))
-    ndisp = int(np.ceil(D_BOTTOM / 8.0) * 8) + 8
-    (folder / "calib.txt").write_text(f"width: {width}\nheight: {height}\nndisp: {ndisp}\n")
-    (folder / "SOURCE.txt").write_text(ROAD_SOURCE.format(d_top=D_TOP, d_bottom=D_BOTTOM, depth=POTHOLE["depth"]))
+    write_image(folder / "left.png", pair.left)
+    write_image(folder / "right.png", pair.right)
+    write_pfm(folder / "disp_gt.pfm", pair.disparity)
+    c = pair.calib
+    (folder / "calib.txt").write_text("".join(
+        f"{key}: {c[key] if isinstance(c[key], int) else format(c[key], '.10g')}\n"
+        for key in ("f", "baseline", "cx", "cy", "width", "height", "height_m", "pitch_deg", "roll_deg", "doffs",
+                    "ndisp")))
+    (gt,) = pair.defects_gt
+    (folder / "SOURCE.txt").write_text(ROAD_SOURCE.format(
+        seed=seed, width=width, height=height, shape=gt["shape"], depth=gt["depth_mm"], area=gt["area_m2"],
+        volume=gt["volume_l"]))
 
 
 def main(argv=None) -> None:

@@ -22,15 +22,15 @@ log = logging.getLogger(__name__)
 
 
 def _stored_map(pair, pair_dir: Path, cfg):
-    """(left image, camera or None, disparity, valid) of a complete pair, from its files.
+    """(left image, right image, camera or None, disparity, valid) of a complete pair, from its files.
 
     Clouds and road outputs are made from what was written (disp.pfm, valid.png), so a
     rerun adds them to pairs computed earlier without computing them again.
     """
-    left, _ = datasets.load_pair_images(pair)
+    left, right = datasets.load_pair_images(pair)
     calib = io.read_calib(pair.calib) if pair.calib is not None else None
     camera = camera_from(calib, cfg, left.shape[:2])
-    return left, camera, io.read_pfm(pair_dir / "disp.pfm"), io.read_mask(pair_dir / "valid.png")
+    return left, right, camera, io.read_pfm(pair_dir / "disp.pfm"), io.read_mask(pair_dir / "valid.png")
 
 
 def _with_warnings(pair, pair_dir: Path, stored: dict, texts, *, changed: bool = False) -> dict:
@@ -56,7 +56,7 @@ def write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -
     if not (want_cloud or cfg.road.report):
         return stored
     with step("reading the stored map"):
-        left, camera, disparity, valid = _stored_map(pair, pair_dir, cfg)
+        left, right, camera, disparity, valid = _stored_map(pair, pair_dir, cfg)
     warnings = []
     if want_cloud:
         cloud_path.unlink(missing_ok=True)  # made with another camera: never left beside the new settings
@@ -74,6 +74,7 @@ def write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -
                                       "camera": dataclasses.asdict(camera)}}
     if cfg.road.report:  # all the logic in d3cli.road.report
         with step("road report"):
-            warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road)[1]
+            warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road,
+                                    right=right)[1]
     # Rewritten after the road outputs too: result.json records the files' sizes and hashes.
     return _with_warnings(pair, pair_dir, stored, warnings, changed=want_cloud or cfg.road.report)

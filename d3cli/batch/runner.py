@@ -450,7 +450,8 @@ def _finish(batch: BatchResult, records: list, meta: dict, pairs: list, out: Pat
     if cfg.road.report or (shard is None and is_our_summary(out / DEFECTS_CSV)):
         # Without --road-report too: pairs computed again lost their defects.json, so an
         # earlier defects.csv would list defects of maps that are gone.
-        if write_defects_csv(out, [out / p.name for p in pairs]) is None and remove_ours(out / DEFECTS_CSV):
+        if (write_defects_csv(out, [out / p.name for p in pairs], frame_spacing_m=cfg.road.frame_spacing_m) is None
+                and remove_ours(out / DEFECTS_CSV)):
             log.info("%s: removed (no pair of this run has road outputs now)", out / DEFECTS_CSV)
     if evaluate and shard is not None:
         log.info("--shard: summary files are left to `d3stereo eval %s --gt ... -o REPORT` once every shard is done", out)

@@ -91,6 +91,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "road.split_neck": (lambda v: 0 < v <= 1, "a number in (0, 1] (1: no split at necks)"),
     "road.split_min_area_m2": (lambda v: v >= 0, "a number >= 0 (m^2)"),
     "road.min_region_decided_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
+    "road.frame_spacing_m": (lambda v: v >= 0, "a number >= 0 (metres; 0: unknown)"),
     "sgbm.block_size": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "sgbm.mode": (lambda v: v in ("sgbm", "hh", "3way", "hh4"), "one of sgbm, hh, 3way, hh4"),
     # 100 kills the process: OpenCV's 3-way SGBM divides by (100 - uniquenessRatio) (SIGFPE).

@@ -208,6 +208,7 @@ class RoadConfig:
     # A region with a smaller share of decided pixels is not reported (its depth is the hole
     # filling's extrapolation), unless the whole map is below min_decided_share.
     min_region_decided_share: float = 0.25
+    frame_spacing_m: float = 0.0  # distance between frames for road_survey.json's per-km counts (0: unknown)
 
 
 @dataclass(frozen=True)

@@ -22,9 +22,11 @@ Definitions (what the numbers in defects.json mean):
   stereo noise (``noise_cell_px`` pixels per independent error).
 * ``volume_l``: sum over the region grown by the ring of ``footprint * max(depth, 0)``,
   litres (1 l = 1e-3 m^3): the material needed to fill it up to the surrounding surface.
-* ``decided_share``: share of the region's pixels whose disparity the method decided
-  itself (valid.png), not filled; below ``min_decided_share`` the defect is flagged
-  ``low_confidence``.
+* ``decided_share``: share of the region's pixels (and of the pixels without an estimate
+  that it encloses) whose disparity the method decided itself (valid.png), not filled;
+  below ``min_decided_share`` the defect is flagged ``low_confidence``.
+* ``at_border``: the region reaches the image border; such a defect is ``low_confidence``
+  too (what lies beyond is unmeasured: depth, area and volume are lower bounds).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from ..config import RoadConfig
 from .plane import RoadPlane, plane_footprint
@@ -57,6 +60,9 @@ class Defect:
     volume_l: float
     decided_share: float
     low_confidence: bool
+    # The region reaches the image border: the part beyond is unmeasured, so depth, area
+    # and volume are lower bounds (and a mismatched far field often ends there).
+    at_border: bool = False
     # Exterior outline of each connected part of the region: polygons of (u, v) pixel
     # vertices (cv2.approxPolyDP, 1 px), largest part first.
     outline_px: tuple = ()
@@ -122,6 +128,7 @@ class DefectTuning:
     split_smooth_px: float = 12.0
     split_terrace: bool = True
     local_noise_px: int = 80
+    peak_px: int = 9
 
 
 @dataclass(frozen=True)
@@ -196,7 +203,8 @@ def find_defects(
     for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
         found += _find_kind(scene, kind, sign, thr_mm)
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
-    defects = [Defect(id=i + 1, kind=kind, low_confidence=d["decided_share"] < road.min_decided_share, **d)
+    defects = [Defect(id=i + 1, kind=kind, **d,
+                      low_confidence=d["decided_share"] < road.min_decided_share or d["at_border"])
                for i, (kind, _, d) in enumerate(found)]
     return (defects, [r for _, r, _ in found]) if return_regions else defects
 
@@ -204,9 +212,13 @@ def find_defects(
 def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, tuning: DefectTuning) -> _Scene:
     """The per-map quantities of :func:`find_defects`: filtered heights, footprints, noise."""
     shape = height.shape
+    footprint = plane_footprint(shape, camera, plane)
+    # A pixel whose ray misses the road plane (beyond its horizon: footprint 0) sees no
+    # road, so it has no height above the road: a failed map's plane can put a
+    # horizon inside the image, and regions there have no plane area or pixel size.
+    height = np.where(footprint > 0, height, np.inf).astype(np.float32)
     finite = np.isfinite(height)
     smooth = _median_filled(height, tuning.median_px)
-    footprint = plane_footprint(shape, camera, plane)
     v_all, u_all = np.mgrid[0:shape[0], 0:shape[1]]
     ring_px, local_noise_px = road.ring_px, tuning.local_noise_px
     kernel_ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
@@ -249,10 +261,14 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     road, tuning, finite, footprint = s.road, s.tuning, s.finite, s.footprint
     if footprint[comp].sum() < 0.25 * road.min_area_m2:
         return None  # cannot pass the area test even with its rim
-    grown = cv2.dilate(comp.astype(np.uint8), s.kernel_gap).astype(bool)
-    ring = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite & ~other
+    # The reference ring lies beyond the walls: a ring drawn right outside the part deeper
+    # than the threshold sat on a gentle wall (a cone's or a bowl's) and took the
+    # reference, and with it depth, area and volume, millimetres too low.
+    whole = _with_walls(s, comp, sign, thr_mm)
+    grown = cv2.dilate(whole.astype(np.uint8), s.kernel_gap).astype(bool)
+    ring = cv2.dilate(whole.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite & ~other
     if ring.sum() < 10:
-        ring = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite
+        ring = cv2.dilate(whole.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite
     if ring.sum() < 10:
         return None
     ref = float(np.median(s.height[ring]))
@@ -263,7 +279,7 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     area = float(footprint[region].sum())
     if area < road.min_area_m2 or not region.any():
         return None
-    peak = float(np.percentile(depth_s[region], 98))
+    peak = _peak(depth_s[region], tuning.peak_px)
     sigma_h = _local_sigma_h(s, comp, region)
     if peak < tuning.noise_k * sigma_h:
         return None
@@ -273,10 +289,12 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     mean_raw = float(np.mean(depth[region & finite])) if n_px else 0.0
     if mean_raw < tuning.mean_noise_k * sigma_h * np.sqrt(tuning.noise_cell_px / max(n_px, tuning.noise_cell_px)):
         return None
-    share = float(s.decided[region].mean())
+    # Pixels without any estimate that the region encloses are unmeasured parts of it.
+    enclosed = ndimage.binary_fill_holes(region)
+    share = float((s.decided & finite)[enclosed].mean())
     if share < road.min_region_decided_share and s.map_decided >= road.min_decided_share:
         return None  # measured on filled pixels: the hole filling's extrapolation, no depth
-    zone = cv2.dilate(comp.astype(np.uint8), s.kernel_ring).astype(bool) & finite
+    zone = grown & finite
     vol = float((footprint[zone] * np.clip(depth_s[zone], 0, None)).sum())
     w = footprint[region]
     vs, us = s.v_all[region], s.u_all[region]
@@ -291,8 +309,38 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
         mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
         volume_l=vol * 1e3,
         decided_share=share,
+        at_border=bool(region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any()),
         outline_px=outline(region),
     )
+
+
+def _peak(depth: np.ndarray, peak_px: int) -> float:
+    """Maximum depth: the mean of the ``peak_px`` deepest (median-filtered) pixels."""
+    k = min(max(int(peak_px), 1), depth.size)
+    return float(np.mean(np.partition(depth, depth.size - k)[depth.size - k:]))
+
+
+def _with_walls(s: _Scene, comp: np.ndarray, sign: float, thr_mm: float) -> np.ndarray:
+    """``comp`` grown down its walls: the connected pixels around it still deeper than a
+    quarter of the threshold, or twice the map's height noise (``split_noise / noise_k``)
+    where that is more, at most ``4 ring_px`` pixels out (noise must not carry it away)."""
+    low = max(0.25 * thr_mm * 1e-3, 2.0 * s.split_noise / s.tuning.noise_k)
+    reach = 4 * s.road.ring_px
+    v, u = np.nonzero(comp)
+    box = (slice(max(v.min() - reach, 0), v.max() + reach + 1), slice(max(u.min() - reach, 0), u.max() + reach + 1))
+    with np.errstate(invalid="ignore"):
+        wall = (s.finite[box] & (sign * s.smooth[box] > low)).astype(np.uint8)
+    seed = comp[box].astype(np.uint8)
+    # Geodesic dilation: 8-connected steps through the wall pixels.
+    kernel = np.ones((3, 3), np.uint8)
+    for _ in range(reach):
+        grown = cv2.dilate(seed, kernel) & (wall | seed)
+        if np.array_equal(grown, seed):
+            break
+        seed = grown
+    out = np.zeros_like(comp)
+    out[box] = seed.astype(bool)
+    return out
 
 
 def _local_sigma_h(s: _Scene, comp: np.ndarray, region: np.ndarray) -> float:
@@ -447,7 +495,9 @@ def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarr
     largest shelf first (:func:`_terrace_pieces`)."""
     # Opening disc: half the radius of the smallest part, in pixels at the part's distance.
     pixel_m = float(np.sqrt(np.median(footprint[part])))
-    radius_px = max(2, int(round(0.5 * np.sqrt(min_part_m2 / np.pi) / max(pixel_m, 1e-9))))
+    # A disc wider than the part's box opens it away whatever its size: capping it there
+    # changes nothing and bounds the element by the image.
+    radius_px = int(np.clip(round(0.5 * np.sqrt(min_part_m2 / np.pi) / max(pixel_m, 1e-9)), 2, max(part.shape)))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
     # Candidate levels: the shelf is widest just above a floor (a raised-cosine or any
     # rounded wall is flat where it meets the floor, so the bands above the floor are wide

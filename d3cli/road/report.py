@@ -22,6 +22,8 @@ from ..data.legend import put_text, text_px, text_size, vertical_colour_bar
 from .defects import find_defects
 from .plane import fit_road_plane, height_map, seen_by_both
 from .pointcloud import Camera, disparity_to_points
+from .rematch import NOISE_M, WINDOWS, rematch
+from .severity import pothole_severity, survey_summary
 
 log = logging.getLogger(__name__)
 
@@ -30,8 +32,10 @@ HEIGHT_COLOR_FILE = "height_color.png"
 DEFECTS_JSON = "defects.json"
 DEFECTS_PNG = "defects.png"
 DEFECTS_CSV = "defects.csv"
+SURVEY_JSON = "road_survey.json"
 CSV_FIELDS = ("pair", "id", "kind", "u", "v", "x_m", "y_m", "z_m", "area_m2", "max_depth_mm",
-              "mean_depth_mm", "volume_l", "decided_share", "low_confidence")
+              "mean_depth_mm", "volume_l", "decided_share", "low_confidence", "diameter_mm", "severity",
+              "equivalent_potholes")
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -90,7 +94,8 @@ def defects_overlay(left: np.ndarray, defects, labels_shape, regions) -> np.ndar
 
 
 def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided: np.ndarray,
-                camera: Camera | None, info: dict, road_cfg) -> tuple[list[dict], list[str]]:
+                camera: Camera | None, info: dict, road_cfg, *, right: np.ndarray | None = None
+                ) -> tuple[list[dict], list[str]]:
     """Write the road outputs of one pair into ``pair_dir``.
 
     Parameters
@@ -108,6 +113,10 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         The pair's result info; ``info['pt']['fallback']`` True (not road-like): height
         outputs but no defects, and a warning.
     road_cfg : RoadConfig
+    right : ndarray, optional, keyword-only
+        The right image.  Given, the disparity inside each defect (grown by its ring) is
+        matched again with a small window (:mod:`d3cli.road.rematch`) and the defects are
+        measured on that; disp.pfm is not changed.
 
     Returns
     -------
@@ -127,8 +136,6 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     if plane is None:
         return [], ["no road report: too few points for a road plane"]
     height = height_map(disparity, finite, camera, plane)
-    write_pfm(pair_dir / HEIGHT_FILE, height)
-    write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
     pt = (info or {}).get("pt")
     fallback = bool(pt and pt.get("fallback"))
     decided_share = float(decided.mean()) if decided.size else 0.0
@@ -137,37 +144,86 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         defects, regions = [], []
     else:
         defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
+        if right is not None and regions:
+            height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
+            defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
         if decided_share < road_cfg.min_decided_share:
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
             defects = [d.__class__(**{**d.__dict__, "low_confidence": True}) for d in defects]
-    items = [d.to_dict() for d in defects]
+    # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
+    write_pfm(pair_dir / HEIGHT_FILE, height)
+    write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
+    items = [{**d.to_dict(), **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})}
+             for d in defects]
     _write_json(pair_dir / DEFECTS_JSON, {
         "plane": plane.to_info(), "decided_share": decided_share, "road_like": not fallback,
         "definitions": "depth: below the median height of the surrounding road ring, mm; area_m2: "
                        "area of the road plane covered by the region; volume_l: fill volume up to the "
-                       "surrounding surface", "defects": items, "warnings": warnings})
+                       "surrounding surface; severity: ASTM D6433 pothole level from max depth and the "
+                       "equivalent-circle diameter_mm of the area", "defects": items, "warnings": warnings})
     write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, height.shape, regions))
     log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
     return items, warnings
 
 
-def write_defects_csv(out: Path, pair_dirs) -> Path | None:
-    """``OUT/defects.csv``: every defect of every pair folder with a defects.json; None if none has one."""
+def _rematched_height(left, right, disparity, finite, regions, camera: Camera, plane, road_cfg) -> np.ndarray:
+    """Height map with the disparity inside each defect (grown by two rings: the ring gives
+    the reference height) matched again (:mod:`d3cli.road.rematch`), with the smallest
+    window of :data:`~d3cli.road.rematch.WINDOWS` whose heights scatter by at most
+    ``NOISE_M`` on the outer ring (:func:`_highpass_noise`); a defect no window measures
+    that cleanly keeps the stored map."""
+    ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
+    out = disparity.copy()
+    for region in regions:
+        inner = cv2.dilate(region.astype(np.uint8), ring).astype(bool)
+        zone = cv2.dilate(inner.astype(np.uint8), ring).astype(bool) & finite
+        band = zone & ~inner  # flat road: its high-pass residual is matching noise only
+        for window in WINDOWS:
+            new = rematch(left, right, disparity, zone, window=window)
+            if _highpass_noise(height_map(new, finite, camera, plane), band, window) <= NOISE_M:
+                out[zone] = new[zone]
+                break
+        # else: no window matches the defect cleanly (a dark, noisy pair): the stored,
+        # smoothed map is the better measurement there.
+    return height_map(out, finite, camera, plane)
+
+
+def _highpass_noise(height: np.ndarray, zone: np.ndarray, window: int) -> float:
+    """Robust spread (1.4826 MAD, metres) over ``zone`` (flat road) of the heights minus
+    their Gaussian smoothing over a window: the matching noise; inf when nothing is
+    measured."""
+    keep = zone & np.isfinite(height)  # a re-match at d <= 0 has no height
+    if keep.sum() < 10:
+        return np.inf
+    values = np.where(keep, height, 0.0).astype(np.float32)
+    smooth = cv2.GaussianBlur(values, (0, 0), window) / np.maximum(
+        cv2.GaussianBlur(keep.astype(np.float32), (0, 0), window), 1e-6)
+    resid = (values - smooth)[keep]
+    return 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
+
+
+def write_defects_csv(out: Path, pair_dirs, *, frame_spacing_m: float = 0.0) -> Path | None:
+    """``OUT/defects.csv``: every defect of every pair folder with a defects.json, and
+    ``OUT/road_survey.json`` (:func:`d3cli.road.severity.survey_summary` of those pairs);
+    None if none has one."""
     rows = []
+    per_pair = {}
     seen = False
     for pair_dir in pair_dirs:
         path = Path(pair_dir) / DEFECTS_JSON
         if not path.is_file():
             continue
         seen = True
-        for d in json.loads(path.read_text(encoding="utf-8")).get("defects", []):
+        per_pair[Path(pair_dir).name] = json.loads(path.read_text(encoding="utf-8")).get("defects", [])
+        for d in per_pair[Path(pair_dir).name]:
             rows.append({"pair": Path(pair_dir).name, "id": d["id"], "kind": d["kind"],
                          "u": round(d["centroid_px"][0], 1), "v": round(d["centroid_px"][1], 1),
                          "x_m": round(d["centroid_m"][0], 4), "y_m": round(d["centroid_m"][1], 4),
                          "z_m": round(d["centroid_m"][2], 4), "area_m2": round(d["area_m2"], 5),
                          "max_depth_mm": round(d["max_depth_mm"], 1), "mean_depth_mm": round(d["mean_depth_mm"], 1),
                          "volume_l": round(d["volume_l"], 3), "decided_share": round(d["decided_share"], 3),
-                         "low_confidence": d["low_confidence"]})
+                         "low_confidence": d["low_confidence"], "diameter_mm": d.get("diameter_mm", ""),
+                         "severity": d.get("severity") or "", "equivalent_potholes": d.get("equivalent_potholes", "")})
     if not seen:
         return None
     buf = _io.StringIO()
@@ -175,4 +231,5 @@ def write_defects_csv(out: Path, pair_dirs) -> Path | None:
     writer.writeheader()
     writer.writerows(rows)
     text = buf.getvalue()
+    _write_json(Path(out) / SURVEY_JSON, survey_summary(per_pair, frame_spacing_m=frame_spacing_m))
     return atomic_write(Path(out) / DEFECTS_CSV, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))

@@ -160,7 +160,7 @@ def test_pothole_ground_truth_matches_the_analytic_profile():
     # + p2) + a3 cos(3 theta + p3).  Integrating over theta, int rim^2 = 2 pi (1 + (a2^2 +
     # a3^2) / 2); the area deeper than t is pi a b rho_t^2 (1 + (a2^2 + a3^2) / 2) with
     # w(rho_t) = t / D, and the volume D a b int rim^2 int_0^1 rho w(rho) d rho.
-    pair = synth.render_pair(seed=2, width=2 * W, height=2 * H, potholes=1, noise=False)
+    pair = synth.render_pair(seed=2, width=2 * W, height=2 * H, potholes=1, noise=False, shapes="classic")
     (hole,) = pair.info["potholes"]
     (truth,) = pair.defects_gt
     a, b = hole["semi_axes_m"]

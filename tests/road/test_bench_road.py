@@ -6,6 +6,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 _spec = importlib.util.spec_from_file_location("bench_road", Path(__file__).parents[2] / "scripts" / "bench_road.py")
 bench_road = importlib.util.module_from_spec(_spec)
@@ -37,3 +38,8 @@ def test_fragment_with_low_decided_share_is_a_duplicate_unless_filtered(tmp_path
     r = bench_road.score_pair(gt, out, min_gt_depth_mm=20, min_decided_share=0.5)
     assert (r["found"], r["duplicates"], r["false"], r["predicted"]) == (1, 0, 0, 1)
     assert r["errors"][0]["depth"] == abs(38.0 - 40.0) / 40.0
+    # Per family: the entry without a shape is a classic pothole.
+    (classic, overall) = bench_road.family_table([r])
+    assert classic == {"family": "classic", "gt": 1, "found": 1, "recall": 1.0, "depth": 0.05,
+                       "signed_depth": -0.05, "area": pytest.approx(0.1), "volume": pytest.approx(0.1)}
+    assert {**overall, "family": "classic"} == classic

@@ -4,6 +4,7 @@ on disk, every file written atomically through :mod:`d3cli.data.formats`).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
@@ -80,6 +81,7 @@ def render_pair(
     potholes: int | None = None,
     flat: bool = False,
     supersample: int = 2,
+    shapes: str = "varied",
 ) -> SynthPair:
     """Render one synthetic road stereo pair with exact ground truth.
 
@@ -103,6 +105,11 @@ def render_pair(
         bump), so the disparity is exactly ``a0 + a1 (v cos(theta) - u sin(theta))``.
     supersample : int
         Rays per pixel along each axis (antialiasing).
+    shapes : {"varied", "classic"}
+        Pothole shapes: "varied" draws the families of :mod:`d3cli.data.synth.potholes`
+        (bowls, flat floors, cones, multilevel, rough, elongated, ragged, water-filled);
+        "classic" only flat floors with raised-cosine walls, the pairs of earlier versions
+        bit for bit.
 
     Returns
     -------
@@ -113,14 +120,16 @@ def render_pair(
     _check_choice("variant", variant, VARIANTS)
     _check_choice("material", material, MATERIALS)
     _check_size(width, height)
+    _check_choice("pothole shapes", shapes, ("varied", "classic"))
     if int(supersample) < 1:
         raise InputError(where_what_fix("synth", f"supersample is {supersample}", "use 1 or more rays per axis"))
     rng = np.random.default_rng(seed)
-    scene = _build_scene(rng, width, height, variant, material, potholes, flat)
+    scene = _build_scene(rng, width, height, variant, material, potholes, flat, shapes)
     left_img, right_img = _render_views(scene, width, height, int(supersample), rng, noise)
 
     disparity, nocc, points = _ground_truth(scene.rig, scene.field_, scene.h_top)
-    pothole_ids, defects_gt = pothole_truth(scene.road.holes, scene.rig, points)
+    pothole_ids, defects_gt = pothole_truth(scene.road.holes, scene.rig, points,
+                                            scene.field_ if shapes == "varied" else None)
     finite = disparity[np.isfinite(disparity)]
     calib = scene.rig.calib()
     calib["ndisp"] = int(math.ceil(float(finite.max()))) + 8 if finite.size else width // 4
@@ -144,10 +153,10 @@ class _Scene:
 
 
 def _build_scene(rng, width: int, height: int, variant: str, material: str, potholes: int | None,
-                 flat: bool) -> _Scene:
+                 flat: bool, shapes: str = "varied") -> _Scene:
     """Draw the rig, road, height field, light and texture, in the order the seed fixes."""
     rig = _sample_rig(rng, width, height)
-    road = _sample_road(rng, rig, potholes, flat)
+    road = _sample_road(rng, rig, potholes, flat, shapes)
     holes = road.holes
 
     texel = _texel_size(rig)
@@ -172,6 +181,13 @@ def _build_scene(rng, width: int, height: int, variant: str, material: str, poth
     mip = _build_mipmap(albedo, texel, bounds[0], bounds[2])
     del albedo
     wet = _build_wetness(rng, field_) if variant == "wet" else np.zeros((1, 1))
+    if field_.water is not None:
+        # Standing water: dark and mirror-like in every light (the dry lights' shading
+        # has no wet terms: those of a wet road are used on the water only).
+        wet = np.maximum(wet, field_.water) if wet.shape == field_.water.shape else field_.water
+        shade = lighting.shade.copy()
+        shade[3], shade[5], shade[6] = max(shade[3], 0.5), max(shade[5], 200.0), max(shade[6], 0.5)
+        lighting = dataclasses.replace(lighting, shade=shade)
     return _Scene(rig, road, texel, spacing, field_, h_top, lighting, mip, wet)
 
 
@@ -300,7 +316,7 @@ def _write_pair(folder: Path, pair: SynthPair, *, dataset_seed: int, index: int)
                                         "pitch_deg", "roll_deg", "doffs", "ndisp")])
     info = pair.info
     finite = pair.disparity[np.isfinite(pair.disparity)]
-    holes = "; ".join(f"x={h['x']:.3f} y={h['y']:.3f} depth={h['depth_m']:.3f} diameter={h['diameter_m']:.2f} "
+    holes = "; ".join(f"shape={h['shape']} x={h['x']:.3f} y={h['y']:.3f} depth={h['depth_m']:.3f} diameter={h['diameter_m']:.2f} "
                       f"u={h['u']:.1f} v={h['v']:.1f}" for h in info["potholes"]) or "none"
     bump = "none" if info["bump"] is None else (f"x={info['bump']['x']:.3f} y={info['bump']['y']:.3f} "
                                                  f"height={info['bump']['height_m']:.3f}")

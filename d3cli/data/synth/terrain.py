@@ -11,21 +11,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .potholes import Pothole, normalised_radius as _normalised_radius, pothole_weight as _pothole_weight
+from .potholes import FAMILIES, varied_pothole
 from .rig import StereoRig
-
-
-@dataclass(frozen=True)
-class Pothole:
-    """A smooth-walled, slightly irregular elliptical depression (world metres)."""
-
-    x: float
-    y: float
-    semi_a: float  # semi-axis along the rotated x direction, metres
-    semi_b: float
-    angle: float  # radians
-    depth: float  # metres, positive
-    flat_fraction: float  # share of the normalised radius with a flat bottom
-    wobble: tuple[float, float, float, float]  # 2nd/3rd harmonic amplitude and phase
 
 
 @dataclass(frozen=True)
@@ -41,6 +29,10 @@ class _HeightField:
     y0: float
     spacing: float
     pothole_weight: np.ndarray  # float32 (ny, nx) in [0, 1], 1 = pothole floor
+    # How far the potholes (profiles, floor relief, water) lower the road, metres, float64
+    # (ny, nx); 1 where water stands.  None/(1, 1) zeros without potholes.
+    sink: np.ndarray | None = None
+    water: np.ndarray | None = None
 
 
 def _value_noise(rng: np.random.Generator, shape: tuple[int, int], cell: float) -> np.ndarray:
@@ -79,9 +71,12 @@ def _sample_road_point(rng, rig: StereoRig) -> tuple[float, float]:
     return float(left[0] + t * direction[0]), float(left[1] + t * direction[1])
 
 
-def _sample_potholes(rng, rig: StereoRig, count: int) -> list[Pothole]:
-    """Potholes centred on road points seen near the middle of the left image."""
+def _sample_potholes(rng, rig: StereoRig, count: int, shape_rng=None) -> list[Pothole]:
+    """Potholes centred on road points seen near the middle of the left image; with a
+    ``shape_rng``, of the families of :mod:`.potholes` (else all classic)."""
     holes = []
+    # Families cycle from a random start: every family appears about equally often.
+    start = int(shape_rng.integers(0, len(FAMILIES))) if shape_rng is not None else 0
     for _ in range(count):
         x, y = _sample_road_point(rng, rig)
         diameter = rng.uniform(0.2, 0.8)
@@ -95,27 +90,9 @@ def _sample_potholes(rng, rig: StereoRig, count: int) -> list[Pothole]:
         wobble = (rng.uniform(0.0, 0.12), rng.uniform(0, 2 * math.pi),
                   rng.uniform(0.0, 0.08), rng.uniform(0, 2 * math.pi))
         holes.append(Pothole(x, y, semi_a, semi_b, rng.uniform(0, math.pi), depth, flat_fraction, wobble))
+        if shape_rng is not None:
+            holes[-1] = varied_pothole(holes[-1], shape_rng, FAMILIES[(start + len(holes) - 1) % len(FAMILIES)])
     return holes
-
-
-def _normalised_radius(hole: Pothole, xx, yy):
-    """Radius of world points (xx, yy) in the hole's rotated, wobbled ellipse (1 = its rim);
-    arrays or scalars."""
-    dx, dy = xx - hole.x, yy - hole.y
-    ca, sa = math.cos(hole.angle), math.sin(hole.angle)
-    xr = (dx * ca + dy * sa) / hole.semi_a
-    yr = (-dx * sa + dy * ca) / hole.semi_b
-    theta = np.arctan2(yr, xr)
-    a2, p2, a3, p3 = hole.wobble
-    rim = 1.0 + a2 * np.cos(2 * theta + p2) + a3 * np.cos(3 * theta + p3)
-    return np.hypot(xr, yr) / rim
-
-
-def _pothole_weight(hole: Pothole, xx: np.ndarray, yy: np.ndarray) -> np.ndarray:
-    """Depth profile in [0, 1] (1 = floor) of one pothole at world points (xx, yy)."""
-    rho = _normalised_radius(hole, xx, yy)
-    wall = np.clip((rho - hole.flat_fraction) / (1.0 - hole.flat_fraction), 0.0, 1.0)
-    return 0.5 * (1.0 + np.cos(np.pi * wall))
 
 
 def _grid_window(hole: Pothole, x0: float, y0: float, spacing: float, shape) -> tuple[slice, slice]:
@@ -188,19 +165,19 @@ class _RoadShape:
         x_min, y_min, x_max, y_max = x_min - 0.1, y_min - 0.1, x_max + 0.1, y_max + 0.1  # grid overhang
         tilt = abs(self.cross_slope) * max(abs(x_min), abs(x_max)) + abs(self.grade) * max(abs(y_min), abs(y_max))
         wave = 5.0 * self.undulation_m
-        hole = max((h.depth for h in self.holes), default=0.0) + (_ROUGH_FLOOR_M * 5.0 if self.holes else 0.0)
+        hole = max((h.depth + h.roughness_m * 5.0 for h in self.holes), default=0.0)
         bump = self.bump[4] if self.bump is not None else 0.0
         return -(tilt + wave + hole) - 1e-3, tilt + wave + bump + 1e-3
 
 
-_ROUGH_FLOOR_M = 2.5e-3  # relief of broken pothole floors (std of |noise| scale)
-
-
-def _sample_road(rng, rig: StereoRig, potholes: int | None, flat: bool) -> _RoadShape:
+def _sample_road(rng, rig: StereoRig, potholes: int | None, flat: bool, shapes: str = "varied") -> _RoadShape:
+    """Road shape; ``shapes`` "varied" draws the pothole families of :mod:`.potholes` from a
+    stream of their own (the rest of the scene is that of the seed), "classic" only the
+    flat-floored potholes with raised-cosine walls of earlier versions."""
     if flat:
         return _RoadShape(0.0, 0.0, 0.0, (), None, True)
     count = int(rng.integers(0, 4)) if potholes is None else int(potholes)
-    holes = tuple(_sample_potholes(rng, rig, count))
+    holes = tuple(_sample_potholes(rng, rig, count, rng.spawn(1)[0] if shapes == "varied" else None))
     bump = None
     if rng.uniform() < 0.35:
         bx, by = _sample_road_point(rng, rig)
@@ -222,6 +199,7 @@ def _build_height_field(rng, road: _RoadShape, bounds, spacing: float) -> _Heigh
         xs = x_min + spacing * np.arange(nx)
         ys = y_min + spacing * np.arange(ny)
         h = road.undulation_m * np.clip(octaves, -5.0, 5.0) + road.cross_slope * xs[None, :] + road.grade * ys[:, None]
+        base = h.copy()  # the road without potholes: what their depth is measured from
         # Overlapping potholes merge into one (the deepest wins), they do not add up.
         sink = np.zeros(shape)
         for hole in road.holes:
@@ -230,12 +208,56 @@ def _build_height_field(rng, road: _RoadShape, bounds, spacing: float) -> _Heigh
             np.maximum(sink[rows, cols], hole.depth * _pothole_weight(hole, xx, yy), out=sink[rows, cols])
         h -= sink
         if road.holes:
-            # Broken, rough floors: a few millimetres of relief where the road is gone.
+            # Broken, rough floors: a few millimetres of relief where the road is gone
+            # (classic potholes: 2.5 mm scale; rough ones more).
             relief = np.clip(np.abs(_fractal_noise(rng, shape, spacing, (0.06, 0.03, 0.015))), 0.0, 5.0)
-            h -= _ROUGH_FLOOR_M * weight * relief
+            h -= _roughness_map(road.holes, x_min, y_min, spacing, shape) * relief
         if road.bump is not None:
             bx, by, sx, sy, height = road.bump
-            h += height * np.exp(-0.5 * (((xs[None, :] - bx) / sx) ** 2 + ((ys[:, None] - by) / sy) ** 2))
+            bump = height * np.exp(-0.5 * (((xs[None, :] - bx) / sx) ** 2 + ((ys[:, None] - by) / sy) ** 2))
+            h += bump
+            base = base + bump
+    water = _fill_water(road.holes, h, base, x_min, y_min, spacing) if not road.flat else None
     grad_y, grad_x = np.gradient(h, spacing)
     tile = 16
-    return _HeightField(h, grad_x, grad_y, _lipschitz_tiles(h, spacing, tile), tile, x_min, y_min, spacing, weight)
+    return _HeightField(h, grad_x, grad_y, _lipschitz_tiles(h, spacing, tile), tile, x_min, y_min, spacing, weight,
+                        sink=None if road.flat else base - h, water=water)
+
+
+def _roughness_map(holes, x0, y0, spacing, shape) -> np.ndarray:
+    """Floor relief scale (metres per unit of |noise|): max over potholes of their
+    ``roughness_m`` times their profile weight."""
+    # float32 like the weight map: classic potholes (one scale) give the relief of
+    # earlier versions bit for bit.
+    rough = np.zeros(shape, np.float32)
+    for hole in holes:
+        rows, cols = _grid_window(hole, x0, y0, spacing, shape)
+        xx, yy = _grid_coords(x0, y0, spacing, rows, cols)
+        w = _pothole_weight(hole, xx, yy).astype(np.float32)
+        np.maximum(rough[rows, cols], hole.roughness_m * w, out=rough[rows, cols])
+    return rough
+
+
+def _fill_water(holes, h: np.ndarray, base: np.ndarray, x0, y0, spacing) -> np.ndarray | None:
+    """Water in the potholes with ``water_fill``: ``h`` raised in place to a horizontal
+    level ``water_fill * depth`` above the floor, kept 2 mm below the lowest point of the
+    rim (so it never spills); returns the water mask (float64, 1 = water) or None."""
+    water = None
+    for hole in holes:
+        if hole.water_fill <= 0:
+            continue
+        rows, cols = _grid_window(hole, x0, y0, spacing, h.shape)
+        xx, yy = _grid_coords(x0, y0, spacing, rows, cols)
+        rho = _normalised_radius(hole, xx, yy)
+        sub, sub_base = h[rows, cols], base[rows, cols]
+        floor = float(sub.min())
+        rim = sub_base[(rho > 0.97) & (rho < 1.03)]
+        level = floor + hole.water_fill * hole.depth
+        if rim.size:
+            level = min(level, float(rim.min()) - 2e-3)
+        wet = (rho < 1.0) & (sub < level)
+        sub[wet] = level
+        if water is None:
+            water = np.zeros(h.shape)
+        water[rows, cols] = np.maximum(water[rows, cols], wet)
+    return water

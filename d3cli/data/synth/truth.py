@@ -7,10 +7,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from .render import _OCCLUSION_TOL_M, _centre_hits, _visible_from
 from .rig import StereoRig
+from .potholes import radial_weight
 from .terrain import Pothole, _HeightField, _normalised_radius, _pothole_weight
 
 
@@ -60,10 +62,10 @@ def _describe_hole(hole: Pothole, rig: StereoRig) -> dict:
     left_c, _ = rig.centres()
     p = rig.rotation() @ (np.array([hole.x, hole.y, -hole.depth]) - left_c)
     return {
-        "x": hole.x, "y": hole.y, "depth_m": hole.depth,
+        "x": hole.x, "y": hole.y, "depth_m": hole.depth, "shape": hole.shape,
         "diameter_m": 2.0 * hole.semi_a,
         "semi_axes_m": [hole.semi_a, hole.semi_b], "angle_rad": hole.angle,
-        "flat_fraction": hole.flat_fraction, "wobble": list(hole.wobble),
+        "flat_fraction": hole.flat_fraction, "wobble": list(hole.wobble), "water_fill": hole.water_fill,
         "u": float(rig.f * p[0] / p[2] + rig.cx), "v": float(rig.f * p[1] / p[2] + rig.cy),
     }
 
@@ -78,8 +80,15 @@ def _opening_ratio(hole: Pothole, x: float, y: float) -> float:
     w = _OPENING_M / hole.depth
     if w >= 1.0:
         return math.inf
-    # Inverse of the raised-cosine wall of _pothole_weight at weight w.
-    rho_open = hole.flat_fraction + (1.0 - hole.flat_fraction) * math.acos(2.0 * w - 1.0) / math.pi
+    if hole.shape == "classic":
+        # Inverse of the raised-cosine wall of _pothole_weight at weight w.
+        rho_open = hole.flat_fraction + (1.0 - hole.flat_fraction) * math.acos(2.0 * w - 1.0) / math.pi
+    else:  # the outermost radius where the profile (core left out) is deeper than w
+        radii = np.linspace(0.0, 1.0, 2001)
+        deep = radii[radial_weight(hole, radii) > w]
+        if not deep.size:
+            return math.inf
+        rho_open = float(deep.max())
     return rho / rho_open
 
 
@@ -131,7 +140,8 @@ def pothole_groups(holes) -> list[int]:
     return [deepest[root(k)] for k in range(len(holes))]
 
 
-def pothole_truth(holes, rig: StereoRig, points: np.ndarray) -> tuple[np.ndarray, list]:
+def pothole_truth(holes, rig: StereoRig, points: np.ndarray, field_: _HeightField | None = None
+                  ) -> tuple[np.ndarray, list]:
     """Pothole id mask (uint8 (H, W)) and the per-pothole ground truth of defects_gt.json.
 
     Nested potholes (:func:`pothole_groups`) are one defect: the entry of the group's
@@ -148,6 +158,12 @@ def pothole_truth(holes, rig: StereoRig, points: np.ndarray) -> tuple[np.ndarray
     rig : StereoRig
     points : ndarray, float64, (H, W, 3)
         World point each left pixel sees (inf/nan where none).
+    field_ : _HeightField, optional
+        The rendered surface.  Given, depth, area and volume are those of its ``sink``
+        (how far the potholes lower the road: profile, floor relief and a water surface
+        included), on its grid refined to 2 mm by bilinear interpolation (the surface the
+        renderer traces): ``depth_mm`` is then the deepest point of the surface, and
+        ``profile_depth_mm`` the nominal depth of the profile.
     """
     h, w = points.shape[:2]
     groups = pothole_groups(holes)
@@ -167,7 +183,7 @@ def pothole_truth(holes, rig: StereoRig, points: np.ndarray) -> tuple[np.ndarray
     for k, hole in enumerate(holes):
         desc = _describe_hole(hole, rig)
         if groups[k] != k:
-            truth.append({"id": k + 1, "depth_mm": 1e3 * hole.depth, "area_m2": 0.0, "volume_l": 0.0,
+            truth.append({"id": k + 1, "shape": hole.shape, "depth_mm": 1e3 * hole.depth, "area_m2": 0.0, "volume_l": 0.0,
                           "visible_px": 0, "u": desc["u"], "v": desc["v"], "part_of": groups[k] + 1})
             continue
         group = [holes[j] for j in members[k]]
@@ -178,12 +194,43 @@ def pothole_truth(holes, rig: StereoRig, points: np.ndarray) -> tuple[np.ndarray
         for j, other in enumerate(holes):
             if groups[j] != k:
                 own = np.where(other.depth * _pothole_weight(other, gx, gy) > own, 0.0, own)
-        truth.append({"id": k + 1, "depth_mm": 1e3 * hole.depth,
-                      "area_m2": float((own > _OPENING_M).sum() * spacing ** 2),
+        entry = {"id": k + 1, "shape": hole.shape, "depth_mm": 1e3 * hole.depth}
+        if field_ is not None and field_.sink is not None:
+            # Where the group's profiles lower the road, the surface's own sink.
+            surface = np.where(own > 0, _sink_at(field_, gx, gy), 0.0)
+            entry["profile_depth_mm"], own = 1e3 * hole.depth, surface
+            # The traced surface is bilinear between the field's nodes: its deepest point is
+            # a node (a cone's apex between nodes is not drawn).
+            entry["depth_mm"] = 1e3 * _deepest_node(field_, group, [o for j, o in enumerate(holes) if groups[j] != k])
+        truth.append({**entry, "area_m2": float((own > _OPENING_M).sum() * spacing ** 2),
                       "volume_l": float(own.sum() * spacing ** 2 * 1e3),
                       "visible_px": int((ids == k + 1).sum()), "u": desc["u"], "v": desc["v"],
                       "members": [j + 1 for j in members[k]]})
     return ids, truth
+
+
+def _deepest_node(field_: _HeightField, group: list, others: list) -> float:
+    """Largest sink (metres) of the field's nodes that ``group``'s profiles lower and no
+    other (deeper there) pothole owns."""
+    ny, nx = field_.sink.shape
+    gx, gy = np.meshgrid(field_.x0 + field_.spacing * np.arange(nx), field_.y0 + field_.spacing * np.arange(ny))
+    lo_x = min(g.x - 1.25 * max(g.semi_a, g.semi_b) for g in group)
+    hi_x = max(g.x + 1.25 * max(g.semi_a, g.semi_b) for g in group)
+    lo_y = min(g.y - 1.25 * max(g.semi_a, g.semi_b) for g in group)
+    hi_y = max(g.y + 1.25 * max(g.semi_a, g.semi_b) for g in group)
+    box = (gx[0] >= lo_x) & (gx[0] <= hi_x), (gy[:, 0] >= lo_y) & (gy[:, 0] <= hi_y)
+    gx, gy, sink = gx[box[1]][:, box[0]], gy[box[1]][:, box[0]], field_.sink[box[1]][:, box[0]]
+    own = np.max([g.depth * _pothole_weight(g, gx, gy) for g in group], axis=0)
+    for other in others:
+        own = np.where(other.depth * _pothole_weight(other, gx, gy) > own, 0.0, own)
+    return float(np.where(own > 0, sink, 0.0).max(initial=0.0))
+
+
+def _sink_at(field_: _HeightField, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+    """The field's sink at world points (gx, gy) of a regular grid, bilinear (as traced)."""
+    fx = np.clip((gx - field_.x0) / field_.spacing, 0.0, field_.sink.shape[1] - 1.0).astype(np.float32)
+    fy = np.clip((gy - field_.y0) / field_.spacing, 0.0, field_.sink.shape[0] - 1.0).astype(np.float32)
+    return cv2.remap(field_.sink.astype(np.float32), fx, fy, cv2.INTER_LINEAR).astype(np.float64)
 
 
 def _ground_truth(rig: StereoRig, field_: _HeightField, h_top: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,0 +1,23 @@
+"""The bundled road sample shows the road report: calibrated, one pothole measured."""
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from d3cli.cli import main
+
+
+def test_road_report_on_the_bundled_samples_measures_the_pothole(tmp_path):
+    # The sample (scripts/make_samples.py, synth seed 2035): a bowl 51.7 mm deep,
+    # 0.128 m^2 deeper than 10 mm, 4.47 l.  SGBM keeps the test fast.
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["run", "-o", str(out), "--method", "sgbm", "--road-report", "-q"])
+    assert result.exit_code == 0, result.output
+    data = json.loads((out / "road" / "defects.json").read_text())
+    assert data["warnings"] == []
+    (pothole,) = [d for d in data["defects"] if d["kind"] == "pothole"]
+    assert pothole["max_depth_mm"] == pytest.approx(51.7, rel=0.2)
+    assert pothole["area_m2"] == pytest.approx(0.128, rel=0.2)
+    assert pothole["volume_l"] == pytest.approx(4.47, rel=0.2)
+    assert (pothole["severity"], pothole["low_confidence"]) == ("medium", False)
