@@ -325,8 +325,8 @@ def _road_totals_row(done: list, n_reports: int) -> str:
 def _road_card(out_dir: Path, pair: str, data: Mapping) -> list[str]:
     """HTML of one pair's card in :func:`road_section`: thumbnail, links and defects table."""
     e = html.escape
-    cols = ("id", "kind", "depth [mm] (bump: height)", "mean depth [mm]", "area [m²]", "volume [l]", "decided [%]",
-            "confidence")
+    cols = ("id", "kind", "depth [mm] (bump: height)", "mean depth [mm]", "area [m²]", "diameter [mm]", "volume [l]",
+            "severity (ASTM D6433)", "decided [%]", "confidence")
     folder = out_dir / pair
     parts = []
     n_pits = sum(d.get("kind") == "pothole" for d in data["defects"])
@@ -345,7 +345,9 @@ def _road_card(out_dir: Path, pair: str, data: Mapping) -> list[str]:
                 (d.get("max_depth_mm"), f"{_num(d.get('max_depth_mm')) or 0.0:.1f}"),
                 (d.get("mean_depth_mm"), f"{_num(d.get('mean_depth_mm')) or 0.0:.1f}"),
                 (d.get("area_m2"), f"{_num(d.get('area_m2')) or 0.0:.4f}"),
+                (d.get("diameter_mm"), "–" if _num(d.get("diameter_mm")) is None else f"{_num(d.get('diameter_mm')):.0f}"),
                 (d.get("volume_l"), f"{_num(d.get('volume_l')) or 0.0:.2f}"),
+                (None, d.get("severity") or "–"),
                 (d.get("decided_share"), f"{100 * (_num(d.get('decided_share')) or 0.0):.0f}"),
                 (None, "low" if low_d else "ok")]
         cells = "".join(f'<td data-v="{_num(v) if _num(v) is not None else ""}">{e(t)}</td>' for v, t in vals)

@@ -156,3 +156,16 @@ def test_summary_md_names_the_columns_as_the_page_does_and_defines_them(tmp_path
                         "- **PEP 3 [%]**: Percentage of error pixels: 100 x share of EPE's pixels with e > 3 px.",
                         "- **time [s]**: Wall time of the pair in the run that made its map: reading, matching, "
                         "writing and scoring."]
+
+
+def test_road_cards_show_each_potholes_diameter_and_astm_severity(tmp_path):
+    _road_pair(tmp_path / "p", [("pothole", 61.5, 0.1, 3.25, 0.95), ("bump", 22.0, 0.01, 0.1, 0.9)])
+    data = json.loads((tmp_path / "p" / "defects.json").read_text())
+    data["defects"][0].update(diameter_mm=356.8, severity="high")  # as d3cli.road writes them
+    (tmp_path / "p" / "defects.json").write_text(json.dumps(data))
+    text = write_report_html(tmp_path, [{"pair": "p", "status": "ok"}], title="t").read_text()
+    card = text[text.index('id="road-p"'):]
+    assert "<th>severity (ASTM D6433)</th>" in card and "<th>diameter [mm]</th>" in card
+    rows = re.findall(r"<tr[^>]*>(.*?)</tr>", card[card.index("<tbody>"):card.index("</tbody>")])
+    cells = [re.findall(r">([^<]*)</td>", row) for row in rows]
+    assert cells[0][5:8] == ["357", "3.25", "high"] and cells[1][5:8] == ["–", "0.10", "–"]
