@@ -199,7 +199,7 @@ class RoadConfig:
     ring_px: int = 12  # width of the surrounding ring that gives a defect's reference height
     min_decided_share: float = 0.5  # below this decided share a defect is low confidence
     colour_range_mm: float = 50.0  # height_color.png saturates at +- this
-    # Splitting joined potholes (d3cli.road.defects._split): a depth saddle this deep, or a
+    # Splitting joined potholes (d3cli.road.splitting.split_parts): a depth saddle this deep, or a
     # neck at most split_neck x the smaller lobe's inscribed radius, separates two defects
     # whose parts are each at least split_min_area_m2.
     split_prominence_mm: float = 6.0

@@ -1,5 +1,7 @@
-"""Road outputs derived from a disparity map: point clouds (and, next, road-surface
-height maps and defects).
+"""Road outputs derived from a disparity map: point clouds (``pointcloud``), the robust road
+plane and heights above it (``plane``), potholes and bumps measured in 3-D (``defects``,
+cut apart by ``splitting``, re-matched with a small window by ``rematch``), their ASTM D6433
+severity (``severity``) and the files of ``--road-report`` (``report``).
 
 May import: :mod:`d3cli.data`, :mod:`d3cli.config`, :mod:`d3cli.errors` (and the PT
 road model of :mod:`d3cli.method.perspective`).  Never the batch or the CLI.

@@ -13,10 +13,9 @@ Definitions (what the numbers in defects.json mean):
 * ``area_m2``: the area of the road plane covered by the region's pixels (each pixel's
   footprint on the plane, :func:`d3cli.road.plane.plane_footprint`), i.e. the opening of
   the pothole in square metres, independent of the image scale and of the viewing angle.
-* ``max_depth_mm``: 98th percentile of the median-filtered depth over the region
-  (robust to single-pixel spikes; ~2 % below the true maximum of a paraboloid, equal on a
-  flat-floored pothole).  Joined potholes are split at a depth saddle, a terrace or a neck of
-  their outline (:func:`_split`).  A region must also be
+* ``max_depth_mm``: the mean of the 9 deepest pixels of the median-filtered depth over the
+  region (robust to single-pixel spikes without the bias of a percentile on a bowl).  Joined potholes are split at a depth saddle, a terrace or a neck of
+  their outline (:func:`d3cli.road.splitting.split_parts`).  A region must also be
   deeper than ``noise_k`` times the height noise expected at its distance, and its mean
   depth must exceed ``mean_noise_k`` standard errors of a mean of spatially correlated
   stereo noise (``noise_cell_px`` pixels per independent error).
@@ -41,6 +40,7 @@ from scipy import ndimage
 from ..config import RoadConfig
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
+from .splitting import split_parts
 
 log = logging.getLogger(__name__)
 
@@ -110,11 +110,11 @@ class DefectTuning:
         ~10^3 such cells per kind, and the errors of the noisy pairs have heavier tails
         than a Gaussian (the usual 5-sigma allowance for looking everywhere).
     split_smooth_px : float
-        Gaussian smoothing of the depth for the saddles of :func:`_split`, pixels (about
+        Gaussian smoothing of the depth for the saddles of :func:`d3cli.road.splitting.split_parts`, pixels (about
         one noise cell: ``0.4 sqrt(noise_cell_px)``).
     split_terrace : bool
         Cut terraces too (a shallow pothole whose floor runs into a deeper one's wall, cue 3
-        of :func:`_split`); the shelf must lie ``max(min_depth_mm, 3 sigma_h)`` above the pit.
+        of :func:`d3cli.road.splitting.split_parts`); the shelf must lie ``max(min_depth_mm, 3 sigma_h)`` above the pit.
     local_noise_px : int
         Outer radius of the annulus around a region whose robust height spread (1.4826
         MAD of all its heights) replaces sigma_h in both significance tests where it is
@@ -181,7 +181,7 @@ def find_defects(
         the ring of surrounding road that gives the reference height, pixels;
         ``min_decided_share``, below which share of decided pixels a defect is
         ``low_confidence``; ``split_prominence_mm``, ``split_neck`` and
-        ``split_min_area_m2``, the splitting of joined potholes (:func:`_split`):
+        ``split_min_area_m2``, the splitting of joined potholes (:func:`d3cli.road.splitting.split_parts`):
         depth-saddle prominence (at least the map's ``noise_k`` sigma_h too), neck ratio
         (1: no neck split) and smallest part (plane area); ``min_region_decided_share``:
         a region with a smaller share of decided pixels is dropped (measured on the hole
@@ -246,7 +246,7 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
     found = []
     # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
     # below it the outline of a noisy map is drawn by the noise.
-    for comp in _split(labels, n, sign * s.smooth, s.footprint, level=max(thr_mm * 1e-3, s.split_noise),
+    for comp in split_parts(labels, n, sign * s.smooth, s.footprint, level=max(thr_mm * 1e-3, s.split_noise),
                        prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
                        smooth_px=tuning.split_smooth_px, neck=road.split_neck, min_part_m2=road.split_min_area_m2,
                        step=max(thr_mm * 1e-3, s.split_noise) if tuning.split_terrace else np.inf):
@@ -384,210 +384,6 @@ def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane) -> flo
     return float(1.4826 * np.median(np.abs(resid - np.median(resid))))
 
 
-def _split(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.ndarray, *, level: float,
-           prominence: float, smooth_px: float, neck: float, min_part_m2: float, step: float = np.inf):
-    """Masks of the components of ``labels``, each cut into separate potholes.
-
-    Three cues, because overlapping potholes join in three ways (applied in the order 1, 3, 2; a part cut by 3 is not cut by 2):
-
-    1. **Depth saddle**: deepest points of the depth map (Gaussian-smoothed with
-       ``smooth_px``, about one noise cell, so a rough or noisy floor does not count) that
-       stand ``prominence`` metres above the saddle between them seed a watershed on the
-       depth (two pits joined by a shallower dip).
-    2. **Neck**: within each part, lobes of the outline whose narrowest passage (the
-       distance-transform saddle, half the neck's width) is at most ``neck`` times the
-       inscribed radius of the smaller lobe seed a watershed on the distance transform (of
-       the part's smoothed depth deeper than ``level``):
-       the h-maxima of ``log(1 + dt)`` with ``h = -log(neck)`` are exactly those lobes.  A
-       shallow pothole whose rim runs into a deeper one's wall joins it without any depth
-       saddle, and the union of the two openings often has a neck.
-    3. **Terrace** (:func:`_terrace_pieces`): the floor of a shallow pothole that runs into
-       a deeper one's wall is neither a depth minimum nor always behind a neck (the
-       union's outline can be nearly convex), but it is a wide flat shelf: between a level
-       ``t`` and ``t + step / 2`` the part loses a blob that is much wider than a wall
-       (it survives an opening with a disc of half the radius of ``min_part_m2``) and at
-       least ``min_part_m2`` large, while at least ``min_part_m2`` of the part lies more
-       than ``step`` deeper (the pit is a pothole below the shelf: ``step`` is the
-       pothole threshold).  A shelf whose convex hull holds the deepest point is a ledge
-       *around* the pit (the pit lies inside the shallower pothole's outline), one
-       pothole, as in the ground truth of :func:`d3cli.data.synth.pothole_groups`.
-
-    Parts smaller than ``min_part_m2`` (plane area, ``footprint``) are merged back into the
-    neighbour they share the longest border with.
-    """
-    from skimage.morphology import h_maxima
-
-    finite_depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
-    smoothed = cv2.GaussianBlur(finite_depth, (0, 0), smooth_px) if smooth_px > 0 else finite_depth
-    kernel_open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
-    for lab in range(1, n):
-        comp = labels == lab
-        v, u = np.nonzero(comp)
-        box = (slice(v.min(), v.max() + 1), slice(u.min(), u.max() + 1))
-        sub_comp = comp[box]
-        if footprint[box][sub_comp].sum() < 2 * min_part_m2:  # too small to hold two parts
-            yield comp
-            continue
-        sub_depth = np.where(sub_comp, smoothed[box], 0.0)
-        parts = _watershed_parts(-sub_depth, h_maxima(sub_depth, prominence) & sub_comp, sub_comp)
-        pieces = []
-        for part in parts:
-            # Terraces before necks: a terrace is cut along the wall between the two floors
-            # (a watershed on the depth); a neck cut follows the outline and would leave part
-            # of the deep wall to the shallow pothole (its depth then reads too deep), and
-            # the concave cut of a terrace would show necks of its own.
-            terraces = _terrace_pieces(part, sub_depth, footprint[box], level=level, step=step, min_part_m2=min_part_m2)
-            if len(terraces) > 1:
-                pieces += terraces
-                continue
-            # The outline of the smoothed depth: the noisy map's own outline is ragged at
-            # the noise-cell scale and shows necks that are not there.
-            opened = cv2.morphologyEx((part & (sub_depth > level)).astype(np.uint8), cv2.MORPH_OPEN, kernel_open)
-            dt = cv2.distanceTransform(np.pad(opened, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
-            lobes = h_maxima(np.log1p(dt), -np.log(neck)) & opened.astype(bool) if neck < 1 else np.zeros_like(part)
-            pieces += _watershed_parts(-dt, lobes, part)
-        for piece in _merge_small(pieces, footprint[box], min_part_m2):
-            mask = np.zeros_like(comp)
-            mask[box] = piece
-            yield mask
-
-
-def _terrace_pieces(part: np.ndarray, depth: np.ndarray, footprint: np.ndarray, *, level: float, step: float,
-                    min_part_m2: float, level_step: float = 2e-3, ledge_share: float = 0.4,
-                    _calls_left: int = 3) -> list:
-    """``part`` cut at the shallowest terrace, then each piece again (cue 3 of :func:`_split`).
-
-    ``depth``: the smoothed depth (metres, + down) of the part's box; ``footprint``: plane
-    area per pixel.  Returns a list of bool masks covering ``part``.
-    """
-    from skimage.segmentation import watershed
-
-    if not np.isfinite(step) or _calls_left <= 0 or footprint[part].sum() < 2 * min_part_m2:
-        return [part]
-    deepest = float(np.percentile(depth[part], 98))
-    candidates = _terrace_candidates(part, depth, footprint, level=level, step=step, min_part_m2=min_part_m2,
-                                     level_step=level_step, deepest=deepest)
-    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
-    for _, t, core, blobs in candidates[:3]:
-        markers = np.zeros(part.shape, np.int32)
-        markers[core] = 1
-        for i, blob in enumerate(blobs, start=2):
-            markers[blob] = i
-        basins = watershed(-depth, markers, mask=part)
-        if not _keep_shelves(basins, len(blobs), part, cross, ledge_share):
-            continue
-        log.debug("terrace at %.1f mm: shelves of %s m^2 beside a pit to %.1f mm", t * 1e3,
-                  [round(float(footprint[b].sum()), 3) for b in blobs], deepest * 1e3)
-        out = []
-        for i in range(1, len(blobs) + 2):
-            piece = basins == i
-            if piece.any():
-                out += _terrace_pieces(piece, depth, footprint, level=t + level_step, step=step,
-                                       min_part_m2=min_part_m2, level_step=level_step, ledge_share=ledge_share,
-                                       _calls_left=_calls_left - 1)
-        return out
-    return [part]
-
-
-def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarray, *, level: float, step: float,
-                        min_part_m2: float, level_step: float, deepest: float) -> list:
-    """(shelf area, level t, core mask, shelf blobs) of every level that shows a terrace,
-    largest shelf first (:func:`_terrace_pieces`)."""
-    # Opening disc: half the radius of the smallest part, in pixels at the part's distance.
-    pixel_m = float(np.sqrt(np.median(footprint[part])))
-    # A disc wider than the part's box opens it away whatever its size: capping it there
-    # changes nothing and bounds the element by the image.
-    radius_px = int(np.clip(round(0.5 * np.sqrt(min_part_m2 / np.pi) / max(pixel_m, 1e-9)), 2, max(part.shape)))
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
-    # Candidate levels: the shelf is widest just above a floor (a raised-cosine or any
-    # rounded wall is flat where it meets the floor, so the bands above the floor are wide
-    # too); the level with the largest shelf is tried first.
-    deepest_at = np.unravel_index(np.argmax(np.where(part, depth, -np.inf)), part.shape)
-    candidates = []
-    for t in np.arange(level, deepest - step + 1e-9, level_step):
-        pit = part & (depth > t + step)
-        if footprint[pit].sum() < min_part_m2:
-            break  # no pothole left below a shelf at t
-        # The core: the parts deeper than t + step / 2 that hold the pit; a floor that only
-        # dips below t + step / 2 (a shelf's middle) is shelf.
-        core_labels, _ = _label(part & (depth > t + 0.5 * step))
-        core = np.isin(core_labels, np.unique(core_labels[pit])) & (core_labels > 0)
-        if np.median(depth[core]) < t + step:
-            continue  # the rest is a floor with relief (up to ~1 cm on broken floors), not a pit below a shelf
-        lost = (part & (depth > t) & ~core).astype(np.uint8)
-        shelf = cv2.morphologyEx(lost, cv2.MORPH_OPEN, disc).astype(bool)
-        if footprint[shelf].sum() < min_part_m2:
-            continue
-        # One marker per connected piece of the lost band: the opening can cut one shelf in two.
-        labels, k = _label(lost.astype(bool) & cv2.dilate(shelf.astype(np.uint8), disc).astype(bool))
-        blobs = []
-        for i in range(1, k + 1):
-            blob = (labels == i) & shelf
-            if footprint[blob].sum() < min_part_m2:
-                continue
-            hull = cv2.convexHull(np.stack(np.nonzero(blob)[::-1], axis=1).astype(np.int32))
-            if cv2.pointPolygonTest(hull, (float(deepest_at[1]), float(deepest_at[0])), False) >= 0:
-                continue  # a ledge around the pit: the same pothole
-            blobs.append(blob)
-        if blobs:
-            candidates.append((sum(float(footprint[b].sum()) for b in blobs), t, core, blobs))
-    candidates.sort(key=lambda c: -c[0])
-    return candidates
-
-
-def _keep_shelves(basins: np.ndarray, n_blobs: int, part: np.ndarray, cross: np.ndarray, ledge_share: float) -> int:
-    """Number of shelf basins (labels 2 ..) kept as pothole pieces; the others are merged
-    into the pit's basin (label 1) in ``basins``, in place.
-
-    A shallow pothole beside the pit has an outline of its own: most of its piece's border
-    is rim (the part's outside).  A ledge around the pit borders the pit along as much as
-    it borders the road.
-    """
-    kept = 0
-    for i in range(2, n_blobs + 2):
-        piece = basins == i
-        edge = piece & ~cv2.erode(piece.astype(np.uint8), cross, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
-        near = cv2.dilate(edge.astype(np.uint8), cross).astype(bool)
-        shared = int((near & (basins == 1)).sum())
-        rim = int((near & ~part).sum()) + int(edge[0].sum() + edge[-1].sum() + edge[:, 0].sum() + edge[:, -1].sum())
-        if shared >= ledge_share * max(shared + rim, 1):
-            basins[piece] = 1
-        else:
-            kept += 1
-    return kept
-
-
-def _watershed_parts(surface: np.ndarray, peaks: np.ndarray, mask: np.ndarray) -> list:
-    """Watershed basins of ``surface`` from the connected ``peaks`` inside ``mask``; [mask]
-    when there are fewer than two peaks."""
-    from skimage.segmentation import watershed
-
-    # h_maxima can return one maximum as pixels a step apart on a plateau: join those.
-    peaks = cv2.dilate(peaks.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))).astype(bool) & mask
-    markers, k = _label(peaks)
-    if k <= 1:
-        return [mask]
-    basins = watershed(surface, markers, mask=mask)
-    return [basins == i for i in range(1, k + 1) if (basins == i).any()]
-
-
-def _merge_small(parts: list, footprint: np.ndarray, min_m2: float) -> list:
-    """Merge the smallest part below ``min_m2`` into the neighbour sharing most border, until none is."""
-    parts = list(parts)
-    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
-    while len(parts) > 1:
-        areas = [float(footprint[p].sum()) for p in parts]
-        i = int(np.argmin(areas))
-        if areas[i] >= min_m2:
-            break
-        ring = cv2.dilate(parts[i].astype(np.uint8), cross).astype(bool) & ~parts[i]
-        shared = [int((ring & p).sum()) if j != i else -1 for j, p in enumerate(parts)]
-        j = int(np.argmax(shared))
-        parts[j] = parts[j] | parts[i]
-        del parts[i]
-    return parts
-
-
 def outline(mask: np.ndarray, *, tolerance_px: float = 1.0) -> tuple:
     """Exterior outline polygons of a bool mask's connected parts, largest first.
 
@@ -603,11 +399,6 @@ def outline(mask: np.ndarray, *, tolerance_px: float = 1.0) -> tuple:
         c = cv2.approxPolyDP(c, tolerance_px, True)
         polys.append(tuple((int(p[0][0]), int(p[0][1])) for p in c))
     return tuple(polys)
-
-
-def _label(mask: np.ndarray):
-    n, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
-    return labels, n - 1
 
 
 def _points(height, us, vs, camera: Camera, plane: RoadPlane) -> np.ndarray:
