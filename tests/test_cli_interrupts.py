@@ -6,6 +6,7 @@ to be killed by SIGINT after shutdown: status -2 instead of 130)."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import textwrap
@@ -21,8 +22,11 @@ def _run_python(code: str, tmp_path) -> subprocess.CompletedProcess:
     scripts exit through another path)."""
     (tmp_path / "inject_d3.py").write_text(textwrap.dedent(code))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [os.getcwd(), os.environ.get("PYTHONPATH")]))}
+    # Started as a terminal's foreground command is: with SIGINT at its default (a test run
+    # started in the background of a non-interactive shell inherits SIGINT ignored).
     return subprocess.run([sys.executable, "-m", "inject_d3"], capture_output=True, text=True, env=env,
-                          timeout=300, cwd=tmp_path)
+                          timeout=300, cwd=tmp_path,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 @pytest.mark.parametrize("module", ["click", "numpy", "numba"])

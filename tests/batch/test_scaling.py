@@ -135,7 +135,7 @@ def test_local_cluster_is_byte_identical_and_records_a_bad_pair_once(tmp_path, p
     assert_same_maps(serial_sgbm, out)
     run = json.loads((out / "run.json").read_text())
     assert run["execution"] == {"mode": "dask", "scheduler": local_cluster.scheduler_address, "workers": 2,
-                                "threads": 2}
+                                "threads": 2, "gpus": 0}
 
     # Deterministic failure: recorded once as failed, the other pairs unaffected, no retry.
     (pair_root / "b" / "right.png").write_bytes(b"not a png")
