@@ -91,7 +91,7 @@ def test_package_data_py_typed_and_license_in_the_project():
     project = tomllib.loads((REPO / "pyproject.toml").read_text())
     assert project["tool"]["setuptools"]["package-data"]["d3cli"] == ["py.typed", "configs/*.yaml"]
     assert (PACKAGE / "py.typed").is_file()
-    assert project["project"]["license"] == {"text": "MIT"}
+    assert project["project"]["license"] == "MIT" and project["project"]["license-files"] == ["LICENSE"]
     license_text = (REPO / "LICENSE").read_text()
     assert license_text.startswith("MIT License\n")  # the license field and the file agree
 

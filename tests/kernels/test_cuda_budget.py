@@ -11,11 +11,10 @@ numba is imported) with :func:`d3cli.kernels.cuda_calls.count_cuda_calls`, as
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
+
+from tests.kernels import simulator_children
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -28,7 +27,12 @@ _COUNT = textwrap.dedent(
     from d3cli.kernels.cuda_calls import count_cuda_calls
     from d3cli.kernels.sgm import cuda as sgm_cuda
 
-    sgm_cuda.LANES = 4  # the simulator runs every thread as Python; launches and copies are the same
+    from d3cli.kernels import cuda_launch
+
+    # the simulator runs every thread of a block as a Python thread: small blocks and one lane
+    # a line make the count about 3 minutes of one core; launches and copies do not depend on them
+    sgm_cuda.LANES = 1
+    cuda_launch.BLOCK_2D, cuda_launch.BLOCK_1D = (4, 4), 8
 
     rng = np.random.default_rng(0)
     wide = cv2.GaussianBlur(rng.uniform(0, 255, (32, 80)).astype(np.float32), (3, 3), 0.8)
@@ -45,9 +49,13 @@ _COUNT = textwrap.dedent(
 )
 
 
+simulator_children.register("test_a_small_pair_stays_within_60_launches_and_10_copies_to_the_host",
+                            ["-c", _COUNT], {"NUMBA_ENABLE_CUDASIM": "1"})
+
+
 def test_a_small_pair_stays_within_60_launches_and_10_copies_to_the_host():
-    proc = subprocess.run([sys.executable, "-c", _COUNT], cwd=ROOT, env={**os.environ, "NUMBA_ENABLE_CUDASIM": "1"},
-                          capture_output=True, text=True, timeout=900)
+    proc = simulator_children.result("test_a_small_pair_stays_within_60_launches_and_10_copies_to_the_host",
+                                     timeout=1200)
     assert proc.returncode == 0, proc.stderr[-3000:]
     got = json.loads(proc.stdout.strip().splitlines()[-1])
     assert got["launches"] <= 60, got["by_kernel"]

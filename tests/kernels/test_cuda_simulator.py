@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.kernels import simulator_children
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -27,16 +29,17 @@ def _run(args, *, env_extra, timeout):
     )
 
 
+simulator_children.register("test_cuda_kernels_match_cpu_under_the_simulator",
+                            ["-m", "pytest", "-q", "-m", "cuda", "tests/kernels", "-p", "no:cacheprovider"],
+                            {"NUMBA_ENABLE_CUDASIM": "1"})
+
+
 def test_cuda_kernels_match_cpu_under_the_simulator():
     try:
         import numba.cuda  # noqa: F401
     except ImportError as exc:
         pytest.skip(f"numba.cuda cannot be imported ({exc}); install the cuda extra to run the CUDA tests")
-    proc = _run(
-        ["-m", "pytest", "-q", "-m", "cuda", "tests/kernels", "-p", "no:cacheprovider"],
-        env_extra={"NUMBA_ENABLE_CUDASIM": "1"},
-        timeout=600,
-    )
+    proc = simulator_children.result("test_cuda_kernels_match_cpu_under_the_simulator", timeout=1200)
     output = proc.stdout + proc.stderr
     assert proc.returncode == 0, "CUDA tests under the simulator failed:\n" + output[-6000:]
     summary = output.strip().splitlines()[-1]
