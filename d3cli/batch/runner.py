@@ -365,19 +365,21 @@ def _pair_task(pair, *, out: Path, **kwargs):
 def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, max_disparity, progress,
                   config_source, pointcloud, executor, shard=None) -> BatchResult:
     """The body of :func:`run_batch`, run while holding the output folder's (or shard's) lock."""
-    settings = settings_fingerprint(cfg, method, max_disparity)
     run_name = RUN_FILE if shard is None else "run-{}-of-{}.json".format(*shard)
     batch = BatchResult(out_dir=out, run_json=out / run_name)
     records = []
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     meta = dict(cfg=cfg, method=method, max_disparity=max_disparity, started=started,
                 config_source=config_source, n_total=len(pairs), shard=shard)
-    task = functools.partial(_pair_task, out=out, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
-                             max_disparity=max_disparity, settings=settings, pointcloud=pointcloud)
     order = {pair.name: i for i, pair in enumerate(pairs)}
-    # The staging folders of a killed run over these pairs (only these: shards share OUT).
-    clean_leftovers(out, order, PAIR_FILES)
+    # From here on an interrupt is recorded in run.json: the lock is held, the batch has begun.
     try:
+        settings = settings_fingerprint(cfg, method, max_disparity)  # reads library versions: imports
+        task = functools.partial(_pair_task, out=out, cfg=cfg, method=method, evaluate=evaluate,
+                                 overwrite=overwrite, max_disparity=max_disparity, settings=settings,
+                                 pointcloud=pointcloud)
+        # The staging folders of a killed run over these pairs (only these: shards share OUT).
+        clean_leftovers(out, order, PAIR_FILES)
         with interrupts_unwrapped(), executor:
             meta["execution"] = executor.describe()
             # Compile before the first pair (and before a pool fans out): no pair's time includes it.
