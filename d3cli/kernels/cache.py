@@ -37,11 +37,6 @@ STAMP = "pixel.sha256"
 _prepared = False
 
 
-def _cache_folder(py_file: Path, cache_dir: str | None) -> Path:
-    """Where numba keeps the cache of the module ``py_file``."""
-    return module_cache_folder(py_file, cache_dir or "")
-
-
 def pixel_digest(root: Path = HERE) -> str:
     """SHA-256 over the paths and contents of every per-pixel module under ``root``."""
     digest = hashlib.sha256()
@@ -52,15 +47,15 @@ def pixel_digest(root: Path = HERE) -> str:
     return digest.hexdigest()
 
 
-def drop_stale(root: Path = HERE, cache_dir: str | None = None) -> bool:
+def drop_stale(root: Path = HERE, cache_dir: str = "") -> bool:
     """Delete the cached functions of every inlining module when a per-pixel module changed.
 
     Parameters
     ----------
     root : Path
         The kernels folder.
-    cache_dir : str or None
-        numba's ``NUMBA_CACHE_DIR`` (None or empty: the ``__pycache__`` beside each module).
+    cache_dir : str
+        numba's ``NUMBA_CACHE_DIR`` (empty: the ``__pycache__`` beside each module).
 
     Returns
     -------
@@ -69,12 +64,12 @@ def drop_stale(root: Path = HERE, cache_dir: str | None = None) -> bool:
         stamp then holds the new hash.
     """
     digest = pixel_digest(root)
-    stamp = _cache_folder(root / "pixel.py", cache_dir) / STAMP
+    stamp = module_cache_folder(root / "pixel.py", cache_dir) / STAMP
     if stamp.exists() and stamp.read_text() == digest:
         return False
     modules = sorted({p for pattern in INLINING_MODULES for p in root.glob(pattern)})
     for module in modules:
-        folder = _cache_folder(module, cache_dir)
+        folder = module_cache_folder(module, cache_dir)
         for f in list(folder.glob(f"{module.stem}.*.nbi")) + list(folder.glob(f"{module.stem}.*.nbc")):
             f.unlink()
     stamp.parent.mkdir(parents=True, exist_ok=True)

@@ -9,7 +9,7 @@ import re
 
 import numpy as np
 
-from .images import _existing_file, _read_bytes
+from .images import _read_bytes, regular_file
 
 
 # Keys read_calib may return, with the numeric type of each.
@@ -102,7 +102,7 @@ def read_calib(path: str | os.PathLike, *, image_size: tuple[int, int] | None = 
         ``ndisp``, ``width``, ``height`` (px), ``height_m`` (m), ``pitch_deg``,
         ``roll_deg``, ``vmin``, ``vmax`` the file defines.
     """
-    path = _existing_file(path, "calibration file")
+    path = regular_file(path, "calibration file")
     text = _read_bytes(path).decode("utf-8", errors="replace")
     calib: dict = {}
     matrices: dict[str, np.ndarray] = {}

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError, where_what_fix
-from .images import MAX_IMAGE_PIXELS, _decode_unchanged, _existing_file, _single_channel
+from .images import MAX_IMAGE_PIXELS, _decode_unchanged, _single_channel, regular_file
 from .pfm import read_pfm
 
 
@@ -105,7 +105,7 @@ def read_disparity(path: str | os.PathLike, *, scale: float = 1.0, invalid: str 
     ndarray, float32, (H, W)
         Disparity in pixels with inf where invalid.
     """
-    path = _existing_file(path, "disparity file")
+    path = regular_file(path, "disparity file")
     mode = _normalise_invalid(path, invalid)
     if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
         raise InputError(where_what_fix(str(path), f"disparity scale must be > 0, got {scale!r}", "fix gt_scale"))
@@ -155,7 +155,7 @@ def read_mask(path: str | os.PathLike, *, min_value: int = 1) -> np.ndarray:
     -------
     ndarray, bool, (H, W)
     """
-    path = _existing_file(path, "mask file")
+    path = regular_file(path, "mask file")
     image = _decode_unchanged(path)
     hit = image >= min_value
     return hit.any(axis=2) if hit.ndim == 3 else hit

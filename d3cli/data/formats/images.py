@@ -70,9 +70,16 @@ def special_file_kind(path: str | os.PathLike) -> str | None:
     return kind
 
 
-def _existing_file(path: str | os.PathLike, what: str = "file") -> Path:
-    """Return ``path`` as a Path, raising InputError when it is missing, a folder, or no
-    regular file (a FIFO, a device: named as such, never opened)."""
+def regular_file(path: str | os.PathLike, what: str = "file") -> Path:
+    """``path`` as a Path when it is an existing regular file (or a link to one); special
+    files (a FIFO, a device) are named as such and never opened.
+
+    Raises
+    ------
+    InputError
+        ``<path>: <what> not found``, ``is a folder, not a file`` or ``not a regular file
+        (a FIFO)`` (a device, a socket, a link to one), each with the fix.
+    """
     path = Path(path)
     if not path.exists():
         raise InputError(where_what_fix(str(path), f"{what} not found", "check the path"))
@@ -82,18 +89,6 @@ def _existing_file(path: str | os.PathLike, what: str = "file") -> Path:
     if kind is not None:
         raise InputError(where_what_fix(str(path), f"not a regular file ({kind})", "give the file itself"))
     return path
-
-
-def regular_file(path: str | os.PathLike, what: str = "file") -> Path:
-    """``path`` as a Path when it is an existing regular file (or a link to one).
-
-    Raises
-    ------
-    InputError
-        ``<path>: <what> not found``, ``is a folder, not a file`` or ``not a regular file
-        (a FIFO)`` (a device, a socket, a link to one), each with the fix.
-    """
-    return _existing_file(path, what)
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -248,7 +243,7 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     InputError
         The file is missing, unreadable, corrupt, or not 8/16-bit.
     """
-    path = _existing_file(path, "image file")
+    path = regular_file(path, "image file")
     image = _decode_unchanged(path)
     if image.dtype.kind == "f":
         image = image.astype(np.float32, copy=False)

@@ -10,7 +10,7 @@ import numpy as np
 from ...errors import InputError, where_what_fix
 from .atomic import atomic_write
 from . import images
-from .images import _decode_unchanged, _existing_file, _single_channel
+from .images import _decode_unchanged, _single_channel, regular_file
 
 
 def read_kitti_png(path: str | os.PathLike) -> np.ndarray:
@@ -26,7 +26,7 @@ def read_kitti_png(path: str | os.PathLike) -> np.ndarray:
     ndarray, float32, (H, W)
         Disparity in pixels, inf where the stored value is 0.
     """
-    path = _existing_file(path, "disparity file")
+    path = regular_file(path, "disparity file")
     raw = _single_channel(path, _decode_unchanged(path), "KITTI disparity PNG")
     if raw.dtype != np.uint16:
         raise InputError(

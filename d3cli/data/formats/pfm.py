@@ -13,7 +13,7 @@ import numpy as np
 
 from ...errors import InputError, where_what_fix
 from .atomic import atomic_write
-from .images import MAX_IMAGE_PIXELS, _existing_file, _read_bytes
+from .images import MAX_IMAGE_PIXELS, _read_bytes, regular_file
 
 
 _PFM_TOKEN = re.compile(rb"\s*(\S+)")
@@ -88,7 +88,7 @@ def read_pfm_raw(path: str | os.PathLike) -> np.ndarray:
     ndarray, float32
         ``(H, W)`` for ``Pf`` files, ``(H, W, 3)`` for ``PF`` files; values bit-exact.
     """
-    path = _existing_file(path, "PFM file")
+    path = regular_file(path, "PFM file")
     _check_claimed_size(path)
     data = _read_bytes(path)
     channels, width, height, byte_order, offset = _parse_pfm_header(path, data)
