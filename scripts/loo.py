@@ -16,7 +16,8 @@ For every parameter and every pair, in turn: the value with the lowest mean crit
 the family before its year: ``middlebury2006`` -> ``middlebury``) is chosen and its
 result on the left-out pair kept.  Printed as Markdown, per family: the means of the
 left-out results beside the shipped config's means, and how often each value was chosen
-(a tie goes to the shipped value); then the family means of every grid point.
+(a tie goes to the shipped value); then the family means of every grid point with the
+mean wall time per pair of its run (taken as the runs were: compare on a quiet machine).
 
 Usage::
 
@@ -64,7 +65,8 @@ def read_run(folder) -> dict:
     Returns
     -------
     dict
-        ``{"name", "config", "pairs": {pair: {metric: float}}, "family": {pair: group}}``;
+        ``{"name", "config", "pairs": {pair: {metric: float}}, "family": {pair: group}}``, the
+        metrics with ``time`` (the run's wall seconds of the pair, NaN where not recorded);
         pairs whose status is not ``ok`` and pairs without ground truth are left out.
     """
     folder = Path(folder)
@@ -73,7 +75,8 @@ def read_run(folder) -> dict:
         with open(folder / "metrics.csv", newline="", encoding="utf-8") as fh:
             # pairs without ground truth have empty metric cells: nothing to choose on
             rows = [r for r in csv.DictReader(fh) if r.get("status") == "ok" and r.get("epe")]
-        pairs = {r["pair"]: {k: float(r[k]) for k in METRICS} for r in rows}
+        pairs = {r["pair"]: {k: float(r[k]) for k in METRICS} | {"time": float(r.get("time_s") or "nan")}
+                 for r in rows}
     except (OSError, KeyError, ValueError) as exc:
         raise SystemExit(f"Error: {folder}: not a finished 'd3stereo run --eval' folder ({exc}); "
                          "run the grid point again") from None
@@ -168,7 +171,8 @@ def family_tables(shipped, axes, family, criterion="pep_1") -> str:
              f"{len(pairs) - 1}, measured on the left-out pair",
              "", f"| parameter | shipped | shipped: {HEAD} | leave-one-out: {HEAD} | chosen (value: pairs) |",
              "|---|---|---|---|---|"]
-    grid = [f"| parameter | value | {HEAD} | {criterion} better than shipped on |", "|---|---|---|---|"]
+    grid = [f"| parameter | value | {HEAD} | {criterion} better than shipped on | time s/pair |",
+            "|---|---|---|---|---|"]
     for label, points in axes.items():
         missing = [(v, run["name"]) for v, run in points if not set(pairs) <= set(run["pairs"])]
         if missing:
@@ -184,7 +188,8 @@ def family_tables(shipped, axes, family, criterion="pep_1") -> str:
             means = {k: _mean(run["pairs"][p][k] for p in pairs) for k in METRICS}
             wins = sum(run["pairs"][p][criterion] < shipped["pairs"][p][criterion] for p in pairs)
             mark = " (shipped)" if run is shipped else ""
-            grid.append(f"| {label} | {value}{mark} | {_cells(means)} | {wins} / {len(pairs)} |")
+            seconds = _mean(run["pairs"][p]["time"] for p in pairs)
+            grid.append(f"| {label} | {value}{mark} | {_cells(means)} | {wins} / {len(pairs)} | {seconds:.2f} |")
     return "\n".join(lines + [""] + grid)
 
 

@@ -69,7 +69,7 @@ def test_the_table_puts_leave_one_out_beside_the_shipped_means(loo, grid, capsys
     assert ("| seeds.pkrn_min | 2.0 | 1.000 / 20.00 / 10.00 / 5.00 | 1.233 / 24.67 / 12.33 / 6.17 "
             "| 1.5: 2, 2.5: 1 |") in out
     assert "| diffusion.max_gap | 0.05 | 1.000 / 20.00 / 10.00 / 5.00 | 1.000 / 20.00 / 10.00 / 5.00 | 0.05: 3 |" in out
-    assert "| seeds.pkrn_min | 1.5 | 0.967 / 19.33 / 9.67 / 4.83 | 1 / 3 |" in out
+    assert "| seeds.pkrn_min | 1.5 | 0.967 / 19.33 / 9.67 / 4.83 | 1 / 3 | 1.00 |" in out
     assert "road" not in out  # pairs without ground truth take no part
 
 
