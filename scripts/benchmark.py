@@ -24,6 +24,13 @@ Usage::
     python scripts/benchmark.py DATA --family road --photometric \\
         -c road --methods d3stereo+pt,d3stereo,sgbm,pt-sgm
     python scripts/benchmark.py DATA --methods d3,sgbm,elas,pandora-sgm --markdown  # peers
+    python scripts/benchmark.py DATA --family kitti -c kitti \\
+        --methods d3,sgbm,elas,pandora-sgm --markdown --per-pair                # + per pair
+
+With ``--markdown`` (ground truth) the per-family table is followed by the per-pair win
+count: for EPE, PEP0.5, PEP1 and PEP2, on how many pairs the first d3stereo variant has a
+lower value than each other variant and than the best of them on that pair (ties are no
+win).  ``--per-pair`` adds one table per metric and time, a row per pair.
 
 The first d3stereo call compiles (or loads cached) kernels; a warm-up call on a tiny
 pair keeps that out of the timings.
@@ -49,6 +56,12 @@ from d3cli.evaluation.metrics import disparity_errors, photometric_scores
 KEYS = ("epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density")
 PHOTO_KEYS = ("mse", "psnr", "ssim", "coverage")
 VARIANTS = ("d3", "d3stereo", "d3stereo+pt", "sgbm", "pt-sgm", "elas", "pandora-sgm")
+D3_VARIANTS = ("d3", "d3stereo", "d3stereo+pt")
+#: Metrics of the per-pair win count and the per-pair tables (lower is better).
+WIN_KEYS = ("epe", "pep_0.5", "pep_1", "pep_2")
+#: Column name of the best peer on each pair in :func:`win_counts`.
+BEST = "best peer"
+KEY_LABELS = {"epe": "EPE", "pep_0.5": "PEP0.5 %", "pep_1": "PEP1 %", "pep_2": "PEP2 %", "time": "time s"}
 LABELS = {"d3": "d3stereo", "d3stereo": "d3stereo (PT off)", "d3stereo+pt": "d3stereo (PT on)",
           "sgbm": "SGBM", "pt-sgm": "PT-SGM", "elas": "ELAS", "pandora-sgm": "pandora census+SGM"}
 
@@ -162,6 +175,82 @@ def markdown_table(rows, *, photometric=False) -> str:
     return "\n".join(lines)
 
 
+def _reference_and_peers(rows):
+    """The first d3stereo variant run and the other variants, in the order run."""
+    names = _methods_of(rows)
+    ref = next((n for n in names if n in D3_VARIANTS), None)
+    return ref, [n for n in names if n != ref]
+
+
+def win_counts(rows, keys=WIN_KEYS):
+    """On how many pairs the first d3stereo variant beats each other variant, per metric.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Per-pair results as :func:`evaluate_pairs` returns them (ground-truth metrics).
+    keys : sequence of str
+        Metrics compared; lower is better for each.
+
+    Returns
+    -------
+    dict
+        ``{family: {"n": pairs, "wins": {against: {key: count}}}}`` per family and
+        ``"overall"``, where ``against`` is each other variant and ``"best peer"``: the
+        lowest value of all other variants on that pair (a win there beats every peer).
+        A tie is no win.  Empty when no d3stereo variant or no other variant was run.
+    """
+    ref, peers = _reference_and_peers(rows)
+    if ref is None or not peers:
+        return {}
+    out = {}
+    for row in rows:
+        for fam in (row["family"], "overall"):
+            entry = out.setdefault(fam, {"n": 0, "wins": {a: dict.fromkeys(keys, 0) for a in peers + [BEST]}})
+            entry["n"] += 1
+            for key in keys:
+                mine = row[ref][key]
+                others = {a: row[a][key] for a in peers}
+                others[BEST] = min(others.values())
+                for against, value in others.items():
+                    entry["wins"][against][key] += int(mine < value)
+    return out
+
+
+def markdown_wins(rows, keys=WIN_KEYS) -> str:
+    """Per-pair win counts of :func:`win_counts` as a Markdown table ("wins / pairs")."""
+    counts = win_counts(rows, keys)
+    if not counts:
+        return ""
+    ref, peers = _reference_and_peers(rows)
+    head = f"| family | pairs | {LABELS[ref]} better than | " + " | ".join(KEY_LABELS[k] for k in keys) + " |"
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for fam in sorted(counts, key=lambda f: (f == "overall", f)):
+        entry = counts[fam]
+        for i, against in enumerate(peers + [BEST]):
+            label = "the best peer on the pair" if against == BEST else LABELS[against]
+            cells = " | ".join(f"{entry['wins'][against][k]} / {entry['n']}" for k in keys)
+            first = f"| {fam} | {entry['n']} |" if i == 0 else "| | |"
+            lines.append(f"{first} {label} | {cells} |")
+    return "\n".join(lines)
+
+
+def markdown_per_pair(rows, keys=WIN_KEYS + ("time",)) -> str:
+    """One Markdown table per metric: a row per pair, a column per variant, the best in bold."""
+    names = _methods_of(rows)
+    tables = []
+    for key in keys:
+        head = f"| {KEY_LABELS[key]} | pair | " + " | ".join(LABELS[n] for n in names) + " |"
+        lines = [head, "|" + "---|" * (head.count("|") - 1)]
+        for row in sorted(rows, key=lambda r: (r["family"], r["pair"])):
+            values = [row[n][key] for n in names]
+            digits = 3 if key in ("epe", "time") else 2
+            cells = [f"**{v:.{digits}f}**" if v == min(values) else f"{v:.{digits}f}" for v in values]
+            lines.append(f"| {row['family']} | {row['pair']} | " + " | ".join(cells) + " |")
+        tables.append("\n".join(lines))
+    return "\n\n".join(tables)
+
+
 def print_summary(rows, *, photometric=False) -> None:
     """One line per family and variant."""
     for fam, name, m in _family_rows(rows, PHOTO_KEYS if photometric else KEYS):
@@ -182,7 +271,10 @@ def main(argv=None) -> int:
     parser.add_argument("--methods", default="d3,sgbm", help=f"comma-separated variants of {', '.join(VARIANTS)}")
     parser.add_argument("--photometric", action="store_true",
                         help="score the pairs WITHOUT ground truth photometrically (MSE, PSNR, SSIM)")
-    parser.add_argument("--markdown", action="store_true", help="print the per-family Markdown table")
+    parser.add_argument("--markdown", action="store_true",
+                        help="print the per-family Markdown table and the per-pair win counts")
+    parser.add_argument("--per-pair", action="store_true",
+                        help="also print per-pair Markdown tables (one per metric, the best in bold)")
     args = parser.parse_args(argv)
     cfg = load_config(args.config, args.set)
     pairs = discover(args.inputs)
@@ -198,6 +290,13 @@ def main(argv=None) -> int:
     if args.markdown:
         print()
         print(markdown_table(rows, photometric=args.photometric))
+        wins = "" if args.photometric else markdown_wins(rows)
+        if wins:
+            print()
+            print(wins)
+    if args.per_pair and not args.photometric:
+        print()
+        print(markdown_per_pair(rows))
     return 0
 
 

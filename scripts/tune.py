@@ -8,6 +8,10 @@ Usage (the sweep behind d3cli/configs/default.yaml)::
     python scripts/tune.py DATA --family middlebury \\
         --grid seeds.pkrn_min=1.2,1.5,2.0 --grid diffusion.max_gap=-1,0.02,0.05,0.1 \\
         --grid seeds.every_level=false,true
+
+It ranks on the same pairs it tunes on; whether a chosen value holds on pairs it was not
+tuned on is checked leave-one-out by ``scripts/loo.py`` (from ``d3stereo run --eval`` grid
+folders, docs/results.md "Leave-one-out of the tuned parameters").
 """
 
 from __future__ import annotations
