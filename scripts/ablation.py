@@ -74,10 +74,11 @@ TABLES = {"a": (("PT", "PRC", "RBF", "ARS"), PAPER_A, ("pep_0.5", "pep_1")),
 #: The additions of this implementation, each a config change on top of the full method.
 ADDITIONS = (
     ("+ occlusion check", ["refine.occlusion_check=true"]),
-    ("+ max_gap 0.05", ["diffusion.max_gap=0.05"]),
+    ("+ max_gap 0", ["diffusion.max_gap=0"]),
     ("+ seeds.every_level", ["seeds.every_level=true"]),
     ("+ band search", ["pyramid.band=true"]),
     ("+ symmetric candidates", ["inheritance.candidates=symmetric"]),
+    ("+ semi-global smoothing", ["aggregation.sgm_p1=0.15", "aggregation.sgm_p2=0.6"]),
 )
 ALL_ADDITIONS = [s for _, sets in ADDITIONS for s in sets]
 

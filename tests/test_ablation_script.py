@@ -62,8 +62,8 @@ def test_table_b_has_the_header_the_eight_switch_rows_and_the_additions(pairs):
     assert body[0].rstrip().endswith("| 34.3 | 24 | 4.07 | 1.11 |")  # the paper's baseline row
     assert body[7].rstrip().endswith("| 24.9 | 17.1 | 2.97 | 1.58 |")
     labels = [row.split("|")[1].strip() for row in body[8:]]
-    assert labels == ["+ occlusion check", "+ max_gap 0.05", "+ seeds.every_level", "+ band search",
-                      "+ symmetric candidates", "+ all additions (defaults)"]
+    assert labels == ["+ occlusion check", "+ max_gap 0", "+ seeds.every_level", "+ band search",
+                      "+ symmetric candidates", "+ semi-global smoothing", "+ all additions (defaults)"]
     for row in body:
         cells = [c.strip() for c in row.split("|")[1:-1]]
         assert len(cells) == len(rows[0].split("|")) - 2
@@ -78,3 +78,19 @@ def test_table_a_without_additions_has_nine_rows_and_a_bad_config_stops_first(pa
     assert rows[0].startswith("| PT | PRC | RBF | ARS |") and len(rows) == 2 + 9
     bad = run(pairs, "--set", "inheritance.candidates=diagonal")
     assert bad.returncode != 0 and "inheritance.candidates" in bad.stderr and "one of symmetric, paper" in bad.stderr
+
+
+def test_all_additions_on_the_full_method_give_the_defaults(monkeypatch):
+    """The last row is labelled "(defaults)": paper.yaml + every switch + every addition must
+    be the default config, key for key (a new default would otherwise go unmeasured)."""
+    import importlib.util
+
+    from d3cli.config import load_config
+
+    monkeypatch.syspath_prepend(str(ROOT / "scripts"))  # ablation.py imports benchmark.py beside it
+    spec = importlib.util.spec_from_file_location("ablation_script", SCRIPT)
+    ablation = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ablation)
+    names = ablation.TABLES["b"][0]
+    full = load_config(ablation.PAPER_CONFIG, ablation.switch_overrides(names, (1,) * len(names)) + ablation.ALL_ADDITIONS)
+    assert full == load_config(None)

@@ -103,7 +103,7 @@ class DiffusionConfig:
     kappa_d: int = 1  # neighbourhood radius
     adversarial: bool = True  # decided pixels may switch to a better candidate (eq. 6)
     max_sweeps: int = 100000  # safeguard; diffusion normally stops when nothing changes
-    max_gap: float = 0.05  # accepted states cost <= the pixel's least cost + this; -1: off (paper)
+    max_gap: float = 0.0  # accepted states cost <= the pixel's least cost + this; -1: off (paper)
 
 
 @dataclass(frozen=True)
