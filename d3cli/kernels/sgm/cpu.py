@@ -7,13 +7,9 @@ import numpy as np
 from numba import njit, prange
 
 from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import _pack, _unpack, ops
+from ..cpu_common import _pack, _unpack
 from ..intrinsics import _prefetch_cells
-
-
-# compiled again to be inlined into the drivers (numba IR inlining: its mode folds to a
-# constant per call site, which the smoothing measured faster)
-_sgm_step = njit(cache=True, error_model="numpy", inline="always")(ops.sgm_step.py_func)
+from .cpu_vector import _sgm_pixel
 
 
 # ----------------------------------------------------------------------------- semi-global smoothing
@@ -60,9 +56,10 @@ def _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, step, mode):
     path buffers (all inf on entry)."""
     w = index.shape[1]
     plo, phi = 0, 0
+    pm = np.float32(np.inf)
     for i in range(w):
         u = i if step > 0 else w - 1 - i
-        _sgm_step(cost, index, v, u, (a, 0), plo, phi, (b, 0), p1, p2, acc, mode)
+        pm = _sgm_pixel(cost, index, v, u, a, 0, plo, phi, pm, b, 0, p1, p2, acc, mode)
         plo, phi = index[v, u, 1], index[v, u, 2]
         a, b = b, a
 
@@ -78,16 +75,19 @@ def _sgm_columns(cost, index, n_disp, p1, p2, acc):
         # per column two path buffers, column k's at k size of two arrays
         a = np.full(size * (u1 - u0), np.inf, np.float32)
         b = np.full(size * (u1 - u0), np.inf, np.float32)
-        _sgm_column_pass(cost, index, u0, u1, a, b, size, p1, p2, acc, 1, 1)  # down
+        least = np.full(u1 - u0, np.inf, np.float32)  # per column the previous pixel's least path cost
+        _sgm_column_pass(cost, index, u0, u1, a, b, least, size, p1, p2, acc, 1, 1)  # down
         a[:] = np.inf
         b[:] = np.inf
-        _sgm_column_pass(cost, index, u0, u1, a, b, size, p1, p2, acc, -1, 2)  # up: the last path scales
+        least[:] = np.inf
+        _sgm_column_pass(cost, index, u0, u1, a, b, least, size, p1, p2, acc, -1, 2)  # up: the last path scales
 
 
 @njit(cache=True, inline="always")
-def _sgm_column_pass(cost, index, u0, u1, a, b, size, p1, p2, acc, step, mode):
+def _sgm_column_pass(cost, index, u0, u1, a, b, least, size, p1, p2, acc, step, mode):
     """One column path (``step`` 1 down, -1 up) over columns u0..u1, row by row; column
-    k's two path buffers at ``k size`` of ``a`` and ``b`` (all inf on entry)."""
+    k's two path buffers at ``k size`` of ``a`` and ``b`` (all inf on entry), its previous
+    pixel's least path cost at ``least[k]`` (inf on entry)."""
     h = index.shape[0]
     for i in range(h):
         v = i if step > 0 else h - 1 - i
@@ -97,7 +97,7 @@ def _sgm_column_pass(cost, index, u0, u1, a, b, size, p1, p2, acc, step, mode):
                 _prefetch_pixel(cost, acc, index, ahead, u)
             plo, phi = (index[v - step, u, 1], index[v - step, u, 2]) if i > 0 else (0, 0)
             k = (u - u0) * size
-            _sgm_step(cost, index, v, u, (a, k), plo, phi, (b, k), p1, p2, acc, mode)
+            least[u - u0] = _sgm_pixel(cost, index, v, u, a, k, plo, phi, least[u - u0], b, k, p1, p2, acc, mode)
         a, b = b, a
 
 
