@@ -19,7 +19,9 @@ def sgm_smooth(cost, p1, p2):
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.sgm_smooth`.
     """
     flat, index, n_disp, dense = _unpack(cost)
-    acc = np.zeros_like(flat)  # zeros: cells outside every visible band stay defined (0)
+    # not zeroed in a pass of its own: the row paths write every cell of a band and zero
+    # those between the bands (stored, not visible), so every cell is defined
+    acc = np.empty_like(flat)
     p1, p2 = np.float32(p1), np.float32(p2)
     _sgm_rows(flat, index, n_disp, p1, p2, acc)
     _sgm_columns(flat, index, n_disp, p1, p2, acc)
@@ -41,6 +43,7 @@ SGM_PREFETCH_ROWS = 2
 @njit(parallel=True, cache=True)
 def _sgm_rows(cost, index, n_disp, p1, p2, acc):
     for v in prange(index.shape[0]):
+        _zero_gaps(index, v, acc)
         # two path buffers, inf outside the band (pixel.sgm_step's layout)
         a = np.full(n_disp + 2, np.inf, np.float32)
         b = np.full(n_disp + 2, np.inf, np.float32)
@@ -48,6 +51,32 @@ def _sgm_rows(cost, index, n_disp, p1, p2, acc):
         a[:] = np.inf
         b[:] = np.inf
         _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, -1, 1)  # right to left
+
+
+@njit(cache=True, inline="always")
+def _zero_gaps(index, v, acc):
+    """Zero the cells of ``acc`` in no band, from the end of row v - 1's last band to
+    that of row v (the last row: to the end); bands packed in pixel order, row after row
+    (:mod:`d3cli.kernels.volume`)."""
+    h, w = index.shape[0], index.shape[1]
+    end = np.int64(0)
+    for r in range(v - 1, -1, -1):  # the cell after the last band above (an empty row: the one before)
+        u = w - 1
+        while u >= 0 and index[r, u, 2] <= index[r, u, 1]:
+            u -= 1
+        if u >= 0:
+            end = np.int64(index[r, u, 0]) + index[r, u, 2]
+            break
+    for u in range(w):
+        lo, hi = index[v, u, 1], index[v, u, 2]
+        if hi > lo:
+            start = np.int64(index[v, u, 0]) + lo
+            for c in range(end, start):
+                acc[c] = 0
+            end = max(end, start + (hi - lo))
+    if v == h - 1:
+        for c in range(end, acc.shape[0]):
+            acc[c] = 0
 
 
 @njit(cache=True, inline="always")
