@@ -1,15 +1,21 @@
 """CPU driver of the semi-global smoothing of a banded volume (four paths, rows and
-columns).  The contract: :mod:`d3cli.kernels.backend`."""
+columns), a path step's cells as LLVM vectors of 8 disparities (one file: numba keys a
+cached driver on its own file, so the inlined step lives beside it).  The contract:
+:mod:`d3cli.kernels.backend`."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
-from numba import njit, prange
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.core import cgutils, errors
+from numba.extending import intrinsic
 
 from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
 from ..cpu_common import _pack, _unpack
 from ..intrinsics import _prefetch_cells
-from .cpu_vector import _sgm_pixel
 
 
 # ----------------------------------------------------------------------------- semi-global smoothing
@@ -137,3 +143,151 @@ def _prefetch_pixel(cost, acc, index, v, u):
     c1 = index[v, u, 0] + index[v, u, 2] - 1
     _prefetch_cells(cost, c0, c1)
     _prefetch_cells(acc, c0, c1)
+
+
+# ----------------------------------------------------------------------------- a path step as vectors
+#: Disparities per block: one AVX register of float32 (a band of 35 fills 5 blocks, 40
+#: lanes; blocks of 16 would fill 48).
+SGM_LANES = 8
+
+
+def _splat(builder, x, ty, lanes):
+    """LLVM IR: a vector of ``lanes`` lanes of ``ty``, each ``x``."""
+    undef = ir.Constant(ir.VectorType(ty, lanes), ir.Undefined)
+    first = builder.insert_element(undef, x, ir.IntType(32)(0))
+    return builder.shuffle_vector(first, undef, ir.Constant(ir.VectorType(ir.IntType(32), lanes), [0] * lanes))
+
+
+def _least(builder, x, lanes):
+    """LLVM IR: the least lane of the float vector ``x`` (compare and select, exact)."""
+    undef = ir.Constant(x.type, ir.Undefined)
+    width = lanes
+    while width > 1:
+        width //= 2
+        upper = builder.shuffle_vector(x, undef, ir.Constant(ir.VectorType(ir.IntType(32), lanes),
+                                                             [width + k if k < width else k for k in range(lanes)]))
+        x = builder.select(builder.fcmp_ordered("<", upper, x), upper, x)
+    return builder.extract_element(x, ir.IntType(32)(0))
+
+
+def _vector_access(context, builder, signature, args, lanes):
+    """LLVM IR helpers of a vector intrinsic over 1D float32 arrays: ``scalar(k, ty)``
+    argument k cast to ``ty``; ``load(k, at, inside)`` and ``store(value, k, at,
+    inside)`` the ``lanes`` cells of array argument k from cell ``at`` (an i64), masked
+    by ``inside`` (a vector of i1) or, with None, plain."""
+    vec = ir.VectorType(ir.FloatType(), lanes)
+    bits = ir.VectorType(ir.IntType(1), lanes)
+    i32 = ir.IntType(32)
+
+    def scalar(k, ty):
+        return context.cast(builder, args[k], signature.args[k], ty)
+
+    def ptr(k, at):
+        ary = context.make_array(signature.args[k])(context, builder, args[k])
+        return builder.gep(ary.data, [at])
+
+    ptr_t = ptr(0, ir.IntType(64)(0)).type
+    m_load = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vec, [ptr_t, i32, bits, vec]),
+                                            f"llvm.masked.load.v{lanes}f32.p0")
+    m_store = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [vec, ptr_t, i32, bits]),
+                                             f"llvm.masked.store.v{lanes}f32.p0")
+
+    def load(k, at, inside):
+        if inside is not None:
+            return builder.call(m_load, [ptr(k, at), i32(4), inside, ir.Constant(vec, [0.0] * lanes)])
+        return builder.load(builder.bitcast(ptr(k, at), vec.as_pointer()), align=4)
+
+    def store(value, k, at, inside):
+        if inside is not None:
+            builder.call(m_store, [value, ptr(k, at), i32(4), inside])
+        else:
+            builder.store(value, builder.bitcast(ptr(k, at), vec.as_pointer()), align=4)
+
+    return scalar, load, store
+
+
+@intrinsic
+def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2, mode):
+    """The ``n`` cells of one path step, :func:`d3cli.kernels.sgm.pixel.build`'s
+    ``sgm_step`` loop in blocks of :data:`SGM_LANES` disparities: cell i's cost at
+    ``cost[cells + i]``, the previous pixel's path costs of d - 1, d, d + 1 at
+    ``pbuf[below + i + (0, 1, 2)]``, the new one written to ``cbuf[out + i]`` and into
+    ``acc[cells + i]`` as ``mode`` (a literal) says.  The same float32 operations in the
+    same order per cell (compare-and-select minima, then ``C + (b - pm)``).  Returns the
+    least new path cost, kept per lane over the blocks and reduced once.  Whole blocks
+    take plain loads and stores, the last partial one masked ones: no cell past ``n`` is
+    read or written."""
+    if not isinstance(mode, types.IntegerLiteral):
+        raise errors.RequireLiteralValue("mode")
+    how = mode.literal_value
+    lanes = SGM_LANES
+
+    def codegen(context, builder, signature, args):
+        f32 = ir.FloatType()
+        i64 = ir.IntType(64)
+        vec = ir.VectorType(f32, lanes)
+        scalar, load, store = _vector_access(context, builder, signature, args, lanes)
+        infs = ir.Constant(vec, [math.inf] * lanes)
+        n = scalar(7, types.int64)
+        pm = scalar(8, types.float32)
+        pm_v = _splat(builder, pm, f32, lanes)
+        p1 = _splat(builder, scalar(9, types.float32), f32, lanes)
+        jump = _splat(builder, builder.fadd(pm, scalar(10, types.float32)), f32, lanes)
+        started = builder.fcmp_unordered("!=", pm, ir.Constant(f32, math.inf))  # else the path's first pixel: L = C
+        least = cgutils.alloca_once_value(builder, infs)
+
+        def block(start, inside):  # cells start .. start + lanes - 1
+            def at(k, shift=0):
+                return builder.add(builder.add(scalar(k, types.int64), start), i64(shift))
+
+            el = load(0, at(4), inside)
+            x = load(2, at(5, 1), inside)  # L(q, d)
+            b = builder.select(builder.fcmp_ordered("<", x, jump), x, jump)
+            y = builder.fadd(load(2, at(5), inside), p1)  # L(q, d - 1) + P1
+            b = builder.select(builder.fcmp_ordered("<", y, b), y, b)
+            y = builder.fadd(load(2, at(5, 2), inside), p1)  # L(q, d + 1) + P1
+            b = builder.select(builder.fcmp_ordered("<", y, b), y, b)
+            el = builder.select(started, builder.fadd(el, builder.fsub(b, pm_v)), el)
+            store(el, 3, at(6), inside)
+            if how == 1:
+                store(builder.fadd(load(1, at(4), inside), el), 1, at(4), inside)
+            elif how == 2:
+                store(builder.fmul(builder.fadd(load(1, at(4), inside), el), ir.Constant(vec, [0.25] * lanes)), 1,
+                      at(4), inside)
+            else:
+                store(el, 1, at(4), inside)
+            el = el if inside is None else builder.select(inside, el, infs)
+            m = builder.load(least)
+            builder.store(builder.select(builder.fcmp_ordered("<", el, m), el, m), least)
+
+        whole = builder.ashr(n, i64(lanes.bit_length() - 1))  # blocks of all lanes (SGM_LANES: a power of two)
+        with cgutils.for_range(builder, whole) as loop:
+            block(builder.mul(loop.index, i64(lanes)), None)
+        start = builder.mul(whole, i64(lanes))
+        with builder.if_then(builder.icmp_signed("<", start, n)):
+            ids = builder.add(_splat(builder, start, i64, lanes), ir.Constant(ir.VectorType(i64, lanes), list(range(lanes))))
+            block(start, builder.icmp_signed("<", ids, _splat(builder, n, i64, lanes)))
+        return _least(builder, builder.load(least), lanes)
+
+    sig = types.float32(cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2, mode)
+    return sig, codegen
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _sgm_pixel(cost, index, v, u, pbuf, pbase, plo, phi, pm, cbuf, cbase, p1, p2, acc, mode):
+    """One pixel of one path (``pixel.sgm_step``'s arithmetic and buffer layout) in
+    blocks of :data:`SGM_LANES` disparities; ``pm`` the least path cost of the previous
+    pixel (inf at the path's start).  Returns the least of this pixel's path costs: the
+    next step's ``pm``, taken from the blocks as they are written instead of a scan of
+    the band (a serial chain of compares that took a fifth of the smoothing's time)."""
+    off = index[v, u, 0]
+    lo = index[v, u, 1]
+    hi = index[v, u, 2]
+    cells = off + lo
+    below = pbase + lo  # L(q, d - 1) of the band's first d
+    out = cbase + lo + 1
+    least = _sgm_band(cost, acc, pbuf, cbuf, cells, below, out, hi - lo, pm, p1, p2, mode)
+    seen = pbase + plo + 1  # the previous pixel's band back to inf (pixel.sgm_step's layout)
+    for i in range(phi - plo):
+        pbuf[np.uint64(seen + i)] = np.inf
+    return least
