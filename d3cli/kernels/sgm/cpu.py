@@ -236,7 +236,10 @@ def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2
         started = builder.fcmp_unordered("!=", pm, ir.Constant(f32, math.inf))  # else the path's first pixel: L = C
         least = cgutils.alloca_once_value(builder, infs)
 
-        def block(start, inside):  # cells start .. start + lanes - 1
+        def block(start, inside, fresh=None):
+            """Cells start .. start + lanes - 1: masked loads and stores for ``inside``;
+            ``fresh`` (an overlapping last block): the sums of the other lanes, done by
+            the block before, are written back as they are."""
             def at(k, shift=0):
                 return builder.add(builder.add(scalar(k, types.int64), start), i64(shift))
 
@@ -248,14 +251,15 @@ def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2
             y = builder.fadd(load(2, at(5, 2), inside), p1)  # L(q, d + 1) + P1
             b = builder.select(builder.fcmp_ordered("<", y, b), y, b)
             el = builder.select(started, builder.fadd(el, builder.fsub(b, pm_v)), el)
-            store(el, 3, at(6), inside)
+            store(el, 3, at(6), inside)  # an overlapping block writes its path costs again, the same
+            old = load(1, at(4), inside) if how or fresh is not None else None
             if how == 1:
-                store(builder.fadd(load(1, at(4), inside), el), 1, at(4), inside)
+                total = builder.fadd(old, el)
             elif how == 2:
-                store(builder.fmul(builder.fadd(load(1, at(4), inside), el), ir.Constant(vec, [0.25] * lanes)), 1,
-                      at(4), inside)
+                total = builder.fmul(builder.fadd(old, el), ir.Constant(vec, [0.25] * lanes))
             else:
-                store(el, 1, at(4), inside)
+                total = el
+            store(total if fresh is None else builder.select(fresh, total, old), 1, at(4), inside)
             el = el if inside is None else builder.select(inside, el, infs)
             m = builder.load(least)
             builder.store(builder.select(builder.fcmp_ordered("<", el, m), el, m), least)
@@ -264,9 +268,18 @@ def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2
         with cgutils.for_range(builder, whole) as loop:
             block(builder.mul(loop.index, i64(lanes)), None)
         start = builder.mul(whole, i64(lanes))
+        ivec = ir.VectorType(i64, lanes)
         with builder.if_then(builder.icmp_signed("<", start, n)):
-            ids = builder.add(_splat(builder, start, i64, lanes), ir.Constant(ir.VectorType(i64, lanes), list(range(lanes))))
-            block(start, builder.icmp_signed("<", ids, _splat(builder, n, i64, lanes)))
+            # the rest: a block ending at the band's end where the band has a whole block
+            # (plain loads and stores), else masked ones
+            with builder.if_else(builder.icmp_signed(">=", n, i64(lanes))) as (overlap, short):
+                with overlap:
+                    last = builder.sub(n, i64(lanes))
+                    ids = builder.add(_splat(builder, last, i64, lanes), ir.Constant(ivec, list(range(lanes))))
+                    block(last, None, builder.icmp_signed(">=", ids, _splat(builder, start, i64, lanes)))
+                with short:
+                    ids = builder.add(_splat(builder, start, i64, lanes), ir.Constant(ivec, list(range(lanes))))
+                    block(start, builder.icmp_signed("<", ids, _splat(builder, n, i64, lanes)))
         return _least(builder, builder.load(least), lanes)
 
     sig = types.float32(cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2, mode)

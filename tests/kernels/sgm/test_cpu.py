@@ -60,6 +60,25 @@ def test_dense_volume_equals_the_reference(p1, p2):
     np.testing.assert_array_equal(got, want)
 
 
+def test_wide_bands_equal_the_reference():
+    # bands of 1 to 21 disparities: whole blocks of the vector step, a last block that
+    # overlaps the one before, and short bands alone
+    rng = np.random.default_rng(7)
+    h, w, n = 5, 8, 24
+    cost = rng.uniform(0, 1, (h, w, n)).astype(F32)
+    lo = rng.integers(0, 3, (h, w))
+    hi = lo + rng.integers(1, 22, (h, w))
+    want, inside = reference_paths(cost, lo, hi, 0.05, 0.3)
+    got = cpu.sgm_smooth(banded(cost, lo, hi), 0.05, 0.3)
+    for v in range(h):
+        for u in range(w):
+            off = got.index[v, u, 0]
+            np.testing.assert_array_equal(got.cost[off + lo[v, u]:off + hi[v, u]], want[v, u, lo[v, u]:hi[v, u]])
+    dense = cost[:, :, :19]
+    np.testing.assert_array_equal(cpu.sgm_smooth(dense, 0.05, 0.3),
+                                  reference_paths(dense, np.zeros((h, w), int), np.full((h, w), 19), 0.05, 0.3)[0])
+
+
 def test_banded_volume_equals_the_reference():
     rng = np.random.default_rng(5)
     h, w, n = 6, 11, 9
