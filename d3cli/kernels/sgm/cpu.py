@@ -90,12 +90,12 @@ def _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, step, mode):
     """One row path (``step`` 1 rightwards, -1 leftwards) along row v; ``a``, ``b`` the
     path buffers (all inf on entry)."""
     w = index.shape[1]
-    plo, phi = 0, 0
     pm = np.float32(np.inf)
     for i in range(w):
         u = i if step > 0 else w - 1 - i
-        pm = _sgm_pixel(cost, index, v, u, a, 0, plo, phi, pm, b, 0, p1, p2, acc, mode)
-        plo, phi = index[v, u, 1], index[v, u, 2]
+        # the band that b (the buffer written now) holds from two pixels back
+        olo, ohi = (index[v, u - 2 * step, 1], index[v, u - 2 * step, 2]) if i >= 2 else (0, 0)
+        pm = _sgm_pixel(cost, index, v, u, a, 0, pm, b, 0, olo, ohi, p1, p2, acc, mode)
         a, b = b, a
 
 
@@ -130,9 +130,10 @@ def _sgm_column_pass(cost, index, u0, u1, a, b, least, size, p1, p2, acc, step, 
         for u in range(u0, u1):
             if 0 <= ahead < h:
                 _prefetch_pixel(cost, acc, index, ahead, u)
-            plo, phi = (index[v - step, u, 1], index[v - step, u, 2]) if i > 0 else (0, 0)
+            # the band that b (the buffer written now) holds from two rows back
+            olo, ohi = (index[v - 2 * step, u, 1], index[v - 2 * step, u, 2]) if i >= 2 else (0, 0)
             k = (u - u0) * size
-            least[u - u0] = _sgm_pixel(cost, index, v, u, a, k, plo, phi, least[u - u0], b, k, p1, p2, acc, mode)
+            least[u - u0] = _sgm_pixel(cost, index, v, u, a, k, least[u - u0], b, k, olo, ohi, p1, p2, acc, mode)
         a, b = b, a
 
 
@@ -287,12 +288,18 @@ def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _sgm_pixel(cost, index, v, u, pbuf, pbase, plo, phi, pm, cbuf, cbase, p1, p2, acc, mode):
+def _sgm_pixel(cost, index, v, u, pbuf, pbase, pm, cbuf, cbase, olo, ohi, p1, p2, acc, mode):
     """One pixel of one path (``pixel.sgm_step``'s arithmetic and buffer layout) in
     blocks of :data:`SGM_LANES` disparities; ``pm`` the least path cost of the previous
     pixel (inf at the path's start).  Returns the least of this pixel's path costs: the
     next step's ``pm``, taken from the blocks as they are written instead of a scan of
-    the band (a serial chain of compares that took a fifth of the smoothing's time)."""
+    the band (a serial chain of compares that took a fifth of the smoothing's time).
+
+    The buffers hold inf outside the band last written into them, as ``sgm_step``'s, but
+    are kept so differently: ``cbuf`` still holds the band ``[olo, ohi)`` of the pixel
+    two steps back (empty: all inf), and only its cells outside this pixel's band go back
+    to inf (``sgm_step`` resets the whole previous band, while neighbouring bands mostly
+    overlap)."""
     off = index[v, u, 0]
     lo = index[v, u, 1]
     hi = index[v, u, 2]
@@ -300,7 +307,8 @@ def _sgm_pixel(cost, index, v, u, pbuf, pbase, plo, phi, pm, cbuf, cbase, p1, p2
     below = pbase + lo  # L(q, d - 1) of the band's first d
     out = cbase + lo + 1
     least = _sgm_band(cost, acc, pbuf, cbuf, cells, below, out, hi - lo, pm, p1, p2, mode)
-    seen = pbase + plo + 1  # the previous pixel's band back to inf (pixel.sgm_step's layout)
-    for i in range(phi - plo):
-        pbuf[np.uint64(seen + i)] = np.inf
+    for d in range(olo, min(ohi, lo)):
+        cbuf[np.uint64(cbase + d + 1)] = np.inf
+    for d in range(max(olo, hi), ohi):
+        cbuf[np.uint64(cbase + d + 1)] = np.inf
     return least
