@@ -7,7 +7,8 @@ For every case (a stereo pair + a config):
   ``--reps`` times d3stereo and SGBM *alternately*; the medians and their ratio are
   reported. Alternating in one process keeps the ratio meaningful on a shared, noisy
   machine, where absolute seconds drift between runs. The median of every step of
-  ``result.timings`` (pyramid, cost per level, seeds, diffusion, finish, ...) is printed,
+  ``result.timings`` (pyramid, cost per level, seeds, diffusion, sgm, finish, ...) is printed,
+  the semi-global smoothing's share of the time (median of the reps' shares, where it runs),
   and the md5 of the d3stereo disparity map (a speed-up that should change no output
   must leave it as it was).
 * **memory**: one fresh process per method does a single call and reads its peak
@@ -117,7 +118,7 @@ def _child_time(spec: dict) -> dict:
     compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
     cold = time.perf_counter() - t0
     compute_pair("sgbm", cfg, left, right, max_disparity=dmax)
-    d3, sg, steps = [], [], {}
+    d3, sg, steps, sgm_share = [], [], {}, []
     for _ in range(spec["reps"]):
         t0 = time.perf_counter()
         res = compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
@@ -127,12 +128,15 @@ def _child_time(spec: dict) -> dict:
         sg.append(time.perf_counter() - t0)
         for key, value in res.timings.items():
             steps.setdefault(key, []).append(value)
+        if "sgm" in res.timings:  # the semi-global smoothing's share of this call (limit: 15 % on KITTI)
+            sgm_share.append(res.timings["sgm"] / res.timings["total"])
     return {
         "pair": name, "size": f"{left.shape[1]}x{left.shape[0]}", "max_disparity": dmax,
         "backend": res.info.get("backend", "?"), "pt": res.info.get("pt", {}).get("applied")
         if isinstance(res.info.get("pt"), dict) else None,
         "cold_s": cold, "d3_s": statistics.median(d3), "sgbm_s": statistics.median(sg),
         "steps": {k: statistics.median(v) for k, v in steps.items()},
+        "sgm_share": statistics.median(sgm_share) if sgm_share else None,
         # bit-identity check of a speed-up: the same md5 before and after the change
         "disparity_md5": hashlib.md5(np.ascontiguousarray(res.disparity, dtype=np.float32).tobytes()).hexdigest(),
     }
@@ -220,6 +224,11 @@ def main(argv=None) -> int:
     print("\nper-step medians (s):")
     for r in rows:
         print(f"  {r['case']}: " + ", ".join(f"{k} {v:.3f}" for k, v in r["steps"].items()))
+    shares = [r for r in rows if r.get("sgm_share") is not None]
+    if shares:
+        print("\nsemi-global smoothing, share of d3stereo's time (median over the reps):")
+        for r in shares:
+            print(f"  {r['case']}: {100 * r['sgm_share']:.1f} %")
     print("\ndisparity md5 (equal before and after a bit-identical speed-up):")
     for r in rows:
         print(f"  {r['case']}: {r['disparity_md5']}")

@@ -9,6 +9,8 @@ configuration into the scalars the kernels take; the kernels live in
 
 from __future__ import annotations
 
+import time
+
 from ..config import Config
 from ..kernels.volume import Volume, dense_index
 from .pyramid import level_max_disparity
@@ -145,7 +147,7 @@ def aggregation_halo(cfg: Config) -> int:
 
 
 def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, backend, features=None,
-               bands=None) -> Volume:
+               bands=None, step_times: dict | None = None) -> Volume:
     """Aggregated cost volume of one level (steps 2-3).
 
     Parameters
@@ -164,6 +166,9 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
     bands : (store, visible) int32 (H, W, 3) host arrays, optional
         From :func:`d3cli.method.band.band_indexes`: the cells to compute and aggregate,
         and the band each pixel shows afterwards.  Default: the full range.
+    step_times : dict, optional
+        Gets ``time_sgm``, the seconds of the semi-global smoothing, where it runs (a
+        step of ``result.timings`` of its own: ``sgm``).
 
     Returns
     -------
@@ -210,5 +215,8 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
     if level == 0 and agg.sgm_p2 > 0:
         # Semi-global smoothing of the finest aggregated cost, four paths: it lowers
         # PEP1 on driving scenes (docs/design.md, 'Semi-global smoothing'; d3cli/configs/kitti.yaml)
+        t0 = time.perf_counter()
         cost = backend.sgm_smooth(cost, agg.sgm_p1, agg.sgm_p2)
+        if step_times is not None:
+            step_times["time_sgm"] = time.perf_counter() - t0
     return cost

@@ -311,8 +311,9 @@ class D3Stereo:
             disp, cost, stats = self._match_level(pyr_l[level], pyr_r[level], disp, level=level,
                                                   coarsest=level == levels - 1, dmax=dmax, stop_level=stop_level,
                                                   features=None if features is None else features[level])
-            for key in ("cost", "decide", "diffusion"):
-                timings[key] = timings.get(key, 0.0) + stats["time_" + key]
+            for key in ("cost", "sgm", "decide", "diffusion"):
+                if "time_" + key in stats:  # sgm: where the semi-global smoothing runs
+                    timings[key] = timings.get(key, 0.0) + stats["time_" + key]
             per_level.append(stats)
             level_maps.insert(0, disp)
             if level > stop_level:
@@ -367,7 +368,7 @@ class D3Stereo:
                                  halo=aggregation_halo(cfg))
             stats["band_cells"] = bands[2]
         cost = level_cost(left, right, level=level, max_disparity=dmax, cfg=cfg, backend=backend,
-                          features=features, bands=bands)
+                          features=features, bands=bands, step_times=stats)
         t1 = time.perf_counter()
         disp = self._decide(cost, coarser, stats, coarsest=coarsest)
         t2 = time.perf_counter()
@@ -387,7 +388,7 @@ class D3Stereo:
         stats.update(  # counts may still be on the device: _read_counts makes them ints
             sweeps=sweeps,
             decided=backend.count_decided(disp),
-            time_cost=t1 - t0,
+            time_cost=t1 - t0 - stats.get("time_sgm", 0.0),  # the smoothing is a step of its own
             time_decide=t2 - t1,
             time_diffusion=t3 - t2,
         )

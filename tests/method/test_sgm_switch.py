@@ -56,3 +56,15 @@ def test_kitti_config_turns_it_on():
 def test_paper_config_turns_it_off():
     cfg = load_config("paper")
     assert (cfg.aggregation.sgm_p1, cfg.aggregation.sgm_p2) == (0.0, 0.0)
+
+
+def test_the_smoothing_is_a_step_of_its_own_in_the_timings():
+    left, right, _ = _pair()
+    on = D3Stereo(load_config(None, SGM)).compute(left, right, max_disparity=16)
+    off = D3Stereo(load_config(None, OFF)).compute(left, right, max_disparity=16)
+    assert on.timings["sgm"] > 0 and "sgm" not in off.timings
+    assert set(on.timings) - set(off.timings) == {"sgm"}
+    # the steps share the total: "cost" no longer holds the smoothing's seconds
+    steps = sum(v for k, v in on.timings.items() if k != "total")
+    assert steps <= on.timings["total"]
+    assert on.info["per_level"][-1]["time_sgm"] == on.timings["sgm"]

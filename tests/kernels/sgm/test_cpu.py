@@ -60,6 +60,25 @@ def test_dense_volume_equals_the_reference(p1, p2):
     np.testing.assert_array_equal(got, want)
 
 
+def test_wide_bands_equal_the_reference():
+    # bands of 1 to 21 disparities: whole blocks of the vector step, a last block that
+    # overlaps the one before, and short bands alone
+    rng = np.random.default_rng(7)
+    h, w, n = 5, 8, 24
+    cost = rng.uniform(0, 1, (h, w, n)).astype(F32)
+    lo = rng.integers(0, 3, (h, w))
+    hi = lo + rng.integers(1, 22, (h, w))
+    want, inside = reference_paths(cost, lo, hi, 0.05, 0.3)
+    got = cpu.sgm_smooth(banded(cost, lo, hi), 0.05, 0.3)
+    for v in range(h):
+        for u in range(w):
+            off = got.index[v, u, 0]
+            np.testing.assert_array_equal(got.cost[off + lo[v, u]:off + hi[v, u]], want[v, u, lo[v, u]:hi[v, u]])
+    dense = cost[:, :, :19]
+    np.testing.assert_array_equal(cpu.sgm_smooth(dense, 0.05, 0.3),
+                                  reference_paths(dense, np.zeros((h, w), int), np.full((h, w), 19), 0.05, 0.3)[0])
+
+
 def test_banded_volume_equals_the_reference():
     rng = np.random.default_rng(5)
     h, w, n = 6, 11, 9
@@ -92,3 +111,33 @@ def test_a_lone_wrong_minimum_is_outvoted_by_its_neighbours():
     smoothed = cpu.sgm_smooth(cost, 0.05, 0.2)
     assert smoothed[0, 4].argmin() == 2
     assert (smoothed.argmin(axis=2) == 2).all()
+
+
+def test_cells_in_no_visible_band_come_out_zero():
+    # a stored volume with cells between the visible bands (as the pyramid's store around
+    # them), NaN there, an empty row and an empty pixel: the bands equal the reference,
+    # every other cell is 0
+    rng = np.random.default_rng(11)
+    h, w, n = 5, 7, 8
+    cost = rng.uniform(0, 1, (h, w, n)).astype(F32)
+    lo = rng.integers(0, 4, (h, w))
+    hi = np.minimum(n, lo + rng.integers(1, 5, (h, w)))
+    hi[2, :] = lo[2, :]  # a row without cells
+    hi[3, 4] = lo[3, 4]
+    gaps = rng.integers(0, 3, (h, w))  # stored cells before each pixel's band
+    base = np.cumsum((gaps + hi - lo).ravel()) - (hi - lo).ravel()
+    index = np.stack([base.reshape(h, w) - lo, lo, hi], axis=2).astype(np.int32)
+    flat = np.full(int(base[-1]) + (hi - lo)[-1, -1] + 3, np.nan, F32)  # 3 more stored cells at the end
+    for v in range(h):
+        for u in range(w):
+            flat[index[v, u, 0] + lo[v, u]:index[v, u, 0] + hi[v, u]] = cost[v, u, lo[v, u]:hi[v, u]]
+    want, inside = reference_paths(cost, lo, hi, 0.1, 0.5)
+    got = cpu.sgm_smooth(Volume(flat, index, n), 0.1, 0.5).cost
+    visible = np.zeros(flat.shape, bool)
+    for v in range(h):
+        for u in range(w):
+            off = index[v, u, 0]
+            visible[off + lo[v, u]:off + hi[v, u]] = True
+            np.testing.assert_array_equal(got[off + lo[v, u]:off + hi[v, u]], want[v, u, lo[v, u]:hi[v, u]])
+    assert (~visible).sum() == gaps.sum() + 3
+    assert (got[~visible] == 0).all()
