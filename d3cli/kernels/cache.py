@@ -1,11 +1,14 @@
 """The numba cache of the kernels: where it lives, and dropping what an edit made stale.
 
-Numba keys a cached function on its own source file only.  The per-pixel functions are
-compiled (and inlined) into the CPU drivers of other files, and a step's per-pixel module
-inlines the shared helpers of ``pixel.py``; after an edit of any per-pixel module those
-caches would keep stale copies.  :func:`drop_stale` therefore hashes every per-pixel
-module (:data:`PIXEL_MODULES`) and deletes the cache of every module that inlines them
-(:data:`INLINING_MODULES`) when the hash changed.
+Numba keys a cached function on its own source file only.  But a kernel inlines the
+functions it calls from other modules: the per-pixel functions are compiled into the CPU
+drivers of other files, a step's per-pixel module inlines the shared helpers of
+``pixel.py``, a driver inlines the vector helpers of a sibling (``aggregation/cpu.py``
+those of ``cpu_vector.py``).  After an edit of such a module numba would keep serving the
+importers' stale copies.  :func:`drop_stale` therefore keeps a hash of every kernels
+module and, for each module that changed, deletes the cache of every module that imports
+it, directly or through others (:func:`importers`, from the relative imports of the
+sources).
 
 Imported (and :func:`prepare` run) by every kernels module that compiles with
 ``cache=True``, before its first decorator: numba picks a function's cache folder when the
@@ -14,7 +17,9 @@ decorator runs.  May import: numba and the standard library only.
 
 from __future__ import annotations
 
+import ast
 import hashlib
+import json
 import os
 from pathlib import Path
 
@@ -22,33 +27,74 @@ from .cachedir import choose_cache_dir, module_cache_folder
 
 #: The kernels package folder.
 HERE = Path(__file__).resolve().parent
-#: Glob patterns (relative to the kernels folder) of the per-pixel modules.
-PIXEL_MODULES = ("pixel.py", "*/pixel.py", "*/pixel_*.py",
-                 # finishing's inlined helpers: smoothing inlines exp.numpy_expf, range_box
-                 # inlines smoothing.at_least_zero
-                 "finishing/exp.py", "finishing/smoothing.py")
-#: Glob patterns of the modules whose cached functions inline per-pixel functions: the
-#: per-pixel modules themselves and every CPU and CUDA driver module (``cpu*.py``,
-#: ``cuda*.py``: the CUDA kernels are cached too, with the device functions linked in).
-INLINING_MODULES = PIXEL_MODULES + ("cpu*.py", "*/cpu*.py", "cuda*.py", "*/cuda*.py", "finishing/range_box.py")
-#: Name of the file, in the kernels folder's cache, holding the hash of the per-pixel modules.
-STAMP = "pixel.sha256"
+#: Name of the file, in the kernels folder's cache, holding the hash of every kernels module.
+STAMP = "modules.sha256.json"
+#: Modules every kernels module imports that compile nothing (an edit of them must not drop
+#: every cache).
+NO_KERNELS = ("cache.py", "cachedir.py")
 
 _prepared = False
 
 
-def pixel_digest(root: Path = HERE) -> str:
-    """SHA-256 over the paths and contents of every per-pixel module under ``root``."""
-    digest = hashlib.sha256()
-    files = sorted({p for pattern in PIXEL_MODULES for p in root.glob(pattern)})
-    for path in files:
-        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
-        digest.update(path.read_bytes())
-    return digest.hexdigest()
+def kernel_modules(root: Path = HERE) -> list[Path]:
+    """Every Python module under the kernels folder ``root``."""
+    return sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def module_digests(root: Path = HERE) -> dict[str, str]:
+    """SHA-256 of each kernels module, keyed by its path relative to ``root``."""
+    return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest() for p in kernel_modules(root)}
+
+
+def _module_file(folder: Path, dotted: str) -> Path | None:
+    """The module ``dotted`` (``a.b``) below ``folder``, as a file or a package ``__init__``."""
+    base = folder.joinpath(*dotted.split(".")) if dotted else folder
+    for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def local_imports(path: Path, root: Path = HERE) -> set[Path]:
+    """The kernels modules ``path`` imports with relative imports (``from .x import f``,
+    ``from .. import pixel``), :data:`NO_KERNELS` left out."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_bytes(), filename=str(path))):
+        if not isinstance(node, ast.ImportFrom) or node.level == 0:
+            continue
+        folder = path.parent
+        for _ in range(node.level - 1):
+            folder = folder.parent
+        if node.module:  # ``from .pixel import build``; ``from .finishing import fill`` names a module too
+            targets = [_module_file(folder, node.module)]
+            targets += [_module_file(folder, f"{node.module}.{a.name}") for a in node.names]
+        else:  # ``from .. import pixel``: the named modules (a name of the package itself: its __init__)
+            targets = [_module_file(folder, a.name) or _module_file(folder, "") for a in node.names]
+        found.update(t for t in targets if t is not None and t.name not in NO_KERNELS
+                     and root in t.parents and t != path)
+    return found
+
+
+def importers(root: Path = HERE) -> dict[Path, set[Path]]:
+    """For each kernels module, the modules that import it directly or through others."""
+    imported_by: dict[Path, set[Path]] = {}
+    for module in kernel_modules(root):
+        for target in local_imports(module, root):
+            imported_by.setdefault(target, set()).add(module)
+    closure = {}
+    for module in kernel_modules(root):
+        seen, todo = set(), [module]
+        while todo:
+            for user in imported_by.get(todo.pop(), ()):
+                if user not in seen:
+                    seen.add(user)
+                    todo.append(user)
+        closure[module] = seen
+    return closure
 
 
 def drop_stale(root: Path = HERE, cache_dir: str = "") -> bool:
-    """Delete the cached functions of every inlining module when a per-pixel module changed.
+    """Delete the cached functions of every module that changed or imports one that changed.
 
     Parameters
     ----------
@@ -60,20 +106,28 @@ def drop_stale(root: Path = HERE, cache_dir: str = "") -> bool:
     Returns
     -------
     bool
-        Whether the caches were dropped (the stamp was missing or held another hash); the
-        stamp then holds the new hash.
+        Whether anything was dropped (no stamp yet, an unreadable one, or a module whose
+        hash differs from the stamp's); the stamp then holds the new hashes.
     """
-    digest = pixel_digest(root)
+    digests = module_digests(root)
     stamp = module_cache_folder(root / "pixel.py", cache_dir) / STAMP
-    if stamp.exists() and stamp.read_text() == digest:
+    try:
+        recorded = json.loads(stamp.read_text())
+    except (OSError, ValueError):
+        recorded = {}
+    if not isinstance(recorded, dict):
+        recorded = {}
+    changed = {root / rel for rel, digest in digests.items() if recorded.get(rel) != digest}
+    if not changed:
         return False
-    modules = sorted({p for pattern in INLINING_MODULES for p in root.glob(pattern)})
-    for module in modules:
+    users = importers(root)
+    stale = set(changed).union(*(users.get(module, set()) for module in changed))
+    for module in sorted(stale):
         folder = module_cache_folder(module, cache_dir)
         for f in list(folder.glob(f"{module.stem}.*.nbi")) + list(folder.glob(f"{module.stem}.*.nbc")):
             f.unlink()
     stamp.parent.mkdir(parents=True, exist_ok=True)
-    stamp.write_text(digest)
+    stamp.write_text(json.dumps(digests, indent=0, sort_keys=True))
     return True
 
 

@@ -1,8 +1,9 @@
-"""The numba cache of the kernels: an edit of any per-pixel module drops the caches of
-every module that inlines per-pixel functions, and only then."""
+"""The numba cache of the kernels: an edit of a kernels module drops the caches of that
+module and of every module that imports it (directly or through others), and only those."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -13,30 +14,16 @@ from d3cli.kernels import cache
 
 @pytest.fixture
 def tree(tmp_path):
-    """A copy of the kernels' per-pixel and CPU driver modules, with fake cache files."""
+    """A copy of the kernels package's modules."""
     root = tmp_path / "kernels"
-    for pattern in cache.INLINING_MODULES:
-        for path in cache.HERE.glob(pattern):
-            target = root / path.relative_to(cache.HERE)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy(path, target)
+    for path in cache.kernel_modules(cache.HERE):
+        target = root / path.relative_to(cache.HERE)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(path, target)
     return root
 
 
-def _fake_caches(root: Path, cache_dir):
-    made = []
-    for pattern in cache.INLINING_MODULES:
-        for module in root.glob(pattern):
-            folder = _folder(module, cache_dir)
-            folder.mkdir(parents=True, exist_ok=True)
-            for suffix in ("nbi", "nbc"):
-                f = folder / f"{module.stem}.f-10.py313.{suffix}"
-                f.write_text("stale")
-                made.append(f)
-    return made
-
-
-def _folder(module: Path, cache_dir):
+def _folder(module: Path, cache_dir: str) -> Path:
     if cache_dir:
         from numba.core.caching import UserProvidedCacheLocator
 
@@ -44,38 +31,75 @@ def _folder(module: Path, cache_dir):
     return module.parent / "__pycache__"
 
 
+def _fake_caches(root: Path, cache_dir: str) -> dict[str, Path]:
+    """One fake cached function per module, keyed by the module's relative path."""
+    made = {}
+    for module in cache.kernel_modules(root):
+        folder = _folder(module, cache_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        f = folder / f"{module.stem}.f-10.py313.nbi"
+        f.write_text("cached")
+        made[module.relative_to(root).as_posix()] = f
+    return made
+
+
+def _dropped(made: dict[str, Path]) -> set[str]:
+    return {name for name, f in made.items() if not f.exists()}
+
+
 @pytest.mark.parametrize("use_cache_dir", [False, True])
 @pytest.mark.parametrize("edited", ["pixel.py", "decisive/pixel_seeds.py", "sgm/pixel.py", "cost/pixel.py"])
-def test_an_edit_of_any_per_pixel_module_drops_every_inlining_cache(tree, tmp_path, edited, use_cache_dir):
-    cache_dir = str(tmp_path / "numba") if use_cache_dir else None
+def test_an_edit_of_a_per_pixel_module_drops_every_driver_that_inlines_it(tree, tmp_path, edited, use_cache_dir):
+    cache_dir = str(tmp_path / "numba") if use_cache_dir else ""
     assert cache.drop_stale(tree, cache_dir)  # no stamp yet
     stamp = _folder(tree / "pixel.py", cache_dir) / cache.STAMP
-    assert stamp.read_text() == cache.pixel_digest(tree)
+    assert json.loads(stamp.read_text()) == cache.module_digests(tree)
     made = _fake_caches(tree, cache_dir)
-    assert any("decisive" in str(f) and "cpu_seeds" in f.name for f in made)
-    assert any("aggregation" in str(f) and "cpu_vector" in f.name for f in made)
     assert not cache.drop_stale(tree, cache_dir)  # unchanged: the caches stay
-    assert all(f.exists() for f in made)
-    before = stamp.read_text()
+    assert _dropped(made) == set()
     with open(tree / edited, "a") as f:
         f.write("# an edit\n")
     assert cache.drop_stale(tree, cache_dir)
-    assert not any(f.exists() for f in made)
-    assert stamp.read_text() == cache.pixel_digest(tree) != before
+    dropped = _dropped(made)
+    assert {edited, "decisive/cpu_seeds.py", "decisive/cpu_diffusion.py", "aggregation/cpu.py", "sgm/cpu.py",
+            "cost/cpu.py", "perspective/cpu.py", "decisive/cuda_diffusion.py", "sgm/cuda.py"} <= dropped
+    assert "finishing/fill.py" not in dropped  # compiles none of the per-pixel functions
+    assert json.loads(stamp.read_text()) == cache.module_digests(tree)
 
 
-def test_other_modules_keep_their_cache(tree):
+def test_an_edit_of_a_helper_module_drops_its_importers_cache(tree):
+    """aggregation/cpu.py inlines cpu_vector.py's row kernels: numba keys the cache on
+    cpu.py's source only, so an edit of cpu_vector.py alone used to leave it stale."""
     cache.drop_stale(tree)
-    other = tree / "__pycache__" / "finishing.f-10.py313.nbi"
-    other.write_text("kept")
-    with open(tree / "pixel.py", "a") as f:
+    made = _fake_caches(tree, "")
+    with open(tree / "aggregation" / "cpu_vector.py", "a") as f:
         f.write("# an edit\n")
     assert cache.drop_stale(tree)
-    assert other.exists()
+    dropped = _dropped(made)
+    assert {"aggregation/cpu_vector.py", "aggregation/cpu.py"} <= dropped
+    assert not dropped & {"sgm/cpu.py", "decisive/cpu_seeds.py", "cost/cpu.py", "pixel.py"}
 
 
-def test_every_per_pixel_module_is_hashed():
-    hashed = {p.relative_to(cache.HERE).as_posix() for pattern in cache.PIXEL_MODULES for p in cache.HERE.glob(pattern)}
-    assert {"pixel.py", "cost/pixel.py", "aggregation/pixel.py", "sgm/pixel.py", "perspective/pixel.py",
-            "decisive/pixel_seeds.py", "decisive/pixel_diffusion.py", "decisive/pixel_inheritance.py",
-            "decisive/pixel_subpixel.py"} <= hashed
+def test_an_edit_of_a_driver_drops_only_that_driver_and_the_facades(tree):
+    cache.drop_stale(tree)
+    made = _fake_caches(tree, "")
+    with open(tree / "sgm" / "cpu.py", "a") as f:
+        f.write("# an edit\n")
+    assert cache.drop_stale(tree)
+    assert _dropped(made) == {"sgm/cpu.py", "cpu.py", "__init__.py"}
+
+
+def test_a_stamp_of_an_older_version_drops_everything(tree):
+    made = _fake_caches(tree, "")
+    stamp = _folder(tree / "pixel.py", "") / cache.STAMP
+    stamp.write_text("0f" * 32)  # not JSON: an older stamp format
+    assert cache.drop_stale(tree)
+    assert _dropped(made) == set(made)
+
+
+def test_relative_imports_are_read_from_the_sources():
+    here = cache.HERE
+    assert cache.local_imports(here / "aggregation" / "cpu.py") >= {
+        here / "aggregation" / "cpu_vector.py", here / "aggregation" / "cpu_rows.py", here / "cpu_common.py",
+        here / "intrinsics.py"}
+    assert here / "cache.py" not in cache.local_imports(here / "aggregation" / "cpu.py")  # compiles nothing
