@@ -152,7 +152,7 @@ class Backend(Protocol):
         -------
         Volume or ndarray
             Same kind and band layout; each cell ``(L_left + L_right + L_down + L_up) / 4``
-            (:func:`pixel.sgm_step`), summed in that order.
+            (the recurrence :func:`pixel.sgm_step` states; each driver runs it in its own vector form), summed in that order.
         """
         ...
 
