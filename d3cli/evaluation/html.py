@@ -7,7 +7,8 @@ relative and point only to files that exist when the page is written.
 
 After ``--road-report`` (a pair folder holds ``defects.json``, :mod:`d3cli.road.report`)
 the page has a "Road inspection" section, read from those files: the batch totals, then
-per pair (deepest pothole first) a ``defects.png`` thumbnail and a table of its defects.
+per pair (deepest pothole first) a ``defects.png`` thumbnail and a table of its defects
+(with each pothole's ASTM D6433 severity), and the survey summary of ``road_survey.json``.
 """
 
 from __future__ import annotations
@@ -234,6 +235,8 @@ def definitions_section(keys: Iterable[str]) -> list[str]:
 #: Per-pair road files (d3cli.road.report writes them; read here, not imported: the
 #: evaluation room does not depend on the road room).
 ROAD_JSON, ROAD_PICTURES = "defects.json", ("defects.png", "height_color.png")
+#: The batch's survey summary (d3cli.road.severity.survey_summary, written beside defects.csv).
+ROAD_SURVEY = "road_survey.json"
 
 
 def _road_reports(out_dir: Path, rows: list[dict]) -> list[tuple[str, dict | None, str]]:
@@ -258,10 +261,11 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
     """HTML of the "Road inspection" section; [] when no pair has a ``defects.json``.
 
     Batch totals (potholes, bumps, low-confidence ones, summed area and fill volume of the
-    potholes, the deepest), then one card per pair with defects, deepest pothole first:
+    potholes, the deepest), the survey summary (``road_survey.json``: per frame, per km,
+    per severity level), then one card per pair with defects, deepest pothole first:
     ``defects.png`` as a thumbnail (links to it and to ``height_color.png``) and a sortable
-    table of id, kind, depth (bumps: height), mean depth, area, volume, decided share and
-    confidence;
+    table of id, kind, depth (bumps: height), mean depth, area, diameter, volume, ASTM D6433
+    severity, decided share and confidence;
     pairs without defects and pairs without a road report are listed by name.
     """
     out_dir = Path(out_dir)
@@ -281,6 +285,7 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping]) -> list[str]:
              _road_totals_row(done, len(reports))]
     if (out_dir / "defects.csv").is_file():
         parts.append('<p>Every defect of the batch: <a href="defects.csv">defects.csv</a>.</p>')
+    parts += _road_survey(out_dir)
 
     def deepest_of(data):
         return max((_num(d.get("max_depth_mm")) or 0.0 for d in data["defects"] if d.get("kind") == "pothole"),
@@ -320,6 +325,30 @@ def _road_totals_row(done: list, n_reports: int) -> str:
     return (f"<tr><td>{len(done)} of {n_reports}</td><td>{sum(bool(d['defects']) for _, d in done)}</td>"
             f"<td>{len(pits)}</td><td>{len(bumps)}</td><td>{low}</td><td>{total(pits, 'area_m2'):.3f}</td>"
             f"<td>{total(pits, 'volume_l'):.2f}</td><td>{deep_txt}</td></tr></tbody></table>")
+
+
+def _road_survey(out_dir: Path) -> list[str]:
+    """HTML of the survey summary (``road_survey.json``): potholes per frame and per km, and
+    per ASTM D6433 severity level; [] when the file is missing or unreadable."""
+    try:
+        survey = json.loads((out_dir / ROAD_SURVEY).read_text(encoding="utf-8"))
+        by = dict(survey.get("by_severity") or {})
+    except (OSError, ValueError, TypeError, AttributeError):
+        return []  # the per-pair tables above still hold every pothole
+
+    def cell(value) -> str:
+        v = _num(value)
+        return "–" if v is None else f"{v:g}"
+
+    cols = ("frames", "potholes", "per frame", "survey length [km]", "per km", "low", "medium", "high", "no level")
+    vals = [survey.get("frames"), survey.get("potholes"), survey.get("potholes_per_frame"), survey.get("length_km"),
+            survey.get("potholes_per_km"), by.get("low"), by.get("medium"), by.get("high"), by.get("none")]
+    return ['<p id="road-survey">Survey summary (<a href="road_survey.json">road_survey.json</a>): potholes per '
+            "frame, per km when road.frame_spacing_m is set, and per ASTM D6433 severity level (equivalent "
+            "potholes: one wider than 750 mm counts its area / 0.5 m²; no level: shallower than 13 mm or "
+            "narrower than 100 mm).</p>",
+            "<table><thead><tr>" + "".join(f"<th>{c}</th>" for c in cols) + "</tr></thead><tbody><tr>"
+            + "".join(f"<td>{cell(v)}</td>" for v in vals) + "</tr></tbody></table>"]
 
 
 def _road_card(out_dir: Path, pair: str, data: Mapping) -> list[str]:

@@ -22,7 +22,7 @@ from ..data.legend import put_text, text_px, text_size, vertical_colour_bar
 from .defects import find_defects
 from .plane import fit_road_plane, height_map, seen_by_both
 from .pointcloud import Camera, disparity_to_points
-from .rematch import NOISE_M, WINDOWS, rematch
+from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, rematch
 from .severity import pothole_severity, survey_summary
 
 log = logging.getLogger(__name__)
@@ -169,7 +169,8 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
 def _rematched_height(left, right, disparity, finite, regions, camera: Camera, plane, road_cfg) -> np.ndarray:
     """Height map with the disparity inside each defect (grown by two rings: the ring gives
     the reference height) matched again (:mod:`d3cli.road.rematch`), with the smallest
-    window of :data:`~d3cli.road.rematch.WINDOWS` whose heights scatter by at most
+    window of :data:`~d3cli.road.rematch.WINDOWS` that re-measures at least
+    ``MIN_RELIABLE`` of the zone and whose re-measured heights scatter by at most
     ``NOISE_M`` on the outer ring (:func:`_highpass_noise`); a defect no window measures
     that cleanly keeps the stored map."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
@@ -179,8 +180,10 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
         zone = cv2.dilate(inner.astype(np.uint8), ring).astype(bool) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
         for window in WINDOWS:
-            new = rematch(left, right, disparity, zone, window=window)
-            if _highpass_noise(height_map(new, finite, camera, plane), band, window) <= NOISE_M:
+            new, got = rematch(left, right, disparity, zone, window=window, return_reliable=True)
+            if got[zone].mean() < MIN_RELIABLE:
+                continue
+            if _highpass_noise(height_map(new, finite, camera, plane), band & got, window) <= NOISE_M:
                 out[zone] = new[zone]
                 break
         # else: no window matches the defect cleanly (a dark, noisy pair): the stored,

@@ -44,7 +44,8 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
        pothole, as in the ground truth of :func:`d3cli.data.synth.pothole_groups`.
 
     Parts smaller than ``min_part_m2`` (plane area, ``footprint``) are merged back into the
-    neighbour they share the longest border with.
+    neighbour they share the longest border with, and neighbouring parts of which one's
+    centre lies inside the other's opening are merged (:func:`_merge_nested`).
     """
     from skimage.morphology import h_maxima
 
@@ -77,7 +78,7 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
             dt = cv2.distanceTransform(np.pad(opened, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
             lobes = h_maxima(np.log1p(dt), -np.log(neck)) & opened.astype(bool) if neck < 1 else np.zeros_like(part)
             pieces += _watershed_parts(-dt, lobes, part)
-        for piece in _merge_small(pieces, footprint[box], min_part_m2):
+        for piece in _merge_nested(_merge_small(pieces, footprint[box], min_part_m2), ~sub_comp):
             mask = np.zeros_like(comp)
             mask[box] = piece
             yield mask
@@ -217,6 +218,42 @@ def _merge_small(parts: list, footprint: np.ndarray, min_m2: float) -> list:
         parts[j] = parts[j] | parts[i]
         del parts[i]
     return parts
+
+
+def _merge_nested(parts: list, outside: np.ndarray, share: float = 0.5) -> list:
+    """Merge each inner fragment, a part at least ``share`` of whose border it shares with
+    other parts (little of its outline is the rim, ``outside``), into the neighbour it
+    shares most border with; decided on the parts as cut, so the result does not depend
+    on their order.
+
+    The ground truth's rule (:func:`d3cli.data.synth.pothole_groups`): a pit inside a
+    shallower pothole's outline is a deeper spot of it.  The cues cut such a union (a
+    shelf around a deeper core, deeper blobs on a wet floor) into fragments, each of
+    which measured a part of one pothole.
+    """
+    if len(parts) < 2:
+        return list(parts)
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    parent = list(range(len(parts)))
+
+    def root(i):
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for i, p in enumerate(parts):
+        edge = p & ~cv2.erode(p.astype(np.uint8), cross, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+        near = cv2.dilate(edge.astype(np.uint8), cross).astype(bool)
+        shared = [int((near & q).sum()) if j != i else 0 for j, q in enumerate(parts)]
+        rim = int((near & outside).sum()) + int(edge[0].sum() + edge[-1].sum() + edge[:, 0].sum() + edge[:, -1].sum())
+        if sum(shared) >= share * max(sum(shared) + rim, 1):
+            ri, rj = root(i), root(int(np.argmax(shared)))
+            if ri != rj:
+                parent[ri] = rj
+    groups: dict = {}
+    for i, p in enumerate(parts):
+        groups[root(i)] = groups[root(i)] | p if root(i) in groups else p
+    return list(groups.values())
 
 
 def _label(mask: np.ndarray):

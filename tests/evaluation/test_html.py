@@ -169,3 +169,27 @@ def test_road_cards_show_each_potholes_diameter_and_astm_severity(tmp_path):
     rows = re.findall(r"<tr[^>]*>(.*?)</tr>", card[card.index("<tbody>"):card.index("</tbody>")])
     cells = [re.findall(r">([^<]*)</td>", row) for row in rows]
     assert cells[0][5:8] == ["357", "3.25", "high"] and cells[1][5:8] == ["–", "0.10", "–"]
+
+
+def test_road_section_shows_the_survey_summary_by_severity(tmp_path):
+    _road_pair(tmp_path / "p", [("pothole", 61.5, 0.1, 3.25, 0.95)])
+    survey = {"frames": 4, "potholes": 3, "bumps": 1, "low_confidence": 1,
+              "by_severity": {"low": 1.0, "medium": 0.0, "high": 2.5, "none": 0},
+              "potholes_per_frame": 0.75, "frame_spacing_m": 5.0, "length_km": 0.02, "potholes_per_km": 150.0}
+    (tmp_path / "road_survey.json").write_text(json.dumps(survey))  # as d3cli.road.report writes it
+    text = write_report_html(tmp_path, [{"pair": "p", "status": "ok"}], title="t").read_text()
+    road = text[text.index('<h2 id="road">'):]
+    survey_html = road[road.index('id="road-survey"'):]
+    survey_html = survey_html[:survey_html.index("</table>")]
+    assert re.findall(r"<th>(.*?)</th>", survey_html) == [
+        "frames", "potholes", "per frame", "survey length [km]", "per km", "low", "medium", "high", "no level"]
+    assert re.findall(r"<td>(.*?)</td>", survey_html) == ["4", "3", "0.75", "0.02", "150", "1", "0", "2.5", "0"]
+    assert 'href="road_survey.json"' in road
+
+    # Without road.frame_spacing_m the survey has no length: no per-km figures.
+    del survey["frame_spacing_m"], survey["length_km"], survey["potholes_per_km"]
+    (tmp_path / "road_survey.json").write_text(json.dumps(survey))
+    text = write_report_html(tmp_path, [{"pair": "p", "status": "ok"}], title="t").read_text()
+    survey_html = text[text.index('id="road-survey"'):]
+    survey_html = survey_html[:survey_html.index("</table>")]
+    assert re.findall(r"<td>(.*?)</td>", survey_html) == ["4", "3", "0.75", "–", "–", "1", "0", "2.5", "0"]

@@ -56,3 +56,30 @@ def test_the_re_match_measures_the_pothole_of_a_smoothed_map(tmp_path, smoothed_
     depth = [next(d["max_depth_mm"] for d in items if d["kind"] == "pothole") for items in (exact, blurred, rematched)]
     assert depth[1] < 0.9 * depth[0]
     assert depth[2] == pytest.approx(depth[0], rel=0.05)
+
+
+def test_the_re_match_keeps_the_stored_disparity_where_the_match_is_unreliable(smoothed_pair):
+    # A specular highlight (or an untextured dark floor) in the right image: its pixels
+    # cannot be matched.  Re-matched anyway they were pixels off and their deepest values
+    # became the pothole's maximum depth (a wet cone read 22 % too deep).
+    from d3cli.road.rematch import rematch
+
+    pair, _, smoothed = smoothed_pair
+    finite = np.isfinite(pair.disparity)
+    u, v = (int(round(pair.defects_gt[0][k])) for k in ("u", "v"))  # the pothole's centre
+    zone = np.zeros(smoothed.shape, bool)
+    zone[v - 30:v + 31, u - 30:u + 31] = True
+    zone &= finite
+    right = np.array(pair.right, copy=True)
+    ur = u - int(round(float(pair.disparity[v, u])))  # where the right camera sees the centre
+    glare = (slice(v - 8, v + 9), slice(ur - 30, ur + 31))
+    right[glare] = np.random.default_rng(0).integers(0, 256, right[glare].shape, dtype=np.uint8)
+    out, got = rematch(pair.left, right, smoothed, zone, return_reliable=True)
+    hidden = np.zeros_like(zone)
+    hidden[v - 4:v + 5, u - 10:u + 11] = True  # every 9 x 9 window here sees the glare
+    assert not got[hidden].any()
+    assert np.array_equal(out[hidden], smoothed[hidden])
+    assert np.array_equal(out[~got], smoothed[~got])
+    clear = got & zone
+    assert clear.sum() > 0.5 * zone.sum()
+    assert np.median(np.abs(out[clear] - pair.disparity[clear])) < 0.05

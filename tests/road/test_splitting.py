@@ -1,0 +1,33 @@
+"""Cutting joined potholes apart leaves no inner fragment (d3cli.road.splitting)."""
+
+import cv2
+import numpy as np
+
+from d3cli.road.splitting import split_parts
+
+
+def _floor_with_spots():
+    # A 25 mm flat floor (radius 80 px, walls to 100 px) with five spots 20 mm deeper: one
+    # in the middle, four 60 px around it (a broken floor, or specular blobs on a wet one).
+    # Each spot stands 20 mm above the saddles: the depth-saddle cue cuts five pieces, the
+    # middle one enclosed by the other four.
+    v, u = np.mgrid[0:260, 0:260].astype(float)
+    depth = np.where(np.hypot(u - 130, v - 130) < 100, 0.025 * np.clip((100 - np.hypot(u - 130, v - 130)) / 20, 0, 1),
+                     -0.001)
+    for cu, cv_ in ((130, 130), (190, 130), (70, 130), (130, 190), (130, 70)):
+        depth += 0.02 * np.clip(1 - np.hypot(u - cu, v - cv_) / 14, 0, None)
+    return depth.astype(np.float32)
+
+
+def test_a_fragment_enclosed_by_the_other_parts_is_merged_into_one_of_them():
+    depth = _floor_with_spots()
+    region = depth > 0.01
+    n, labels = cv2.connectedComponents(region.astype(np.uint8))
+    parts = list(split_parts(labels, n, depth, np.full(depth.shape, 1e-5), level=0.01, prominence=0.006,
+                             smooth_px=2.0, neck=0.9, min_part_m2=0.01, step=0.01))
+    # Was five parts, the middle spot's (3572 px) bordering no road at all: a duplicate
+    # that measured one pothole's deepest spot.
+    assert sorted(int(p.sum()) for p in parts) == [6101, 6170, 14290]
+    assert np.array_equal(np.logical_or.reduce(parts), region)
+    rim = cv2.dilate((~region).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    assert all((p & rim).any() for p in parts)
