@@ -17,9 +17,10 @@ So the per-pair files are the serial executor's, byte for byte (result.json's ti
 aside), and so are its failure rules: a pair that fails at any stage is recorded and the
 next one runs; a full disk or Ctrl-C ends the batch.
 
-Bounds: at most ``prefetch`` pairs are read ahead (read and not yet computing) and at
-most ``write_behind`` computed pairs wait for the writer, so at most
-``prefetch + write_behind + 2`` pairs are in memory (one computing, one being written).
+Bounds: at most ``prefetch`` pairs are read ahead of the one computing (the reader
+takes the next pair once a compute has finished) and at most ``write_behind`` computed
+pairs wait for the writer, so at most ``prefetch + write_behind + 2`` pairs are in
+memory (one computing, one being written).
 
 Ctrl-C (or SIGTERM) reaches the calling thread: the pair computing is dropped (nothing of
 it was written), the writer finishes the pair it holds (written whole, counted as done,
@@ -101,7 +102,8 @@ class PipelinedExecutor:
         the pair's stage generator (:func:`d3cli.batch.runner._pair_task`)."""
         pairs = list(pairs)
         self._stop.clear()
-        slots = threading.Semaphore(self.prefetch)
+        # A slot per pair read and not yet computed: the one computing and ``prefetch`` ahead.
+        slots = threading.Semaphore(self.prefetch + 1)
         read_q: queue.Queue = queue.Queue()  # bounded by ``slots``
         write_q: queue.Queue = queue.Queue(maxsize=self.write_behind)
         self._threads = [
@@ -113,9 +115,8 @@ class PipelinedExecutor:
             thread.start()
         try:
             for _ in pairs:
-                item = _get(read_q, self._stop)
-                slots.release()  # the pair leaves the read-ahead: the reader may start the next
-                item = self._compute(item)
+                item = self._compute(_get(read_q, self._stop))
+                slots.release()  # computed: its images are the writer's now, the reader may read the next
                 while not _offer(write_q, item):  # the writer is behind: hand back what it finished
                     yield from self._ready()
                 yield from self._ready()
