@@ -457,6 +457,8 @@ def make_executor(workers: int = 1, scheduler: str | None = None, out: Path | No
         log.info("--workers %d: %d pair(s) to run, so %d worker process(es)", workers, n_pairs, max(1, n_pairs))
         workers = max(1, n_pairs)
     if workers > 1:
+        if prefetch:
+            log.info("--prefetch %d: not used with --workers %d (each worker takes whole pairs)", prefetch, workers)
         return PoolExecutor(workers)
     prefetch = resolve_prefetch(prefetch, cfg, method)
     if prefetch >= 1:

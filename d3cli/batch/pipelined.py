@@ -23,9 +23,10 @@ pairs wait for the writer, so at most ``prefetch + write_behind + 2`` pairs are 
 memory (one computing, one being written).
 
 Ctrl-C (or SIGTERM) reaches the calling thread: the pair computing is dropped (nothing of
-it was written), the writer finishes the pair it holds (written whole, counted as done,
-:meth:`PipelinedExecutor.drain`), pairs read ahead or queued for writing are dropped
-(nothing of them was written; a rerun computes them).
+it was written) and so are the pairs read ahead; the writer finishes the pairs already
+computed (at most ``write_behind + 1``, each written whole and counted as done,
+:meth:`PipelinedExecutor.drain`), so, as in a serial batch, every pair before the one
+interrupted is complete.
 
 Results are yielded in input order (one writer, first in first out).
 """
@@ -92,7 +93,7 @@ class PipelinedExecutor:
 
     def drain(self) -> list:
         """``(pair, result)`` of the pairs the writer finished after an interruption (it
-        finishes the pair it holds); call after leaving the ``with`` block."""
+        writes the pairs computed before it); call after leaving the ``with`` block."""
         finished, self._finished = self._finished, []
         return finished
 
@@ -158,8 +159,9 @@ class PipelinedExecutor:
 
     def _writer(self, write_q: queue.Queue) -> None:
         """Writer thread: each pair's last stage, in the order computed.  After a pair
-        that ends the batch, or once the batch is stopping, the pairs still queued are
-        dropped (nothing of them was written)."""
+        that ends the batch (a full disk, Ctrl-C inside a write) the pairs still queued
+        are dropped (nothing of them was written); when the calling thread stops the batch,
+        those already queued are written first."""
         failed = False
         while True:
             item = _get(write_q, self._stop)
@@ -169,7 +171,7 @@ class PipelinedExecutor:
                 self._done.put(_END)
                 return
             kind, pair, payload = item
-            if failed or self._stop.is_set():
+            if failed:
                 if kind == "stages":
                     payload.close()
                 continue

@@ -149,17 +149,13 @@ def test_a_full_disk_in_the_writer_ends_the_batch_at_that_pair(tmp_path, five_pa
 
 
 # ----------------------------------------------------------------------------- Ctrl-C
-def test_ctrl_c_while_computing_keeps_the_pair_being_written_and_drops_the_rest(tmp_path, five_pairs,
-                                                                                 monkeypatch):
+def test_ctrl_c_while_computing_writes_the_pairs_computed_before_and_drops_the_rest(tmp_path, five_pairs,
+                                                                                    monkeypatch):
     real = d3cli.batch.runner.compute_pair
     out = tmp_path / "out"
 
     def interrupted_on_c(method, cfg, left, right, **kwargs):
         if Path(kwargs["pair_dir"]).name == "c":
-            deadline = time.monotonic() + WAIT_S  # until b is written: it is then finished, not dropped
-            while not (out / "b" / "result.json").exists():
-                assert time.monotonic() < deadline
-                time.sleep(0.01)
             try:  # what numba raises when SIGINT arrives inside a compiled function
                 raise KeyboardInterrupt
             except KeyboardInterrupt:
