@@ -38,8 +38,6 @@ import queue
 import threading
 from typing import Callable, Iterator, Sequence
 
-from .warmup import warm_jit
-
 log = logging.getLogger(__name__)
 
 #: Pairs read ahead by default (``--prefetch auto`` on a GPU): one is enough to hide a
@@ -89,7 +87,10 @@ class PipelinedExecutor:
         return {"mode": self.mode, "workers": 1, "prefetch": self.prefetch, "write_behind": self.write_behind}
 
     def warm(self, cfg, method) -> float:
-        return warm_jit(cfg, method)
+        """Compile or load the kernels before the first pair, as the serial executor does."""
+        from . import executors  # its warm_jit: one name for every executor of this process
+
+        return executors.warm_jit(cfg, method)
 
     def drain(self) -> list:
         """``(pair, result)`` of the pairs the writer finished after an interruption (it
