@@ -27,7 +27,8 @@ writes ``run.json`` / the summary.
 
 Ctrl-C: queued pairs are cancelled; pool workers ignore SIGINT and finish the pair they
 hold (whole pairs only, written atomically; counted as done, :meth:`PoolExecutor.drain`), Dask tasks in flight are cancelled (a
-cancelled pair leaves no ``result.json``, so a rerun computes it again).
+cancelled pair leaves no ``result.json``, so a rerun computes it again); the pipelined
+executor's writer finishes the pairs already computed.
 """
 
 from __future__ import annotations
