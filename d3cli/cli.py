@@ -236,7 +236,8 @@ def main():
                    "defects.png per pair, OUT/defects.csv); same as road.report: true.")
 @_verbosity
 def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
-        break_lock, no_fill, pointcloud, workers, prefetch, scheduler, shard, color_range, road_report, verbose, quiet):
+        break_lock, no_fill, pointcloud, workers, prefetch, scheduler, shard, color_range, road_report, verbose,
+        quiet):
     """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
 
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or

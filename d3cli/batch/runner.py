@@ -537,8 +537,8 @@ def _pair_stages(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_
             reused = True
         else:
             stored = yield from _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
-                               max_disparity=max_disparity, settings=settings, fingerprint=fingerprint,
-                               pointcloud=pointcloud)
+                                          max_disparity=max_disparity, settings=settings, fingerprint=fingerprint,
+                                          pointcloud=pointcloud)
     except D3Error as exc:
         if io.is_disk_full(exc):
             raise  # every later pair would fail the same way: the batch stops
