@@ -18,9 +18,9 @@ aside), and so are its failure rules: a pair that fails at any stage is recorded
 next one runs; a full disk or Ctrl-C ends the batch.
 
 Bounds: at most ``prefetch`` pairs are read ahead of the one computing (the reader
-takes the next pair once a compute has finished) and at most ``write_behind`` computed
-pairs wait for the writer, so at most ``prefetch + write_behind + 2`` pairs are in
-memory (one computing, one being written).
+takes the next pair once a computed one is in the writer's queue) and at most
+``write_behind`` computed pairs wait for the writer, so at most
+``prefetch + write_behind + 2`` pairs are in memory (one computing, one being written).
 
 Ctrl-C (or SIGTERM) reaches the calling thread: the pair computing is dropped (nothing of
 it was written) and so are the pairs read ahead; the writer finishes the pairs already
@@ -33,12 +33,9 @@ Results are yielded in input order (one writer, first in first out).
 
 from __future__ import annotations
 
-import logging
 import queue
 import threading
 from typing import Callable, Iterator, Sequence
-
-log = logging.getLogger(__name__)
 
 #: Pairs read ahead by default (``--prefetch auto`` on a GPU): one is enough to hide a
 #: read shorter than a compute, the second absorbs one slow read (a cold file cache).
@@ -104,7 +101,8 @@ class PipelinedExecutor:
         the pair's stage generator (:func:`d3cli.batch.runner._pair_task`)."""
         pairs = list(pairs)
         self._stop.clear()
-        # A slot per pair read and not yet computed: the one computing and ``prefetch`` ahead.
+        # A slot per pair read and not yet handed to the writer: the one computing and
+        # ``prefetch`` ahead.
         slots = threading.Semaphore(self.prefetch + 1)
         read_q: queue.Queue = queue.Queue()  # bounded by ``slots``
         write_q: queue.Queue = queue.Queue(maxsize=self.write_behind)
@@ -118,9 +116,9 @@ class PipelinedExecutor:
         try:
             for _ in pairs:
                 item = self._compute(_get(read_q, self._stop))
-                slots.release()  # computed: its images are the writer's now, the reader may read the next
                 while not _offer(write_q, item):  # the writer is behind: hand back what it finished
                     yield from self._ready()
+                slots.release()  # its images are the writer's now: the reader may read the next pair
                 yield from self._ready()
             while not _offer(write_q, _END):
                 yield from self._ready()
