@@ -19,6 +19,7 @@ from types import SimpleNamespace
 import pytest
 from click.testing import CliRunner
 
+import d3cli.batch.pipelined
 import d3cli.batch.runner
 import d3cli.data.formats.images
 import d3cli.data.layouts
@@ -71,8 +72,9 @@ def five_pairs(tmp_path, make_pair_folder):
 
 
 # ----------------------------------------------------------------------------- same files
-@pytest.mark.parametrize("method", ["sgbm", "d3stereo"])
-def test_pipelined_files_are_the_serial_files(tmp_path, five_pairs, method):
+@pytest.mark.parametrize("method, writers", [("sgbm", 1), ("sgbm", 3), ("d3stereo", 2)])
+def test_pipelined_files_are_the_serial_files(tmp_path, five_pairs, monkeypatch, method, writers):
+    monkeypatch.setattr(d3cli.batch.pipelined, "default_writers", lambda: writers)
     names = PAIRS if method == "sgbm" else PAIRS[:3]  # d3stereo: 3 pairs keep the test under 5 s
     for name in set(PAIRS) - set(names):
         shutil.rmtree(five_pairs / name)
@@ -85,7 +87,8 @@ def test_pipelined_files_are_the_serial_files(tmp_path, five_pairs, method):
     assert len(files) == len(pair_files(serial, names)) >= len(names) * 6
     assert files == pair_files(serial, names)
     run = run_json(piped)
-    assert run["execution"] == {"mode": "pipelined", "workers": 1, "prefetch": 2, "write_behind": 2}
+    assert run["execution"] == {"mode": "pipelined", "workers": 1, "prefetch": 2, "writers": writers,
+                                "write_behind": max(2, writers)}
     assert [(p["pair"], p["status"]) for p in run["pairs"]] == [(n, "ok") for n in names]
 
 
@@ -131,6 +134,7 @@ def test_a_failing_writer_fails_only_its_pair(tmp_path, five_pairs, monkeypatch)
 
 
 def test_a_full_disk_in_the_writer_ends_the_batch_at_that_pair(tmp_path, five_pairs, monkeypatch):
+    monkeypatch.setattr(d3cli.batch.pipelined, "default_writers", lambda: 1)  # with more, c may be written beside b
     real = d3cli.data.formats.images.write_encoded
 
     def full_disk_on_b(path, image):
@@ -229,6 +233,7 @@ def test_the_next_pair_is_read_while_one_computes_and_written_behind(tmp_path, f
     monkeypatch.setattr(d3cli.data.layouts, "load_pair_images", load)
     monkeypatch.setattr(d3cli.batch.runner, "compute_pair", compute)
     monkeypatch.setattr(d3cli.batch.runner, "write_panel", panel)
+    monkeypatch.setattr(d3cli.batch.pipelined, "default_writers", lambda: 1)  # writes in input order
     out = tmp_path / "out"
     assert invoke("run", five_pairs, "-o", out, "--method", "sgbm", "-q", "--prefetch", "1").exit_code == 0
     assert waited == {"read b": True, "compute b": True}
@@ -313,7 +318,7 @@ def test_the_write_queue_is_bounded_and_results_come_in_input_order():
 
     opener = threading.Thread(target=open_gate)
     opener.start()
-    with PipelinedExecutor(1, write_behind=2) as executor:
+    with PipelinedExecutor(1, writers=1, write_behind=2) as executor:
         results = [(pair.name, result) for pair, result in executor.imap(task, [SimpleNamespace(name=n)
                                                                                 for n in names])]
     opener.join()
@@ -323,6 +328,38 @@ def test_the_write_queue_is_bounded_and_results_come_in_input_order():
     assert [n for s, n in log[:first_write] if s == "read"] == ["p0", "p1", "p2", "p3", "p4"]
     assert [n for s, n in log if s == "write"] == names
     assert in_memory == {"now": 0, "max": 5}
+
+
+def test_writers_write_at_once_and_results_still_come_in_input_order():
+    """Three writers: the three writes meet at a barrier (so they run at the same time) and
+    finish in reverse order; the pairs are yielded in input order all the same."""
+    names = ["p0", "p1", "p2", "p3"]
+    barrier = threading.Barrier(3, timeout=WAIT_S)
+    written = {name: threading.Event() for name in names}
+    finished = []
+
+    def task(pair, staged=False):
+        def stages():
+            yield "read"
+            yield "computed"
+            if pair.name != "p3":
+                barrier.wait()  # BrokenBarrierError after WAIT_S if the writes were one at a time
+                later = {"p0": "p1", "p1": "p2"}.get(pair.name)
+                if later is not None:
+                    assert written[later].wait(WAIT_S)
+            finished.append(pair.name)
+            written[pair.name].set()
+            return pair.name.upper()
+
+        return stages()
+
+    executor = PipelinedExecutor(3, writers=3)
+    assert executor.write_behind == 3
+    with executor:
+        results = [(pair.name, result) for pair, result in executor.imap(task, [SimpleNamespace(name=n)
+                                                                                for n in names])]
+    assert [n for n in finished if n != "p3"] == ["p2", "p1", "p0"]  # p3 is written once a writer is free
+    assert results == [(n, n.upper()) for n in names]
 
 
 # ----------------------------------------------------------------------------- choice
