@@ -384,3 +384,48 @@ def test_parse_prefetch_and_its_error_line(tmp_path, five_pairs):
     assert result.exit_code == 1
     assert result.output.strip().splitlines()[-1] == (
         "Error: --prefetch -1: use a number of pairs from 0 (none) to 64, or 'auto' (2 on a GPU, none on the CPU)")
+
+
+# ----------------------------------------------------------------------------- threads and stderr
+def test_two_threads_decoding_at_once_leave_stderr_where_it_was(tmp_path, monkeypatch):
+    """The reader and a writer decode images at the same moment (the inputs, the panel's
+    tiles).  A decode sends file descriptor 2 to a temporary file for its duration; two
+    overlapping decodes restored it crosswise and left the process's stderr in a deleted
+    file: the batch's last line ("Interrupted: ...") was lost."""
+    import cv2
+
+    from tests.helpers import textured_pair, write_png
+
+    write_png(tmp_path / "img.png", textured_pair(3, (16, 24))[0])
+    real = cv2.imdecode
+    first_inside, second_inside, first_done = threading.Event(), threading.Event(), threading.Event()
+
+    def decode(data, flags):
+        if threading.current_thread().name == "first":
+            first_inside.set()
+            second_inside.wait(0.5)  # the second decode starts meanwhile, unless decodes take turns
+        else:
+            second_inside.set()
+            first_done.wait(WAIT_S)  # and ends after the first
+        return real(data, flags)
+
+    def read(name):
+        if name == "second":
+            assert first_inside.wait(WAIT_S)
+        d3cli.data.formats.images.read_image(tmp_path / "img.png")
+        if name == "first":
+            first_done.set()
+
+    monkeypatch.setattr(cv2, "imdecode", decode)
+    before, saved = os.fstat(2), os.dup(2)
+    try:
+        threads = [threading.Thread(target=read, args=(name,), name=name) for name in ("first", "second")]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(WAIT_S)
+        after = os.fstat(2)
+    finally:
+        os.dup2(saved, 2)  # this process's stderr back, whatever the decodes did to it
+        os.close(saved)
+    assert (after.st_dev, after.st_ino) == (before.st_dev, before.st_ino)
