@@ -2,11 +2,10 @@
 
 Made for one GPU, whose kernels take a fraction of a pair's time while the host reads,
 decodes, encodes and writes: here a reader thread reads and decodes the next pairs while
-the current one computes, and a writer thread encodes and writes the finished ones
-behind it (several writer threads on a machine with many cores: encoding the PNGs,
-the panel and the scores of a 720p pair take longer than its kernels).  Each pair runs
-the very code of the serial executor, cut into its three
-stages by the generator :func:`d3cli.batch.runner._pair_stages`:
+the current one computes, and writer threads encode and write the finished ones behind
+it (several on a machine with many cores: the PNGs, the panel and the scores of a 720p
+pair take longer than its kernels).  Each pair runs the very code of the serial
+executor, cut into its three stages by the generator :func:`d3cli.batch.runner._pair_stages`:
 
 1. read (reader thread): the resume check (fingerprints, a skipped pair's reuse), the
    images, the disparity range, the memory check;
