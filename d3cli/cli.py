@@ -220,6 +220,9 @@ def main():
 @click.option("--workers", default="1", show_default=True, metavar="N|auto",
               help="Local worker processes, each taking whole pairs (auto: one per core); numba threads "
                    "per worker = cores // N.")
+@click.option("--prefetch", default="auto", show_default=True, metavar="N|auto",
+              help="With one worker: read N pairs ahead and write outputs behind, in threads, while a pair "
+                   "computes (auto: 2 on the CUDA backend, 0 - serial - on the CPU).")
 @click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
               help="Run each pair as a task on this Dask scheduler [default: $DASK_SCHEDULER_ADDRESS]; "
                    "OUT must be shared with the workers. Needs the 'distributed' extra.")
@@ -233,7 +236,8 @@ def main():
                    "defects.png per pair, OUT/defects.csv); same as road.report: true.")
 @_verbosity
 def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
-        break_lock, no_fill, pointcloud, workers, scheduler, shard, color_range, road_report, verbose, quiet):
+        break_lock, no_fill, pointcloud, workers, prefetch, scheduler, shard, color_range, road_report, verbose,
+        quiet):
     """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
 
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
@@ -264,6 +268,7 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
 
         require(method)  # an Error now, not one failed pair after another
     n_workers = batch.parse_workers(workers)
+    n_ahead = batch.parse_prefetch(prefetch)
     shard_of = batch.parse_shard(shard) if shard else None
     scheduler = scheduler or os.environ.get(batch.SCHEDULER_ENV) or None
     pairs = datasets.discover(list(inputs) if inputs else [samples_dir()])
@@ -271,7 +276,7 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     result = batch.run_batch(pairs, out_dir, cfg=cfg, method=method, evaluate=evaluate,
                              overwrite=overwrite, max_disparity=override, progress=not quiet,
                              config_source=source, pointcloud=pointcloud, workers=n_workers,
-                             scheduler=scheduler, shard=shard_of, break_lock=break_lock)
+                             scheduler=scheduler, shard=shard_of, break_lock=break_lock, prefetch=n_ahead)
     _batch_recorded()
     if _own_process():  # a SIGTERM from now on still exits 143, recorded in run.json
         batch.terminate_after_batch(result.run_json, f"Terminated (SIGTERM): {result.n_computed + result.n_skipped} "

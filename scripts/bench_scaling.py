@@ -1,4 +1,5 @@
-"""Throughput of ``d3stereo run``: serial against ``--workers N`` (and a local Dask cluster).
+"""Throughput of ``d3stereo run``: serial against ``--workers N``, ``--prefetch N`` (the
+pipelined batch), a local Dask cluster and, on a GPU, ``--backend cuda``.
 
 Runs the same batch with each way in turn, alternating (serial, workers, dask, serial,
 workers, dask, ...) so that a change of the machine's load hits every way alike; each
@@ -15,6 +16,15 @@ Example (the figures in README "Scaling out")::
 
 ``--start spawn`` (or fork, forkserver) sets ``D3STEREO_POOL_START`` for the pool runs,
 to compare how the workers start.
+
+The pipelined batch (reading and writing in threads beside the pair computing) on the
+CPU, and on a GPU machine CUDA serial / CUDA pipelined against the CPU pool::
+
+    python scripts/bench_scaling.py /tmp/synth12 --reps 3 --workers 0 --prefetch 2
+    python scripts/bench_scaling.py DATA --reps 1 --backend cpu --workers 16 --cuda
+
+Every way runs with ``--backend`` (default: the configuration's) except the ``--cuda``
+ways; serial is ``--prefetch 0`` (never pipelined, whatever the backend).
 """
 
 from __future__ import annotations
@@ -81,11 +91,30 @@ def start_dask(workers: int, env: dict, folder: Path):
     return address, procs
 
 
+def way_list(args, env: dict, pool_env: dict) -> list:
+    """(name, extra ``d3stereo run`` arguments, environment) of every way to run, serial first."""
+    backend = ["--backend", args.backend] if args.backend else []
+    ways = [("serial", [*backend, "--prefetch", "0"], env)]
+    if args.workers > 1:
+        ways.append((f"--workers {args.workers}", [*backend, "--workers", str(args.workers)], pool_env))
+    if args.prefetch > 0:
+        ways.append((f"--prefetch {args.prefetch}", [*backend, "--prefetch", str(args.prefetch)], env))
+    if args.cuda:
+        ways.append(("cuda --prefetch 0", ["--backend", "cuda", "--prefetch", "0"], env))
+        ways.append(("cuda --prefetch auto", ["--backend", "cuda", "--prefetch", "auto"], env))
+    return ways
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("inputs", nargs="+", help="what `d3stereo run` takes (a folder of pairs, ...)")
     parser.add_argument("--method", default="d3stereo")
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=int, default=2, help="pool processes (0: no pool run)")
+    parser.add_argument("--prefetch", type=int, default=0,
+                        help="also the pipelined batch reading this many pairs ahead (0: not run)")
+    parser.add_argument("--backend", choices=["auto", "cpu", "cuda"], help="--backend of the runs")
+    parser.add_argument("--cuda", action="store_true",
+                        help="also --backend cuda serially (--prefetch 0) and pipelined (--prefetch auto)")
     parser.add_argument("--reps", type=int, default=3)
     parser.add_argument("--dask", action="store_true", help="also a local Dask cluster of --workers workers")
     parser.add_argument("--start", choices=["fork", "spawn", "forkserver"], help="pool start method")
@@ -98,12 +127,16 @@ def main(argv=None) -> int:
     tmp = Path(tempfile.mkdtemp(prefix="d3-bench-scaling-"))
     procs = []
     try:
-        ways = [("serial", [], env), (f"--workers {args.workers}", ["--workers", str(args.workers)], pool_env)]
+        ways = way_list(args, env, pool_env)
         if args.dask:
             address, procs = start_dask(args.workers, env, tmp)
             ways.append((f"--scheduler ({args.workers} workers)", ["--scheduler", address], env))
         # One untimed run: numba cache written, files in the page cache, Dask workers joined.
-        run_once(args.inputs, tmp / "reference", args.method, [], env)
+        run_once(args.inputs, tmp / "reference", args.method, ways[0][1], env)
+        for name, extra, way_env in ways:
+            if "cuda" in extra:  # the CUDA kernels compiled or loaded once too
+                run_once(args.inputs, tmp / "cuda-warm", args.method, extra, way_env)
+                break
         reference = tmp / "reference"
         n_pairs = len(list(reference.glob("*/result.json")))
         if args.dask:
@@ -146,6 +179,12 @@ def main(argv=None) -> int:
         ratios = [r["wall_s"] / s for r, s in zip((r for r in runs if r["way"] == name), serial)]
         print(f"{name}: wall / serial wall of the same repetition, median {statistics.median(ratios):.2f} "
               f"(each: {', '.join(f'{x:.2f}' for x in ratios)})")
+    pool = [r["wall_s"] for r in runs if r["way"] == f"--workers {args.workers}"]
+    for name, _, _ in ways:
+        mine = [r["wall_s"] for r in runs if r["way"] == name]
+        if name.startswith("cuda") and pool:  # the claim to check: a GPU batch beats the machine's CPU pool
+            print(f"{name}: median wall / --workers {args.workers} median wall "
+                  f"{statistics.median(mine) / statistics.median(pool):.2f}")
     if args.json:
         args.json.write_text(json.dumps({"n_pairs": n_pairs, "runs": runs}, indent=1))
     return 0

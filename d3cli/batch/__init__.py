@@ -10,6 +10,7 @@
 - ``fingerprint``: what a stored result depends on (resume decisions), versions;
 - ``lock``: one run per output folder (one per shard with ``--shard``);
 - ``executors``: where pairs run - here, a local process pool; shards;
+- ``pipelined``: one process, reading ahead and writing behind the pair computing;
 - ``cluster``: the Dask executor (``--scheduler``), its scheduler probe;
 - ``staging``: a pair's folder written aside and renamed into place; file records checked on resume;
 - ``steps``: a pair's steps, so that an internal error names the step;
@@ -20,7 +21,7 @@ May import everything below it: method, baselines, evaluation, road, kernels, da
 config, errors.  Only :mod:`d3cli.cli` imports this package.
 """
 
-from .executors import SCHEDULER_ENV, parse_shard, parse_workers, select_shard
+from .executors import SCHEDULER_ENV, parse_prefetch, parse_shard, parse_workers, select_shard
 from .evaluate import evaluate_folders, evaluate_predictions
 from .fingerprint import package_versions, settings_fingerprint
 from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock
@@ -43,6 +44,7 @@ __all__ = [
     "evaluate_folders",
     "evaluate_predictions",
     "package_versions",
+    "parse_prefetch",
     "parse_shard",
     "parse_workers",
     "release_lock",

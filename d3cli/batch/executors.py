@@ -14,6 +14,9 @@ writes ``run.json`` / the summary.
   two pairs of 640x360); the first worker compiles or loads the kernels, the others then
   load the cache it wrote.  At most 2 N pairs are in flight, so a huge manifest never
   becomes a huge queue.
+* :class:`PipelinedExecutor` (:mod:`d3cli.batch.pipelined`) - ``--prefetch N`` (``auto``:
+  2 on the CUDA backend): one process, the next pairs read by a thread while this one
+  computes, the previous written behind by another; for one GPU.
 * :class:`DaskExecutor` (:mod:`d3cli.batch.cluster`) - ``--scheduler tcp://HOST:PORT``: each pair a task on an existing
   ``dask.distributed`` cluster, submitted through a window of in-flight futures
   (``as_completed``), checked up front (scheduler reachable, workers present with the
@@ -24,7 +27,8 @@ writes ``run.json`` / the summary.
 
 Ctrl-C: queued pairs are cancelled; pool workers ignore SIGINT and finish the pair they
 hold (whole pairs only, written atomically; counted as done, :meth:`PoolExecutor.drain`), Dask tasks in flight are cancelled (a
-cancelled pair leaves no ``result.json``, so a rerun computes it again).
+cancelled pair leaves no ``result.json``, so a rerun computes it again); the pipelined
+executor's writer finishes the pairs already computed.
 """
 
 from __future__ import annotations
@@ -397,13 +401,56 @@ class PoolExecutor:
         return finished
 
 
+def parse_prefetch(value: str | int | None) -> int | None:
+    """``--prefetch`` value -> pairs read ahead (0: none, serial), or None for ``auto``.
+
+    Raises
+    ------
+    ConfigError
+        When the value is neither a number from 0 to :data:`MAX_PREFETCH` nor ``auto``.
+    """
+    if value is None or str(value).strip().lower() == "auto":
+        return None
+    try:
+        n = int(value)
+    except ValueError:
+        n = -1
+    if not 0 <= n <= MAX_PREFETCH:
+        raise ConfigError(f"--prefetch {str(value)[:30]}: use a number of pairs from 0 (none) to {MAX_PREFETCH}, "
+                          f"or 'auto' ({DEFAULT_PREFETCH} on a GPU, none on the CPU)")
+    return n
+
+
+#: Most pairs ``--prefetch`` reads ahead (each holds its decoded images in memory).
+MAX_PREFETCH = 64
+
+
+def resolve_prefetch(prefetch: int | None, cfg=None, method: str | None = None) -> int:
+    """Pairs read ahead by a batch in this process: ``prefetch``, or for ``auto`` (None)
+    :data:`~d3cli.batch.pipelined.DEFAULT_PREFETCH` when ``method`` computes on the CUDA
+    backend (whose host work would otherwise leave the device idle), else 0 (serial:
+    on the CPU the reading and writing threads take cores from the numba kernels)."""
+    if prefetch is not None:
+        return prefetch
+    if cfg is None or method in (None, "sgbm") or cfg.run.backend == "cpu":
+        return 0
+    from ..kernels import SIMULATOR, cuda_status
+
+    usable, reason = cuda_status()  # probed once per process; get_backend would log its choice again
+    on_device = usable and (cfg.run.backend == "cuda" or reason != SIMULATOR)  # auto never picks the simulator
+    return DEFAULT_PREFETCH if on_device else 0
+
+
 def make_executor(workers: int = 1, scheduler: str | None = None, out: Path | None = None,
-                  n_pairs: int | None = None):
-    """The executor for ``--workers`` / ``--scheduler`` (scheduler wins; 1 worker is serial).
+                  n_pairs: int | None = None, *, prefetch: int | None = 0, cfg=None, method: str | None = None):
+    """The executor for ``--workers`` / ``--scheduler`` / ``--prefetch`` (scheduler wins;
+    1 worker is serial, or pipelined with ``prefetch`` >= 1).
 
     A pool gets at most ``n_pairs`` workers: more would only start, load the kernels one
     after the other and idle (``--workers 1000`` on two pairs kept 999 processes alive
-    long after both pairs were done).
+    long after both pairs were done).  ``prefetch`` (None: ``auto``, resolved for ``cfg``
+    and ``method`` by :func:`resolve_prefetch`) applies to a batch in this process only:
+    a pool's or a cluster's workers take whole pairs.
     """
     if scheduler:
         return DaskExecutor(scheduler, Path(out).resolve())
@@ -411,8 +458,14 @@ def make_executor(workers: int = 1, scheduler: str | None = None, out: Path | No
         log.info("--workers %d: %d pair(s) to run, so %d worker process(es)", workers, n_pairs, max(1, n_pairs))
         workers = max(1, n_pairs)
     if workers > 1:
+        if prefetch:
+            log.info("--prefetch %d: not used with --workers %d (each worker takes whole pairs)", prefetch, workers)
         return PoolExecutor(workers)
+    prefetch = resolve_prefetch(prefetch, cfg, method)
+    if prefetch >= 1:
+        return PipelinedExecutor(prefetch)
     return SerialExecutor()
 
 
 from .cluster import CONNECT_TIMEOUT_S, SCHEDULER_ENV, WORKER_TIMEOUT_S, DaskExecutor  # noqa: E402 - re-exported
+from .pipelined import DEFAULT_PREFETCH, PipelinedExecutor  # noqa: E402 - re-exported

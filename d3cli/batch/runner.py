@@ -102,8 +102,14 @@ class BatchInterrupted(KeyboardInterrupt):
 
 
 def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, settings, fingerprint,
-              pointcloud=False) -> dict:
-    """Compute, write and (optionally) score one pair; returns the stored result dict.
+              pointcloud=False):
+    """Compute, write and (optionally) score one pair: a generator of its stages, whose
+    return value is the stored result dict.
+
+    It yields :data:`READ` once the images are read and :data:`COMPUTED` once the map
+    is computed, so a pipelined executor can run the three stages in different threads
+    (:mod:`d3cli.batch.pipelined`); run one after the other they are the serial pair.
+    ``timings.wall`` counts the stages' own time, not the waits between them.
 
     Everything (maps, error map, panel, cloud and road outputs, result.json) is written
     into a staging folder beside ``pair_dir`` that then replaces it in one rename
@@ -118,11 +124,13 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
     height, width = left.shape[:2]
     dmax, range_note = _resolve_range(pair, width, max_disparity)
     resources.check_memory((height, width), dmax, cfg, method=method, where=pair.name)
+    waited = yield from _pause(READ)
     with step(f"matching ({method})"):
         result = compute_pair(method, cfg, left, right, max_disparity=dmax, pair_dir=Path(pair.left).parent)
     if range_note:
         result.warnings.insert(0, range_note)
     result.warnings.extend(diagnostics.suspicious_result(result, dmax))
+    waited += yield from _pause(COMPUTED)
     staging = new_staging(pair_dir)
     try:
         with step("writing the outputs"):
@@ -136,7 +144,7 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
         for text in result.warnings:
             log.warning("%s: %s", pair.name, text)
         stored = _stored_result(pair, method, settings, fingerprint, result, (height, width), dmax, written, scores,
-                                eval_error, time.perf_counter() - t0)
+                                eval_error, time.perf_counter() - t0 - waited)
         stored = write_result(staging, stored)
         # The extras asked for belong to the pair: one that fails leaves no pair behind.
         stored = write_extras(pair, staging, stored, cfg, pointcloud=pointcloud)
@@ -150,6 +158,17 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
             raise named_as_target(exc, staging, pair_dir) from None
         raise
     return stored
+
+
+#: The stages a pair's generator (:func:`_pair_stages`) yields: images read, map computed.
+READ, COMPUTED = "read", "computed"
+
+
+def _pause(stage: str):
+    """Yield ``stage`` (a stage of the pair is done); returns the seconds until resumed."""
+    paused = time.perf_counter()
+    yield stage
+    return time.perf_counter() - paused
 
 
 def _stored_result(pair, method, settings, fingerprint, result, shape, dmax, written, scores, eval_error,
@@ -234,7 +253,7 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
               overwrite: bool = False, max_disparity: int | None = None, progress: bool = True,
               config_source: str | None = None, pointcloud: bool = False, workers: int = 1,
               scheduler: str | None = None, shard: tuple[int, int] | None = None,
-              break_lock: bool = False) -> BatchResult:
+              break_lock: bool = False, prefetch: int | None = None) -> BatchResult:
     """Run ``method`` on every pair, writing ``out_dir/<pair>/...`` and ``out_dir/run.json``.
 
     Parameters
@@ -273,6 +292,10 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
     break_lock : bool, keyword-only
         Take over the folder's lock even when its record names another host or a live
         pid, as long as no running d3stereo holds it (:func:`d3cli.batch.lock.acquire_lock`).
+    prefetch : int or None, keyword-only
+        With one worker: pairs read ahead while one computes, outputs written behind
+        (:class:`d3cli.batch.pipelined.PipelinedExecutor`); 0 runs serially; None
+        (``auto``) pipelines on the CUDA backend only.
 
     Returns
     -------
@@ -290,7 +313,7 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
     previous = sigterm_as_interrupt()
     try:
         batch = _lock_and_run(pairs, out, shard=shard, break_lock=break_lock, workers=workers, scheduler=scheduler,
-                              cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
+                              prefetch=prefetch, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
                               max_disparity=max_disparity, progress=progress, config_source=config_source,
                               pointcloud=pointcloud)
     finally:
@@ -299,7 +322,8 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
     return batch
 
 
-def _lock_and_run(pairs: list, out: Path, *, shard, break_lock, workers, scheduler, **batch_args) -> BatchResult:
+def _lock_and_run(pairs: list, out: Path, *, shard, break_lock, workers, scheduler, prefetch,
+                  **batch_args) -> BatchResult:
     """Take OUT's (or the shard's) lock, run the batch, release the lock.
 
     A SIGTERM after run.json recorded the batch complete (while the lock is released) is
@@ -313,7 +337,8 @@ def _lock_and_run(pairs: list, out: Path, *, shard, break_lock, workers, schedul
             with signals_deferred():
                 lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard),
                                     break_lock=break_lock)
-            executor = make_executor(workers, scheduler, out, n_pairs=len(pairs))
+            executor = make_executor(workers, scheduler, out, n_pairs=len(pairs), prefetch=prefetch,
+                                     cfg=batch_args["cfg"], method=batch_args["method"])
             batch = _locked_batch(pairs, out, executor=executor, shard=shard, **batch_args)
         finally:
             if lock is not None:
@@ -357,8 +382,12 @@ def _absolute(pair):
     return dataclasses.replace(pair, **changes)
 
 
-def _pair_task(pair, *, out: Path, **kwargs):
-    """The task every executor runs for one pair: :func:`_batch_pair` into ``out/<pair>``."""
+def _pair_task(pair, *, out: Path, staged: bool = False, **kwargs):
+    """The task every executor runs for one pair: :func:`_batch_pair` into ``out/<pair>``;
+    with ``staged`` its stages as a generator (:func:`_pair_stages`), for the pipelined
+    executor."""
+    if staged:
+        return _pair_stages(pair, out / pair.name, **kwargs)
     return _batch_pair(pair, out / pair.name, **kwargs)
 
 
@@ -471,14 +500,25 @@ def _finish(batch: BatchResult, records: list, meta: dict, pairs: list, out: Pat
                       versions=package_versions(), run_counts=run_counts)
 
 
-def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, settings,
-                pointcloud=False):
-    """One pair of a batch -> (report row, run.json record).
+def _batch_pair(pair, pair_dir: Path, **kwargs):
+    """One pair of a batch -> (report row, run.json record): its stages one after the other.
 
     Raises only KeyboardInterrupt and the OutputError of a full disk; any other failure
     becomes a ``failed`` row (an unexpected exception: ``<pair>: internal error in
     <step> (...); please report it``).
     """
+    stages = _pair_stages(pair, pair_dir, **kwargs)
+    while True:
+        try:
+            next(stages)
+        except StopIteration as done:
+            return done.value
+
+
+def _pair_stages(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_disparity, settings,
+                 pointcloud=False):
+    """:func:`_batch_pair` as a generator: yields :data:`READ` and :data:`COMPUTED` between the
+    stages of a computed pair (none for a skipped or failed one), returns its (row, record)."""
     t0 = time.perf_counter()
     reused = False
     try:
@@ -496,9 +536,9 @@ def _batch_pair(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_d
             stored = _reuse_pair(pair, pair_dir, stored, cfg=cfg, evaluate=evaluate, pointcloud=pointcloud)
             reused = True
         else:
-            stored = _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
-                               max_disparity=max_disparity, settings=settings, fingerprint=fingerprint,
-                               pointcloud=pointcloud)
+            stored = yield from _run_pair(pair, pair_dir, cfg=cfg, method=method, evaluate=evaluate,
+                                          max_disparity=max_disparity, settings=settings, fingerprint=fingerprint,
+                                          pointcloud=pointcloud)
     except D3Error as exc:
         if io.is_disk_full(exc):
             raise  # every later pair would fail the same way: the batch stops

@@ -11,6 +11,7 @@ import re
 import stat
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 import cv2
@@ -137,6 +138,12 @@ def _opencv_max_side() -> int:
     return min(limits)
 
 
+#: One decode at a time swaps file descriptor 2 (:func:`_decoder_messages_logged`): two
+#: overlapping swaps (a pipelined batch's reader and writer threads) restored it crosswise
+#: and left the process's stderr in a deleted temporary file.
+_STDERR_SWAP = threading.Lock()
+
+
 @contextlib.contextmanager
 def _decoder_messages_logged(path: Path):
     """Catch what C libraries write to file descriptor 2 while decoding ``path``.
@@ -144,8 +151,16 @@ def _decoder_messages_logged(path: Path):
     libpng reports a corrupt file with its own stderr line before OpenCV returns None,
     and this module then raises one Error naming the file: the library's line is logged
     at DEBUG (``-v`` shows it) instead of reaching the terminal.  Lines that are not a
-    decoder's (another thread's output) are written to stderr afterwards.
+    decoder's (another thread's output) are written to stderr afterwards.  Threads take
+    turns (:data:`_STDERR_SWAP`).
     """
+    with _STDERR_SWAP, _stderr_to_sink(path):
+        yield
+
+
+@contextlib.contextmanager
+def _stderr_to_sink(path: Path):
+    """:func:`_decoder_messages_logged` without the lock."""
     try:
         sys.stderr.flush()
         saved = os.dup(2)
