@@ -432,13 +432,11 @@ def resolve_prefetch(prefetch: int | None, cfg=None, method: str | None = None) 
     on the CPU the reading and writing threads take cores from the numba kernels)."""
     if prefetch is not None:
         return prefetch
-    if cfg is None or method in (None, "sgbm") or cfg.run.backend == "cpu":
+    if cfg is None or method in (None, "sgbm"):
         return 0
-    from ..kernels import SIMULATOR, cuda_status
+    from ..kernels import chosen_backend
 
-    usable, reason = cuda_status()  # probed once per process; get_backend would log its choice again
-    on_device = usable and (cfg.run.backend == "cuda" or reason != SIMULATOR)  # auto never picks the simulator
-    return DEFAULT_PREFETCH if on_device else 0
+    return DEFAULT_PREFETCH if chosen_backend(cfg.run.backend) == "cuda" else 0
 
 
 def make_executor(workers: int = 1, scheduler: str | None = None, out: Path | None = None,

@@ -157,6 +157,19 @@ def _driver_present() -> bool:
     return ctypes.util.find_library("cuda") is not None or os.path.exists("/proc/driver/nvidia/version")
 
 
+def chosen_backend(name: str = "auto") -> str | None:
+    """The backend :func:`get_backend` returns for ``name``, without loading or logging it:
+    ``"cpu"`` or ``"cuda"``; None when ``name`` is ``"cuda"`` and CUDA cannot be used
+    (``get_backend`` raises).  ``auto`` takes CUDA on a usable device only, never the
+    simulator."""
+    if name == "cpu":
+        return "cpu"
+    usable, reason = cuda_status()
+    if name == "cuda":
+        return "cuda" if usable else None
+    return "cuda" if usable and reason != SIMULATOR else "cpu"
+
+
 def get_backend(name: str = "auto"):
     """Return ``(module, name)`` of the kernel backend to use.
 
@@ -177,8 +190,9 @@ def get_backend(name: str = "auto"):
 
         return cpu, "cpu"
     kind, reason = _cuda_probe()
+    choice = chosen_backend(name)
     if name == "cuda":
-        if kind is None:
+        if choice is None:
             origin = getattr(name, "origin", "")  # run.backend of a config file (config.checks.value_origin)
             raise BackendUnavailable(f"{origin}: cuda cannot be used ({reason}); set it to cpu or auto there, "
                                      "or pass --backend cpu"
@@ -188,7 +202,7 @@ def get_backend(name: str = "auto"):
         if kind == "simulator":
             log.warning("backend cuda: running on the %s; this is for tests and very slow", SIMULATOR)
         return cuda_backend, "cuda"
-    if kind == "device":
+    if choice == "cuda":
         from . import cuda as cuda_backend
 
         log.info("backend auto: using CUDA (%s)", device_description())
