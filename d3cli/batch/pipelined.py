@@ -37,7 +37,6 @@ Results are yielded in input order, whichever writer finished first.
 
 from __future__ import annotations
 
-import os
 import queue
 import threading
 from typing import Callable, Iterator, Sequence
@@ -61,11 +60,10 @@ def default_writers() -> int:
     The compute thread keeps numba's threads for the host steps; PNG encoding and the
     panel release the GIL, so a few writers run in parallel (on 16 cores: 4).
     """
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # macOS, Windows
-        cores = os.cpu_count() or 1
-    return max(1, min(MAX_DEFAULT_WRITERS, cores // 4))
+    from .executors import available_cores  # executors imports this module at its end
+
+    return max(1, min(MAX_DEFAULT_WRITERS, available_cores() // 4))
+
 
 #: How often (seconds) a waiting thread checks whether the batch is stopping.
 _POLL_S = 0.05
