@@ -36,6 +36,19 @@ def make_pair_folder():
 
 
 @pytest.fixture
+def make_pair_set(make_pair_folder):
+    """Factory: ``make_pair_set(root, names) -> root``, one pair folder per name, shifts
+    3, 4, 5, ... and seeds 0, 1, 2, ... (every pair a different map)."""
+
+    def _make(root, names):
+        for i, name in enumerate(names):
+            make_pair_folder(root, name, shift=3 + i, seed=i)
+        return Path(root)
+
+    return _make
+
+
+@pytest.fixture
 def pairs_root(tmp_path, make_pair_folder):
     """A folder of three small pair folders ``a``, ``b``, ``c`` (shifts 4, 6, 8)."""
     root = tmp_path / "pairs"

@@ -64,11 +64,8 @@ def pair_files(out, names=PAIRS):
 
 
 @pytest.fixture
-def five_pairs(tmp_path, make_pair_folder):
-    root = tmp_path / "pairs"
-    for i, name in enumerate(PAIRS):
-        make_pair_folder(root, name, shift=3 + i, seed=i)
-    return root
+def five_pairs(tmp_path, make_pair_set):
+    return make_pair_set(tmp_path / "pairs", PAIRS)
 
 
 # ----------------------------------------------------------------------------- same files

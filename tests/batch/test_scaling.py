@@ -30,11 +30,8 @@ def invoke(*args):
 
 
 @pytest.fixture
-def pair_root(tmp_path, make_pair_folder):
-    root = tmp_path / "pairs"
-    for i, name in enumerate(PAIRS):
-        make_pair_folder(root, name, shift=3 + i, seed=i)
-    return root
+def pair_root(tmp_path, make_pair_set):
+    return make_pair_set(tmp_path / "pairs", PAIRS)
 
 
 @pytest.fixture

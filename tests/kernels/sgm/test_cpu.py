@@ -50,6 +50,23 @@ def reference_paths(cost, lo, hi, p1, p2):
     return acc * F32(0.25), inside
 
 
+def random_bands(seed, h, w, n, *, lo_below, width_below):
+    """A random (H, W, n) cost and bands [lo, hi): lo < ``lo_below``, 1 <= hi - lo < ``width_below``, hi <= n."""
+    rng = np.random.default_rng(seed)
+    cost = rng.uniform(0, 1, (h, w, n)).astype(F32)
+    lo = rng.integers(0, lo_below, (h, w))
+    hi = np.minimum(n, lo + rng.integers(1, width_below, (h, w)))
+    return cost, lo, hi, rng
+
+
+def assert_bands_equal(flat, index, lo, hi, want):
+    """Each pixel's band of a banded result (``flat`` cells, ``index`` offsets) equals ``want``'s cells there."""
+    for v in range(lo.shape[0]):
+        for u in range(lo.shape[1]):
+            off = index[v, u, 0]
+            np.testing.assert_array_equal(flat[off + lo[v, u]:off + hi[v, u]], want[v, u, lo[v, u]:hi[v, u]])
+
+
 @pytest.mark.parametrize("p1, p2", [(0.0, 0.0), (0.05, 0.2), (0.4, 1.6)])
 def test_dense_volume_equals_the_reference(p1, p2):
     rng = np.random.default_rng(3)
@@ -63,35 +80,22 @@ def test_dense_volume_equals_the_reference(p1, p2):
 def test_wide_bands_equal_the_reference():
     # bands of 1 to 21 disparities: whole blocks of the vector step, a last block that
     # overlaps the one before, and short bands alone
-    rng = np.random.default_rng(7)
     h, w, n = 5, 8, 24
-    cost = rng.uniform(0, 1, (h, w, n)).astype(F32)
-    lo = rng.integers(0, 3, (h, w))
-    hi = lo + rng.integers(1, 22, (h, w))
+    cost, lo, hi, _ = random_bands(7, h, w, n, lo_below=3, width_below=22)
     want, inside = reference_paths(cost, lo, hi, 0.05, 0.3)
     got = cpu.sgm_smooth(banded(cost, lo, hi), 0.05, 0.3)
-    for v in range(h):
-        for u in range(w):
-            off = got.index[v, u, 0]
-            np.testing.assert_array_equal(got.cost[off + lo[v, u]:off + hi[v, u]], want[v, u, lo[v, u]:hi[v, u]])
+    assert_bands_equal(got.cost, got.index, lo, hi, want)
     dense = cost[:, :, :19]
     np.testing.assert_array_equal(cpu.sgm_smooth(dense, 0.05, 0.3),
                                   reference_paths(dense, np.zeros((h, w), int), np.full((h, w), 19), 0.05, 0.3)[0])
 
 
 def test_banded_volume_equals_the_reference():
-    rng = np.random.default_rng(5)
-    h, w, n = 6, 11, 9
-    cost = rng.uniform(0, 1, (h, w, n)).astype(F32)
-    lo = rng.integers(0, 5, (h, w))
-    hi = np.minimum(n, lo + rng.integers(1, 6, (h, w)))
+    cost, lo, hi, _ = random_bands(5, 6, 11, 9, lo_below=5, width_below=6)
     want, inside = reference_paths(cost, lo, hi, 0.1, 0.5)
     got = cpu.sgm_smooth(banded(cost, lo, hi), 0.1, 0.5)
     assert isinstance(got, Volume) and np.array_equal(got.index, banded(cost, lo, hi).index)
-    for v in range(h):
-        for u in range(w):
-            off = got.index[v, u, 0]
-            np.testing.assert_array_equal(got.cost[off + lo[v, u]:off + hi[v, u]], want[v, u, lo[v, u]:hi[v, u]])
+    assert_bands_equal(got.cost, got.index, lo, hi, want)
 
 
 def test_without_penalties_each_path_is_the_cost_plus_nothing():
@@ -117,11 +121,8 @@ def test_cells_in_no_visible_band_come_out_zero():
     # a stored volume with cells between the visible bands (as the pyramid's store around
     # them), NaN there, an empty row and an empty pixel: the bands equal the reference,
     # every other cell is 0
-    rng = np.random.default_rng(11)
     h, w, n = 5, 7, 8
-    cost = rng.uniform(0, 1, (h, w, n)).astype(F32)
-    lo = rng.integers(0, 4, (h, w))
-    hi = np.minimum(n, lo + rng.integers(1, 5, (h, w)))
+    cost, lo, hi, rng = random_bands(11, h, w, n, lo_below=4, width_below=5)
     hi[2, :] = lo[2, :]  # a row without cells
     hi[3, 4] = lo[3, 4]
     gaps = rng.integers(0, 3, (h, w))  # stored cells before each pixel's band
@@ -133,11 +134,10 @@ def test_cells_in_no_visible_band_come_out_zero():
             flat[index[v, u, 0] + lo[v, u]:index[v, u, 0] + hi[v, u]] = cost[v, u, lo[v, u]:hi[v, u]]
     want, inside = reference_paths(cost, lo, hi, 0.1, 0.5)
     got = cpu.sgm_smooth(Volume(flat, index, n), 0.1, 0.5).cost
+    assert_bands_equal(got, index, lo, hi, want)
     visible = np.zeros(flat.shape, bool)
     for v in range(h):
         for u in range(w):
-            off = index[v, u, 0]
-            visible[off + lo[v, u]:off + hi[v, u]] = True
-            np.testing.assert_array_equal(got[off + lo[v, u]:off + hi[v, u]], want[v, u, lo[v, u]:hi[v, u]])
+            visible[index[v, u, 0] + lo[v, u]:index[v, u, 0] + hi[v, u]] = True
     assert (~visible).sum() == gaps.sum() + 3
     assert (got[~visible] == 0).all()
