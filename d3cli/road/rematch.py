@@ -40,7 +40,7 @@ def _grey(image: np.ndarray) -> np.ndarray:
 
 def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np.ndarray, *,
             window: int = WINDOW, reach: float = REACH, step: float = STEP,
-            min_score: float = MIN_SCORE, return_reliable: bool = False):
+            min_score: float = MIN_SCORE) -> tuple[np.ndarray, np.ndarray]:
     """Disparity re-measured at the pixels of ``mask`` by zero-mean NCC.
 
     Parameters
@@ -57,20 +57,20 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     min_score : float, keyword-only
         A pixel whose best score is lower, or whose best offset is an end of the search
         (the true disparity may lie beyond it), keeps its stored disparity.
-    return_reliable : bool, keyword-only
-        Also return the bool (H, W) mask of the pixels re-measured.
 
     Returns
     -------
-    ndarray, float32, (H, W)
+    disparity : ndarray, float32, (H, W)
         A copy of ``disparity`` with the finite pixels of ``mask`` re-measured where the
-        match is reliable (and, with ``return_reliable``, the mask of those pixels).
+        match is reliable.
+    reliable : ndarray, bool, (H, W)
+        The pixels re-measured.
     """
     out = np.array(disparity, np.float32, copy=True)
     done = np.zeros(out.shape, bool)
     todo = mask & np.isfinite(out)
     if not todo.any():
-        return (out, done) if return_reliable else out
+        return out, done
     lg, rg = _grey(left), _grey(right)
     v, u = np.nonzero(todo)
     pad = window + int(np.ceil(reach)) + 1
@@ -102,4 +102,4 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     inside = todo[v0:v1, u0:u1] & reliable
     sub[inside] = new[inside]
     done[v0:v1, u0:u1] = inside
-    return (out, done) if return_reliable else out
+    return out, done

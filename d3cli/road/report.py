@@ -180,7 +180,7 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
         zone = cv2.dilate(inner.astype(np.uint8), ring).astype(bool) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
         for window in WINDOWS:
-            new, got = rematch(left, right, disparity, zone, window=window, return_reliable=True)
+            new, got = rematch(left, right, disparity, zone, window=window)
             if got[zone].mean() < MIN_RELIABLE:
                 continue
             if _highpass_noise(height_map(new, finite, camera, plane), band & got, window) <= NOISE_M:

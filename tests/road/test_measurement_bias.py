@@ -74,7 +74,7 @@ def test_the_re_match_keeps_the_stored_disparity_where_the_match_is_unreliable(s
     ur = u - int(round(float(pair.disparity[v, u])))  # where the right camera sees the centre
     glare = (slice(v - 8, v + 9), slice(ur - 30, ur + 31))
     right[glare] = np.random.default_rng(0).integers(0, 256, right[glare].shape, dtype=np.uint8)
-    out, got = rematch(pair.left, right, smoothed, zone, return_reliable=True)
+    out, got = rematch(pair.left, right, smoothed, zone)
     hidden = np.zeros_like(zone)
     hidden[v - 4:v + 5, u - 10:u + 11] = True  # every 9 x 9 window here sees the glare
     assert not got[hidden].any()
