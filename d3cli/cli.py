@@ -276,8 +276,8 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     result = batch.run_batch(pairs, out_dir, cfg=cfg, method=method, evaluate=evaluate,
                              overwrite=overwrite, max_disparity=override, progress=not quiet,
                              config_source=source, pointcloud=pointcloud, workers=n_workers,
-                             scheduler=scheduler, shard=shard_of, break_lock=break_lock, prefetch=n_ahead)
-    _batch_recorded()
+                             scheduler=scheduler, shard=shard_of, break_lock=break_lock, prefetch=n_ahead,
+                             on_recorded=_batch_recorded)
     if _own_process():  # a SIGTERM from now on still exits 143, recorded in run.json
         batch.terminate_after_batch(result.run_json, f"Terminated (SIGTERM): {result.n_computed + result.n_skipped} "
                                                      f"of {result.n_pairs} pairs done; rerun the same command to resume")
@@ -294,12 +294,12 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
 
 
 def _batch_recorded() -> None:
-    """The batch has ended and run.json records it complete: a Ctrl-C from here on is
-    ignored (exit 0, everything written; README "Failure behaviour"), in the command's own
-    process.  Until now one during the summary lines ended the command with 130 and the
-    resume line although nothing was left to resume (tests/batch/test_interrupts.py saw
-    it once; tests/test_cli_interrupts.py now sends it there).  SIGTERM still stops the
-    command there (143)."""
+    """run.json has just recorded the batch complete (called by the batch, signals held):
+    a Ctrl-C from here on is ignored (exit 0, everything written; README "Failure
+    behaviour"), in the command's own process.  One during the summary lines, or between
+    run.json and the batch's return (CI, tests/batch/test_interrupts.py), ended the command
+    with 130 and the resume line although nothing was left to resume.  SIGTERM still stops
+    the command there (143)."""
     if _own_process():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 

@@ -33,6 +33,8 @@ class BatchResult:
     n_computed, n_skipped : int
         Pairs computed by this run, and pairs kept as complete from an earlier run
         (``ok`` and ``skipped`` in run.json); in the rows and the summary both are ``ok``.
+    recorded : bool
+        True once run.json records the batch complete (its last act).
     """
 
     out_dir: Path
@@ -42,6 +44,7 @@ class BatchResult:
     summary: dict | None = None
     n_computed: int = 0
     n_skipped: int = 0
+    recorded: bool = False
 
     def counts_line(self) -> str:
         """``N ok (C computed, S skipped as complete), F failed of T pairs``: run.json's counts."""

@@ -253,7 +253,7 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
               overwrite: bool = False, max_disparity: int | None = None, progress: bool = True,
               config_source: str | None = None, pointcloud: bool = False, workers: int = 1,
               scheduler: str | None = None, shard: tuple[int, int] | None = None,
-              break_lock: bool = False, prefetch: int | None = None) -> BatchResult:
+              break_lock: bool = False, prefetch: int | None = None, on_recorded=None) -> BatchResult:
     """Run ``method`` on every pair, writing ``out_dir/<pair>/...`` and ``out_dir/run.json``.
 
     Parameters
@@ -296,6 +296,11 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
         With one worker: pairs read ahead while one computes, outputs written behind
         (:class:`d3cli.batch.pipelined.PipelinedExecutor`); 0 runs serially; None
         (``auto``) pipelines on the CUDA backend only.
+    on_recorded : callable or None, keyword-only
+        Called without arguments right after run.json records the batch complete, with
+        Ctrl-C and SIGTERM held back in between (the ``d3stereo`` command ignores Ctrl-C
+        from there on).  A Ctrl-C after that point is ignored by this function too: the
+        batch returns complete.
 
     Returns
     -------
@@ -315,7 +320,7 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
         batch = _lock_and_run(pairs, out, shard=shard, break_lock=break_lock, workers=workers, scheduler=scheduler,
                               prefetch=prefetch, cfg=cfg, method=method, evaluate=evaluate, overwrite=overwrite,
                               max_disparity=max_disparity, progress=progress, config_source=config_source,
-                              pointcloud=pointcloud)
+                              pointcloud=pointcloud, on_recorded=on_recorded)
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
@@ -352,6 +357,10 @@ def _lock_and_run(pairs: list, out: Path, *, shard, break_lock, workers, schedul
         mark_terminated(batch.run_json)
         raise BatchInterrupted(batch.n_computed + batch.n_skipped, batch.n_pairs, batch.run_json,
                                terminated=True) from None
+    except KeyboardInterrupt:
+        if batch is None or not batch.recorded:
+            raise
+        # A Ctrl-C held back while the lock was released: the batch is complete and recorded.
     return batch
 
 
@@ -392,7 +401,7 @@ def _pair_task(pair, *, out: Path, staged: bool = False, **kwargs):
 
 
 def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, max_disparity, progress,
-                  config_source, pointcloud, executor, shard=None) -> BatchResult:
+                  config_source, pointcloud, executor, shard=None, on_recorded=None) -> BatchResult:
     """The body of :func:`run_batch`, run while holding the output folder's (or shard's) lock."""
     run_name = RUN_FILE if shard is None else "run-{}-of-{}.json".format(*shard)
     batch = BatchResult(out_dir=out, run_json=out / run_name)
@@ -441,7 +450,21 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
             raise
         _record_disk_full(batch, records, meta, current, exc)
         raise
-    _finish(batch, records, meta, pairs, out, order=order, evaluate=evaluate, settings=settings)
+    try:
+        _finish(batch, records, meta, pairs, out, order=order, evaluate=evaluate, settings=settings,
+                on_recorded=on_recorded)
+    except KeyboardInterrupt as exc:
+        # After the last pair, while the summary files are written: recorded as an
+        # interruption (a rerun writes them) unless run.json already records the batch
+        # complete.  Then a Ctrl-C is ignored (exit 0; it gave 130 and "rerun the same
+        # command to resume" beside a run.json saying the batch was complete: CI,
+        # tests/batch/test_interrupts.py's eight moments) and a SIGTERM recorded (143).
+        if not batch.recorded:
+            raise _interrupted(batch, records, meta, None, exc) from None
+        if isinstance(exc, Terminated):
+            mark_terminated(batch.run_json)
+            raise BatchInterrupted(batch.n_computed + batch.n_skipped, batch.n_pairs, batch.run_json,
+                                   terminated=True) from None
     return batch
 
 
@@ -468,7 +491,7 @@ def _record_disk_full(batch: BatchResult, records: list, meta: dict, current, ex
 
 
 def _finish(batch: BatchResult, records: list, meta: dict, pairs: list, out: Path, *, order: dict,
-            evaluate: bool, settings: str) -> None:
+            evaluate: bool, settings: str, on_recorded=None) -> None:
     """After the last pair: counts, defects.csv, the summary files, run.json and report.html."""
     cfg, method, shard = meta["cfg"], meta["method"], meta["shard"]
     # Parallel executors finish pairs in any order; the files list them in input order.
@@ -494,10 +517,23 @@ def _finish(batch: BatchResult, records: list, meta: dict, pairs: list, out: Pat
         # describe maps this run may have replaced; only d3stereo's own files are removed.
         for name in remove_stale_summaries(out):
             log.info("%s: removed the summary of an earlier --eval run (rerun with --eval to score)", out / name)
-    write_run_json(batch, records, **meta, interrupted=False)
-    # The page people look at, after every batch.
+    # The page people look at, after every batch; before run.json, whose complete record
+    # is the batch's last act (see _record_complete).
     write_report_html(out, batch.rows, title=f"d3stereo run: {out} ({method})", config=cfg.to_dict(),
                       versions=package_versions(), run_counts=run_counts)
+    _record_complete(batch, records, meta, on_recorded)
+
+
+def _record_complete(batch: BatchResult, records: list, meta: dict, on_recorded) -> None:
+    """Write run.json as complete and mark ``batch.recorded``, with Ctrl-C/SIGTERM held back
+    so that the two happen together: an interrupt after this is one after a finished batch
+    (:func:`_locked_batch`), one before it is recorded in run.json.  ``on_recorded`` runs
+    inside the same held block (the CLI ignores Ctrl-C from there on)."""
+    with signals_deferred():
+        write_run_json(batch, records, **meta, interrupted=False)
+        batch.recorded = True
+        if on_recorded is not None:
+            on_recorded()
 
 
 def _batch_pair(pair, pair_dir: Path, **kwargs):

@@ -62,23 +62,33 @@ def signals_deferred():
 
     Only signals whose handler is a Python function (Ctrl-C's KeyboardInterrupt, our
     SIGTERM handler) are held; in the main thread only.  A signal that came meanwhile
-    is delivered once the block is done, by calling its own handler.
+    is delivered once the block is done, by calling its own handler; a handler the block
+    itself set for the signal stays in place and the held signal is dropped (the block
+    decided what that signal means now).
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     pending = []
     held = {}
+
+    def hold(signum, frame):
+        pending.append(signum)
+
     for sig in (signal.SIGINT, signal.SIGTERM):
         handler = signal.getsignal(sig)
         if callable(handler):
             held[sig] = handler
-            signal.signal(sig, lambda signum, frame: pending.append(signum))
+            signal.signal(sig, hold)
     try:
         yield
     finally:
-        for sig, handler in held.items():
-            signal.signal(sig, handler)
+        for sig in list(held):
+            if signal.getsignal(sig) is hold:
+                signal.signal(sig, held[sig])
+            else:  # the block set a handler of its own (e.g. SIGINT ignored): it stays, and rules
+                del held[sig]
+        pending = [sig for sig in pending if sig in held]
         if pending:
             # Also when the block failed: the workers of a pool killed by the same SIGTERM
             # made it fail ("could not start"), and the interrupt is what happened.

@@ -167,3 +167,83 @@ def test_ctrl_c_between_a_pairs_outputs_and_its_result_json_leaves_no_half_pair(
     run = json.loads((out / "run.json").read_text())
     assert run["interrupted"] is True and run["pairs"] == []
     assert [p.name for p in out.iterdir() if p.is_dir()] == []
+
+
+def _interrupting(real, when):
+    """``real`` wrapped: after it returns, when ``when(args, kwargs)``, a Ctrl-C arrives."""
+
+    def wrapped(*args, **kwargs):
+        value = real(*args, **kwargs)
+        if when(args, kwargs):
+            signal.raise_signal(signal.SIGINT)
+            time.sleep(0.05)  # (a pending signal is handled at the next bytecode)
+        return value
+
+    return wrapped
+
+
+def _run_with_ctrl_c_handler(args):
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # even where a shell ignores SIGINT
+    try:
+        return CliRunner().invoke(main, args)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def test_ctrl_c_right_after_run_json_records_the_batch_complete_is_ignored(tmp_path, pairs_root, monkeypatch):
+    """CI: a Ctrl-C between run.json's complete record and the batch's return gave exit 130
+    and "rerun the same command to resume" beside ``interrupted: false``.  Now the batch
+    returns complete and the command exits 0."""
+    monkeypatch.setattr(d3cli.batch.runner, "write_run_json", _interrupting(
+        d3cli.batch.runner.write_run_json, lambda args, kwargs: kwargs.get("interrupted") is False))
+    out = tmp_path / "out"
+    result = _run_with_ctrl_c_handler(["run", str(pairs_root), "-o", str(out), "--method", "sgbm"])
+    assert result.exit_code == 0, result.output
+    assert "rerun" not in result.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["interrupted"] is False and run["n_failed"] == 0
+    assert not (out / LOCK_FILE).exists()
+
+
+def test_ctrl_c_while_the_report_is_written_is_recorded_and_a_rerun_finishes(tmp_path, pairs_root, monkeypatch):
+    """A Ctrl-C after the last pair, before run.json's complete record (report.html being
+    written): exit 130, run.json says interrupted with every pair done, and a rerun writes
+    the rest without computing a pair again."""
+    monkeypatch.setattr(d3cli.batch.runner, "write_report_html", _interrupting(
+        d3cli.batch.runner.write_report_html, lambda args, kwargs: True))
+    out = tmp_path / "out"
+    args = ["run", str(pairs_root), "-o", str(out), "--method", "sgbm"]
+    result = _run_with_ctrl_c_handler(args)
+    assert result.exit_code == 130, result.output
+    assert result.output.strip().splitlines()[-1].endswith("rerun the same command to resume")
+    run = json.loads((out / "run.json").read_text())
+    assert run["interrupted"] is True and run["n_failed"] == 0
+    assert {p["status"] for p in run["pairs"]} == {"ok"}
+    monkeypatch.undo()
+    again = CliRunner().invoke(main, args)
+    assert again.exit_code == 0, again.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["interrupted"] is False and {p["status"] for p in run["pairs"]} == {"skipped"}
+
+
+def test_signals_deferred_delivers_a_held_ctrl_c_unless_the_block_set_its_own_handler():
+    """A Ctrl-C inside the block comes out at its end; when the block itself set SIGINT's
+    handler (the run command ignores Ctrl-C once run.json records the batch), that handler
+    stays and the held Ctrl-C is dropped (the old end put the earlier handler back over it)."""
+    from d3cli.batch.signals import signals_deferred
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        try:
+            with signals_deferred():
+                signal.raise_signal(signal.SIGINT)
+            raise AssertionError("the held Ctrl-C was not delivered")
+        except KeyboardInterrupt:
+            pass
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        with signals_deferred():
+            signal.raise_signal(signal.SIGINT)
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
