@@ -428,13 +428,15 @@ MAX_PREFETCH = 64
 def resolve_prefetch(prefetch: int | None, cfg=None, method: str | None = None) -> int:
     """Pairs read ahead by a batch in this process: ``prefetch``, or for ``auto`` (None)
     :data:`~d3cli.batch.pipelined.DEFAULT_PREFETCH` when ``method`` computes on the CUDA
-    backend (whose host work would otherwise leave the device idle), else 0 (serial:
+    backend (d3stereo, pt-sgm) (whose host work would otherwise leave the device idle), else 0 (serial:
     on the CPU the reading and writing threads take cores from the numba kernels)."""
     if prefetch is not None:
         return prefetch
-    if cfg is None or method in (None, "sgbm"):
-        return 0
     from ..kernels import chosen_backend
+    from ..kernels.cachedir import KERNEL_METHODS
+
+    if cfg is None or method not in KERNEL_METHODS:  # sgbm, elas, pandora-sgm never use the device
+        return 0
 
     return DEFAULT_PREFETCH if chosen_backend(cfg.run.backend) == "cuda" else 0
 

@@ -426,3 +426,16 @@ def test_two_threads_decoding_at_once_leave_stderr_where_it_was(tmp_path, monkey
         os.dup2(saved, 2)  # this process's stderr back, whatever the decodes did to it
         os.close(saved)
     assert (after.st_dev, after.st_ino) == (before.st_dev, before.st_ino)
+
+
+@pytest.mark.parametrize("method, mode", [("d3stereo", "pipelined"), ("pt-sgm", "pipelined"), ("sgbm", "serial"),
+                                          ("elas", "serial"), ("pandora-sgm", "serial")])
+def test_prefetch_auto_pipelines_only_the_methods_that_compute_on_the_device(monkeypatch, method, mode):
+    """``--prefetch auto`` with CUDA chosen: the methods that run our kernels are pipelined;
+    sgbm, elas and pandora-sgm compute on the CPU and stay serial (elas and pandora were
+    pipelined, their reading threads taking cores from the CPU method)."""
+    from d3cli.config import Config
+
+    monkeypatch.setattr(d3cli.kernels, "chosen_backend", lambda name="auto": "cuda")
+    executor = make_executor(1, prefetch=None, cfg=Config(), method=method)
+    assert executor.describe()["mode"] == mode
