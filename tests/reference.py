@@ -360,8 +360,9 @@ def ref_inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates="symmetric"
 
 
 # ----------------------------------------------------------------------------- finish
-def ref_subpixel(cost, disp):
-    """Parabola vertex through C(d-1), C(d), C(d+1), offset clamped to +-0.5.
+def ref_subpixel(cost, disp, equiangular=False):
+    """Parabola vertex through C(d-1), C(d), C(d+1), offset clamped to +-0.5; with
+    ``equiangular`` the crossing of two lines of equal and opposite slope through them.
 
     Integer d at the ends of the range and on flat or concave curves; inf where undecided.
     """
@@ -377,7 +378,8 @@ def ref_subpixel(cost, disp):
             if d == 0 or d == n_disp - 1:
                 continue
             c0, c1, c2 = (float(cost[v, u, s]) for s in (d - 1, d, d + 1))
-            curvature = c0 + c2 - 2.0 * c1
+            # the parabola's curvature, or the lines' rise over one disparity
+            curvature = max(c0, c2) - c1 if equiangular else c0 + c2 - 2.0 * c1
             if curvature <= 0.0:
                 continue
             out[v, u] = d + min(0.5, max(-0.5, 0.5 * (c0 - c2) / curvature))

@@ -69,6 +69,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "pt.inlier_threshold": (lambda v: v > 0, "a number > 0"),
     "pt.iterations": (lambda v: 1 <= v <= 100, "an integer in [1, 100]"),
     "refine.smooth_kernel": (lambda v: v in ("gaussian", "box"), "one of gaussian, box"),
+    "refine.subpixel_fit": (lambda v: v in ("auto", "parabola", "equiangular"), "one of auto, parabola, equiangular"),
     "refine.speckle_size": (lambda v: 0 <= v <= 100000, "an integer in [0, 100000]"),
     "refine.speckle_range": (lambda v: 0 < v <= 64, "a number in (0, 64]"),
     "refine.smooth_radius": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),

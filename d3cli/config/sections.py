@@ -138,7 +138,10 @@ class PTConfig:
 class RefineConfig:
     """Sub-pixel refinement and hole filling (docs/design.md, 'Finishing')."""
 
-    subpixel: bool = True  # parabola through C(d-1), C(d), C(d+1), clamped to +-0.5
+    subpixel: bool = True  # fit through C(d-1), C(d), C(d+1), offset clamped to +-0.5
+    # the fit: parabola (the paper's) | equiangular (two lines of equal slope: a V-shaped
+    # minimum) | auto: equiangular on the semi-global smoothing's cost, else parabola
+    subpixel_fit: str = "auto"
     occlusion_check: bool = True  # uniqueness + left-border tests: estimates with no possible true match become holes
     # connected regions of decided pixels (neighbours within speckle_range px) with at most
     # speckle_size pixels become holes before filling; 0: off
@@ -238,6 +241,16 @@ class Config:
             sec = dataclasses.asdict(getattr(self, f.name))
             out[f.name] = {k: list(v) if isinstance(v, tuple) else v for k, v in sec.items()}
         return out
+
+    @property
+    def equiangular_subpixel(self) -> bool:
+        """Whether the sub-pixel step fits two lines of equal slope rather than a parabola:
+        ``refine.subpixel_fit``, where ``auto`` takes the lines for a cost smoothed by the
+        semi-global paths (``aggregation.sgm_p2 > 0``), whose linear penalties make its
+        minimum a V, and the parabola for the RBF-aggregated cost, whose minimum is round."""
+        if self.refine.subpixel_fit == "auto":
+            return self.aggregation.sgm_p2 > 0
+        return self.refine.subpixel_fit == "equiangular"
 
     def level_window(self, level: int) -> int:
         """NCC window size at ``level`` (0 = full resolution).

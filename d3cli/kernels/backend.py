@@ -221,8 +221,10 @@ class Backend(Protocol):
         """
         ...
 
-    def subpixel(self, cost, disp) -> Any:
-        """Parabola sub-pixel refinement (docs/design.md, step 8); float32 (H, W), inf where undecided.
+    def subpixel(self, cost, disp, equiangular: bool = False) -> Any:
+        """Sub-pixel refinement (docs/design.md, step 8): the parabola through C(d-1), C(d),
+        C(d+1), or with ``equiangular`` the equiangular line fit; float32 (H, W), inf where
+        undecided.
         """
         ...
 

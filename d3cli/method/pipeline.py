@@ -496,7 +496,8 @@ class D3Stereo:
         cfg = self.cfg
         backend = self.backend
         if cfg.refine.subpixel:
-            sub = refine_subpixel(match.cost, match.disparity, backend=backend)
+            sub = refine_subpixel(match.cost, match.disparity, backend=backend,
+                                  equiangular=cfg.equiangular_subpixel)
         # The volume's last reader was the sub-pixel step: release it before the host
         # finishing allocates its own maps (the peak of a 720p road pair).
         match.cost = None

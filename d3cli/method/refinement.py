@@ -35,8 +35,8 @@ def _check_updatable(valid: np.ndarray, disp: np.ndarray) -> None:
         raise ValueError("valid must be a C-contiguous bool map of the disparity's shape (updated in place)")
 
 
-def refine_subpixel(cost, disparity, *, backend):
-    """Parabola sub-pixel refinement at full resolution (docs/design.md, 'Finishing').
+def refine_subpixel(cost, disparity, *, backend, equiangular: bool = False):
+    """Sub-pixel refinement at full resolution (docs/design.md, 'Finishing'), eq. of step 8.
 
     Parameters
     ----------
@@ -44,14 +44,19 @@ def refine_subpixel(cost, disparity, *, backend):
     disparity : ndarray, int32, (H, W)
         Integer disparities, -1 undecided.
     backend : module
+    equiangular : bool, keyword-only
+        Fit two lines of equal and opposite slope (equiangular line fitting) instead of the
+        paper's parabola: the better model of a V-shaped minimum, as the semi-global
+        smoothing's linear penalties make (:attr:`d3cli.config.Config.equiangular_subpixel`).
 
     Returns
     -------
     ndarray, float32, (H, W)
-        d + offset, offset = (C(d-1) - C(d+1)) / (2 (C(d-1) + C(d+1) - 2 C(d))) clamped to
-        [-0.5, 0.5]; inf where undecided.
+        d + offset clamped to [-0.5, 0.5]; inf where undecided.  Parabola:
+        offset = (C(d-1) - C(d+1)) / (2 (C(d-1) + C(d+1) - 2 C(d))); lines:
+        offset = (C(d-1) - C(d+1)) / (2 (max(C(d-1), C(d+1)) - C(d))).
     """
-    return backend.subpixel(cost, disparity)
+    return backend.subpixel(cost, disparity, equiangular)
 
 
 def occluded_by_uniqueness(disparity: np.ndarray, valid: np.ndarray, *, tolerance: float = 1.0) -> np.ndarray:

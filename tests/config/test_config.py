@@ -221,3 +221,24 @@ def test_line_numbers_of_flow_style_and_nested_keys(tmp_path):
     path = write(tmp_path, "# comment\n\nrun: {method: sgbm, backend: gpu}\n")
     with pytest.raises(ConfigError, match=rf"^{path}:3: run.backend must be one of auto, cpu, cuda, got 'gpu'"):
         load_config(path)
+
+
+@pytest.mark.parametrize("fit, sgm_p2, equiangular", [("auto", 0.6, True), ("auto", 0.0, False),
+                                                      ("parabola", 0.6, False), ("equiangular", 0.0, True)])
+def test_subpixel_fit_auto_takes_the_lines_after_the_semi_global_smoothing(fit, sgm_p2, equiangular):
+    cfg = load_config(None, [f"refine.subpixel_fit={fit}", f"aggregation.sgm_p2={sgm_p2}"])
+    assert cfg.equiangular_subpixel is equiangular
+
+
+def test_bundled_configs_fit_the_subpixel_as_their_cost_asks():
+    """The defaults and kitti.yaml smooth the cost (lines); paper.yaml and road.yaml do not
+    (the parabola: the paper's step, and the measured better fit on an RBF cost)."""
+    from d3cli.config import bundled_configs
+
+    fits = {name: load_config(path).equiangular_subpixel for name, path in bundled_configs().items()}
+    assert fits["default"] and fits["kitti"] and not fits["paper"] and not fits["road"]
+
+
+def test_unknown_subpixel_fit_is_refused():
+    with pytest.raises(ConfigError, match="refine.subpixel_fit.*one of auto, parabola, equiangular"):
+        load_config(None, ["refine.subpixel_fit=cubic"])

@@ -1,4 +1,4 @@
-"""CPU drivers over decided maps: the least cost per pixel, the sub-pixel parabola,
+"""CPU drivers over decided maps: the least cost per pixel, the sub-pixel fit,
 merging two maps and counting decided pixels.  The contract: :mod:`d3cli.kernels.backend`."""
 
 from __future__ import annotations
@@ -35,10 +35,11 @@ def _min_cost(cost, index):
 
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)
-def subpixel(cost, disp):
-    """Parabola sub-pixel refinement (docs/design.md, step 8); float32 (H, W), inf where undecided."""
+def subpixel(cost, disp, equiangular=False):
+    """Sub-pixel refinement (docs/design.md, step 8): the parabola, or with ``equiangular``
+    the equiangular line fit (``pixel.subpixel_at``); float32 (H, W), inf where undecided."""
     flat, index, _, _ = _unpack(cost)
-    return _subpixel(flat, index, disp)
+    return _subpixel(flat, index, disp, bool(equiangular))
 
 
 #: :func:`_subpixel` prefetches the cells of the pixel this many columns ahead.
@@ -46,7 +47,7 @@ SUBPIXEL_PREFETCH = 32
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _subpixel(cost, index, disp):
+def _subpixel(cost, index, disp, equiangular):
     """:func:`pixel.subpixel_at` for every pixel, row by row.
 
     Each pixel reads the three cells around its disparity, one line of its band: with
@@ -62,7 +63,7 @@ def _subpixel(cost, index, disp):
             if u + SUBPIXEL_PREFETCH < w:
                 q = u + SUBPIXEL_PREFETCH
                 _prefetch(cost, index[v, q, 0] + disp[v, q])
-            out[v, u] = _subpixel_at(cost, index, disp, v, u)
+            out[v, u] = _subpixel_at(cost, index, disp, v, u, equiangular)
     return out
 
 

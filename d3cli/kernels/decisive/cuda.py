@@ -91,17 +91,18 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
 
 # ----------------------------------------------------------------------------- sub-pixel (step 8)
 @cuda.jit(cache=True)
-def _subpixel_kernel(cost, index, disp, out):
+def _subpixel_kernel(cost, index, disp, equiangular, out):
     u, v = cuda.grid(2)
     if v < disp.shape[0] and u < disp.shape[1]:
-        out[v, u] = _subpixel_at(cost, index, disp, v, u)
+        out[v, u] = _subpixel_at(cost, index, disp, v, u, equiangular)
 
 
-def subpixel(cost, disp):
-    """Parabola sub-pixel refinement (docs/design.md, step 8); float32 (H, W), inf where undecided."""
+def subpixel(cost, disp, equiangular=False):
+    """Sub-pixel refinement (docs/design.md, step 8): the parabola, or with ``equiangular``
+    the equiangular line fit (``pixel.subpixel_at``); float32 (H, W), inf where undecided."""
     d_disp = _dev(disp)
     flat, index, _, _ = _unpack(cost)
-    return _per_pixel(_subpixel_kernel, d_disp.shape, np.float32, flat, index, d_disp)
+    return _per_pixel(_subpixel_kernel, d_disp.shape, np.float32, flat, index, d_disp, bool(equiangular))
 
 
 @cuda.jit(cache=True)

@@ -409,14 +409,15 @@ def test_inheritance_of_a_perfect_coarse_map_with_a_disparity_step():
 
 
 # ----------------------------------------------------------------------------- sub-pixel
-def test_subpixel_matches_reference():
+@pytest.mark.parametrize("equiangular", [False, True])
+def test_subpixel_matches_reference(equiangular):
     rng = np.random.default_rng(23)
     for h, w in SHAPES:
         for n_disp in (1, 2, 5):
             cost = random_volume(rng, h, w, n_disp, levels=None if n_disp != 5 else 4)
             disp = sparse_map(rng, (h, w), n_disp, share=0.8)
-            got = cpu.subpixel(cost, disp)
-            np.testing.assert_allclose(got, ref.ref_subpixel(cost, disp), rtol=0, atol=COST_ATOL)
+            got = cpu.subpixel(cost, disp, equiangular)
+            np.testing.assert_allclose(got, ref.ref_subpixel(cost, disp, equiangular), rtol=0, atol=COST_ATOL)
             assert got.dtype == np.float32 and (np.isinf(got) == (disp < 0)).all()
 
 
@@ -441,6 +442,26 @@ def test_subpixel_known_answers():
     assert cpu.subpixel(ends, np.array([[0]], np.int32))[0, 0] == 0.0
     assert cpu.subpixel(ends, np.array([[3]], np.int32))[0, 0] == 3.0
     assert np.isinf(cpu.subpixel(ends, np.array([[-1]], np.int32))[0, 0])
+
+
+def v_volume(d0, n_disp=8, slope=0.05, b=0.1):
+    """A cost with a V-shaped minimum at ``d0``: b + slope |d - d0|."""
+    return (slope * np.abs(np.arange(n_disp) - d0) + b).astype(np.float32).reshape(1, 1, n_disp)
+
+
+@pytest.mark.parametrize("d0", [3.0, 3.3, 2.75, 3.49])
+def test_equiangular_subpixel_finds_the_tip_of_a_v_the_parabola_misses(d0):
+    """Two lines of equal slope through three costs of a V meet at its tip exactly; the
+    parabola through them is pulled towards the integer (pixel locking: at 3.3 it says
+    3.2, at 2.75 it says 2.83)."""
+    one = np.array([[int(round(d0))]], np.int32)
+    np.testing.assert_allclose(cpu.subpixel(v_volume(d0), one, True)[0, 0], d0, atol=1e-5)
+    parabola = cpu.subpixel(v_volume(d0), one)[0, 0]
+    assert d0 not in (3.3, 2.75) or abs(parabola - d0) > 0.05
+    steep = np.array([0.9, 0.1, 0.2, 0.5, 0.9], np.float32).reshape(1, 1, 5)
+    assert cpu.subpixel(steep, np.array([[2]], np.int32), True)[0, 0] == 1.5  # not a minimum: clamped
+    flat = np.full((1, 1, 3), 0.4, np.float32)
+    assert cpu.subpixel(flat, np.array([[1]], np.int32), True)[0, 0] == 1.0
 
 
 # ----------------------------------------------------------------------------- realistic volumes

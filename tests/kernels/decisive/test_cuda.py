@@ -127,13 +127,14 @@ def test_inheritance_of_a_perfect_coarse_map_matches_cpu(gpu):
 
 
 # ----------------------------------------------------------------------------- sub-pixel
-def test_subpixel_matches_cpu(gpu):
+@pytest.mark.parametrize("equiangular", [False, True])
+def test_subpixel_matches_cpu(gpu, equiangular):
     rng = np.random.default_rng(23)
     for n_disp, levels in ((1, None), (2, None), (6, 4)):
         cost = random_volume(rng, H, W, n_disp, levels=levels)
         disp = sparse_map(rng, (H, W), n_disp, share=0.8)
-        got = host(gpu, gpu.subpixel(gpu.to_device(cost), gpu.to_device(disp)))
-        want = cpu.subpixel(cost, disp)
+        got = host(gpu, gpu.subpixel(gpu.to_device(cost), gpu.to_device(disp), equiangular))
+        want = cpu.subpixel(cost, disp, equiangular)
         assert got.dtype == np.float32
         np.testing.assert_array_equal(np.isinf(got), np.isinf(want))
         np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)
