@@ -78,7 +78,9 @@ ADDITIONS = (
     ("+ seeds.every_level", ["seeds.every_level=true"]),
     ("+ band search", ["pyramid.band=true"]),
     ("+ symmetric candidates", ["inheritance.candidates=symmetric"]),
-    ("+ semi-global smoothing", ["aggregation.sgm_p1=0.15", "aggregation.sgm_p2=0.6"]),
+    # with the sub-pixel fit that follows it (auto: two lines of equal slope after the smoothing)
+    ("+ semi-global smoothing", ["aggregation.sgm_p1=0.15", "aggregation.sgm_p2=0.6", "refine.subpixel_fit=auto"]),
+    ("+ finishing smoothing", ["refine.smooth_radius=3", "refine.smooth_sigma=2.0", "refine.smooth_kernel=box"]),
 )
 ALL_ADDITIONS = [s for _, sets in ADDITIONS for s in sets]
 

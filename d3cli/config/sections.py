@@ -150,9 +150,9 @@ class RefineConfig:
     fill: bool = True  # False: undecided pixels stay inf in disp.pfm
     fill_inside: bool = False  # non-occluded holes take the median of 4 directions, not the background side
     smooth_filled: bool = True  # 5x5 median over the filled pixels only
-    smooth_radius: int = 0  # edge-preserving smoothing of the result, box radius in pixels; 0: off
-    smooth_sigma: float = 1.0  # range sigma of that smoothing, disparity pixels (residual to the road model with PT)
-    smooth_kernel: str = "gaussian"  # its range kernel: gaussian | box (mean of neighbours within smooth_sigma; faster)
+    smooth_radius: int = 3  # edge-preserving smoothing of the result, box radius in pixels; 0: off
+    smooth_sigma: float = 2.0  # range sigma of that smoothing, disparity pixels (residual to the road model with PT)
+    smooth_kernel: str = "box"  # its range kernel: gaussian | box (mean of neighbours within smooth_sigma; faster)
 
 
 @dataclass(frozen=True)
