@@ -28,8 +28,8 @@ def _rbf_cells_vec(typingctx, out, db, ring, offs, sb, band, weights, v, ux, uy,
     ``uy``, the others ``uz``'s (one pixel's weights repeated for fewer pixels).  Same
     terms in the same order per cell (float32 multiply, then add: no fused
     multiply-add), written as vectors of 16: LLVM's vectoriser leaves the loop that picks
-    a weight per cell scalar.  The arrays and offsets, not slices of them: a slice per
-    block cost its reference counting, more than the block's arithmetic."""
+    a weight per cell scalar.  The arrays and offsets, not slices of them: the slices
+    per run and the weights view per block cost 2-9 % of the filter (measured)."""
     if not isinstance(vectors, types.IntegerLiteral):
         raise errors.RequireLiteralValue("vectors")
     n_vec = vectors.literal_value
@@ -258,10 +258,9 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
         if covered[v, u] == 2 and 0 < u < w - 1:
             # a run of interior pixels whose neighbours all hold this band: their cells,
             # and each neighbour row's, follow one another B apart, so each of the nine
-            # sources is one (m, B) view and the per-pixel work is nine weights
+            # sources is one offset into the ring and the per-pixel work is nine weights
             # (_rbf_run)
             u1 = run_end[v, u]
-            m = u1 - u
             room = row_start[v + 1] - off - lo  # the cells to the row's end
             ba = ra + index[ym, u - 1, 0] - sh_a + lo
             bh = rh + index[v, u - 1, 0] - sh_h + lo
