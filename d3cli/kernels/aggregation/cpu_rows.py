@@ -218,29 +218,30 @@ def _covered_bands(index):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rbf_cells(dst, b, count, q0, q1, q2, q3, q4, q5, q6, q7, q8, wp):
-    """``dst[b + i]``, i < count: the nine sources at ``b + i`` weighted by ``wp[0..8]``
-    and added in slot order.  ``b`` is unsigned, so the indexes need no negative-index
-    wraparound and the loop vectorises."""
-    w0 = wp[0]
-    w1 = wp[1]
-    w2 = wp[2]
-    w3 = wp[3]
-    w4 = wp[4]
-    w5 = wp[5]
-    w6 = wp[6]
-    w7 = wp[7]
-    w8 = wp[8]
+def _rbf_cells(out, db, ring, offs, sb, count, weights, v, u):
+    """``out[db + i]``, i < count: the nine sources ``ring[offs[k] + sb + i]`` weighted by
+    ``weights[v, u, k]`` and added in slot order.  The arrays themselves and offsets, not
+    slices (a slice per call costs its reference counting); unsigned subscripts, so the
+    indexes need no negative-index wraparound and the loop vectorises."""
+    w0 = weights[v, u, 0]
+    w1 = weights[v, u, 1]
+    w2 = weights[v, u, 2]
+    w3 = weights[v, u, 3]
+    w4 = weights[v, u, 4]
+    w5 = weights[v, u, 5]
+    w6 = weights[v, u, 6]
+    w7 = weights[v, u, 7]
+    w8 = weights[v, u, 8]
+    o0, o1, o2, o3, o4, o5, o6, o7, o8 = offs
     for i in range(count):
-        j = b + np.uint64(i)
         a = np.float32(0.0)
-        a += w0 * q0[j]
-        a += w1 * q1[j]
-        a += w2 * q2[j]
-        a += w3 * q3[j]
-        a += w4 * q4[j]
-        a += w5 * q5[j]
-        a += w6 * q6[j]
-        a += w7 * q7[j]
-        a += w8 * q8[j]
-        dst[j] = a
+        a += w0 * ring[UINT(o0 + sb + i)]
+        a += w1 * ring[UINT(o1 + sb + i)]
+        a += w2 * ring[UINT(o2 + sb + i)]
+        a += w3 * ring[UINT(o3 + sb + i)]
+        a += w4 * ring[UINT(o4 + sb + i)]
+        a += w5 * ring[UINT(o5 + sb + i)]
+        a += w6 * ring[UINT(o6 + sb + i)]
+        a += w7 * ring[UINT(o7 + sb + i)]
+        a += w8 * ring[UINT(o8 + sb + i)]
+        out[UINT(db + i)] = a

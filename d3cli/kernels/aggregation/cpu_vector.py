@@ -21,45 +21,54 @@ RBF_MAX_LANES = 96
 
 
 @intrinsic
-def _rbf_cells_vec(typingctx, dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wx, wy, wz, vectors):
-    """:func:`_rbf_cells` over the ``16 vectors`` cells from ``b`` (``vectors`` a
-    literal) of up to three pixels of ``band`` cells each: cell ``b + i`` with i < band
-    takes the weights ``wx``, i < 2 band ``wy``, the others ``wz`` (one pixel's
-    weights repeated for fewer pixels).  Same terms in the same order per cell (float32
-    multiply, then add: no fused multiply-add), written as vectors of 16: LLVM's
-    vectoriser leaves the loop that picks a weight per cell scalar."""
+def _rbf_cells_vec(typingctx, out, db, ring, offs, sb, band, weights, v, ux, uy, uz, vectors):
+    """:func:`_rbf_cells` over the ``16 vectors`` cells ``out[db ..]`` (``vectors`` a
+    literal), source k's from ``ring[offs[k] + sb]``, of up to three pixels of ``band``
+    cells each: cell i < band takes the weights ``weights[v, ux]``, i < 2 band those of
+    ``uy``, the others ``uz``'s (one pixel's weights repeated for fewer pixels).  Same
+    terms in the same order per cell (float32 multiply, then add: no fused
+    multiply-add), written as vectors of 16: LLVM's vectoriser leaves the loop that picks
+    a weight per cell scalar.  The arrays and offsets, not slices of them: the slices
+    per run and the weights view per block cost 2-9 % of the filter (measured)."""
     if not isinstance(vectors, types.IntegerLiteral):
         raise errors.RequireLiteralValue("vectors")
-    sources = (q0, q1, q2, q3, q4, q5, q6, q7, q8)
     n_vec = vectors.literal_value
 
     def codegen(context, builder, signature, args):
         f32 = ir.FloatType()
         i64 = ir.IntType(64)
         vec = ir.VectorType(f32, 16)
+        out_t, offs_t, weights_t = signature.args[0], signature.args[3], signature.args[6]
+        out_ary = context.make_array(out_t)(context, builder, args[0])
+        ring_ary = context.make_array(signature.args[2])(context, builder, args[2])
+        weights_ary = context.make_array(weights_t)(context, builder, args[6])
 
-        def at(k, i):  # a pointer to cell i of (1D) array argument k
-            ary = context.make_array(signature.args[k])(context, builder, args[k])
-            return cgutils.get_item_pointer(context, builder, signature.args[k], ary, [i])
+        def as_i64(k):
+            return context.cast(builder, args[k], signature.args[k], types.int64)
 
-        start = context.cast(builder, args[1], signature.args[1], types.intp)
-        width = context.cast(builder, args[2], signature.args[2], types.int64)
+        sb = as_i64(4)
+        starts = [builder.add(context.cast(builder, builder.extract_value(args[3], k), offs_t.types[k], types.int64),
+                              sb) for k in range(9)]
+        width = as_i64(5)
         ends = (_splat16(builder, width, i64), _splat16(builder, builder.mul(width, i64(2)), i64))
-        weights = [[_splat16(builder, builder.load(at(12 + g, i64(k))), f32) for k in range(9)] for g in range(3)]
-        for v in range(n_vec):
-            lanes = ir.Constant(ir.VectorType(i64, 16), list(range(16 * v, 16 * v + 16)))
+        weights = [[_splat16(builder, builder.load(cgutils.get_item_pointer(
+            context, builder, weights_t, weights_ary, [as_i64(7), as_i64(8 + g), i64(k)])), f32) for k in range(9)]
+            for g in range(3)]
+        for n in range(n_vec):
+            lanes = ir.Constant(ir.VectorType(i64, 16), list(range(16 * n, 16 * n + 16)))
             first = builder.icmp_signed("<", lanes, ends[0])
             second = builder.icmp_signed("<", lanes, ends[1])
-            j = builder.add(start, i64(16 * v))
             a = ir.Constant(vec, [0.0] * 16)
             for k in range(9):
                 w = builder.select(first, weights[0][k], builder.select(second, weights[1][k], weights[2][k]))
-                q = builder.load(builder.bitcast(at(3 + k, j), vec.as_pointer()), align=4)
+                at = builder.gep(ring_ary.data, [builder.add(starts[k], i64(16 * n))])
+                q = builder.load(builder.bitcast(at, vec.as_pointer()), align=4)
                 a = builder.fadd(a, builder.fmul(w, q))
-            builder.store(a, builder.bitcast(at(0, j), vec.as_pointer()), align=4)
+            at = builder.gep(out_ary.data, [builder.add(as_i64(1), i64(16 * n))])
+            builder.store(a, builder.bitcast(at, vec.as_pointer()), align=4)
         return context.get_dummy_value()
 
-    return types.void(dst, b, band, *sources, wx, wy, wz, vectors), codegen
+    return types.void(out, db, ring, offs, sb, band, weights, v, ux, uy, uz, vectors), codegen
 
 
 @intrinsic
@@ -116,26 +125,24 @@ def _rbf_cells_borrowing(typingctx, out, d0, ring, own, nbr, weights, v, u, c0, 
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, group, vectors):
+def _rbf_groups(out, d0, ring, offs, weights, v, u0, m, band, room, group, vectors):
     """:func:`_rbf_run` with blocks of ``16 vectors`` cells that hold ``group`` pixels
     (literals; ``group band <= 16 vectors``)."""
-    m = wr.shape[0]
     lanes = 16 * vectors
     step = group * band
     n_fast = min(m // group, (room - lanes) // step + 1) if room >= lanes else 0
-    b = np.uint64(0)
+    b = 0
     for g in range(n_fast):
-        p = g * group
-        _rbf_cells_vec(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p], wr[p + (group > 1)],
-                       wr[p + group - 1], vectors)
-        b += np.uint64(step)
+        p = u0 + g * group
+        _rbf_cells_vec(out, d0 + b, ring, offs, b, band, weights, v, p, p + (group > 1), p + group - 1, vectors)
+        b += step
     p_fast = min(m, (room - lanes) // band + 1) if room >= lanes else 0
     for p in range(n_fast * group, p_fast):
-        _rbf_cells_vec(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p], wr[p], wr[p], vectors)
-        b += np.uint64(band)
+        _rbf_cells_vec(out, d0 + b, ring, offs, b, band, weights, v, u0 + p, u0 + p, u0 + p, vectors)
+        b += band
     for p in range(max(n_fast * group, p_fast), m):
-        _rbf_cells(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p])
-        b += np.uint64(band)
+        _rbf_cells(out, d0 + b, ring, offs, b, band, weights, v, u0 + p)
+        b += band
 
 
 @njit(cache=True, error_model="numpy")
@@ -144,7 +151,7 @@ def _rbf_run(out, d0, ring, o0, o1, o2, o3, o4, o5, o6, o7, o8, weights, v, u0, 
     is ``out[d0 + p B + i]``, from the sources ``ring[ok + p B + i]`` (k = 0 .. 8)
     weighted by ``weights[v, u0 + p, k]``; ``room`` cells of ``out`` from ``d0`` (to the
     end of the row) may be written.  It takes the arrays and offsets, not slices of
-    them: a slice passed to a function costs reference counting, and the covered pixels
+    them, and hands them on so: a slice costs reference counting, and the covered pixels
     outside the runs call it for one pixel each (offsets measured faster than slices).
 
     A loop over the B cells of a pixel vectorises only where it is long, and the bands
@@ -160,38 +167,31 @@ def _rbf_run(out, d0, ring, o0, o1, o2, o3, o4, o5, o6, o7, o8, weights, v, u0, 
     cold first compile; hence only these eight (bands of 9 and 10, rare, go one pixel a
     vector).
     """
-    dst = out[d0:d0 + room]
-    q0 = ring[o0:o0 + room]
-    q1 = ring[o1:o1 + room]
-    q2 = ring[o2:o2 + room]
-    q3 = ring[o3:o3 + room]
-    q4 = ring[o4:o4 + room]
-    q5 = ring[o5:o5 + room]
-    q6 = ring[o6:o6 + room]
-    q7 = ring[o7:o7 + room]
-    q8 = ring[o8:o8 + room]
-    wr = weights[v, u0:u1]
+    offs = (np.int64(o0), np.int64(o1), np.int64(o2), np.int64(o3), np.int64(o4), np.int64(o5), np.int64(o6),
+            np.int64(o7), np.int64(o8))
+    m = u1 - u0
+    d0 = np.int64(d0)
     if band <= 5:
-        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 3, 1)
+        _rbf_groups(out, d0, ring, offs, weights, v, u0, m, band, room, 3, 1)
     elif band <= 8:
-        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 2, 1)
+        _rbf_groups(out, d0, ring, offs, weights, v, u0, m, band, room, 2, 1)
     elif band <= 16:
-        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 1)
+        _rbf_groups(out, d0, ring, offs, weights, v, u0, m, band, room, 1, 1)
     elif band <= 24:
-        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 2, 3)
+        _rbf_groups(out, d0, ring, offs, weights, v, u0, m, band, room, 2, 3)
     elif band <= 32:
-        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 2)
+        _rbf_groups(out, d0, ring, offs, weights, v, u0, m, band, room, 1, 2)
     elif band <= 48:
-        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 3)
+        _rbf_groups(out, d0, ring, offs, weights, v, u0, m, band, room, 1, 3)
     elif band <= 64:
-        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 4)
+        _rbf_groups(out, d0, ring, offs, weights, v, u0, m, band, room, 1, 4)
     elif band <= 96:
-        _rbf_groups(dst, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr, band, room, 1, 6)
+        _rbf_groups(out, d0, ring, offs, weights, v, u0, m, band, room, 1, 6)
     else:
-        b = np.uint64(0)
-        for p in range(wr.shape[0]):
-            _rbf_cells(dst, b, band, q0, q1, q2, q3, q4, q5, q6, q7, q8, wr[p])
-            b += np.uint64(band)
+        b = 0
+        for p in range(m):
+            _rbf_cells(out, d0 + b, ring, offs, b, band, weights, v, u0 + p)
+            b += band
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -258,10 +258,9 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
         if covered[v, u] == 2 and 0 < u < w - 1:
             # a run of interior pixels whose neighbours all hold this band: their cells,
             # and each neighbour row's, follow one another B apart, so each of the nine
-            # sources is one (m, B) view and the per-pixel work is nine weights
+            # sources is one offset into the ring and the per-pixel work is nine weights
             # (_rbf_run)
             u1 = run_end[v, u]
-            m = u1 - u
             room = row_start[v + 1] - off - lo  # the cells to the row's end
             ba = ra + index[ym, u - 1, 0] - sh_a + lo
             bh = rh + index[v, u - 1, 0] - sh_h + lo

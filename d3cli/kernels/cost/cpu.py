@@ -160,6 +160,7 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance, n_thr
         vl = np.zeros(w, np.float64)
         mr = np.zeros(w, np.float64)
         vr = np.zeros(w, np.float64)
+        rev = np.empty((2, w), np.float64)  # mr, vr reversed (_reversed_stats)
         num = np.zeros(max_row, np.float64)  # per cell of a row: NCC numerator, denominator^2
         den = np.zeros(max_row, np.float64)
         r_in = np.empty(w, np.float64)  # a right row reversed, float64 (_add_row_products)
@@ -172,7 +173,7 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance, n_thr
                 y_out = v - r - 1 if v - r - 1 >= 0 else -1
                 if y_in >= 0 or y_out >= 0:
                     _add_row_products(acc, acc_lo, acc_hi, left, right, y_in, y_out, r_in, r_out)
-            _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii_r, ii_rr, h, w, r,
+            _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, rev, num, den, ii_l, ii_ll, ii_r, ii_rr, h, w, r,
                      min_variance)
     return cost
 
@@ -298,25 +299,26 @@ def _unclipped_end(u, lo, hi, r, w):
 
 
 @njit(cache=True, error_model="numpy")
-def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii_r, ii_rr, h, w, r, min_variance):
+def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, rev, num, den, ii_l, ii_ll, ii_r, ii_rr, h, w, r, min_variance):
     """Costs of the bands of row v from the window-row column sums ``acc``.
 
     ``win[d]`` is the window sum of ``acc`` over the columns u - r .. u + r; it slides
     from column to column while the band stays the same and the window is not clipped,
     and is summed afresh otherwise.  The window means and variances of unclipped windows
-    are computed once per column (:func:`_window_stats`), not once per cell.  The cells
-    of unclipped windows are done in two passes: the first leaves each cell's numerator
-    ``slr / n - m_l m_r`` and ``v_l v_r`` (-1: flat) in ``num``, ``den``; the second
+    are computed once per column (:func:`_window_stats`), not once per cell, the right
+    image's also reversed (:func:`_reversed_stats`).  The cells of unclipped windows are
+    done in two passes: the first leaves each cell's numerator ``slr / n - m_l m_r`` and
+    ``v_l v_r`` (NaN or -1: flat) in ``num``, ``den``; the second
     (:func:`_costs_from_terms`) runs over the row's contiguous cells (a band of 5-7 cells is
     shorter than a vector; a row is not).  Operation for operation this is
     :func:`pixel.ncc_cost`: the same bits.  Clipped windows (the image borders) get their
     ``num``, ``den`` from their own box sums (:func:`_clipped_terms`)."""
     v0 = max(0, v - r)
     v1 = min(h - 1, v + r)
-    n_full = (v1 - v0 + 1) * (2 * r + 1)
-    inv = 1.0 / n_full
+    inv = 1.0 / ((v1 - v0 + 1) * (2 * r + 1))
     _window_stats(ii_l, ii_ll, v0, v1, r, inv, ml, vl)
     _window_stats(ii_r, ii_rr, v0, v1, r, inv, mr, vr)
+    mrr, vrr = _reversed_stats(mr, vr, rev, min_variance)
     start = index[v, 0, 0] + index[v, 0, 1]  # the row's cells: cost[start:start + n_row]
     n_row = 0
     clipped = False
@@ -340,19 +342,18 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
             ea = (u + r) * acc_w + lo  # acc[u + r, lo] in accf
             la = (u - r - 1) * acc_w + lo
             o = off + lo - start
+            k = w - 1 - u + lo  # the right window of d = lo + i sits at column u - d: rev[:, k + i]
+            ml_u = ml[u]
+            vl_u = vl[u] if vl[u] > min_variance else np.nan  # a flat window: NaN, as the right's
             if run_lo == lo and run_hi == d_fast and u > r and n <= NCC_NARROW:
                 # a narrow band: slide and the cell's terms in one loop, the same operations
                 # (two loops over 5-8 cells barely vectorise, and one costs less; on wide
                 # bands one loop is slower)
-                ml_u = ml[u]
-                vl_u = vl[u]
                 for i in range(n):  # slide by one column
                     t = win[UINT(lo + i)] + (accf[UINT(ea + i)] - accf[UINT(la + i)])
                     win[UINT(lo + i)] = t
-                    x = UINT(u - lo - i)  # the right window of d = lo + i sits at column u - d
-                    vr_x = vr[x]
-                    num[UINT(o + i)] = t * inv - ml_u * mr[x]
-                    den[UINT(o + i)] = vl_u * vr_x if (vl_u > min_variance and vr_x > min_variance) else -1.0
+                    num[UINT(o + i)] = t * inv - ml_u * mrr[UINT(k + i)]
+                    den[UINT(o + i)] = vl_u * vrr[UINT(k + i)]
                 continue
             if run_lo == lo and run_hi == d_fast and u > r:
                 for i in range(n):  # slide by one column
@@ -366,18 +367,34 @@ def _ncc_row(cost, index, v, acc, win, ml, vl, mr, vr, num, den, ii_l, ii_ll, ii
                         win[UINT(lo + i)] += accf[UINT(ca + i)]
             run_lo = lo
             run_hi = d_fast
-            ml_u = ml[u]
-            vl_u = vl[u]
             for i in range(n):
-                x = UINT(u - lo - i)  # the right window of d = lo + i sits at column u - d
-                vr_x = vr[x]
-                num[UINT(o + i)] = win[UINT(lo + i)] * inv - ml_u * mr[x]
-                den[UINT(o + i)] = vl_u * vr_x if (vl_u > min_variance and vr_x > min_variance) else -1.0
+                num[UINT(o + i)] = win[UINT(lo + i)] * inv - ml_u * mrr[UINT(k + i)]
+                den[UINT(o + i)] = vl_u * vrr[UINT(k + i)]  # no select per cell
         else:
             run_hi = -1
     if clipped:
         _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0, v1, w, r, min_variance)
     _costs_from_terms(cost[start:start + n_row], num, den)
+
+
+@njit(cache=True, error_model="numpy")
+def _reversed_stats(mr, vr, rev, min_variance):
+    """``(rev[0], rev[1])``: ``mr`` and ``vr`` reversed (``rev[:, w - 1 - x]`` holds column
+    x), a flat window's variance (<= ``min_variance``) replaced by NaN.
+
+    A pixel's cells read the right windows at columns u - d with d rising: reversed,
+    they run forward, without a shuffle per vector; and the flat test needs no select
+    per cell: a product with NaN is NaN, which :func:`_costs_from_terms` rejects (``den
+    >= 0`` fails) as it rejects the -1 of a flat window, so the costs are the same bits.
+    """
+    w = mr.shape[0]
+    mrr = rev[0]
+    vrr = rev[1]
+    for k in range(w):
+        x = w - 1 - k
+        mrr[k] = mr[x]
+        vrr[k] = vr[x] if vr[x] > min_variance else np.nan
+    return mrr, vrr
 
 
 @njit(cache=True, error_model="numpy", inline="always")

@@ -153,3 +153,32 @@ def test_ncc_flat_window_costs_one():
     right = rng.uniform(0, 255, (7, 9)).astype(np.float32)
     assert (cpu.ncc_cost_volume(left, right, 3, 5, 1e-2) == 1.0).all()
     assert (cpu.ncc_cost_volume(right, left, 3, 5, 1e-2) == 1.0).all()
+
+
+@pytest.mark.parametrize("window", [3, 5])
+@pytest.mark.parametrize("min_variance", [1e-2, 0.0, 40.0])
+def test_ncc_cost_volume_is_the_per_cell_formula_bit_for_bit(window, min_variance):
+    # Integer grey levels: every window sum is an exact integer in float64, whatever the
+    # order of the additions, so the driver's costs must be those of the per-cell formula
+    # (ops.ncc_cost) of the same sums, bit for bit: flat windows (left, right, and
+    # variances at the min_variance threshold) and clipped windows at the borders included.
+    rng = np.random.default_rng(window + int(min_variance))
+    h, w, n_disp = 11, 19, 7
+    left = rng.integers(0, 256, (h, w)).astype(np.float32)
+    right = rng.integers(0, 256, (h, w)).astype(np.float32)
+    left[2:7, 3:9] = 90.0
+    right[5:, 10:16] = 31.0
+    right[0:4, 0:5] = rng.integers(0, 2, (4, 5))  # a variance near the threshold
+    got = cpu.ncc_cost_volume(left, right, n_disp - 1, window, min_variance)
+    lf, rf = left.astype(np.float64), right.astype(np.float64)
+    r = window // 2
+    want = np.ones((h, w, n_disp), np.float32)
+    for v in range(h):
+        rows = slice(max(0, v - r), min(h, v + r + 1))
+        for u in range(w):
+            for d in range(min(n_disp, u + 1)):
+                c0, c1 = max(u - r, d), min(u + r, w - 1)  # the right window at c - d stays inside
+                wl, wr = lf[rows, c0:c1 + 1], rf[rows, c0 - d:c1 - d + 1]
+                want[v, u, d] = cpu.ops.ncc_cost(wl.size, wl.sum(), (wl * wl).sum(), wr.sum(), (wr * wr).sum(),
+                                                 (wl * wr).sum(), min_variance)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
