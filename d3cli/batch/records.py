@@ -11,6 +11,7 @@ from pathlib import Path
 from .. import __version__
 from .fingerprint import package_versions
 from .outputs import write_json
+from .signals import signals_deferred
 
 
 @dataclass
@@ -100,3 +101,16 @@ def write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, s
         "failed": failed,
     }
     write_json(batch.run_json, data)
+
+
+def record_complete(batch: BatchResult, records, meta: dict, on_recorded=None) -> None:
+    """Write run.json as complete and mark ``batch.recorded``, with Ctrl-C/SIGTERM held back
+    so that the two happen together: an interrupt after this is one after a finished batch
+    (the runner ignores a Ctrl-C then), one before it is recorded in run.json as an
+    interruption.  ``on_recorded`` runs inside the same held block (the CLI ignores Ctrl-C
+    from there on)."""
+    with signals_deferred():
+        write_run_json(batch, records, **meta, interrupted=False)
+        batch.recorded = True
+        if on_recorded is not None:
+            on_recorded()

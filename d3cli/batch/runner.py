@@ -52,7 +52,7 @@ from .fingerprint import feature_files, package_versions, pair_fingerprint, sett
 from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock, shard_lock_name
 from .methods import compute_pair
 from ..evaluation.html import write_report_html
-from .records import BatchResult, write_run_json
+from .records import BatchResult, record_complete, write_run_json
 from .signals import (interrupts_unwrapped, mark_terminated, signals_deferred, signals_held,
                       sigterm_as_interrupt)
 from .staging import changed_files, clean_leftovers, discard, named_as_target, new_staging, publish
@@ -518,22 +518,10 @@ def _finish(batch: BatchResult, records: list, meta: dict, pairs: list, out: Pat
         for name in remove_stale_summaries(out):
             log.info("%s: removed the summary of an earlier --eval run (rerun with --eval to score)", out / name)
     # The page people look at, after every batch; before run.json, whose complete record
-    # is the batch's last act (see _record_complete).
+    # is the batch's last act (records.record_complete).
     write_report_html(out, batch.rows, title=f"d3stereo run: {out} ({method})", config=cfg.to_dict(),
                       versions=package_versions(), run_counts=run_counts)
-    _record_complete(batch, records, meta, on_recorded)
-
-
-def _record_complete(batch: BatchResult, records: list, meta: dict, on_recorded) -> None:
-    """Write run.json as complete and mark ``batch.recorded``, with Ctrl-C/SIGTERM held back
-    so that the two happen together: an interrupt after this is one after a finished batch
-    (:func:`_locked_batch`), one before it is recorded in run.json.  ``on_recorded`` runs
-    inside the same held block (the CLI ignores Ctrl-C from there on)."""
-    with signals_deferred():
-        write_run_json(batch, records, **meta, interrupted=False)
-        batch.recorded = True
-        if on_recorded is not None:
-            on_recorded()
+    record_complete(batch, records, meta, on_recorded)
 
 
 def _batch_pair(pair, pair_dir: Path, **kwargs):
