@@ -152,7 +152,13 @@ class Backend(Protocol):
         -------
         Volume or ndarray
             Same kind and band layout; each cell ``(L_left + L_right + L_down + L_up) / 4``
-            (the recurrence :func:`pixel.sgm_step` states; each driver runs it in its own vector form), summed in that order.
+            with ``L(p, d) = C(p, d) + min(L(q, d), L(q, d -+ 1) + P1, min_k L(q, k) + P2) -
+            min_k L(q, k)`` along each path (``q`` the previous pixel; ``L = C`` at its
+            start), in float32, the paths summed in that order.  The one place per target
+            where the per-cell math is not a shared per-pixel function: the CPU driver runs
+            it in LLVM vectors of 8 disparities, the CUDA driver across a block's threads,
+            the same float32 operations in the same order (tests/kernels/sgm/ hold both to
+            a NumPy reference and to each other).
         """
         ...
 

@@ -2,7 +2,7 @@
 
 This module holds the helpers several steps share (:func:`build_shared`) and
 :func:`build_ops`, which composes them with every step's per-pixel module
-(``cost/pixel.py``, ``aggregation/pixel.py``, ``sgm/pixel.py``, ``decisive/pixel_*.py``,
+(``cost/pixel.py``, ``aggregation/pixel.py``, ``decisive/pixel_*.py``,
 ``perspective/pixel.py``) into one namespace of functions compiled with ``jit``:
 ``numba.njit`` for the CPU (``kernels/cpu_common.py``) and ``numba.cuda.jit(device=True)``
 for CUDA (``kernels/cuda_launch.py``).  The same Python source is compiled twice, so the two
@@ -182,7 +182,7 @@ def build_ops(jit):
         The shared helpers of :func:`build_shared` and every step's functions:
         ``ncc_cost, cosine_cost, box_sum, cost_or_inf, right_cost_or_inf, rbf_weight, seed_at,
         diffuse_at, inherit_patch, inherit_pixel, inherit_at, inherit_quad, subpixel_at,
-        sgm_step, pt_shift, bilinear_at, pt_restore_at`` and the helpers they use.  The
+        pt_shift, bilinear_at, pt_restore_at`` and the helpers they use.  The
         drivers inherit with ``inherit_quad`` (one 2x2 patch, each cell read once); the
         per-pixel form ``inherit_at`` states eq. 7-9 literally and the tests hold the two
         to each other.
@@ -202,10 +202,9 @@ def build_ops(jit):
     from .cost import pixel as cost
     from .decisive import pixel_diffusion, pixel_inheritance, pixel_seeds, pixel_subpixel
     from .perspective import pixel as perspective
-    from .sgm import pixel as sgm
 
     shared = build_shared(jit)
     found = dict(vars(shared))
-    for step in (cost, sgm, aggregation, pixel_seeds, pixel_diffusion, pixel_inheritance, pixel_subpixel, perspective):
+    for step in (cost, aggregation, pixel_seeds, pixel_diffusion, pixel_inheritance, pixel_subpixel, perspective):
         found.update(vars(step.build(jit, shared)))
     return SimpleNamespace(**found)

@@ -48,7 +48,7 @@ def _dropped(made: dict[str, Path]) -> set[str]:
 
 
 @pytest.mark.parametrize("use_cache_dir", [False, True])
-@pytest.mark.parametrize("edited", ["pixel.py", "decisive/pixel_seeds.py", "sgm/pixel.py", "cost/pixel.py"])
+@pytest.mark.parametrize("edited", ["pixel.py", "decisive/pixel_seeds.py", "decisive/pixel_subpixel.py", "cost/pixel.py"])
 def test_an_edit_of_a_per_pixel_module_drops_every_driver_that_inlines_it(tree, tmp_path, edited, use_cache_dir):
     cache_dir = str(tmp_path / "numba") if use_cache_dir else ""
     assert cache.drop_stale(tree, cache_dir)  # no stamp yet

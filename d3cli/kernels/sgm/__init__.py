@@ -1,5 +1,6 @@
-"""Semi-global smoothing of a banded cost volume (four paths).  ``pixel.py`` one pixel
-of one path, ``cpu.py`` and ``cuda.py`` the drivers.
+"""Semi-global smoothing of a banded cost volume (four paths).  ``cpu.py`` and ``cuda.py``
+the drivers, each with the path step in its own vector form (the recurrence:
+:meth:`d3cli.kernels.backend.Backend.sgm_smooth`).
 
 May import: the kernels' shared modules (``pixel``, ``volume``, ``cache``, ``intrinsics``,
 ``cpu_common``, ``cuda_launch``), numba, numpy, llvmlite; no other step package.

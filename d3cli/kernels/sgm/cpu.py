@@ -50,7 +50,7 @@ SGM_PREFETCH_ROWS = 2
 def _sgm_rows(cost, index, n_disp, p1, p2, acc):
     for v in prange(index.shape[0]):
         _zero_gaps(index, v, acc)
-        # two path buffers, inf outside the band (pixel.sgm_step's layout)
+        # two path buffers, L(d) at d + 1, inf outside the band (sentinels at both ends)
         a = np.full(n_disp + 2, np.inf, np.float32)
         b = np.full(n_disp + 2, np.inf, np.float32)
         _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, 1, 0)  # left to right: the first path stores
@@ -209,8 +209,8 @@ def _vector_access(context, builder, signature, args, lanes):
 
 @intrinsic
 def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2, mode):
-    """The ``n`` cells of one path step, :func:`d3cli.kernels.sgm.pixel.build`'s
-    ``sgm_step`` loop in blocks of :data:`SGM_LANES` disparities: cell i's cost at
+    """The ``n`` cells of one path step (the recurrence of
+    :meth:`d3cli.kernels.backend.Backend.sgm_smooth`) in blocks of :data:`SGM_LANES` disparities: cell i's cost at
     ``cost[cells + i]``, the previous pixel's path costs of d - 1, d, d + 1 at
     ``pbuf[below + i + (0, 1, 2)]``, the new one written to ``cbuf[out + i]`` and into
     ``acc[cells + i]`` as ``mode`` (a literal) says.  The same float32 operations in the
@@ -289,17 +289,16 @@ def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _sgm_pixel(cost, index, v, u, pbuf, pbase, pm, cbuf, cbase, olo, ohi, p1, p2, acc, mode):
-    """One pixel of one path (``pixel.sgm_step``'s arithmetic and buffer layout) in
+    """One pixel of one path (L(d) at ``base + d + 1`` of a buffer of n_disp + 2 cells) in
     blocks of :data:`SGM_LANES` disparities; ``pm`` the least path cost of the previous
     pixel (inf at the path's start).  Returns the least of this pixel's path costs: the
     next step's ``pm``, taken from the blocks as they are written instead of a scan of
     the band (a serial chain of compares that took a fifth of the smoothing's time).
 
-    The buffers hold inf outside the band last written into them, as ``sgm_step``'s, but
-    are kept so differently: ``cbuf`` still holds the band ``[olo, ohi)`` of the pixel
-    two steps back (empty: all inf), and only its cells outside this pixel's band go back
-    to inf (``sgm_step`` resets the whole previous band, while neighbouring bands mostly
-    overlap)."""
+    The buffers hold inf outside the band last written into them: ``cbuf`` still holds the
+    band ``[olo, ohi)`` of the pixel two steps back (empty: all inf), and only its cells
+    outside this pixel's band go back to inf (resetting the whole previous band cost more:
+    neighbouring bands mostly overlap)."""
     off = index[v, u, 0]
     lo = index[v, u, 1]
     hi = index[v, u, 2]

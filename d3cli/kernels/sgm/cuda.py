@@ -16,12 +16,12 @@ MAX_LANES = 32
 
 
 # ----------------------------------------------------------------------------- semi-global smoothing
-# One path step of a pixel is ``pixel.sgm_step``'s arithmetic, cell by cell, with the band
-# spread over the block's threads instead of a loop: the previous pixel's least path cost is
+# One path step of a pixel is the recurrence of ``Backend.sgm_smooth`` (kernels/backend.py),
+# cell by cell, with the band spread over the block's threads instead of a loop: the previous pixel's least path cost is
 # a block-wide minimum (exact in any order), each cell's new cost the same float32
 # expression in the same order, so the result equals the CPU's bit for bit (the tests
 # compare them).  The line's two path buffers are in ``scratch`` (L(d) at base + d + 1, as
-# ``sgm_step``'s); a cell outside the previous pixel's band reads as inf by a bounds test
+# the CPU's); a cell outside the previous pixel's band reads as inf by a bounds test
 # rather than from inf-filled sentinels (on the CPU they keep the loop branch-free), which
 # spares a reset of the buffer and a barrier per pixel.
 @cuda.jit(device=True)
