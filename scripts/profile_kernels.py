@@ -7,9 +7,11 @@ the finest level's NCC is told from the coarse ones').  One warm-up call, then `
 calls; the medians over the calls are printed, with the total CPU time of a call and the
 md5 of the disparity map (the same as bench_speed's).
 
-``--capture DIR`` also saves the inputs of the finest level's NCC and RBF calls of the
-last rep (``DIR/<case>_ncc.npz``, ``DIR/<case>_rbf.npz``), for kernel A/B timings of an
-old and a new driver in one process.
+``--capture DIR`` also saves the inputs of the finest level's NCC, RBF, inheritance and
+diffusion calls of the last rep (``DIR/<case>_ncc.npz``, ``_rbf``, ``_inherit``,
+``_diffuse``; the last two hold the volume's ``cost``, ``index``, ``n_disp`` and the
+call's other arguments as ``a1``, ``a2``, ...), for kernel A/B timings of an old and a
+new driver in one process.
 
 Usage::
 
@@ -51,7 +53,7 @@ def _wrap(backend, totals: dict, captured: dict) -> None:
             continue
 
         def timed(*args, _name=name, _f=getattr(backend, name), **kw):
-            if _name in ("ncc_cost_volume", "rbf_weights", "rbf_filter"):
+            if _name in ("ncc_cost_volume", "rbf_weights", "rbf_filter", "inherit", "diffuse"):
                 captured.setdefault(_name, []).append((args, kw))
             t0 = time.process_time()
             out = _f(*args, **kw)
@@ -63,7 +65,7 @@ def _wrap(backend, totals: dict, captured: dict) -> None:
 
 
 def _save(captured: dict, folder: Path, case: str) -> None:
-    """The finest level's NCC and RBF inputs of the last call, as .npz files."""
+    """The finest level's NCC, RBF, inheritance and diffusion inputs of the last call, as .npz files."""
     import numpy as np
 
     args, kw = max(captured["ncc_cost_volume"], key=lambda c: c[0][0].shape[1])
@@ -72,6 +74,13 @@ def _save(captured: dict, folder: Path, case: str) -> None:
              min_variance=min_var, index=kw.get("index") if kw.get("index") is not None else np.zeros(0))
     img_args, _ = max(captured["rbf_weights"], key=lambda c: c[0][0].shape[1])
     np.savez(folder / f"{case}_rbf.npz", image=img_args[0], sigma_space=img_args[1], sigma_color=img_args[2])
+    for name in ("inherit", "diffuse"):
+        if name not in captured:
+            continue
+        args, kw = max(captured[name], key=lambda c: _width(c[0]))
+        vol = args[0]
+        rest = {f"a{i}": (np.zeros(0) if a is None else np.asarray(a)) for i, a in enumerate(args[1:], 1)}
+        np.savez(folder / f"{case}_{name}.npz", cost=vol.cost, index=vol.index, n_disp=vol.n_disp, **rest)
 
 
 def main(argv=None) -> int:
@@ -85,7 +94,7 @@ def main(argv=None) -> int:
     parser.add_argument("--data", default=os.environ.get("D3STEREO_DATA", ""))
     parser.add_argument("--cases", nargs="+", default=list(bs.DEFAULT_CASES), choices=sorted(bs.CASES))
     parser.add_argument("--reps", type=int, default=5)
-    parser.add_argument("--capture", help="folder for the finest level's NCC and RBF inputs")
+    parser.add_argument("--capture", help="folder for the finest level's kernel inputs")
     args = parser.parse_args(argv)
     totals: dict = {}
     captured: dict = {}
