@@ -76,7 +76,9 @@ def test_the_re_match_measures_the_pothole_of_a_smoothed_map(tmp_path, smoothed_
     blurred = road_report(tmp_path, pair.left, smoothed, finite, cam, {}, cfg)[0]
     rematched = road_report(tmp_path, pair.left, smoothed, finite, cam, {}, cfg, right=pair.right)[0]
     depth = [next(d["max_depth_mm"] for d in items if d["kind"] == "pothole") for items in (exact, blurred, rematched)]
-    assert depth[1] < 0.9 * depth[0]
+    # The blur reads the pothole 8 % shallow (29.9 -> 27.5 mm; 26.2 mm while the reference
+    # ring stopped on the blurred wall); the re-match gives back the exact map's depth.
+    assert depth[1] < 0.95 * depth[0]
     assert depth[2] == pytest.approx(depth[0], rel=0.05)
 
 
