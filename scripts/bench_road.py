@@ -7,19 +7,24 @@ Usage::
     python -m d3cli run /tmp/road-synth -c road --road-report -o /tmp/road-out
     python scripts/bench_road.py /tmp/road-synth /tmp/road-out [--min-gt-depth-mm 20]
 
-Matching (one ground-truth pothole to at most one detection, one detection to at most one
-pothole): a detection's pixels are its ``outline_px`` polygons (defects.json; its bounding
-box for outputs without them), a ground-truth pothole's pixels are its id in
-potholes_gt.png (the surface it lowers by more than 1 mm, deeper pothole wins where two
-overlap; nested potholes are one defect under the deepest one's id, the others' entries say
-``part_of`` and have no pixels, so they are not counted).  A detection and a pothole *can match* when at least ``--min-inside`` (0.5) of the
-detection lies on that pothole AND the detection covers at least ``--min-cover`` (0.3) of the
-pothole's visible pixels; matches are taken greedily, largest overlap first.  A detection
-that matches nothing is a **false defect** when less than half of it lies on pothole pixels
-of any id, else a **duplicate** (a fragment of a pothole matched already, or one region
-spanning two potholes: a split or merge error).  A pothole joined with its neighbour into
-one region therefore counts as missed (the region matches at most one of them), and a
-pothole cut into pieces is found once, with the area error of its largest piece.
+Matching, ``--rule deep`` (the default; docs/road.md, "The match rule"): a detection's pixels
+are its ``outline_px`` polygons (defects.json; its bounding box for outputs without them), a
+ground-truth pothole's pixels are its id in potholes_gt.png (the surface it lowers by more than
+1 mm, deeper pothole wins where two overlap; nested potholes are one defect under the deepest
+one's id, the others' entries say ``part_of`` and have no pixels, so they are not counted); its
+*deep part* is those pixels lowered by more than ``--threshold-mm`` (10, the report's
+``road.min_depth_mm``), its *deepest point* the pixel lowered most (the synth road rebuilt from
+SOURCE.txt's pair_seed: ``d3cli.data.synth.pothole_depth_image``).  A detection at least half of
+which lies on pothole pixels stands for the pothole holding most of its pixels, and matches it
+when it covers at least half of its deep part or its deepest point.  One to one: of several
+detections matching a pothole the one covering most of its deep part wins (then the one with
+more pixels on it).  ``--rule footprint`` is the earlier rule: a detection and a pothole can
+match when at least ``--min-inside`` (0.5) of the detection lies on that pothole and it covers at
+least ``--min-cover`` (0.3) of the pothole's pixels, largest overlap first.  Under both rules a
+detection that matches nothing is a **false defect** when less than half of it lies on pothole
+pixels of any id, else a **duplicate** (a fragment of a pothole, or one region spanning two
+potholes: a split or merge error); a pothole joined with its neighbour into one region counts for
+at most one of them, and a pothole cut into pieces is found once.
 
 Bumps: a predicted bump is true when the pair has a ground-truth bump (SOURCE.txt
 ``bump: x= y= height=``, world metres) whose centre, projected with the rig of calib.txt,
@@ -106,8 +111,77 @@ def match_potholes(ids: np.ndarray, pits: list, *, min_inside: float, min_cover:
     return hits, duplicates, false
 
 
+def match_deep(ids: np.ndarray, depth_mm: np.ndarray, pits: list, *, threshold_mm: float):
+    """One-to-one matching by the deep part and the deepest point (module docstring).
+
+    Parameters
+    ----------
+    ids : ndarray, uint8, (H, W)
+        Ground-truth pothole id per pixel (0: none).
+    depth_mm : ndarray, float, (H, W)
+        How far the potholes lower the road at each pixel (nan: unknown).
+    pits : list of dict
+        Predicted potholes (defects.json entries).
+    threshold_mm : float
+        The report's depth threshold: a pothole's deep part is deeper than this.
+
+    Returns
+    -------
+    hits : dict gt id -> detection
+    duplicates, false : int
+    """
+    depth = np.nan_to_num(np.asarray(depth_mm, np.float64), nan=-np.inf)
+    masks = [detection_mask(d, ids.shape) for d in pits]
+    claims = []
+    for i, m in enumerate(masks):
+        on = ids[m]
+        on = on[on > 0]
+        if on.size < 0.5 * max(int(m.sum()), 1):
+            continue
+        labels, counts = np.unique(on, return_counts=True)
+        k = int(labels[np.argmax(counts)])
+        pothole = ids == k
+        deep = pothole & (depth > threshold_mm)
+        deepest = np.unravel_index(np.argmax(np.where(pothole, depth, -np.inf)), ids.shape)
+        cover = int((m & deep).sum())
+        if (deep.any() and cover >= 0.5 * int(deep.sum())) or m[deepest]:
+            claims.append((cover, int(counts.max()), i, k))
+    hits, used = {}, set()
+    for _, _, i, k in sorted(claims, reverse=True):
+        if k not in hits:
+            hits[k] = pits[i]
+            used.add(i)
+    duplicates = false = 0
+    for i, m in enumerate(masks):
+        if i in used:
+            continue
+        if (ids[m] > 0).sum() >= 0.5 * max(int(m.sum()), 1):
+            duplicates += 1
+        else:
+            false += 1
+    return hits, duplicates, false
+
+
+def gt_depth_mm(gt_dir: Path, shape) -> np.ndarray:
+    """How far the potholes lower the road at each left pixel of a synth pair, mm (nan where
+    the pair has no SOURCE.txt pair_seed or no exact disparity)."""
+    from d3cli.data.formats import read_pfm
+    from d3cli.data.synth import pothole_depth_image
+
+    source = gt_dir / "SOURCE.txt"
+    fields = dict(ln.split(": ", 1) for ln in source.read_text().splitlines() if ": " in ln) if source.is_file() else {}
+    if "pair_seed" not in fields or not (gt_dir / "disp_gt.pfm").is_file():
+        return np.full(shape, np.nan)
+    width, height = (int(x) for x in fields["image_size"].split("x"))
+    return pothole_depth_image(seed=int(fields["pair_seed"]), width=width, height=height,
+                               disparity=read_pfm(gt_dir / "disp_gt.pfm"))
+
+
 def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_inside: float = 0.5,
-               min_cover: float = 0.3, bump_margin_px: float = 10.0, min_decided_share: float = 0.0) -> dict:
+               min_cover: float = 0.3, bump_margin_px: float = 10.0, min_decided_share: float = 0.0,
+               rule: str = "deep", threshold_mm: float = 10.0, depth_mm: np.ndarray | None = None) -> dict:
+    """Scores of one pair (module docstring); ``depth_mm`` (how far the potholes lower the
+    road per pixel, for ``rule="deep"``) is rebuilt from the pair's SOURCE.txt when None."""
     gt = json.loads((gt_dir / "defects_gt.json").read_text())["potholes"]
     ids = cv2.imread(str(gt_dir / "potholes_gt.png"), cv2.IMREAD_UNCHANGED)
     pred_path = out_dir / "defects.json"
@@ -118,7 +192,12 @@ def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_insid
     pits = [d for d in preds if d["kind"] == "pothole"]
     by_id = {g["id"]: g for g in gt}
     counted = {g["id"] for g in gt if g["depth_mm"] > min_gt_depth_mm and g["visible_px"] > 0}
-    hits, dup, false = match_potholes(ids, pits, min_inside=min_inside, min_cover=min_cover)
+    if rule == "deep":
+        if depth_mm is None:
+            depth_mm = gt_depth_mm(gt_dir, ids.shape)
+        hits, dup, false = match_deep(ids, depth_mm, pits, threshold_mm=threshold_mm)
+    else:
+        hits, dup, false = match_potholes(ids, pits, min_inside=min_inside, min_cover=min_cover)
     bump_at = gt_bump_px(gt_dir)
     false_bumps = 0
     for d in preds:
@@ -170,10 +249,14 @@ def main(argv=None) -> int:
     ap.add_argument("gt_root", type=Path, help="folder of synth pairs (defects_gt.json, potholes_gt.png)")
     ap.add_argument("out_root", type=Path, help="output folder of `run --road-report`")
     ap.add_argument("--min-gt-depth-mm", type=float, default=20.0)
+    ap.add_argument("--rule", choices=("deep", "footprint"), default="deep",
+                    help="match rule: deep (half the deep part or the deepest point) or footprint (the earlier one)")
+    ap.add_argument("--threshold-mm", type=float, default=10.0,
+                    help="the report's depth threshold (road.min_depth_mm): a pothole's deep part is deeper")
     ap.add_argument("--min-inside", type=float, default=0.5,
-                    help="share of a detection that must lie on the pothole it matches")
+                    help="footprint rule: share of a detection that must lie on the pothole it matches")
     ap.add_argument("--min-cover", type=float, default=0.3,
-                    help="share of a pothole's visible pixels its matching detection must cover")
+                    help="footprint rule: share of a pothole's visible pixels its matching detection must cover")
     ap.add_argument("--bump-margin-px", type=float, default=10.0)
     ap.add_argument("--min-decided-share", type=float, default=0.0,
                     help="what-if: ignore defects whose decided_share is below this (0: score all)")
@@ -186,7 +269,8 @@ def main(argv=None) -> int:
         return 1
     rows = [score_pair(p, args.out_root / p.name, min_gt_depth_mm=args.min_gt_depth_mm,
                        min_inside=args.min_inside, min_cover=args.min_cover, bump_margin_px=args.bump_margin_px,
-                       min_decided_share=args.min_decided_share) for p in pairs]
+                       min_decided_share=args.min_decided_share, rule=args.rule,
+                       threshold_mm=args.threshold_mm) for p in pairs]
     for r in rows:
         errs = ", ".join(f"#{e['id']} {e['gt_depth_mm']:.0f}mm d{100 * e['signed_depth']:+.0f}% "
                          f"a{100 * e['signed_area']:+.0f}% v{100 * e['volume']:.0f}%" for e in r["errors"])

@@ -7,14 +7,15 @@ Definitions (what the numbers in defects.json mean):
 * A candidate region is a connected set of pixels whose median-filtered height is below
   ``-min_depth`` (pothole) or above ``+min_height`` (bump).
 * **Depth** is measured against the *surrounding surface*, not the global plane alone:
-  the reference is the median height of a ring of road pixels around the region
-  (``ring_px`` wide), so a gently cambered or sloping road does not add to or take from a
-  pothole.  ``depth = reference - h`` (bumps: ``h - reference``).
+  the reference is the median height of a ring of road pixels (``ring_px`` wide) around
+  the region grown down its walls to their foot (:func:`_with_walls`), so a gently
+  cambered or sloping road does not add to or take from a pothole.  ``depth = reference - h`` (bumps: ``h - reference``).
 * ``area_m2``: the area of the road plane covered by the region's pixels (each pixel's
   footprint on the plane, :func:`d3cli.road.plane.plane_footprint`), i.e. the opening of
   the pothole in square metres, independent of the image scale and of the viewing angle.
 * ``max_depth_mm``: the mean of the 9 deepest pixels of the median-filtered depth over the
-  region (robust to single-pixel spikes without the bias of a percentile on a bowl).  Joined potholes are split at a depth saddle, a terrace or a neck of
+  region's decided pixels (all its pixels when fewer than 9 are decided; robust to
+  single-pixel spikes without the bias of a percentile on a bowl).  Joined potholes are split at a depth saddle, a terrace or a neck of
   their outline (:func:`d3cli.road.splitting.split_parts`).  A region must also be
   deeper than ``noise_k`` times the height noise expected at its distance, and its mean
   depth must exceed ``mean_noise_k`` standard errors of a mean of spatially correlated
@@ -264,7 +265,7 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     # The reference ring lies beyond the walls: a ring drawn right outside the part deeper
     # than the threshold sat on a gentle wall (a cone's or a bowl's) and took the
     # reference, and with it depth, area and volume, millimetres too low.
-    whole = _with_walls(s, comp, sign, thr_mm)
+    whole = _with_walls(s, comp, sign, other)
     grown = cv2.dilate(whole.astype(np.uint8), s.kernel_gap).astype(bool)
     ring = cv2.dilate(whole.astype(np.uint8), s.kernel_ring).astype(bool) & ~grown & finite & ~other
     if ring.sum() < 10:
@@ -279,7 +280,11 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     area = float(footprint[region].sum())
     if area < road.min_area_m2 or not region.any():
         return None
-    peak = _peak(depth_s[region], tuning.peak_px)
+    # The deepest pixels where the method decided the disparity itself: a filled pixel's
+    # depth is the hole filling's extrapolation (on wet floors it read potholes up to twice
+    # as deep), not a measurement.
+    measured = region & s.decided
+    peak = _peak(depth_s[measured if measured.sum() >= tuning.peak_px else region], tuning.peak_px)
     sigma_h = _local_sigma_h(s, comp, region)
     if peak < tuning.noise_k * sigma_h:
         return None
@@ -320,26 +325,39 @@ def _peak(depth: np.ndarray, peak_px: int) -> float:
     return float(np.mean(np.partition(depth, depth.size - k)[depth.size - k:]))
 
 
-def _with_walls(s: _Scene, comp: np.ndarray, sign: float, thr_mm: float) -> np.ndarray:
-    """``comp`` grown down its walls: the connected pixels around it still deeper than a
-    quarter of the threshold, or twice the map's height noise (``split_noise / noise_k``)
-    where that is more, at most ``4 ring_px`` pixels out (noise must not carry it away)."""
-    low = max(0.25 * thr_mm * 1e-3, 2.0 * s.split_noise / s.tuning.noise_k)
-    reach = 4 * s.road.ring_px
+def _with_walls(s: _Scene, comp: np.ndarray, sign: float, other: np.ndarray, *, step_px: int = 2,
+                tolerance_m: float = 5e-4) -> np.ndarray:
+    """``comp`` grown down its walls to their foot: every pixel within ``r`` of it, where
+    ``r`` is the first distance at which the median depth of the band of pixels
+    ``(r - step_px, r]`` away (other defects left out) comes within ``tolerance_m`` of its
+    lowest value out to ``4 ring_px`` or the radius of a disc of ``comp``'s area, whichever
+    is more (a cone twice as deep as the threshold has a wall as wide as that radius).
+
+    A wall ends where the surface stops rising: a fixed depth level to grow through ended
+    a cone's or a bowl's gentle wall millimetres below the road (2 sigma_h of a dark map is
+    more than the threshold), and the reference ring beyond it then sat on the pothole.
+    The band medians are taken over whole bands, so the stereo noise does not decide
+    where the growth stops; out to the first near-minimum, so a neighbouring pothole
+    further out does not pull it on."""
     v, u = np.nonzero(comp)
+    reach = max(4 * s.road.ring_px, int(np.ceil(np.sqrt(v.size / np.pi))))
     box = (slice(max(v.min() - reach, 0), v.max() + reach + 1), slice(max(u.min() - reach, 0), u.max() + reach + 1))
+    inside = comp[box]
+    dist = cv2.distanceTransform((~inside).astype(np.uint8), cv2.DIST_L2, 5)
+    use = s.finite[box] & ~other[box] & (dist > 0) & (dist <= reach)
+    band = np.ceil(dist[use] / step_px).astype(np.int64)
     with np.errstate(invalid="ignore"):
-        wall = (s.finite[box] & (sign * s.smooth[box] > low)).astype(np.uint8)
-    seed = comp[box].astype(np.uint8)
-    # Geodesic dilation: 8-connected steps through the wall pixels.
-    kernel = np.ones((3, 3), np.uint8)
-    for _ in range(reach):
-        grown = cv2.dilate(seed, kernel) & (wall | seed)
-        if np.array_equal(grown, seed):
-            break
-        seed = grown
+        depth = sign * s.smooth[box][use]
+    medians = np.full(-(-reach // step_px) + 1, np.nan)
+    for b in np.unique(band):
+        values = depth[band == b]
+        if values.size >= 10:
+            medians[b] = np.median(values)
     out = np.zeros_like(comp)
-    out[box] = seed.astype(bool)
+    out[box] = inside
+    if np.isfinite(medians).any():
+        foot = int(np.nonzero(medians <= np.nanmin(medians) + tolerance_m)[0][0])
+        out[box] |= dist <= foot * step_px
     return out
 
 

@@ -61,3 +61,18 @@ def test_classic_shapes_are_those_of_earlier_versions():
 def test_unknown_shapes_are_refused():
     with pytest.raises(InputError, match="unknown pothole shapes .round."):
         synth.render_pair(seed=0, width=W, height=H, shapes="round")
+
+
+def test_pothole_depth_image_is_the_truth_seen_by_each_pixel(pairs):
+    # Rebuilt from the seed and the exact disparity: lowered by more than 1 mm exactly
+    # where the id mask says so (up to pixels on that 1 mm contour), and as deep as the
+    # truth at the deepest pixel (pixel centres miss a cone's apex by up to 3 %).
+    for seed, p in enumerate(pairs):
+        depth = synth.pothole_depth_image(seed=seed, width=W, height=H, disparity=p.disparity, potholes=3)
+        finite = np.isfinite(p.disparity)
+        assert not np.isnan(depth[finite]).any() and np.isnan(depth[~finite]).all()
+        assert np.mean(((depth > 1.0) == (p.pothole_ids > 0))[finite]) >= 0.998
+        for g in p.defects_gt:
+            if "part_of" not in g and g["visible_px"]:
+                deepest = depth[p.pothole_ids == g["id"]].max()
+                assert 0.97 * g["depth_mm"] <= deepest <= g["depth_mm"] + 0.01

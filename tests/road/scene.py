@@ -28,8 +28,9 @@ def rotation(pitch_deg: float, roll_deg: float) -> np.ndarray:
 
 
 def pothole_scene(*, width=320, height=240, f=300.0, baseline=0.12, cam_height=1.5, pitch_deg=45.0,
-                  roll_deg=8.0, depth=0.08, radius=0.3, centre=(0.1, 1.5), bump=None, more=()):
-    """-> (disparity float32 (H, W), camera, rotation).  ``bump``: optional (x, y, R, H) dome;
+                  roll_deg=8.0, depth=0.08, radius=0.3, centre=(0.1, 1.5), bump=None, more=(), cone=False):
+    """-> (disparity float32 (H, W), camera, rotation).  ``cone``: the first pothole is a cone
+    ``D (1 - r / R)`` instead of a paraboloid; ``bump``: optional (x, y, R, H) dome;
     ``more``: further potholes (x, y, R, D) paraboloids or (x, y, R, D, flat[, aspect])
     flat-floored (:func:`flat_profile`), elliptical with semi-axes R along X and R aspect
     along Y; where they overlap the deepest wins."""
@@ -42,10 +43,11 @@ def pothole_scene(*, width=320, height=240, f=300.0, baseline=0.12, cam_height=1
 
     def surface(x, y):
         sink = np.zeros_like(x)
-        for hx, hy, hr, hd, *flat in ((centre[0], centre[1], radius, depth), *more):
+        for k, (hx, hy, hr, hd, *flat) in enumerate(((centre[0], centre[1], radius, depth), *more)):
             aspect = flat[1] if len(flat) > 1 else 1.0
             r = np.sqrt(((x - hx) / hr) ** 2 + ((y - hy) / (hr * aspect)) ** 2)
-            sink = np.maximum(sink, hd * (flat_profile(r, flat[0]) if flat else np.clip(1.0 - r ** 2, 0.0, None)))
+            profile = np.clip(1.0 - (r if cone and k == 0 else r ** 2), 0.0, None)
+            sink = np.maximum(sink, hd * (flat_profile(r, flat[0]) if flat else profile))
         z = -sink
         if bump is not None:
             bx, by, br, bh = bump
@@ -72,6 +74,12 @@ def flat_profile(r, flat: float):
     floor (r < flat), a raised-cosine wall out to r = 1 (the profile of d3cli.data.synth)."""
     wall = np.clip((r - flat) / (1.0 - flat), 0.0, 1.0)
     return 0.5 * (1.0 + np.cos(np.pi * wall))
+
+
+def cone_truth(depth: float, radius: float, threshold: float) -> dict:
+    """Depth, area deeper than ``threshold`` and volume of a cone pothole."""
+    return {"max_depth_mm": depth * 1e3, "area_m2": math.pi * (radius * (1 - threshold / depth)) ** 2,
+            "volume_l": math.pi * radius ** 2 * depth / 3 * 1e3}
 
 
 def paraboloid_truth(depth: float, radius: float, threshold: float) -> dict:

@@ -14,7 +14,7 @@ from d3cli.road.plane import fit_road_plane, height_map
 from d3cli.road.pointcloud import Camera, disparity_to_points
 from d3cli.road.report import road_report
 
-from .scene import paraboloid_truth, pothole_scene
+from .scene import cone_truth, paraboloid_truth, pothole_scene
 
 
 def test_a_shallow_wide_bowl_is_measured_from_the_road_beyond_its_walls():
@@ -30,6 +30,28 @@ def test_a_shallow_wide_bowl_is_measured_from_the_road_beyond_its_walls():
     assert d.max_depth_mm == pytest.approx(truth["max_depth_mm"], rel=0.03)
     assert d.area_m2 == pytest.approx(truth["area_m2"], rel=0.05)
     assert d.volume_l == pytest.approx(truth["volume_l"], rel=0.05)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_a_cone_on_a_noisy_map_is_measured_from_the_road_at_the_foot_of_its_wall(seed):
+    # A 30 mm cone 0.8 m across, its wall from the 10 mm contour (0.67 R) to the rim, on a
+    # map with correlated disparity noise (0.1 px).  Grown to a fixed level (2 sigma_h of
+    # the map, more than a quarter of the threshold), the wall ended far short of the rim,
+    # the reference ring sat on it and the cone read small: area 0.104 and 0.125 m^2,
+    # volume 2.39 and 2.78 l (truth 0.223 m^2, 5.03 l).  The foot of the wall is where
+    # the median depth of a band around the region stops falling.
+    disp, cam, _ = pothole_scene(width=640, height=480, f=600.0, pitch_deg=45.0, roll_deg=0.0, depth=0.03,
+                                 radius=0.4, centre=(0.0, 1.5), cone=True)
+    noise = cv2.GaussianBlur(np.random.default_rng(seed).normal(0, 1, disp.shape).astype(np.float32), (0, 0), 6)
+    noisy = disp + noise * np.float32(0.1 / noise.std())
+    valid = np.isfinite(noisy)
+    plane = fit_road_plane(disparity_to_points(noisy, valid, cam)[0], cam, sigma_disparity=0.25)
+    (d,) = [d for d in find_defects(height_map(noisy, valid, cam, plane), valid, cam, plane, RoadConfig())
+            if d.kind == "pothole"]
+    truth = cone_truth(0.03, 0.4, 0.01)
+    assert d.max_depth_mm == pytest.approx(truth["max_depth_mm"], rel=0.15)
+    assert d.area_m2 == pytest.approx(truth["area_m2"], rel=0.2)
+    assert d.volume_l == pytest.approx(truth["volume_l"], rel=0.15)
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +76,9 @@ def test_the_re_match_measures_the_pothole_of_a_smoothed_map(tmp_path, smoothed_
     blurred = road_report(tmp_path, pair.left, smoothed, finite, cam, {}, cfg)[0]
     rematched = road_report(tmp_path, pair.left, smoothed, finite, cam, {}, cfg, right=pair.right)[0]
     depth = [next(d["max_depth_mm"] for d in items if d["kind"] == "pothole") for items in (exact, blurred, rematched)]
-    assert depth[1] < 0.9 * depth[0]
+    # The blur reads the pothole 8 % shallow (29.9 -> 27.5 mm; 26.2 mm while the reference
+    # ring stopped on the blurred wall); the re-match gives back the exact map's depth.
+    assert depth[1] < 0.95 * depth[0]
     assert depth[2] == pytest.approx(depth[0], rel=0.05)
 
 
@@ -83,3 +107,22 @@ def test_the_re_match_keeps_the_stored_disparity_where_the_match_is_unreliable(s
     clear = got & zone
     assert clear.sum() > 0.5 * zone.sum()
     assert np.median(np.abs(out[clear] - pair.disparity[clear])) < 0.05
+
+
+def test_the_deepest_pixels_are_taken_where_the_disparity_was_decided():
+    # An 80 mm paraboloid whose bottom holds a 15 x 15 px patch of filled (undecided)
+    # pixels, extrapolated 40 mm too deep, as the hole filling does on a specular wet
+    # floor: the 9 deepest pixels all lay in that patch and the pothole read 119.7 mm.
+    # Measured on decided pixels it reads the bottom's rim, 3 mm above the bottom.
+    disp, cam, _ = pothole_scene(pitch_deg=45.0, roll_deg=8.0, depth=0.08, radius=0.3)
+    valid = np.isfinite(disp)
+    plane = fit_road_plane(disparity_to_points(disp, valid, cam)[0], cam, sigma_disparity=0.05)
+    height = height_map(disp, valid, cam, plane)
+    bottom = np.unravel_index(np.argmin(np.where(np.isfinite(height), height, np.inf)), height.shape)
+    patch = (slice(bottom[0] - 7, bottom[0] + 8), slice(bottom[1] - 7, bottom[1] + 8))
+    height[patch] -= 0.04
+    decided = valid.copy()
+    decided[patch] = False
+    (d,) = [d for d in find_defects(height, decided, cam, plane, RoadConfig()) if d.kind == "pothole"]
+    assert d.max_depth_mm == pytest.approx(80.0, rel=0.05)
+    assert d.decided_share < 1.0

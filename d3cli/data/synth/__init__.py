@@ -22,19 +22,20 @@ view-dependent specular highlights, so left and right differ as on real wet road
 
 Modules: ``rig``, ``terrain``, ``texture``, ``render``, ``truth``, ``dataset``; this
 package re-exports the public API: :func:`render_pair`, :func:`generate_dataset`,
-:func:`self_test`, :func:`pothole_groups`, :func:`pothole_truth` and the records.
+:func:`self_test`, :func:`pothole_groups`, :func:`pothole_truth`,
+:func:`pothole_depth_image` and the records.
 
 May import: :mod:`d3cli.data.formats` (its writers), :mod:`d3cli.errors` only.
 """
 
 from __future__ import annotations
 
-from .dataset import DATASET_FILE, MAX_SIDE, MIN_SIDE, generate_dataset, pair_name, render_pair
+from .dataset import DATASET_FILE, MAX_SIDE, MIN_SIDE, generate_dataset, pair_name, pothole_depth_image, render_pair
 from .rig import MATERIALS, VARIANTS, StereoRig
 from .terrain import Pothole
 from .truth import SynthPair, pothole_groups, pothole_truth, self_test
 
 __all__ = [
     "DATASET_FILE", "MATERIALS", "MAX_SIDE", "MIN_SIDE", "VARIANTS", "Pothole", "StereoRig", "SynthPair",
-    "generate_dataset", "pair_name", "pothole_groups", "pothole_truth", "render_pair", "self_test",
+    "generate_dataset", "pair_name", "pothole_depth_image", "pothole_groups", "pothole_truth", "render_pair", "self_test",
 ]

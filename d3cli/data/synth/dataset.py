@@ -17,9 +17,9 @@ from ...errors import InputError, OutputError, where_what_fix
 from ..formats import atomic_write, write_image, write_pfm
 from .render import _Lighting, _expose, _render_view, _sample_lighting
 from .rig import MATERIALS, VARIANTS, StereoRig, _road_bounds, _sample_rig, _texel_size
-from .terrain import _build_height_field, _HeightField, _RoadShape, _sample_road, _sample_road_point
+from .terrain import _build_height_field, _HeightField, _pothole_weight, _RoadShape, _sample_road, _sample_road_point
 from .texture import _build_albedo, _build_mipmap, _build_wetness, _MipMap
-from .truth import SynthPair, _describe_hole, _ground_truth, pothole_truth
+from .truth import SynthPair, _describe_hole, _ground_truth, _sink_at, pothole_truth
 
 log = logging.getLogger(__name__)
 
@@ -155,24 +155,8 @@ class _Scene:
 def _build_scene(rng, width: int, height: int, variant: str, material: str, potholes: int | None,
                  flat: bool, shapes: str = "varied") -> _Scene:
     """Draw the rig, road, height field, light and texture, in the order the seed fixes."""
-    rig = _sample_rig(rng, width, height)
-    road = _sample_road(rng, rig, potholes, flat, shapes)
+    rig, road, texel, spacing, bounds, field_, h_top = _build_surface(rng, width, height, potholes, flat, shapes)
     holes = road.holes
-
-    texel = _texel_size(rig)
-    spacing = float(np.clip(1.5 * texel, 2e-3, 2e-2))
-    # The visible patch depends on the height range and the tilt part of the height
-    # range on the patch: two rounds from a generous start settle it.
-    z_low, z_high = -0.15, 0.1
-    for _ in range(2):
-        bounds = _road_bounds(rig, z_low, z_high, margin=0.05)
-        z_low, z_high = road.height_range(bounds)
-    bounds = _road_bounds(rig, z_low, z_high, margin=0.05)
-    field_ = _build_height_field(rng, road, bounds, spacing)
-    h_top = float(field_.h.max()) + 1e-3
-    if field_.h.max() > z_high or field_.h.min() < z_low:
-        raise RuntimeError("synthetic road height left the range its visible patch was computed for")
-
     lighting = _sample_lighting(rng, variant, rig)
     light_pool = None
     if variant == "dusk":
@@ -189,6 +173,68 @@ def _build_scene(rng, width: int, height: int, variant: str, material: str, poth
         shade[3], shade[5], shade[6] = max(shade[3], 0.5), max(shade[5], 200.0), max(shade[6], 0.5)
         lighting = dataclasses.replace(lighting, shade=shade)
     return _Scene(rig, road, texel, spacing, field_, h_top, lighting, mip, wet)
+
+
+def _build_surface(rng, width: int, height: int, potholes: int | None, flat: bool, shapes: str):
+    """The rig, road shape and height field (the first draws of a pair's seed): rig, road,
+    texel, grid spacing, bounds, field, h_top."""
+    rig = _sample_rig(rng, width, height)
+    road = _sample_road(rng, rig, potholes, flat, shapes)
+    texel = _texel_size(rig)
+    spacing = float(np.clip(1.5 * texel, 2e-3, 2e-2))
+    # The visible patch depends on the height range and the tilt part of the height
+    # range on the patch: two rounds from a generous start settle it.
+    z_low, z_high = -0.15, 0.1
+    for _ in range(2):
+        bounds = _road_bounds(rig, z_low, z_high, margin=0.05)
+        z_low, z_high = road.height_range(bounds)
+    bounds = _road_bounds(rig, z_low, z_high, margin=0.05)
+    field_ = _build_height_field(rng, road, bounds, spacing)
+    h_top = float(field_.h.max()) + 1e-3
+    if field_.h.max() > z_high or field_.h.min() < z_low:
+        raise RuntimeError("synthetic road height left the range its visible patch was computed for")
+    return rig, road, texel, spacing, bounds, field_, h_top
+
+
+def pothole_depth_image(*, seed: int, width: int, height: int, disparity: np.ndarray,
+                        potholes: int | None = None, shapes: str = "varied") -> np.ndarray:
+    """How far the potholes lower the road at the surface point each left pixel sees.
+
+    The road of :func:`render_pair` with this ``seed`` and size is drawn again (rig, road
+    and height field only: no rendering) and its sink (the road without potholes minus the
+    surface, water level included: what ``defects_gt.json`` measures depth, area and
+    volume of) is read at the points the exact disparity triangulates.
+
+    Parameters
+    ----------
+    seed, width, height : int
+        Those of the pair (SOURCE.txt ``pair_seed`` and ``image_size``).
+    disparity : ndarray, float32, (H, W)
+        The pair's exact disparity (``disp_gt.pfm``; inf where no road).
+    potholes : int or None
+        As in :func:`render_pair`.
+    shapes : {"varied", "classic"}
+        As in :func:`render_pair`.
+
+    Returns
+    -------
+    ndarray, float64, (H, W)
+        Depth below the road without potholes in mm (0 off the potholes), nan where the
+        disparity is not finite.
+    """
+    rig, road, _, _, _, field_, _ = _build_surface(np.random.default_rng(seed), width, height, potholes, False, shapes)
+    d = np.asarray(disparity, np.float64)
+    ok = np.isfinite(d) & (d > 0)
+    vv, uu = np.mgrid[0:d.shape[0], 0:d.shape[1]].astype(np.float64)
+    depth = rig.f * rig.baseline / np.where(ok, d, 1.0)
+    points = rig.centres()[0] + depth[..., None] * rig.ray_directions(uu, vv)
+    if field_.sink is not None:
+        sink = _sink_at(field_, points[..., 0], points[..., 1])
+    else:  # classic potholes: no relief, the profiles are the sink
+        sink = np.zeros(d.shape)
+        for hole in road.holes:
+            sink = np.maximum(sink, hole.depth * _pothole_weight(hole, points[..., 0], points[..., 1]))
+    return np.where(ok, 1e3 * sink, np.nan)
 
 
 def _render_views(scene: _Scene, width: int, height: int, supersample: int, rng, noise: bool):
