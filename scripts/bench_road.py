@@ -95,20 +95,7 @@ def match_potholes(ids: np.ndarray, pits: list, *, min_inside: float, min_cover:
         for k, c in zip(labels, counts):
             if k > 0 and c >= min_inside * size and c >= min_cover * gt_px[int(k)]:
                 overlaps.append((int(c), i, int(k)))
-    hits, used = {}, set()
-    for _, i, k in sorted(overlaps, reverse=True):
-        if i not in used and k not in hits:
-            hits[k] = pits[i]
-            used.add(i)
-    duplicates = false = 0
-    for i, m in enumerate(masks):
-        if i in used:
-            continue
-        if (ids[m] > 0).sum() >= 0.5 * max(int(m.sum()), 1):
-            duplicates += 1
-        else:
-            false += 1
-    return hits, duplicates, false
+    return _assign(ids, masks, pits, overlaps)
 
 
 def match_deep(ids: np.ndarray, depth_mm: np.ndarray, pits: list, *, threshold_mm: float):
@@ -146,9 +133,16 @@ def match_deep(ids: np.ndarray, depth_mm: np.ndarray, pits: list, *, threshold_m
         cover = int((m & deep).sum())
         if (deep.any() and cover >= 0.5 * int(deep.sum())) or m[deepest]:
             claims.append((cover, int(counts.max()), i, k))
+    return _assign(ids, masks, pits, [((cover, inside), i, k) for cover, inside, i, k in claims])
+
+
+def _assign(ids: np.ndarray, masks: list, pits: list, candidates: list):
+    """One-to-one assignment, best ``(score, detection, pothole)`` first (a detection and a
+    pothole each taken once); the detections left over are duplicates when at least half of
+    them lies on pothole pixels, else false defects.  (hits, duplicates, false)."""
     hits, used = {}, set()
-    for _, _, i, k in sorted(claims, reverse=True):
-        if k not in hits:
+    for _, i, k in sorted(candidates, reverse=True):
+        if i not in used and k not in hits:
             hits[k] = pits[i]
             used.add(i)
     duplicates = false = 0
