@@ -427,9 +427,10 @@ MAX_PREFETCH = 64
 
 def resolve_prefetch(prefetch: int | None, cfg=None, method: str | None = None) -> int:
     """Pairs read ahead by a batch in this process: ``prefetch``, or for ``auto`` (None)
-    :data:`~d3cli.batch.pipelined.DEFAULT_PREFETCH` when ``method`` computes on the CUDA
-    backend (d3stereo, pt-sgm) (whose host work would otherwise leave the device idle), else 0 (serial:
-    on the CPU the reading and writing threads take cores from the numba kernels)."""
+    :data:`~d3cli.batch.pipelined.DEFAULT_PREFETCH` when ``method`` runs the kernels
+    (d3stereo, pt-sgm) on the CUDA backend, whose host work would otherwise leave the device
+    idle; else 0 (serial: on the CPU the reading and writing threads take cores from the
+    numba kernels, and sgbm, elas and pandora-sgm never use the device)."""
     if prefetch is not None:
         return prefetch
     from ..kernels import chosen_backend

@@ -20,6 +20,28 @@ def _default_sigint():
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def _interrupting(real, when):
+    """``real`` wrapped: after it returns, when ``when(args, kwargs)``, a Ctrl-C arrives."""
+
+    def wrapped(*args, **kwargs):
+        value = real(*args, **kwargs)
+        if when(args, kwargs):
+            signal.raise_signal(signal.SIGINT)
+            time.sleep(0.05)  # (a pending signal is handled at the next bytecode)
+        return value
+
+    return wrapped
+
+
+def _run_with_ctrl_c_handler(args):
+    """``d3stereo ARGS`` in this process with Python's Ctrl-C handler installed."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # even where a shell ignores SIGINT
+    try:
+        return CliRunner().invoke(main, args)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def test_ctrl_c_inside_a_numba_kernel_stops_the_batch_and_fails_no_pair(tmp_path, pairs_root, monkeypatch):
     real = d3cli.batch.runner.compute_pair
 
@@ -117,22 +139,12 @@ def test_ctrl_c_while_the_lock_is_taken_leaves_no_lock(tmp_path, pairs_root, mon
     """Seen once in 10 repetitions of the eight-moment test: a Ctrl-C in the middle of
     acquire_lock left OUT/.d3stereo.lock behind.  The lock is now taken whole, the
     interrupt raised once it is held, and the lock released."""
-    real = d3cli.batch.runner.acquire_lock
-
-    def interrupted_acquire(*args, **kwargs):
-        lock = real(*args, **kwargs)
-        signal.raise_signal(signal.SIGINT)  # Ctrl-C lands before acquire_lock has returned
-        time.sleep(0.05)  # (a pending signal is handled at the next bytecode)
-        return lock
-
-    monkeypatch.setattr(d3cli.batch.runner, "acquire_lock", interrupted_acquire)
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # even where a shell ignores SIGINT
+    # Ctrl-C lands before acquire_lock has returned
+    monkeypatch.setattr(d3cli.batch.runner, "acquire_lock",
+                        _interrupting(d3cli.batch.runner.acquire_lock, lambda args, kwargs: True))
     term_before = signal.getsignal(signal.SIGTERM)
-    try:
-        out = tmp_path / "out"
-        result = CliRunner().invoke(main, ["run", str(pairs_root), "-o", str(out), "--method", "sgbm"])
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    out = tmp_path / "out"
+    result = _run_with_ctrl_c_handler(["run", str(pairs_root), "-o", str(out), "--method", "sgbm"])
     assert result.exit_code == 130, result.output
     assert result.output.strip().splitlines()[-1] == "Interrupted; rerun the same command to resume"
     assert not (out / LOCK_FILE).exists()
@@ -167,27 +179,6 @@ def test_ctrl_c_between_a_pairs_outputs_and_its_result_json_leaves_no_half_pair(
     run = json.loads((out / "run.json").read_text())
     assert run["interrupted"] is True and run["pairs"] == []
     assert [p.name for p in out.iterdir() if p.is_dir()] == []
-
-
-def _interrupting(real, when):
-    """``real`` wrapped: after it returns, when ``when(args, kwargs)``, a Ctrl-C arrives."""
-
-    def wrapped(*args, **kwargs):
-        value = real(*args, **kwargs)
-        if when(args, kwargs):
-            signal.raise_signal(signal.SIGINT)
-            time.sleep(0.05)  # (a pending signal is handled at the next bytecode)
-        return value
-
-    return wrapped
-
-
-def _run_with_ctrl_c_handler(args):
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # even where a shell ignores SIGINT
-    try:
-        return CliRunner().invoke(main, args)
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 def test_ctrl_c_right_after_run_json_records_the_batch_complete_is_ignored(tmp_path, pairs_root, monkeypatch):
