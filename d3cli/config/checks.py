@@ -47,6 +47,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "features.mean": (lambda v: len(v) in (1, 3), "a list of 1 or 3 numbers"),
     "features.std": (lambda v: len(v) in (1, 3) and all(s > 0 for s in v), "a list of 1 or 3 numbers > 0"),
     "aggregation.t_max": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
+    "aggregation.finest_t_max": (lambda v: v is None or 0 <= v <= 64, "an integer in [0, 64] or null"),
     "aggregation.sigma_space": (lambda v: v > 0, "a number > 0"),
     "aggregation.sigma_color": (lambda v: v > 0, "a number > 0"),
     "aggregation.kappa_a": (lambda v: 0 <= v <= 32, "an integer in [0, 32]"),

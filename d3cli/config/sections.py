@@ -66,7 +66,15 @@ class AggregationConfig:
     """Cost aggregation: recursive bilateral filtering, paper eq. 2-3."""
 
     rbf: bool = True  # False: one-pass plain bilateral filter of radius kappa_a (ablation)
-    t_max: int = 4  # RBF passes of the 3x3 kernel
+    t_max: int = 4  # RBF passes of the 3x3 kernel (every level below full resolution, see finest_t_max)
+    # RBF passes at full resolution (level 1); None: t_max.  0 by default since 2026-11-27:
+    # there the semi-global smoothing of the cost (below) follows, and the raw NCC under it
+    # measured better than 4 passes on the Middlebury and KITTI pairs (EPE and PEP1) at a
+    # third less time per pair (the filter and its weights were a quarter of it); below full
+    # resolution, where no smoothing runs, the filter keeps the coarse maps and with them
+    # the bands narrow (0 there too doubled the decisions' and the diffusion's time).
+    # docs/performance.md, 'Default settings'; paper.yaml and road.yaml: None
+    finest_t_max: int | None = 0
     sigma_space: float = 1.5  # sigma_1 in eq. 3, pixels
     sigma_color: float = 12.0  # sigma_2 in eq. 3, grey levels (0-255)
     kappa_a: int = 4  # radius of the plain bilateral filter used when rbf is False
@@ -77,11 +85,11 @@ class AggregationConfig:
     # 'Semi-global smoothing'): the mean of four path costs (left, right, down, up) with
     # penalties P1 (one-disparity step) and P2 (larger jump) in cost units
     # ((1 - NCC) / 2); sgm_p2 0: off (the paper's method, d3cli/configs/paper.yaml).  On
-    # by default with light penalties: chosen leave-one-out on the Middlebury pairs, it
-    # lowers EPE and every PEP there (docs/performance.md, 'Default settings');
-    # d3cli/configs/kitti.yaml uses 0.3 / 1.2
+    # by default: with finest_t_max 0, P1 0.15 / P2 1.2 chosen on the Middlebury pairs and
+    # checked leave-one-out (docs/performance.md, 'Default settings');
+    # d3cli/configs/kitti.yaml uses 0.6 / 1.2
     sgm_p1: float = 0.15
-    sgm_p2: float = 0.6
+    sgm_p2: float = 1.2
 
 
 @dataclass(frozen=True)
@@ -251,6 +259,20 @@ class Config:
         if self.refine.subpixel_fit == "auto":
             return self.aggregation.sgm_p2 > 0
         return self.refine.subpixel_fit == "equiangular"
+
+    def level_t_max(self, level: int) -> int:
+        """RBF passes at ``level`` (0 = full resolution): ``aggregation.finest_t_max`` at
+        level 0 where it is set, else ``aggregation.t_max``.
+
+        Parameters
+        ----------
+        level : int
+            Pyramid level, 0 at full resolution.
+        """
+        agg = self.aggregation
+        if level == 0 and agg.finest_t_max is not None:
+            return agg.finest_t_max
+        return agg.t_max
 
     def level_window(self, level: int) -> int:
         """NCC window size at ``level`` (0 = full resolution).

@@ -140,10 +140,10 @@ def feature_cost_volume(features, *, max_disparity: int, backend, index=None):
                                       int(max_disparity), index=index)
 
 
-def aggregation_halo(cfg: Config) -> int:
-    """How far (pixels) aggregation mixes costs: RBF passes, or the bilateral radius."""
+def aggregation_halo(cfg: Config, level: int) -> int:
+    """How far (pixels) aggregation mixes costs at ``level``: RBF passes, or the bilateral radius."""
     agg = cfg.aggregation
-    return int(agg.t_max) if agg.rbf else int(agg.kappa_a)
+    return int(cfg.level_t_max(level)) if agg.rbf else int(agg.kappa_a)
 
 
 def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, backend, features=None,
@@ -203,7 +203,7 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
         cost,
         left,
         rbf=agg.rbf,
-        t_max=agg.t_max,
+        t_max=cfg.level_t_max(level),
         sigma_space=agg.sigma_space,
         sigma_color=agg.sigma_color,
         kappa_a=agg.kappa_a,

@@ -170,11 +170,11 @@ def test_banded_level_matches_cpu(gpu, rbf):
     from d3cli.method.cost import aggregation_halo, level_cost
 
     cfg = load_config(overrides=[f"aggregation.rbf={str(rbf).lower()}", "aggregation.kappa_a=2",
-                                 "aggregation.t_max=3", "cost.window=3"])
+                                 "aggregation.t_max=3", "aggregation.finest_t_max=null", "cost.window=3"])
     rng = np.random.default_rng(50)
     left, right = random_images(rng, (H, W))
     coarse = sparse_map(rng, ((H + 1) // 2, (W + 1) // 2), 5, share=0.5)
-    bands = band_indexes(coarse, (H, W), n_disp=10, margin=2, tile=4, halo=aggregation_halo(cfg))
+    bands = band_indexes(coarse, (H, W), n_disp=10, margin=2, tile=4, halo=aggregation_halo(cfg, 0))
     want = level_cost(left, right, level=0, max_disparity=9, cfg=cfg, backend=cpu, bands=bands)
     got = level_cost(gpu.to_device(left), gpu.to_device(right), level=0, max_disparity=9, cfg=cfg, backend=gpu,
                      bands=bands)

@@ -19,7 +19,7 @@ from tests.helpers import textured_pair
 
 from d3cli import D3Stereo, load_config
 from d3cli.kernels import cpu
-from d3cli.method.cost import aggregate, bilateral_sigma_space
+from d3cli.method.cost import aggregate, aggregation_halo, bilateral_sigma_space
 
 
 def cfg(*overrides):
@@ -114,9 +114,32 @@ def test_aggregation_switch_runs_rbf_passes_or_one_scaled_bilateral_pass(pair, m
     per_level(pair, f"aggregation.rbf={str(rbf).lower()}", "aggregation.t_max=3", "aggregation.kappa_a=3",
               "aggregation.sigma_space=1.25", "aggregation.sigma_color=10")
     if rbf:
-        assert calls == [("rbf", 3)] * 3
+        # coarsest level first; none at full resolution (aggregation.finest_t_max 0 by default)
+        assert calls == [("rbf", 3)] * 2
     else:
         assert calls == [("bf", 3, 3.75, 10.0)] * 3
+
+
+@pytest.mark.parametrize("finest, passes", [("null", [3, 3, 3]), ("0", [3, 3]), ("2", [3, 3, 2])])
+def test_finest_t_max_sets_the_passes_at_full_resolution_only(pair, monkeypatch, finest, passes):
+    calls = []
+    real_rbf = cpu.rbf_filter
+
+    def rbf_filter(cost, weights, t_max, **kw):
+        calls.append(t_max)
+        return real_rbf(cost, weights, t_max, **kw)
+
+    monkeypatch.setattr(cpu, "rbf_filter", rbf_filter)
+    per_level(pair, "aggregation.t_max=3", f"aggregation.finest_t_max={finest}")
+    assert calls == passes
+
+
+@pytest.mark.parametrize("finest, halo", [("null", 3), ("0", 0), ("2", 2)])
+def test_the_band_halo_at_full_resolution_follows_its_passes(finest, halo):
+    cfg = load_config(None, ["aggregation.t_max=3", f"aggregation.finest_t_max={finest}"])
+    assert aggregation_halo(cfg, 0) == halo
+    assert aggregation_halo(cfg, 1) == 3
+    assert aggregation_halo(load_config(None, ["aggregation.rbf=false", "aggregation.kappa_a=5"]), 0) == 5
 
 
 def test_bilateral_sigma_override_and_its_effect():

@@ -78,7 +78,7 @@ def test_visible_cells_equal_the_full_range_volume(overrides):
     # the semi-global smoothing (on by default) runs along paths through the band, so it is
     # off here: this test is about the window sums and the filters
     cfg = load_config(None, ["pyramid.band_tile=8", "pyramid.band_margin=2", "aggregation.sgm_p1=0",
-                             "aggregation.sgm_p2=0"] + overrides)
+                             "aggregation.sgm_p2=0", "aggregation.finest_t_max=null"] + overrides)
     left, right, _ = textured_pair(5, (37, 53), seed=4)
     left = left.astype(np.float32)
     right = right.astype(np.float32)
@@ -89,7 +89,7 @@ def test_visible_cells_equal_the_full_range_volume(overrides):
     coarse = np.broadcast_to(2 + np.arange(27) // 5, (19, 27)).astype(np.int32)  # steps of 1 every 5 columns
     coarse = np.where(rng.random(coarse.shape) < 0.1, -1, coarse).astype(np.int32)
     coarse[:4, :4] = -1  # a tile the coarser level left undecided: the full range around it
-    bands = band_indexes(coarse, left.shape, n_disp=n_disp, margin=2, tile=8, halo=aggregation_halo(cfg))
+    bands = band_indexes(coarse, left.shape, n_disp=n_disp, margin=2, tile=8, halo=aggregation_halo(cfg, 0))
     part = level_cost(left, right, level=0, max_disparity=dmax, cfg=cfg, backend=cpu, bands=bands)
     assert part.cost.size == bands[2] < full.cost.size
     dense_full = to_dense(full.cost, full.index, n_disp)
