@@ -85,10 +85,10 @@ class AggregationConfig:
     # 'Semi-global smoothing'): the mean of four path costs (left, right, down, up) with
     # penalties P1 (one-disparity step) and P2 (larger jump) in cost units
     # ((1 - NCC) / 2); sgm_p2 0: off (the paper's method, d3cli/configs/paper.yaml).  On
-    # by default: with finest_t_max 0, P1 0.15 / P2 1.2 chosen on the Middlebury pairs and
+    # by default: with finest_t_max 0, P1 0.1 / P2 1.2 chosen on the Middlebury pairs and
     # checked leave-one-out (docs/performance.md, 'Default settings');
     # d3cli/configs/kitti.yaml uses 0.6 / 1.2
-    sgm_p1: float = 0.15
+    sgm_p1: float = 0.1
     sgm_p2: float = 1.2
 
 
