@@ -115,18 +115,44 @@ def coarse_points(disparity: np.ndarray, *, scale: float) -> tuple[np.ndarray, n
     return u, v, disp[vc, uc].astype(np.float64) * scale
 
 
+#: Relative size below which the centred normal matrix of :func:`_solve` counts as singular
+#: (collinear points: its determinant is 0 up to rounding).
+_SINGULAR = 1e-12
+
+
 def _solve(u, v, d, w=None):
-    """Weighted least squares of d = a0 + b1 v + b2 u; None when singular."""
-    cols = [np.ones_like(u), v, u]
-    if w is not None:
-        sw = np.sqrt(w)
-        cols, d = [c * sw for c in cols], d * sw
-    # The columns stacked as rows and transposed: a Fortran-ordered (n, 3) matrix, which
-    # LAPACK takes as it is, where a C-ordered one is copied first.  The same values in
-    # the same LAPACK call, so the same solution, without the copy.
-    a = np.stack(cols, axis=0).T
-    sol, _, rank, _ = np.linalg.lstsq(a, d, rcond=None)
-    return sol if rank == 3 else None
+    """Weighted least squares of d = a0 + b1 v + b2 u; None when singular.
+
+    Solved by the normal equations in coordinates centred on the weighted means: there the
+    constant's column is orthogonal to the others, so (b1, b2) come from a 2x2 system whose
+    condition is that of the points' spread (about 1-10 on a road image; uncentred, the
+    columns 1, v, u of a 720p image give about 1e7).  A few passes over the points instead
+    of LAPACK's SVD least squares (``np.linalg.lstsq``: 1.2 ms per call on the 14,000 coarse
+    points of a 720p road pair, eleven calls per fit); the solutions agree to about 1e-12
+    relative (tests/method/test_perspective.py), not bit for bit.
+    """
+    w = np.ones_like(u) if w is None else w
+    sw = w.sum()
+    if not sw > 0.0:
+        return None
+    uc = (w * u).sum() / sw
+    vc = (w * v).sum() / sw
+    du = u - uc
+    dv = v - vc
+    wdu = w * du
+    wdv = w * dv
+    svv = (wdv * dv).sum()
+    suu = (wdu * du).sum()
+    svu = (wdv * du).sum()
+    det = svv * suu - svu * svu
+    if not det > _SINGULAR * svv * suu:
+        return None
+    svd = (wdv * d).sum()
+    sud = (wdu * d).sum()
+    b1 = (suu * svd - svu * sud) / det
+    b2 = (svv * sud - svu * svd) / det
+    a0 = (w * d).sum() / sw - b1 * vc - b2 * uc
+    return np.array([a0, b1, b2])
 
 
 def _ransac(u, v, d, threshold, rng):

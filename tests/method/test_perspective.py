@@ -81,8 +81,11 @@ def loop_ransac(u, v, d, threshold, seed, hypotheses=200, sample=5000):
     if best is None:
         return None
     inl = np.abs(d - (best[0] + best[1] * v + best[2] * u)) <= threshold
-    sol, _, rank, _ = np.linalg.lstsq(np.stack([np.ones(inl.sum()), v[inl], u[inl]], axis=1), d[inl], rcond=None)
-    return sol if rank == 3 else best
+    # the refit is _solve's (checked against np.linalg.lstsq on its own below)
+    from d3cli.method.perspective import _solve
+
+    sol = _solve(u[inl], v[inl], d[inl])
+    return sol if sol is not None else best
 
 
 @pytest.mark.parametrize("seed, outliers, shape", [(0, 0.3, (45, 80)), (4, 0.6, (45, 80)), (5, 0.3, (3, 200)),
@@ -253,9 +256,9 @@ def test_road_config_finds_the_road_on_a_dark_steeply_pitched_pair():
     assert epe < 1.0  # 0.598 measured; 120.7 with the naive PKRN
 
 
-def test_solve_gives_the_bits_of_a_plain_lstsq():
-    # _solve hands LAPACK a Fortran-ordered matrix (no copy); the solution must be that
-    # of the plain C-ordered weighted least squares, bit for bit.
+def test_solve_gives_the_weighted_least_squares_of_lstsq():
+    # _solve takes the centred normal equations instead of LAPACK's SVD least squares: the
+    # same solution to rounding, on 720p-sized coordinates and with Tukey-like weights
     from d3cli.method import perspective
 
     rng = np.random.default_rng(3)
@@ -268,4 +271,17 @@ def test_solve_gives_the_bits_of_a_plain_lstsq():
         if weights is not None:
             a, b = a * np.sqrt(weights)[:, None], d * np.sqrt(weights)
         plain = np.linalg.lstsq(a, b, rcond=None)[0]
-        assert np.array_equal(perspective._solve(u, v, d, weights), plain)
+        np.testing.assert_allclose(perspective._solve(u, v, d, weights), plain, rtol=1e-10, atol=1e-12)
+
+
+def test_solve_refuses_collinear_points_and_zero_weights():
+    from d3cli.method import perspective
+
+    t = np.linspace(0.0, 1000.0, 50)
+    u, v = t, 2.0 * t + 5.0  # on one line: the plane is not determined
+    assert perspective._solve(u, v, 3.0 + 0.1 * v) is None
+    assert perspective._solve(u, t[::-1] ** 1.5, 3.0 + u, np.zeros_like(u)) is None
+    # three points that are not collinear fix the plane exactly
+    u3, v3 = np.array([0.0, 1280.0, 0.0]), np.array([0.0, 0.0, 720.0])
+    np.testing.assert_allclose(perspective._solve(u3, v3, 2.0 + 0.5 * v3 - 0.25 * u3), [2.0, 0.5, -0.25],
+                               rtol=0, atol=1e-12)

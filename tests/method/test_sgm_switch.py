@@ -49,13 +49,17 @@ def test_a_textured_constant_shift_is_still_found_exactly():
 
 def test_kitti_config_turns_it_on():
     cfg = load_config(Path(__file__).resolve().parents[2] / "d3cli" / "configs" / "kitti.yaml")
-    assert (cfg.aggregation.sgm_p1, cfg.aggregation.sgm_p2) == (0.3, 1.2)
-    assert (load_config(None).aggregation.sgm_p1, load_config(None).aggregation.sgm_p2) == (0.15, 0.6)
+    assert (cfg.aggregation.sgm_p1, cfg.aggregation.sgm_p2) == (0.6, 1.2)
+    assert (load_config(None).aggregation.sgm_p1, load_config(None).aggregation.sgm_p2) == (0.1, 1.2)
+    # where the smoothing runs (full resolution) the shipped configs run no RBF passes before it
+    assert cfg.level_t_max(0) == load_config(None).level_t_max(0) == 0
+    assert cfg.level_t_max(1) == load_config(None).level_t_max(1) == 4
 
 
 def test_paper_config_turns_it_off():
     cfg = load_config("paper")
     assert (cfg.aggregation.sgm_p1, cfg.aggregation.sgm_p2) == (0.0, 0.0)
+    assert [cfg.level_t_max(level) for level in range(4)] == [4, 4, 4, 4]  # RBF at every level, as published
 
 
 def test_the_smoothing_is_a_step_of_its_own_in_the_timings():
