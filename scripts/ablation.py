@@ -79,7 +79,9 @@ ADDITIONS = (
     ("+ band search", ["pyramid.band=true"]),
     ("+ symmetric candidates", ["inheritance.candidates=symmetric"]),
     # with the sub-pixel fit that follows it (auto: two lines of equal slope after the smoothing)
-    ("+ semi-global smoothing", ["aggregation.sgm_p1=0.15", "aggregation.sgm_p2=0.6", "refine.subpixel_fit=auto"]),
+    ("+ semi-global smoothing", ["aggregation.sgm_p1=0.1", "aggregation.sgm_p2=1.2", "refine.subpixel_fit=auto"]),
+    # the smoothing in place of the RBF passes at full resolution (the coarser levels keep them)
+    ("+ no RBF at full resolution", ["aggregation.finest_t_max=0"]),
     ("+ finishing smoothing", ["refine.smooth_radius=3", "refine.smooth_sigma=2.0", "refine.smooth_kernel=box"]),
 )
 ALL_ADDITIONS = [s for _, sets in ADDITIONS for s in sets]

@@ -63,8 +63,8 @@ def test_table_b_has_the_header_the_eight_switch_rows_and_the_additions(pairs):
     assert body[7].rstrip().endswith("| 24.9 | 17.1 | 2.97 | 1.58 |")
     labels = [row.split("|")[1].strip() for row in body[8:]]
     assert labels == ["+ occlusion check", "+ max_gap 0", "+ seeds.every_level", "+ band search",
-                      "+ symmetric candidates", "+ semi-global smoothing", "+ finishing smoothing",
-                      "+ all additions (defaults)"]
+                      "+ symmetric candidates", "+ semi-global smoothing", "+ no RBF at full resolution",
+                      "+ finishing smoothing", "+ all additions (defaults)"]
     for row in body:
         cells = [c.strip() for c in row.split("|")[1:-1]]
         assert len(cells) == len(rows[0].split("|")) - 2

@@ -82,9 +82,9 @@ def loop_ransac(u, v, d, threshold, seed, hypotheses=200, sample=5000):
         return None
     inl = np.abs(d - (best[0] + best[1] * v + best[2] * u)) <= threshold
     # the refit is _solve's (checked against np.linalg.lstsq on its own below)
-    from d3cli.method.perspective import _solve
+    from d3cli.method import perspective
 
-    sol = _solve(u[inl], v[inl], d[inl])
+    sol = perspective._solve(u[inl], v[inl], d[inl])
     return sol if sol is not None else best
 
 
