@@ -67,13 +67,13 @@ class AggregationConfig:
 
     rbf: bool = True  # False: one-pass plain bilateral filter of radius kappa_a (ablation)
     t_max: int = 4  # RBF passes of the 3x3 kernel (every level below full resolution, see finest_t_max)
-    # RBF passes at full resolution (level 1); None: t_max.  0 by default since 2026-11-27:
+    # RBF passes at full resolution (level 1); None: t_max.  0 by default since 2026-11-28:
     # there the semi-global smoothing of the cost (below) follows, and the raw NCC under it
     # measured better than 4 passes on the Middlebury and KITTI pairs (EPE and PEP1) at a
     # third less time per pair (the filter and its weights were a quarter of it); below full
     # resolution, where no smoothing runs, the filter keeps the coarse maps and with them
     # the bands narrow (0 there too doubled the decisions' and the diffusion's time).
-    # docs/performance.md, 'Default settings'; paper.yaml and road.yaml: None
+    # docs/performance.md, 'Default settings'; paper.yaml: None (the paper's RBF everywhere)
     finest_t_max: int | None = 0
     sigma_space: float = 1.5  # sigma_1 in eq. 3, pixels
     sigma_color: float = 12.0  # sigma_2 in eq. 3, grey levels (0-255)
