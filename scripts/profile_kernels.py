@@ -7,9 +7,10 @@ the finest level's NCC is told from the coarse ones').  One warm-up call, then `
 calls; the medians over the calls are printed, with the total CPU time of a call and the
 md5 of the disparity map (the same as bench_speed's).
 
-``--capture DIR`` also saves the inputs of the finest level's NCC, RBF, inheritance and
-diffusion calls of the last rep (``DIR/<case>_ncc.npz``, ``_rbf``, ``_inherit``,
-``_diffuse``; the last two hold the volume's ``cost``, ``index``, ``n_disp`` and the
+``--capture DIR`` also saves the inputs of the finest level's NCC, inheritance and
+diffusion calls of the last rep and of its RBF weights at the widest level that runs the
+filter (since 2026-11-28 the shipped configs run none at full resolution)
+(``DIR/<case>_ncc.npz``, ``_rbf``, ``_inherit``, ``_diffuse``; the last two hold the volume's ``cost``, ``index``, ``n_disp`` and the
 call's other arguments as ``a1``, ``a2``, ...), for kernel A/B timings of an old and a
 new driver in one process.
 
@@ -53,7 +54,7 @@ def _wrap(backend, totals: dict, captured: dict) -> None:
             continue
 
         def timed(*args, _name=name, _f=getattr(backend, name), **kw):
-            if _name in ("ncc_cost_volume", "rbf_weights", "rbf_filter", "inherit", "diffuse"):
+            if _name in ("ncc_cost_volume", "rbf_weights", "inherit", "diffuse"):
                 captured.setdefault(_name, []).append((args, kw))
             t0 = time.process_time()
             out = _f(*args, **kw)
@@ -65,7 +66,8 @@ def _wrap(backend, totals: dict, captured: dict) -> None:
 
 
 def _save(captured: dict, folder: Path, case: str) -> None:
-    """The finest level's NCC, RBF, inheritance and diffusion inputs of the last call, as .npz files."""
+    """The finest level's NCC, inheritance and diffusion inputs of the last call and the RBF
+    weights' of the widest level that has them, as .npz files."""
     import numpy as np
 
     args, kw = max(captured["ncc_cost_volume"], key=lambda c: c[0][0].shape[1])

@@ -36,7 +36,7 @@ def _check_updatable(valid: np.ndarray, disp: np.ndarray) -> None:
 
 
 def refine_subpixel(cost, disparity, *, backend, equiangular: bool = False):
-    """Sub-pixel refinement at full resolution (docs/design.md, 'Finishing'), eq. of step 8.
+    """Sub-pixel refinement at full resolution (docs/design.md, 'Finishing', step 8).
 
     Parameters
     ----------
