@@ -64,13 +64,14 @@ def test_fit_is_deterministic_and_integer_maps_work():
 
 def loop_ransac(u, v, d, threshold, seed, hypotheses=200, sample=5000):
     """The RANSAC start as a plain loop over the hypotheses (the code before the
-    batched version), with the same generator calls and the refit on the inliers."""
+    batched version), with the same draws and the refit on the inliers."""
+    from d3cli.method import perspective
+
     rng = np.random.default_rng(seed)
     idx = rng.choice(u.size, size=min(u.size, sample), replace=False)
     us, vs, ds = u[idx], v[idx], d[idx]
     best, best_count = None, -1
-    for _ in range(hypotheses):
-        pick = rng.choice(us.size, size=3, replace=False)
+    for pick in perspective._draw_triples(rng, us.size, hypotheses):
         a = np.stack([np.ones(3), vs[pick], us[pick]], axis=1)
         if abs(np.linalg.det(a)) < 1e-6:
             continue
@@ -82,8 +83,6 @@ def loop_ransac(u, v, d, threshold, seed, hypotheses=200, sample=5000):
         return None
     inl = np.abs(d - (best[0] + best[1] * v + best[2] * u)) <= threshold
     # the refit is _solve's (checked against np.linalg.lstsq on its own below)
-    from d3cli.method import perspective
-
     sol = perspective._solve(u[inl], v[inl], d[inl])
     return sol if sol is not None else best
 
@@ -99,6 +98,29 @@ def test_ransac_start_equals_the_loop_over_hypotheses_bit_for_bit(seed, outliers
     want = loop_ransac(u, v, d, 1.0 * SCALE, seed)
     got = fit_road_model(coarse, scale=SCALE, iterations=0, seed=seed)
     assert (got.a0, got.b1, got.b2) == tuple(float(x) for x in want)
+
+
+@pytest.mark.parametrize("n", [3, 4, 50, 5000])
+def test_ransac_triples_are_distinct_and_uniform(n):
+    from d3cli.method.perspective import _draw_triples
+
+    rng = np.random.default_rng(n)
+    picks = _draw_triples(rng, n, 20000)
+    assert picks.shape == (20000, 3) and picks.min() >= 0 and picks.max() < n
+    assert np.all((picks[:, 0] != picks[:, 1]) & (picks[:, 0] != picks[:, 2]) & (picks[:, 1] != picks[:, 2]))
+    # every position uniform over the n indices (n = 3, 4: each of the 6 or 24 ordered
+    # triples about equally often; chi-square-like bound at 6 standard deviations)
+    for k in range(3):
+        counts = np.bincount(picks[:, k], minlength=n)
+        expect = 20000 / n
+        assert np.all(np.abs(counts - expect) <= 6 * np.sqrt(expect) + 1)
+    if n <= 4:
+        keys = picks[:, 0] * n * n + picks[:, 1] * n + picks[:, 2]
+        seen = np.bincount(keys, minlength=n ** 3)
+        triples = n * (n - 1) * (n - 2)
+        assert np.count_nonzero(seen) == triples
+        expect = 20000 / triples
+        assert np.all(np.abs(seen[seen > 0] - expect) <= 6 * np.sqrt(expect))
 
 
 def test_ransac_inlier_counts_equal_the_numpy_expression_ties_included():
@@ -285,3 +307,75 @@ def test_solve_refuses_collinear_points_and_zero_weights():
     u3, v3 = np.array([0.0, 1280.0, 0.0]), np.array([0.0, 0.0, 720.0])
     np.testing.assert_allclose(perspective._solve(u3, v3, 2.0 + 0.5 * v3 - 0.25 * u3), [2.0, 0.5, -0.25],
                                rtol=0, atol=1e-12)
+
+
+def numpy_irls(u, v, d, sol, threshold, iterations):
+    """The IRLS loop in NumPy (the code before the compiled one), with _solve."""
+    from d3cli.method import perspective
+
+    for _ in range(iterations):
+        r = d - (sol[0] + sol[1] * v + sol[2] * u)
+        sigma = 1.4826 * np.median(np.abs(r))
+        c = perspective._TUKEY_C * max(sigma, threshold / 2.5)
+        z = r / c
+        w = np.where(np.abs(z) < 1.0, (1.0 - z * z) ** 2, 0.0)
+        if np.count_nonzero(w) < 3:
+            break
+        new = perspective._solve(u, v, d, w)
+        if new is None:
+            break
+        done = np.max(np.abs(new - sol)) < 1e-9
+        sol = new
+        if done:
+            break
+    return sol
+
+
+@pytest.mark.parametrize("seed, outliers, start", [(0, 0.3, (0.0, 0.1, 0.0)), (1, 0.6, (5.0, 0.05, 0.01)),
+                                                   (2, 0.1, (-3.0, 0.2, -0.02))])
+def test_compiled_irls_equals_the_numpy_loop(seed, outliers, start):
+    from d3cli.method import perspective
+
+    rng = np.random.default_rng(40 + seed)
+    u, v, d = coarse_points(road_coarse_map(rng, (90, 160), outliers=outliers), scale=SCALE)
+    for iterations in (0, 1, 3, 10):
+        want = numpy_irls(u, v, d, np.array(start), 1.0 * SCALE, iterations)
+        got = perspective._irls(u, v, d, np.array(start), 1.0 * SCALE, iterations)
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+
+
+def test_compiled_irls_stops_where_the_numpy_loop_stops():
+    from d3cli.method import perspective
+    from d3cli.kernels.perspective.road_fit import solve_weighted
+
+    # two points: fewer than 3 keep a weight, no round is taken (the start comes back)
+    start = np.array([1.0, 0.0, 0.0])
+    u2, v2, d2 = np.array([0.0, 100.0]), np.array([0.0, 50.0]), np.array([1.0, 3.0])
+    np.testing.assert_array_equal(perspective._irls(u2, v2, d2, start, 1.0, 10), start)
+    np.testing.assert_array_equal(numpy_irls(u2, v2, d2, start, 1.0, 10), start)
+    u = np.array([0.0, 100.0, 0.0, 50.0, 70.0])
+    v = np.array([0.0, 0.0, 100.0, 60.0, 30.0])
+    d = np.array([1.0, 1.0, 500.0, 900.0, 700.0])
+    np.testing.assert_allclose(perspective._irls(u, v, d, start, 1.0, 10), numpy_irls(u, v, d, start, 1.0, 10),
+                               rtol=1e-10, atol=1e-12)
+    # collinear points: the weighted system is singular in both
+    t = np.linspace(0.0, 1000.0, 50)
+    assert solve_weighted(t, 2.0 * t + 5.0, 3.0 + t, np.ones(50), perspective._SINGULAR)[0] is False
+    assert perspective._solve(t, 2.0 * t + 5.0, 3.0 + t) is None
+    np.testing.assert_array_equal(perspective._irls(t, 2.0 * t + 5.0, 3.0 + t, start, 1.0, 10),
+                                  numpy_irls(t, 2.0 * t + 5.0, 3.0 + t, start, 1.0, 10))
+    # zero weights
+    assert solve_weighted(u, v, d, np.zeros(5), perspective._SINGULAR)[0] is False
+
+
+def test_solve_weighted_equals_solve():
+    from d3cli.method import perspective
+    from d3cli.kernels.perspective.road_fit import solve_weighted
+
+    rng = np.random.default_rng(5)
+    u, v = rng.uniform(0, 1280, 5000), rng.uniform(0, 720, 5000)
+    d = 3.0 + 0.1 * v - 0.02 * u + rng.normal(0, 0.5, 5000)
+    w = rng.uniform(0, 1, 5000)
+    ok, a0, b1, b2 = solve_weighted(u, v, d, w, perspective._SINGULAR)
+    assert ok
+    np.testing.assert_allclose([a0, b1, b2], perspective._solve(u, v, d, w), rtol=1e-12, atol=1e-13)
