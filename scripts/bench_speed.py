@@ -16,6 +16,11 @@ For every case (a stereo pair + a config):
   parent's peak across ``exec``); this is the whole process, interpreter and libraries
   included, as a user sees it.
 
+``--against KEY=VALUE`` (repeatable) times a second d3stereo, the case's config with those
+overrides too, in the same process and alternation (d3stereo, the variant, SGBM): the
+speed of a setting against the shipped one on a noisy machine, where two separate runs
+drift apart more than the setting changes.
+
 SGBM is ``d3cli.batch.compute_pair("sgbm", ...)`` with the case's config and the same
 disparity range: OpenCV StereoSGBM, 3-way, block ``sgbm.block_size`` (5 by default,
 forced to 5 on every case with ``--sgbm-block 5``, as in issue 10's table).
@@ -33,6 +38,8 @@ Usage::
 
     PYTHONPATH=. python scripts/bench_speed.py --data DATA --markdown
     PYTHONPATH=. python scripts/bench_speed.py --cases road road-full --reps 7
+    PYTHONPATH=. python scripts/bench_speed.py --cases middlebury --reps 11 --no-memory \
+        --against pyramid.finest_band_tile=32
 """
 
 from __future__ import annotations
@@ -93,13 +100,14 @@ def _load(spec: dict):
     return np.load(cache / "left.npy"), np.load(cache / "right.npy"), dmax, f"synth road {width}x{height}"
 
 
-def _config(spec: dict):
+def _config(spec: dict, extra=()):
     from d3cli import load_config
 
     overrides = [f"run.backend={spec['backend']}"]
     if spec.get("sgbm_block"):
         overrides.append(f"sgbm.block_size={spec['sgbm_block']}")
     overrides += spec.get("overrides", [])
+    overrides += list(extra)
     cfg_path = spec["config"]  # a bundled config's name, or None
     return load_config(cfg_path, overrides)
 
@@ -114,15 +122,22 @@ def _child_time(spec: dict) -> dict:
 
     left, right, dmax, name = _load(spec)
     cfg = _config(spec)
+    against = _config(spec, spec["against"]) if spec.get("against") else None
     t0 = time.perf_counter()
     compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
     cold = time.perf_counter() - t0
+    if against is not None:
+        res_b = compute_pair("d3stereo", against, left, right, max_disparity=dmax)
     compute_pair("sgbm", cfg, left, right, max_disparity=dmax)
-    d3, sg, steps, sgm_share = [], [], {}, []
+    d3, d3_b, sg, steps, sgm_share = [], [], [], {}, []
     for _ in range(spec["reps"]):
         t0 = time.perf_counter()
         res = compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
         d3.append(time.perf_counter() - t0)
+        if against is not None:
+            t0 = time.perf_counter()
+            res_b = compute_pair("d3stereo", against, left, right, max_disparity=dmax)
+            d3_b.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         compute_pair("sgbm", cfg, left, right, max_disparity=dmax)
         sg.append(time.perf_counter() - t0)
@@ -139,6 +154,9 @@ def _child_time(spec: dict) -> dict:
         "sgm_share": statistics.median(sgm_share) if sgm_share else None,
         # bit-identity check of a speed-up: the same md5 before and after the change
         "disparity_md5": hashlib.md5(np.ascontiguousarray(res.disparity, dtype=np.float32).tobytes()).hexdigest(),
+        "against_s": statistics.median(d3_b) if d3_b else None,
+        "against_md5": hashlib.md5(np.ascontiguousarray(res_b.disparity, dtype=np.float32).tobytes()).hexdigest()
+        if d3_b else None,
     }
 
 
@@ -177,6 +195,9 @@ def main(argv=None) -> int:
                         help="SGBM block size for the reference (default 5, issue 10's baseline; 0: the config's)")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         help="config override for every case, e.g. --set pyramid.band=false")
+    parser.add_argument("--against", action="append", default=[], metavar="KEY=VALUE",
+                        help="also time d3stereo with this override (repeatable: one variant with all of them), "
+                             "alternating with the shipped config and SGBM in the same process")
     parser.add_argument("--no-memory", action="store_true", help="skip the fresh-process memory runs")
     parser.add_argument("--markdown", action="store_true", help="print a markdown table")
     parser.add_argument("--json", dest="json_out", help="also write the rows to this JSON file")
@@ -191,7 +212,8 @@ def main(argv=None) -> int:
     rows = []
     for case in args.cases or DEFAULT_CASES:
         spec = dict(CASES[case], case=case, data=args.data, seed=args.seed, reps=args.reps,
-                    backend=args.backend, sgbm_block=args.sgbm_block or None, overrides=args.overrides)
+                    backend=args.backend, sgbm_block=args.sgbm_block or None, overrides=args.overrides,
+                    against=args.against)
         if spec.get("pair") and not (Path(args.data) / spec["pair"]).is_dir():
             print(f"{case}: {Path(args.data) / spec['pair']} not found, skipped", file=sys.stderr)
             continue
@@ -221,6 +243,13 @@ def main(argv=None) -> int:
                   f"{r['d3_s']:.3f} | {r['sgbm_s']:.3f} | {ratio:.2f}x | {mem} | {r['cold_s']:.2f} |")
         else:
             print(f"{r['case']:<11} {r['d3_s']:7.3f} s  SGBM {r['sgbm_s']:6.3f} s  {ratio:5.2f}x  MB {mem}")
+    timed = [r for r in rows if r.get("against_s") is not None]
+    if timed:
+        print(f"\nagainst {args.against} (the same process, alternating):")
+        for r in timed:
+            print(f"  {r['case']}: {r['against_s']:.3f} s, {r['against_s'] / r['sgbm_s']:.2f}x SGBM's time; "
+                  f"the shipped config takes {100 * (r['d3_s'] / r['against_s'] - 1):+.1f} % of its time "
+                  f"(md5 {r['against_md5'][:8]})")
     print("\nper-step medians (s):")
     for r in rows:
         print(f"  {r['case']}: " + ", ".join(f"{k} {v:.3f}" for k, v in r["steps"].items()))

@@ -35,6 +35,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "pyramid.levels": (lambda v: 1 <= v <= 8, "an integer in [1, 8]"),
     "pyramid.band_margin": (lambda v: 2 <= v <= 64, "an integer in [2, 64]"),
     "pyramid.band_tile": (lambda v: 4 <= v <= 256, "an integer in [4, 256]"),
+    "pyramid.finest_band_tile": (lambda v: v is None or 4 <= v <= 256, "an integer in [4, 256] or null"),
     "cost.window": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
     "cost.level_windows": (
         lambda v: all(w >= 1 and w % 2 == 1 and w <= 31 for w in v),

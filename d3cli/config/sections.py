@@ -33,6 +33,13 @@ class PyramidConfig:
     band: bool = True  # levels below the coarsest search a band around the coarser level's map (docs/design.md, 'Pyramid and bands')
     band_margin: int = 2  # the band: 2 d_coarse +- this many disparities, hull over a tile and its neighbours
     band_tile: int = 32  # tile size (pixels of the level); a tile searches the hull over itself and its 8 neighbours
+    # The tile at full resolution (level 1); None: band_tile.  16 by default since
+    # 2026-11-28 (session 16): on the 22 Middlebury pairs the same maps to 0.01 EPE as 32
+    # (1.351 / 20.09 / 12.53 / 8.89 against 1.350 / 20.09 / 12.51 / 8.85; 8: 1.386) in about
+    # 7 % less time on Middlebury-Q (the finest level's bands are its NCC, smoothing,
+    # inheritance and diffusion cells); tiles of 16 at every level lose (1.395: a coarse
+    # band too narrow is not made good below).  kitti.yaml keeps 32.  docs/performance.md
+    finest_band_tile: int | None = 16
 
 
 @dataclass(frozen=True)
@@ -273,6 +280,20 @@ class Config:
         if level == 0 and agg.finest_t_max is not None:
             return agg.finest_t_max
         return agg.t_max
+
+    def level_band_tile(self, level: int) -> int:
+        """Band tile at ``level`` (0 = full resolution): ``pyramid.finest_band_tile`` at
+        level 0 where it is set, else ``pyramid.band_tile``.
+
+        Parameters
+        ----------
+        level : int
+            Pyramid level, 0 at full resolution.
+        """
+        pyr = self.pyramid
+        if level == 0 and pyr.finest_band_tile is not None:
+            return pyr.finest_band_tile
+        return pyr.band_tile
 
     def level_window(self, level: int) -> int:
         """NCC window size at ``level`` (0 = full resolution).

@@ -364,7 +364,7 @@ class D3Stereo:
         bands = None
         if coarser is not None and cfg.pyramid.band:
             bands = band_indexes(backend.to_host(coarser), shape, n_disp=level_max_disparity(dmax, level) + 1,
-                                 margin=cfg.pyramid.band_margin, tile=cfg.pyramid.band_tile,
+                                 margin=cfg.pyramid.band_margin, tile=cfg.level_band_tile(level),
                                  halo=aggregation_halo(cfg, level))
             stats["band_cells"] = bands[2]
         cost = level_cost(left, right, level=level, max_disparity=dmax, cfg=cfg, backend=backend,

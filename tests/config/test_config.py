@@ -196,7 +196,7 @@ def test_config_from_environment(tmp_path, monkeypatch):
          "fix the value of sgbm.uniqueness_ratio"),
         ("pyramid: 4\n",
          "{path}:1: section pyramid must be a mapping of keys, got 4; valid keys: levels, ars, band, band_margin, "
-             "band_tile"),
+             "band_tile, finest_band_tile"),
         ("This is a README, not a config file.\n",
          "{path}:1: the top level must be a mapping of sections, got str; valid sections: run, pyramid, cost, "
          "features, aggregation, seeds, diffusion, inheritance, pt, refine, sgbm, peers, camera, road"),

@@ -155,3 +155,34 @@ def test_bilateral_sigma_override_and_its_effect():
     # 81 cells almost evenly, so it leaves far less variance than the narrow one
     inner = (slice(4, -4), slice(4, -4))
     assert scaled[inner].std() < 0.5 * narrow[inner].std()
+
+
+@pytest.mark.parametrize("finest, tiles", [("null", [8, 8]), ("4", [8, 4]), ("16", [8, 16])])
+def test_finest_band_tile_sets_the_tile_at_full_resolution_only(pair, monkeypatch, finest, tiles):
+    from d3cli.method import pipeline
+
+    calls = []
+    real = pipeline.band_indexes
+
+    def band_indexes(coarse, shape, **kw):
+        calls.append(kw["tile"])
+        return real(coarse, shape, **kw)
+
+    monkeypatch.setattr(pipeline, "band_indexes", band_indexes)
+    per_level(pair, "pyramid.band_tile=8", f"pyramid.finest_band_tile={finest}")
+    assert calls == tiles  # the two levels below the coarsest, finest last
+
+
+def test_finest_band_tile_of_the_shipped_configs():
+    assert [load_config(None).level_band_tile(level) for level in range(4)] == [16, 32, 32, 32]
+    assert [load_config("kitti").level_band_tile(level) for level in range(4)] == [24, 32, 32, 32]
+    assert load_config("middlebury").level_band_tile(0) == 16
+
+
+def test_finest_band_tile_changes_the_finest_bands_only(pair):
+    # a narrower tile at full resolution: the coarser levels' maps are the same, the
+    # finest level searches fewer cells
+    wide = per_level(pair, "pyramid.band_tile=16", "pyramid.finest_band_tile=null")
+    narrow = per_level(pair, "pyramid.band_tile=16", "pyramid.finest_band_tile=4")
+    assert [s["band_cells"] for s in wide[1:-1]] == [s["band_cells"] for s in narrow[1:-1]]
+    assert narrow[-1]["band_cells"] < wide[-1]["band_cells"]
