@@ -248,7 +248,7 @@ def main(argv=None) -> int:
         print(f"\nagainst {args.against} (the same process, alternating):")
         for r in timed:
             print(f"  {r['case']}: {r['against_s']:.3f} s, {r['against_s'] / r['sgbm_s']:.2f}x SGBM's time; "
-                  f"the shipped config takes {100 * (r['d3_s'] / r['against_s'] - 1):+.1f} % of its time "
+                  f"the shipped config's time {100 * (r['d3_s'] / r['against_s'] - 1):+.1f} % against it "
                   f"(md5 {r['against_md5'][:8]})")
     print("\nper-step medians (s):")
     for r in rows:

@@ -102,10 +102,10 @@ def test_ransac_start_equals_the_loop_over_hypotheses_bit_for_bit(seed, outliers
 
 @pytest.mark.parametrize("n", [3, 4, 50, 5000])
 def test_ransac_triples_are_distinct_and_uniform(n):
-    from d3cli.method.perspective import _draw_triples
+    from d3cli.method import perspective
 
     rng = np.random.default_rng(n)
-    picks = _draw_triples(rng, n, 20000)
+    picks = perspective._draw_triples(rng, n, 20000)
     assert picks.shape == (20000, 3) and picks.min() >= 0 and picks.max() < n
     assert np.all((picks[:, 0] != picks[:, 1]) & (picks[:, 0] != picks[:, 2]) & (picks[:, 1] != picks[:, 2]))
     # every position uniform over the n indices (n = 3, 4: each of the 6 or 24 ordered
