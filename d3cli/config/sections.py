@@ -38,7 +38,7 @@ class PyramidConfig:
     # (1.351 / 20.09 / 12.53 / 8.89 against 1.350 / 20.09 / 12.51 / 8.85; 8: 1.386) in about
     # 7 % less time on Middlebury-Q (the finest level's bands are its NCC, smoothing,
     # inheritance and diffusion cells); tiles of 16 at every level lose (1.395: a coarse
-    # band too narrow is not made good below).  kitti.yaml keeps 32.  docs/performance.md
+    # band too narrow is not made good below).  kitti.yaml takes 24.  docs/performance.md
     finest_band_tile: int | None = 16
 
 
@@ -230,6 +230,12 @@ class RoadConfig:
     frame_spacing_m: float = 0.0  # distance between frames for road_survey.json's per-km counts (0: unknown)
 
 
+def _at_level(level: int, finest, rest):
+    """A per-level setting: ``finest`` at level 0 (full resolution) where it is set (not
+    None), else ``rest`` (the value of every level)."""
+    return finest if level == 0 and finest is not None else rest
+
+
 @dataclass(frozen=True)
 class Config:
     """The whole resolved configuration of one run."""
@@ -276,10 +282,7 @@ class Config:
         level : int
             Pyramid level, 0 at full resolution.
         """
-        agg = self.aggregation
-        if level == 0 and agg.finest_t_max is not None:
-            return agg.finest_t_max
-        return agg.t_max
+        return _at_level(level, self.aggregation.finest_t_max, self.aggregation.t_max)
 
     def level_band_tile(self, level: int) -> int:
         """Band tile at ``level`` (0 = full resolution): ``pyramid.finest_band_tile`` at
@@ -290,10 +293,7 @@ class Config:
         level : int
             Pyramid level, 0 at full resolution.
         """
-        pyr = self.pyramid
-        if level == 0 and pyr.finest_band_tile is not None:
-            return pyr.finest_band_tile
-        return pyr.band_tile
+        return _at_level(level, self.pyramid.finest_band_tile, self.pyramid.band_tile)
 
     def level_window(self, level: int) -> int:
         """NCC window size at ``level`` (0 = full resolution).
