@@ -89,7 +89,7 @@ class AggregationConfig:
     # stretched to the (2 kappa_a + 1)^2 window (same receptive field as RBF, Fig. 4)
     bf_sigma_space: float | None = None
     # Semi-global smoothing of the full-resolution aggregated cost (docs/design.md,
-    # 'Semi-global smoothing'): the mean of four path costs (left, right, down, up) with
+    # 'Semi-global smoothing'): the mean of four path costs (left, down, right, up) with
     # penalties P1 (one-disparity step) and P2 (larger jump) in cost units
     # ((1 - NCC) / 2); sgm_p2 0: off (the paper's method, d3cli/configs/paper.yaml).  On
     # by default: with finest_t_max 0, P1 0.1 / P2 1.2 chosen on the Middlebury pairs and

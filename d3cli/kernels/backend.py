@@ -140,7 +140,7 @@ class Backend(Protocol):
         ...
 
     def sgm_smooth(self, cost, p1, p2) -> Any:
-        """Mean of four semi-global path costs (left, right, down, up) of a volume.
+        """Mean of four semi-global path costs (left, down, right, up) of a volume.
 
         Parameters
         ----------
@@ -151,7 +151,7 @@ class Backend(Protocol):
         Returns
         -------
         Volume or ndarray
-            Same kind and band layout; each cell ``(L_left + L_right + L_down + L_up) / 4``
+            Same kind and band layout; each cell ``(L_left + L_down + L_right + L_up) / 4``
             with ``L(p, d) = C(p, d) + min(L(q, d), L(q, d -+ 1) + P1, min_k L(q, k) + P2) -
             min_k L(q, k)`` along each path (``q`` the previous pixel; ``L = C`` at its
             start), in float32, the paths summed in that order.  The one place per target

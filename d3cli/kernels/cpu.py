@@ -29,7 +29,7 @@ from .decisive.cpu_maps import SUBPIXEL_PREFETCH, count_decided, merge_sparse, m
 from .decisive.cpu_seeds import SEED_PREFETCH, _right_wta_row, decisive_seeds  # noqa: F401
 from .intrinsics import _store_fence, _store_nt  # noqa: F401
 from .perspective.cpu import pt_restore, pt_warp  # noqa: F401
-from .sgm.cpu import SGM_COLUMNS, SGM_PREFETCH_ROWS, sgm_smooth  # noqa: F401
+from .sgm.cpu import SGM_MIN_SEGMENT, SGM_PREFETCH_PIXELS, SGM_SEGMENTS, sgm_smooth  # noqa: F401
 
 
 def to_device(array):

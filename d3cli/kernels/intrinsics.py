@@ -1,12 +1,14 @@
 """LLVM intrinsics and inlined prefetch helpers shared by the CPU drivers:
 non-temporal stores and their fence, prefetch hints, the 16-lane splat of the vector
-intrinsics of :mod:`d3cli.kernels.aggregation.cpu_vector`."""
+intrinsics of :mod:`d3cli.kernels.aggregation.cpu_vector`, and the atomic loads, stores
+and pause by which threads of one sweep hand work to each other (the smoothing's)."""
 
 from __future__ import annotations
 
 import platform
 from llvmlite import ir
 from numba import njit, types
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 from . import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
@@ -89,3 +91,55 @@ def _prefetch(typingctx, arr, i):
         return context.get_dummy_value()
 
     return types.void(arr, i), codegen
+
+
+# ----------------------------------------------------------------------------- threads handing work over
+@intrinsic
+def _load_acquire(typingctx, arr, i):
+    """``arr[i]`` of an int64 array as an atomic load with acquire order: what the thread
+    that stored it (:func:`_store_release`) wrote before is visible after, and the load is
+    never hoisted out of a waiting loop."""
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.gep(ary.data, [context.cast(builder, args[1], signature.args[1], types.intp)])
+        return builder.load_atomic(ptr, "acquire", 8)
+
+    return types.int64(arr, i), codegen
+
+
+@intrinsic
+def _store_release(typingctx, arr, i, val):
+    """``arr[i] = val`` of an int64 array as an atomic store with release order (every
+    store before it is visible to a thread that loads it with :func:`_load_acquire`)."""
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.gep(ary.data, [context.cast(builder, args[1], signature.args[1], types.intp)])
+        builder.store_atomic(context.cast(builder, args[2], signature.args[2], types.int64), ptr, "release", 8)
+        return context.get_dummy_value()
+
+    return types.void(arr, i, val), codegen
+
+
+#: Whether the C library has ``sched_yield`` (POSIX; not on Windows).
+_POSIX = platform.system() != "Windows"
+
+
+@intrinsic
+def _spin_pause(typingctx, give_up_cpu):
+    """One round of a waiting loop: x86's ``pause`` (a spinning core leaves the pipeline to
+    its sibling), and with ``give_up_cpu`` true ``sched_yield`` too, so that on a machine
+    with more busy threads than cores the thread being waited for gets the core."""
+
+    def codegen(context, builder, signature, args):
+        if _X86:
+            fn = builder.module.declare_intrinsic("llvm.x86.sse2.pause", (), ir.FunctionType(ir.VoidType(), ()))
+            builder.call(fn, ())
+        if _POSIX:
+            with builder.if_then(args[0]):
+                fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.IntType(32), ()), "sched_yield")
+                builder.call(fn, ())
+        return context.get_dummy_value()
+
+    return types.void(give_up_cpu), codegen

@@ -1,10 +1,12 @@
 """The task pool of the host kernels: ``func(i, n, *args)`` for every task i, on threads.
 
-The kernels that run here (today the finishing, :mod:`d3cli.kernels.finishing`) are numba
-functions compiled with ``nogil``; :func:`run_tasks` runs their tasks on the calling thread
-and a pool, numba's thread count of threads in all, and :func:`row_tasks` says how many
-blocks of rows a map is cut into.  Tasks write disjoint cells, so results do not depend on
-the thread count.  A thread pool, not ``prange``: OpenMP's spin-waiting made the parallel
+The kernels that run here (today the finishing, :mod:`d3cli.kernels.finishing`, and the
+semi-global smoothing's sweeps, :mod:`d3cli.kernels.sgm`) are numba functions compiled
+with ``nogil``; :func:`run_tasks` runs their tasks on the calling thread and a pool,
+numba's thread count of threads in all, and :func:`row_tasks` says how many blocks of rows
+a map is cut into.  Tasks write disjoint cells, so results do not depend on the thread
+count.  Tasks are taken in increasing order, each by a thread that runs it to the end: a
+task may wait for a lower one (the smoothing's segments do), never for a higher one.  A thread pool, not ``prange``: OpenMP's spin-waiting made the parallel
 kernels slower than one thread whenever the machine was shared with other work; idle pool
 threads block instead of spinning.
 

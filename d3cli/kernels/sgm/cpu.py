@@ -1,7 +1,7 @@
 """CPU driver of the semi-global smoothing of a banded volume (four paths, rows and
-columns), a path step's cells as LLVM vectors of 8 disparities (one file: numba keys a
-cached driver on its own file, so the inlined step lives beside it).  The contract:
-:mod:`d3cli.kernels.backend`."""
+columns, in two sweeps of two paths each), a path step's cells as LLVM vectors of 8
+disparities (one file: numba keys a cached driver on its own file, so the inlined step
+lives beside it).  The contract: :mod:`d3cli.kernels.backend`."""
 
 from __future__ import annotations
 
@@ -9,54 +9,170 @@ import math
 
 import numpy as np
 from llvmlite import ir
-from numba import njit, prange, types
+from numba import njit, types
 from numba.core import cgutils, errors
 from numba.extending import intrinsic
 
 from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
 from ..cpu_common import _pack, _unpack
-from ..intrinsics import _prefetch_cells
+from ..intrinsics import _load_acquire, _prefetch_cells, _spin_pause, _store_release
+from ..pool import run_tasks, threads
 
 
 # ----------------------------------------------------------------------------- semi-global smoothing
 def sgm_smooth(cost, p1, p2):
-    """Mean of four semi-global path costs (left, right, down, up) of a volume.
+    """Mean of four semi-global path costs (left, down, right, up) of a volume.
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.sgm_smooth`.
+
+    Two sweeps over the volume, each walking two paths at once: the first top to bottom
+    and left to right (the left path, then the down path, at each cell), the second bottom
+    to top and right to left (right, then up).  A sweep cuts the columns into one segment
+    per thread; a segment's down (up) paths are its own, its rows' left (right) paths come
+    in from the segment before it, which hands each row's last path costs over as it
+    finishes the row (a wavefront: segment j works on row v while segment j - 1 works
+    further down).  Two paths per visit of a cell instead of one: each cell's cost is read
+    twice instead of four times, the sums read and written twice instead of four times, a
+    pixel's band set up half as often.  A KITTI finest volume (15.4 M cells, 2 threads, in
+    one process with the driver before, which walked the row paths by rows and the column
+    paths by strips of columns): 39.0 against 44.9 ms; in the pipeline 36.8 against 42.2.
     """
     flat, index, n_disp, dense = _unpack(cost)
-    # not zeroed in a pass of its own: the row paths write every cell of a band and zero
-    # those between the bands (stored, not visible), so every cell is defined
+    # not zeroed in a pass of its own: the first sweep writes every cell of a band and
+    # zeroes those between the bands (stored, not visible), so every cell is defined
     acc = np.empty_like(flat)
     p1, p2 = np.float32(p1), np.float32(p2)
-    _sgm_rows(flat, index, n_disp, p1, p2, acc)
-    _sgm_columns(flat, index, n_disp, p1, p2, acc)
+    bounds = _segment_bounds(index, SGM_SEGMENTS or threads())
+    n_seg = bounds.shape[0] - 1
+    # per boundary and row the path costs (and their least) handed to the next segment
+    hand = np.empty((max(n_seg - 1, 1), index.shape[0], n_disp + 2), np.float32)
+    hand_least = np.empty((max(n_seg - 1, 1), index.shape[0]), np.float32)
+    for backward in (False, True):
+        done = np.zeros(n_seg, np.int64)  # per segment the rows finished in this sweep
+        task = _backward_task if backward else _forward_task
+        run_tasks(task, n_seg, flat, index, bounds, p1, p2, acc, hand, hand_least, done)
     return _pack(acc, index, n_disp, dense)
 
 
-#: Columns per task of the column paths: each task walks its columns down (then up) row
-#: by row, so the cells it reads lie side by side (8, 16 and 64 measured the same on
-#: KITTI; the first kernel walked one column at a time, a cache line per pixel).
-SGM_COLUMNS = 32
+#: Segments per sweep; None: one per thread (the tests set more, to cross many boundaries
+#: on small volumes; more segments than threads are taken in turn and still agree).
+SGM_SEGMENTS = None
 
 
-#: The column paths prefetch the cells of the pixel this many rows ahead: each task's
-#: rows lie apart in the volume, where the hardware's prefetcher does not follow (2 rows
-#: measured best).
-SGM_PREFETCH_ROWS = 2
+#: Columns per segment at least: fewer segments than threads on narrow images, since each
+#: boundary costs a hand-over per row.
+SGM_MIN_SEGMENT = 64
 
 
-@njit(parallel=True, cache=True)
-def _sgm_rows(cost, index, n_disp, p1, p2, acc):
-    for v in prange(index.shape[0]):
-        _zero_gaps(index, v, acc)
-        # two path buffers, L(d) at d + 1, inf outside the band (sentinels at both ends)
-        a = np.full(n_disp + 2, np.inf, np.float32)
-        b = np.full(n_disp + 2, np.inf, np.float32)
-        _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, 1, 0)  # left to right: the first path stores
-        a[:] = np.inf
-        b[:] = np.inf
-        _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, -1, 1)  # right to left
+#: The sweeps prefetch the cells of the pixel this many steps ahead on its row (in the
+#: volume and in the sums): a segment's stretch of a row is contiguous, but the hardware's
+#: prefetcher loses it at each page (without it a KITTI volume took 70 ms against 39-44;
+#: 8 to 16 pixels measured the same, 24 and 32 a little slower, a row ahead 43).
+SGM_PREFETCH_PIXELS = 8
+
+
+#: Rounds of a waiting loop between two ``sched_yield`` calls.
+SGM_SPINS = 64
+
+
+def _segment_bounds(index, n_threads):
+    """Column bounds of the sweeps' segments (int64, first 0, last W): one per thread (at
+    most W / :data:`SGM_MIN_SEGMENT`), cut where the band cells summed over columns reach
+    equal shares, so that the segments take equal time."""
+    w = index.shape[1]
+    n_seg = max(1, min(n_threads, w // SGM_MIN_SEGMENT))
+    if n_seg == 1:
+        return np.array([0, w], np.int64)
+    cells = np.cumsum(_column_cells(index))
+    bounds = np.zeros(n_seg + 1, np.int64)
+    bounds[1:-1] = np.searchsorted(cells, cells[-1] * np.arange(1, n_seg) / n_seg) + 1
+    bounds[-1] = w
+    for k in range(1, n_seg):  # at least a column each
+        bounds[k] = min(max(bounds[k], bounds[k - 1] + 1), w - (n_seg - k))
+    return bounds
+
+
+@njit(cache=True, error_model="numpy")
+def _column_cells(index):
+    """Band cells per column (float64, for the cumulative share)."""
+    out = np.zeros(index.shape[1], np.float64)
+    for v in range(index.shape[0]):
+        for u in range(index.shape[1]):
+            out[u] += max(0, index[v, u, 2] - index[v, u, 1])
+    return out
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _forward_task(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done):
+    """Segment i of the first sweep: the left path stores, the down path adds."""
+    _sweep_segment(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, 1, 1)
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _backward_task(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done):
+    """Segment n - 1 - i of the second sweep (tasks start at the right): the right path
+    adds, the up path adds and scales by a quarter."""
+    _sweep_segment(n - 1 - i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, -1, 2)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _sweep_segment(j, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, step, mode):
+    """The rows of segment j, in sweep order (``step`` 1: top down, left to right; -1:
+    bottom up, right to left), each pixel's row path step then its column path step.
+
+    Row v's path comes in from the segment upstream (j - step) once that one has finished
+    the row (``done``); this segment hands its own on (``hand[boundary, v]``, the least in
+    ``hand_least``) and counts the row done.  Tasks are taken in sweep order, so the
+    segment waited for is always being worked on: no wait can deadlock, whatever the
+    number of threads."""
+    h, w = index.shape[0], index.shape[1]
+    size = hand.shape[2]
+    u0, u1 = bounds[j], bounds[j + 1]
+    width = u1 - u0
+    up = j - step  # the segment the row paths come from
+    has_up = 0 <= up < n
+    has_down = 0 <= j + step < n
+    # the boundary between j and j + step: hand[min(j, j + step)]
+    give = j if step > 0 else j - 1
+    take = j - 1 if step > 0 else j
+    # per column two path buffers, column k's at k size; per column the previous pixel's least
+    ca = np.full(size * width, np.inf, np.float32)
+    cb = np.full(size * width, np.inf, np.float32)
+    least = np.full(width, np.inf, np.float32)
+    x = np.empty(size, np.float32)  # the row path's two buffers
+    y = np.empty(size, np.float32)
+    for i in range(h):
+        v = i if step > 0 else h - 1 - i
+        if step > 0 and j == 0:
+            _zero_gaps(index, v, acc)
+        pm = np.float32(np.inf)
+        x[:] = np.inf
+        if has_up:
+            spins = 0
+            while _load_acquire(done, up) <= i:
+                spins += 1
+                _spin_pause(spins % SGM_SPINS == 0)
+            x[:] = hand[take, v]
+            pm = hand_least[take, v]
+        y[:] = np.inf
+        pa, pb = (ca, cb) if i % 2 == 0 else (cb, ca)
+        for k in range(width):
+            u = u0 + k if step > 0 else u1 - 1 - k
+            if 0 <= u + step * SGM_PREFETCH_PIXELS < w:
+                _prefetch_pixel(cost, acc, index, v, u + step * SGM_PREFETCH_PIXELS)
+            # the band the buffer written now holds from two steps back: on the row path
+            # none for the segment's first pixel (fresh), the one handed over for its second
+            back = u - 2 * step
+            row_back = (index[v, back, 1], index[v, back, 2]) if k >= 1 and 0 <= back < w else (0, 0)
+            column_back = (index[v - 2 * step, u, 1], index[v - 2 * step, u, 2]) if i >= 2 else (0, 0)
+            c = u - u0
+            pm, least[c] = _sgm_pixel(cost, index, v, u, p1, p2, acc, mode, x, 0, pm, y, row_back,
+                                      pa, c * size, least[c], pb, column_back)
+            x, y = y, x
+        if has_down:
+            hand[give, v] = x  # x: the path costs of the row's last pixel here
+            hand_least[give, v] = pm
+            _store_release(done, j, i + 1)
 
 
 @njit(cache=True, inline="always")
@@ -83,58 +199,6 @@ def _zero_gaps(index, v, acc):
     if v == h - 1:
         for c in range(end, acc.shape[0]):
             acc[c] = 0
-
-
-@njit(cache=True, inline="always")
-def _sgm_row_pass(cost, index, v, a, b, p1, p2, acc, step, mode):
-    """One row path (``step`` 1 rightwards, -1 leftwards) along row v; ``a``, ``b`` the
-    path buffers (all inf on entry)."""
-    w = index.shape[1]
-    pm = np.float32(np.inf)
-    for i in range(w):
-        u = i if step > 0 else w - 1 - i
-        # the band that b (the buffer written now) holds from two pixels back
-        olo, ohi = (index[v, u - 2 * step, 1], index[v, u - 2 * step, 2]) if i >= 2 else (0, 0)
-        pm = _sgm_pixel(cost, index, v, u, a, 0, pm, b, 0, olo, ohi, p1, p2, acc, mode)
-        a, b = b, a
-
-
-@njit(parallel=True, cache=True)
-def _sgm_columns(cost, index, n_disp, p1, p2, acc):
-    w = index.shape[1]
-    n_tasks = (w + SGM_COLUMNS - 1) // SGM_COLUMNS
-    size = n_disp + 2
-    for task in prange(n_tasks):
-        u0 = task * SGM_COLUMNS
-        u1 = min(w, u0 + SGM_COLUMNS)
-        # per column two path buffers, column k's at k size of two arrays
-        a = np.full(size * (u1 - u0), np.inf, np.float32)
-        b = np.full(size * (u1 - u0), np.inf, np.float32)
-        least = np.full(u1 - u0, np.inf, np.float32)  # per column the previous pixel's least path cost
-        _sgm_column_pass(cost, index, u0, u1, a, b, least, size, p1, p2, acc, 1, 1)  # down
-        a[:] = np.inf
-        b[:] = np.inf
-        least[:] = np.inf
-        _sgm_column_pass(cost, index, u0, u1, a, b, least, size, p1, p2, acc, -1, 2)  # up: the last path scales
-
-
-@njit(cache=True, inline="always")
-def _sgm_column_pass(cost, index, u0, u1, a, b, least, size, p1, p2, acc, step, mode):
-    """One column path (``step`` 1 down, -1 up) over columns u0..u1, row by row; column
-    k's two path buffers at ``k size`` of ``a`` and ``b`` (all inf on entry), its previous
-    pixel's least path cost at ``least[k]`` (inf on entry)."""
-    h = index.shape[0]
-    for i in range(h):
-        v = i if step > 0 else h - 1 - i
-        ahead = v + step * SGM_PREFETCH_ROWS
-        for u in range(u0, u1):
-            if 0 <= ahead < h:
-                _prefetch_pixel(cost, acc, index, ahead, u)
-            # the band that b (the buffer written now) holds from two rows back
-            olo, ohi = (index[v - 2 * step, u, 1], index[v - 2 * step, u, 2]) if i >= 2 else (0, 0)
-            k = (u - u0) * size
-            least[u - u0] = _sgm_pixel(cost, index, v, u, a, k, least[u - u0], b, k, olo, ohi, p1, p2, acc, mode)
-        a, b = b, a
 
 
 @njit(cache=True, inline="always")
@@ -208,16 +272,18 @@ def _vector_access(context, builder, signature, args, lanes):
 
 
 @intrinsic
-def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2, mode):
-    """The ``n`` cells of one path step (the recurrence of
-    :meth:`d3cli.kernels.backend.Backend.sgm_smooth`) in blocks of :data:`SGM_LANES` disparities: cell i's cost at
-    ``cost[cells + i]``, the previous pixel's path costs of d - 1, d, d + 1 at
-    ``pbuf[below + i + (0, 1, 2)]``, the new one written to ``cbuf[out + i]`` and into
-    ``acc[cells + i]`` as ``mode`` (a literal) says.  The same float32 operations in the
-    same order per cell (compare-and-select minima, then ``C + (b - pm)``).  Returns the
-    least new path cost, kept per lane over the blocks and reduced once.  Whole blocks
-    take plain loads and stores, the last partial one masked ones: no cell past ``n`` is
-    read or written."""
+def _sgm_band(typingctx, cost, acc, cells, n, p1, p2, mode,
+              pbuf_a, cbuf_a, below_a, out_a, pm_a, pbuf_b, cbuf_b, below_b, out_b, pm_b):
+    """The ``n`` cells of one pixel's step on two paths, a and b (the recurrence of
+    :meth:`d3cli.kernels.backend.Backend.sgm_smooth`), in blocks of :data:`SGM_LANES`
+    disparities: cell i's cost at ``cost[cells + i]``; path a's previous pixel's path costs
+    of d - 1, d, d + 1 at ``pbuf_a[below_a + i + (0, 1, 2)]``, its new one written to
+    ``cbuf_a[out_a + i]``; path b's likewise.  ``mode`` (a literal) 1: the first sweep,
+    ``acc[cells + i] = L_a + L_b``; 2: the second, ``acc = ((acc + L_a) + L_b) / 4``.  The
+    same float32 operations in the same order per cell as the reference (compare-and-select
+    minima, then ``C + (b - pm)``).  Returns the least new path cost of each path, kept per
+    lane over the blocks and reduced once.  Whole blocks take plain loads and stores, the
+    last partial one masked ones: no cell past ``n`` is read or written."""
     if not isinstance(mode, types.IntegerLiteral):
         raise errors.RequireLiteralValue("mode")
     how = mode.literal_value
@@ -229,13 +295,17 @@ def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2
         vec = ir.VectorType(f32, lanes)
         scalar, load, store = _vector_access(context, builder, signature, args, lanes)
         infs = ir.Constant(vec, [math.inf] * lanes)
-        n = scalar(7, types.int64)
-        pm = scalar(8, types.float32)
-        pm_v = _splat(builder, pm, f32, lanes)
-        p1 = _splat(builder, scalar(9, types.float32), f32, lanes)
-        jump = _splat(builder, builder.fadd(pm, scalar(10, types.float32)), f32, lanes)
-        started = builder.fcmp_unordered("!=", pm, ir.Constant(f32, math.inf))  # else the path's first pixel: L = C
-        least = cgutils.alloca_once_value(builder, infs)
+        n = scalar(3, types.int64)
+        p1 = _splat(builder, scalar(4, types.float32), f32, lanes)
+        paths = []
+        for first in (7, 12):  # the arguments of path a, then b: pbuf, cbuf, below, out, pm
+            pm = scalar(first + 4, types.float32)
+            paths.append(dict(
+                pbuf=first, cbuf=first + 1, below=first + 2, out=first + 3,
+                pm=_splat(builder, pm, f32, lanes),
+                jump=_splat(builder, builder.fadd(pm, scalar(5, types.float32)), f32, lanes),
+                started=builder.fcmp_unordered("!=", pm, ir.Constant(f32, math.inf)),  # else L = C
+                least=cgutils.alloca_once_value(builder, infs)))
 
         def block(start, inside, fresh=None):
             """Cells start .. start + lanes - 1: masked loads and stores for ``inside``;
@@ -244,26 +314,28 @@ def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2
             def at(k, shift=0):
                 return builder.add(builder.add(scalar(k, types.int64), start), i64(shift))
 
-            el = load(0, at(4), inside)
-            x = load(2, at(5, 1), inside)  # L(q, d)
-            b = builder.select(builder.fcmp_ordered("<", x, jump), x, jump)
-            y = builder.fadd(load(2, at(5), inside), p1)  # L(q, d - 1) + P1
-            b = builder.select(builder.fcmp_ordered("<", y, b), y, b)
-            y = builder.fadd(load(2, at(5, 2), inside), p1)  # L(q, d + 1) + P1
-            b = builder.select(builder.fcmp_ordered("<", y, b), y, b)
-            el = builder.select(started, builder.fadd(el, builder.fsub(b, pm_v)), el)
-            store(el, 3, at(6), inside)  # an overlapping block writes its path costs again, the same
-            old = load(1, at(4), inside) if how or fresh is not None else None
+            c = load(0, at(2), inside)
+            new = []
+            for path in paths:
+                x = load(path["pbuf"], at(path["below"], 1), inside)  # L(q, d)
+                b = builder.select(builder.fcmp_ordered("<", x, path["jump"]), x, path["jump"])
+                y = builder.fadd(load(path["pbuf"], at(path["below"]), inside), p1)  # L(q, d - 1) + P1
+                b = builder.select(builder.fcmp_ordered("<", y, b), y, b)
+                y = builder.fadd(load(path["pbuf"], at(path["below"], 2), inside), p1)  # L(q, d + 1) + P1
+                b = builder.select(builder.fcmp_ordered("<", y, b), y, b)
+                el = builder.select(path["started"], builder.fadd(c, builder.fsub(b, path["pm"])), c)
+                store(el, path["cbuf"], at(path["out"]), inside)  # an overlapping block writes them again, the same
+                masked = el if inside is None else builder.select(inside, el, infs)
+                m = builder.load(path["least"])
+                builder.store(builder.select(builder.fcmp_ordered("<", masked, m), masked, m), path["least"])
+                new.append(el)
+            old = load(1, at(2), inside) if how == 2 or fresh is not None else None
             if how == 1:
-                total = builder.fadd(old, el)
-            elif how == 2:
-                total = builder.fmul(builder.fadd(old, el), ir.Constant(vec, [0.25] * lanes))
+                total = builder.fadd(new[0], new[1])
             else:
-                total = el
-            store(total if fresh is None else builder.select(fresh, total, old), 1, at(4), inside)
-            el = el if inside is None else builder.select(inside, el, infs)
-            m = builder.load(least)
-            builder.store(builder.select(builder.fcmp_ordered("<", el, m), el, m), least)
+                total = builder.fmul(builder.fadd(builder.fadd(old, new[0]), new[1]),
+                                     ir.Constant(vec, [0.25] * lanes))
+            store(total if fresh is None else builder.select(fresh, total, old), 1, at(2), inside)
 
         whole = builder.ashr(n, i64(lanes.bit_length() - 1))  # blocks of all lanes (SGM_LANES: a power of two)
         with cgutils.for_range(builder, whole) as loop:
@@ -281,33 +353,43 @@ def _sgm_band(typingctx, cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2
                 with short:
                     ids = builder.add(_splat(builder, start, i64, lanes), ir.Constant(ivec, list(range(lanes))))
                     block(start, builder.icmp_signed("<", ids, _splat(builder, n, i64, lanes)))
-        return _least(builder, builder.load(least), lanes)
+        least = [_least(builder, builder.load(path["least"]), lanes) for path in paths]
+        return context.make_tuple(builder, signature.return_type, least)
 
-    sig = types.float32(cost, acc, pbuf, cbuf, cells, below, out, n, pm, p1, p2, mode)
+    sig = types.UniTuple(types.float32, 2)(cost, acc, cells, n, p1, p2, mode,
+                                           pbuf_a, cbuf_a, below_a, out_a, pm_a, pbuf_b, cbuf_b, below_b, out_b, pm_b)
     return sig, codegen
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _sgm_pixel(cost, index, v, u, pbuf, pbase, pm, cbuf, cbase, olo, ohi, p1, p2, acc, mode):
-    """One pixel of one path (L(d) at ``base + d + 1`` of a buffer of n_disp + 2 cells) in
-    blocks of :data:`SGM_LANES` disparities; ``pm`` the least path cost of the previous
-    pixel (inf at the path's start).  Returns the least of this pixel's path costs: the
-    next step's ``pm``, taken from the blocks as they are written instead of a scan of
-    the band (a serial chain of compares that took a fifth of the smoothing's time).
+def _sgm_pixel(cost, index, v, u, p1, p2, acc, mode, pbuf_a, base_a, pm_a, cbuf_a, back_a, pbuf_b, base_b, pm_b,
+               cbuf_b, back_b):
+    """One pixel's step on two paths, a and b (each: L(d) at ``base + d + 1`` of a buffer
+    of n_disp + 2 cells, ``pm`` the least path cost of its previous pixel, inf at the
+    path's start), in blocks of :data:`SGM_LANES` disparities.  Returns the least of this
+    pixel's path costs on each path: their next steps' ``pm``, taken from the blocks as
+    they are written instead of a scan of the band (a serial chain of compares that took a
+    fifth of the smoothing's time).
 
     The buffers hold inf outside the band last written into them: ``cbuf`` still holds the
-    band ``[olo, ohi)`` of the pixel two steps back (empty: all inf), and only its cells
-    outside this pixel's band go back to inf (resetting the whole previous band cost more:
-    neighbouring bands mostly overlap)."""
+    band of the pixel two steps back on its path (``back``: its (lo, hi), (0, 0) for
+    none: all inf), and only its cells outside this pixel's band go back to inf (resetting
+    the whole previous band cost more: neighbouring bands mostly overlap)."""
     off = index[v, u, 0]
     lo = index[v, u, 1]
     hi = index[v, u, 2]
-    cells = off + lo
-    below = pbase + lo  # L(q, d - 1) of the band's first d
-    out = cbase + lo + 1
-    least = _sgm_band(cost, acc, pbuf, cbuf, cells, below, out, hi - lo, pm, p1, p2, mode)
-    for d in range(olo, min(ohi, lo)):
-        cbuf[np.uint64(cbase + d + 1)] = np.inf
-    for d in range(max(olo, hi), ohi):
-        cbuf[np.uint64(cbase + d + 1)] = np.inf
+    least = _sgm_band(cost, acc, off + lo, hi - lo, p1, p2, mode,
+                      pbuf_a, cbuf_a, base_a + lo, base_a + lo + 1, pm_a,
+                      pbuf_b, cbuf_b, base_b + lo, base_b + lo + 1, pm_b)
+    _reset_outside(cbuf_a, base_a, back_a[0], back_a[1], lo, hi)
+    _reset_outside(cbuf_b, base_b, back_b[0], back_b[1], lo, hi)
     return least
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _reset_outside(cbuf, base, olo, ohi, lo, hi):
+    """Cells of band ``[olo, ohi)`` outside ``[lo, hi)`` back to inf (L(d) at base + d + 1)."""
+    for d in range(olo, min(ohi, lo)):
+        cbuf[np.uint64(base + d + 1)] = np.inf
+    for d in range(max(olo, hi), ohi):
+        cbuf[np.uint64(base + d + 1)] = np.inf

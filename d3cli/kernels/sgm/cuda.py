@@ -84,17 +84,17 @@ def _sgm_path(cost, index, line, along_rows, backward, p1, p2, scratch, size, ac
 
 
 @cuda.jit(cache=True)
-def _sgm_lines_kernel(cost, index, along_rows, p1, p2, scratch, size, acc, forward_mode, backward_mode):
-    """Both paths of one row (``along_rows``) or column per block: forward, then backward."""
+def _sgm_line_kernel(cost, index, along_rows, backward, p1, p2, scratch, size, acc, mode):
+    """One path of one row (``along_rows``) or column per block, forward or ``backward``."""
     line = cuda.blockIdx.x
     partial = cuda.shared.array(MAX_LANES, numba.float32)
-    _sgm_path(cost, index, line, along_rows, False, p1, p2, scratch, size, acc, forward_mode, partial)
-    _sgm_path(cost, index, line, along_rows, True, p1, p2, scratch, size, acc, backward_mode, partial)
+    _sgm_path(cost, index, line, along_rows, backward, p1, p2, scratch, size, acc, mode, partial)
 
 
 def sgm_smooth(cost, p1, p2):
     """Mean of four semi-global path costs of a volume (as the CPU backend's): a block per
-    row for the row paths, then a block per column for the column paths.
+    row or column, one launch per path, in the CPU's order of the sums (left, down, right,
+    up: the CPU walks two paths per sweep, left and down, then right and up).
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.sgm_smooth`.
     """
@@ -105,6 +105,8 @@ def sgm_smooth(cost, p1, p2):
     size = n_disp + 2
     scratch = cuda.device_array(2 * size * max(h, w), np.float32)  # read only where written
     lanes = min(int(LANES), MAX_LANES)
-    _sgm_lines_kernel[h, lanes](flat, index, True, p1, p2, scratch, size, acc, 0, 1)  # the first path stores
-    _sgm_lines_kernel[w, lanes](flat, index, False, p1, p2, scratch, size, acc, 1, 2)  # the last one scales
+    # (along rows, backward, mode): the first path stores, the last one scales
+    for along_rows, backward, mode in ((True, False, 0), (False, False, 1), (True, True, 1), (False, True, 2)):
+        lines = h if along_rows else w
+        _sgm_line_kernel[lines, lanes](flat, index, along_rows, backward, p1, p2, scratch, size, acc, mode)
     return _pack(acc, index, n_disp, dense)

@@ -1,7 +1,7 @@
 """Semi-global smoothing of a cost volume against a NumPy reference.
 
 The reference states the path recursion literally, in float32 with the kernel's order of
-additions (paths left, right, down, up), so the kernel must equal it exactly.
+additions (paths left, down, right, up), so the kernel must equal it exactly.
 """
 
 from __future__ import annotations
@@ -11,13 +11,14 @@ import pytest
 from tests.volumes import banded
 
 from d3cli.kernels import cpu
+from d3cli.kernels.sgm import cpu as sgm_cpu
 from d3cli.kernels.volume import Volume
 
 F32 = np.float32
 
 
 def reference_paths(cost, lo, hi, p1, p2):
-    """(L_left + L_right + L_down + L_up) / 4 of a dense (H, W, D) cost whose cells
+    """(L_left + L_down + L_right + L_up) / 4 of a dense (H, W, D) cost whose cells
     outside [lo, hi) of each pixel do not exist (inf in the path costs, 0 in the result)."""
     h, w, n = cost.shape
     p1, p2 = F32(p1), F32(p2)
@@ -43,9 +44,11 @@ def reference_paths(cost, lo, hi, p1, p2):
 
     for v in range(h):
         walk([(v, u) for u in range(w)])
-        walk([(v, u) for u in range(w - 1, -1, -1)])
     for u in range(w):
         walk([(v, u) for v in range(h)])
+    for v in range(h):
+        walk([(v, u) for u in range(w - 1, -1, -1)])
+    for u in range(w):
         walk([(v, u) for v in range(h - 1, -1, -1)])
     return acc * F32(0.25), inside
 
@@ -141,3 +144,57 @@ def test_cells_in_no_visible_band_come_out_zero():
             visible[index[v, u, 0] + lo[v, u]:index[v, u, 0] + hi[v, u]] = True
     assert (~visible).sum() == gaps.sum() + 3
     assert (got[~visible] == 0).all()
+
+
+@pytest.fixture
+def segments(monkeypatch):
+    """Sweeps cut into ``n`` segments of the columns (however narrow), more than threads."""
+    def use(n):
+        monkeypatch.setattr(sgm_cpu, "SGM_SEGMENTS", n)
+        monkeypatch.setattr(sgm_cpu, "SGM_MIN_SEGMENT", 1)
+    return use
+
+
+@pytest.mark.parametrize("n_seg", [2, 3, 5, 13])
+def test_segments_hand_the_row_paths_over_exactly(segments, n_seg):
+    # the row paths cross 1 to 12 segment boundaries (13: a column per segment, each pixel
+    # handed over), on bands that move: the result does not depend on the cut
+    cost, lo, hi, _ = random_bands(21, 6, 13, 20, lo_below=6, width_below=15)
+    want, _ = reference_paths(cost, lo, hi, 0.05, 0.3)
+    segments(n_seg)
+    assert sgm_cpu._segment_bounds(banded(cost, lo, hi).index, n_seg).shape == (n_seg + 1,)
+    got = cpu.sgm_smooth(banded(cost, lo, hi), 0.05, 0.3)
+    assert_bands_equal(got.cost, got.index, lo, hi, want)
+
+
+def test_segments_on_one_thread_run_in_sweep_order(segments):
+    # one thread takes the tasks in turn: each segment finds the one before it done
+    import numba
+    cost = np.random.default_rng(22).uniform(0, 1, (5, 11, 7)).astype(F32)
+    want, _ = reference_paths(cost, np.zeros((5, 11), int), np.full((5, 11), 7), 0.1, 0.4)
+    segments(4)
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        got = cpu.sgm_smooth(cost, 0.1, 0.4)
+    finally:
+        numba.set_num_threads(before)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_segments_share_the_band_cells():
+    # cells piled up on the left: the cut lies left of the middle, the shares near equal
+    h, w = 4, 200
+    lo = np.zeros((h, w), int)
+    hi = np.where(np.arange(w)[None, :] < 50, 40, 4) + lo
+    cost = np.zeros((h, w, 40), F32)
+    index = banded(cost, lo, hi).index
+    bounds = sgm_cpu._segment_bounds(index, 2)
+    assert bounds[0] == 0 and bounds[-1] == w and bounds.shape == (3,)
+    cells = (hi - lo).sum(axis=0)
+    left, right = cells[:bounds[1]].sum(), cells[bounds[1]:].sum()
+    assert abs(left - right) <= cells.max()
+    assert bounds[1] < 50
+    # narrow images: no segment narrower than SGM_MIN_SEGMENT columns
+    assert sgm_cpu._segment_bounds(index, 64).shape[0] - 1 == w // sgm_cpu.SGM_MIN_SEGMENT
+    assert sgm_cpu._segment_bounds(index[:, :sgm_cpu.SGM_MIN_SEGMENT + 1], 2).tolist() == [0, sgm_cpu.SGM_MIN_SEGMENT + 1]
