@@ -92,11 +92,17 @@ def _segment_bounds(index, n_threads):
     return bounds
 
 
+#: Rows between two rows counted for the segments' shares of the cells (the bands change
+#: from tile to tile, not from row to row: every row took 0.85 ms on KITTI, every 8th 0.15).
+SGM_SHARE_ROWS = 8
+
+
 @njit(cache=True, error_model="numpy")
 def _column_cells(index):
-    """Band cells per column (float64, for the cumulative share)."""
+    """Band cells per column in every :data:`SGM_SHARE_ROWS`-th row (float64, for the
+    cumulative share)."""
     out = np.zeros(index.shape[1], np.float64)
-    for v in range(index.shape[0]):
+    for v in range(0, index.shape[0], SGM_SHARE_ROWS):
         for u in range(index.shape[1]):
             out[u] += max(0, index[v, u, 2] - index[v, u, 1])
     return out
