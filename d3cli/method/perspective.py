@@ -126,33 +126,19 @@ def _solve(u, v, d, w=None):
     Solved by the normal equations in coordinates centred on the weighted means: there the
     constant's column is orthogonal to the others, so (b1, b2) come from a 2x2 system whose
     condition is that of the points' spread (about 1-10 on a road image; uncentred, the
-    columns 1, v, u of a 720p image give about 1e7).  A few passes over the points instead
-    of LAPACK's SVD least squares (``np.linalg.lstsq``: 1.2 ms per call on the 14,000 coarse
-    points of a 720p road pair, eleven calls per fit); the solutions agree to about 1e-12
-    relative (tests/method/test_perspective.py), not bit for bit.
+    columns 1, v, u of a 720p image give about 1e7).  Compiled, one pass per sum
+    (:func:`d3cli.kernels.perspective.road_fit.solve_weighted`, which the IRLS rounds call
+    too: one solver for the whole fit) instead of LAPACK's SVD least squares
+    (``np.linalg.lstsq``: 1.2 ms per call on the 14,000 coarse points of a 720p road pair);
+    the solutions agree with it to about 1e-12 relative (tests/method/test_perspective.py),
+    not bit for bit.
     """
-    w = np.ones_like(u) if w is None else w
-    sw = w.sum()
-    if not sw > 0.0:
-        return None
-    uc = (w * u).sum() / sw
-    vc = (w * v).sum() / sw
-    du = u - uc
-    dv = v - vc
-    wdu = w * du
-    wdv = w * dv
-    svv = (wdv * dv).sum()
-    suu = (wdu * du).sum()
-    svu = (wdv * du).sum()
-    det = svv * suu - svu * svu
-    if not det > _SINGULAR * svv * suu:
-        return None
-    svd = (wdv * d).sum()
-    sud = (wdu * d).sum()
-    b1 = (suu * svd - svu * sud) / det
-    b2 = (svv * sud - svu * svd) / det
-    a0 = (w * d).sum() / sw - b1 * vc - b2 * uc
-    return np.array([a0, b1, b2])
+    from ..kernels.perspective.road_fit import solve_weighted
+
+    u, v, d = (np.ascontiguousarray(x, np.float64) for x in (u, v, d))
+    w = np.ones_like(u) if w is None else np.ascontiguousarray(w, np.float64)
+    ok, a0, b1, b2 = solve_weighted(u, v, d, w, _SINGULAR)
+    return np.array([a0, b1, b2]) if ok else None
 
 
 def _draw_triples(rng, n, count):

@@ -309,8 +309,27 @@ def test_solve_refuses_collinear_points_and_zero_weights():
                                rtol=0, atol=1e-12)
 
 
+def numpy_solve(u, v, d, w):
+    """The centred normal equations in NumPy (pairwise sums; the code before the compiled
+    solver), None where singular as perspective._solve."""
+    from d3cli.method import perspective
+
+    sw = w.sum()
+    if not sw > 0.0:
+        return None
+    uc, vc = (w * u).sum() / sw, (w * v).sum() / sw
+    du, dv = u - uc, v - vc
+    svv, suu, svu = (w * dv * dv).sum(), (w * du * du).sum(), (w * dv * du).sum()
+    det = svv * suu - svu * svu
+    if not det > perspective._SINGULAR * svv * suu:
+        return None
+    svd, sud = (w * dv * d).sum(), (w * du * d).sum()
+    b1, b2 = (suu * svd - svu * sud) / det, (svv * sud - svu * svd) / det
+    return np.array([(w * d).sum() / sw - b1 * vc - b2 * uc, b1, b2])
+
+
 def numpy_irls(u, v, d, sol, threshold, iterations):
-    """The IRLS loop in NumPy (the code before the compiled one), with _solve."""
+    """The IRLS loop in NumPy (the code before the compiled one), with numpy_solve."""
     from d3cli.method import perspective
 
     for _ in range(iterations):
@@ -321,7 +340,7 @@ def numpy_irls(u, v, d, sol, threshold, iterations):
         w = np.where(np.abs(z) < 1.0, (1.0 - z * z) ** 2, 0.0)
         if np.count_nonzero(w) < 3:
             break
-        new = perspective._solve(u, v, d, w)
+        new = numpy_solve(u, v, d, w)
         if new is None:
             break
         done = np.max(np.abs(new - sol)) < 1e-9
@@ -368,7 +387,8 @@ def test_compiled_irls_stops_where_the_numpy_loop_stops():
     assert solve_weighted(u, v, d, np.zeros(5), perspective._SINGULAR)[0] is False
 
 
-def test_solve_weighted_equals_solve():
+def test_solve_weighted_equals_the_numpy_normal_equations():
+    # the compiled sums in index order against NumPy's pairwise sums of the same formulas
     from d3cli.method import perspective
     from d3cli.kernels.perspective.road_fit import solve_weighted
 
@@ -378,4 +398,5 @@ def test_solve_weighted_equals_solve():
     w = rng.uniform(0, 1, 5000)
     ok, a0, b1, b2 = solve_weighted(u, v, d, w, perspective._SINGULAR)
     assert ok
-    np.testing.assert_allclose([a0, b1, b2], perspective._solve(u, v, d, w), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose([a0, b1, b2], numpy_solve(u, v, d, w), rtol=1e-12, atol=1e-13)
+    np.testing.assert_array_equal(perspective._solve(u, v, d, w), [a0, b1, b2])  # one solver

@@ -46,11 +46,12 @@ def ransac_inlier_counts(sols, us, vs, ds, threshold):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def solve_weighted(u, v, d, w, singular):
-    """Weighted least squares of d = a0 + b1 v + b2 u by the centred normal equations:
-    :func:`d3cli.method.perspective._solve` in one compiled pass per sum (the same
-    formulas; sums in index order instead of NumPy's pairwise order: the solutions agree
-    to about 1e-13 relative).  Returns ``(ok, a0, b1, b2)``; ``ok`` False where
-    ``_solve`` returns None (no weight, collinear points)."""
+    """Weighted least squares of d = a0 + b1 v + b2 u by the centred normal equations
+    (the road fit's one solver: the RANSAC refit through
+    :func:`d3cli.method.perspective._solve`, and every IRLS round), one compiled pass per
+    sum, in index order.  Returns ``(ok, a0, b1, b2)``; ``ok`` False with no weight or
+    collinear points (the centred 2x2 determinant below ``singular`` times its diagonal's
+    product)."""
     n = u.shape[0]
     sw = 0.0
     swu = 0.0
