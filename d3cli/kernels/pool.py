@@ -31,7 +31,7 @@ def threads() -> int:
     return max(1, numba.get_num_threads())
 
 
-def run_tasks(func, n_tasks, *args):
+def run_tasks(func, n_tasks, *args, abort=None):
     """``func(i, n_tasks, *args)`` for every task i, on the pool; returns when all are done.
 
     The calling thread and ``threads() - 1`` pool threads take the tasks in turn from a
@@ -41,6 +41,11 @@ def run_tasks(func, n_tasks, *args):
     thread, and so does task 0 of the first call of ``func`` in a process (it compiles or
     loads the kernel) before any other.
     Exceptions of a task are raised here, once every thread has stopped taking tasks.
+
+    ``abort`` (tasks that wait for another): an array whose cell 0 is set to 1 as soon as a
+    thread stops with an exception (a task's error, or Ctrl-C between two tasks), before
+    this call waits for the other threads; a waiting task must give up when it sees it, or
+    it would wait for good on a task that failed or was never taken.
     """
     global _POOL, _POOL_KEY
     n = threads()
@@ -68,10 +73,15 @@ def run_tasks(func, n_tasks, *args):
     counter = itertools.count(start)  # next() of a count is atomic (one C call under the GIL)
 
     def take():
-        for i in counter:
-            if i >= n_tasks:
-                return
-            func(i, n_tasks, *args)
+        try:
+            for i in counter:
+                if i >= n_tasks:
+                    return
+                func(i, n_tasks, *args)
+        except BaseException:
+            if abort is not None:
+                abort[0] = 1
+            raise
 
     helpers = [_POOL.submit(take) for _ in range(min(n, n_tasks - start) - 1)]
     try:

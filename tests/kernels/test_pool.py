@@ -43,3 +43,46 @@ def test_run_tasks_loads_a_kernel_in_the_calling_thread_before_fanning_out():
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
+
+
+def test_a_task_waiting_for_one_that_failed_is_told_to_give_up():
+    # task 2 waits for task 1, which raises: run_tasks sets abort before it waits for the
+    # other threads, the waiting task gives up, the error comes out (before the abort
+    # array, run_tasks waited for good on the waiting task)
+    import threading
+    import time
+
+    import numpy as np
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs two threads")
+    done = np.zeros(3, np.int64)
+    abort = np.zeros(1, np.int64)
+
+    def task(i, n, done, abort):
+        if i == 1:
+            raise ValueError("task 1")
+        if i == 2:
+            while not done[1]:
+                if abort[0]:
+                    return
+                time.sleep(0.001)
+        done[i] = 1
+
+    outcome = []
+
+    def call():
+        try:
+            pool.run_tasks(task, 3, done, abort, abort=abort)
+        except ValueError as error:
+            outcome.append(str(error))
+
+    numba.set_num_threads(2)
+    try:
+        caller = threading.Thread(target=call, daemon=True)
+        caller.start()
+        caller.join(timeout=30)
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    assert not caller.is_alive()
+    assert outcome == ["task 1"] and abort[0] == 1 and done.tolist() == [1, 0, 0]

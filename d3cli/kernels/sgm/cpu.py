@@ -49,8 +49,9 @@ def sgm_smooth(cost, p1, p2):
     hand_least = np.empty((max(n_seg - 1, 1), index.shape[0]), np.float32)
     for backward in (False, True):
         done = np.zeros(n_seg, np.int64)  # per segment the rows finished in this sweep
+        abort = np.zeros(1, np.int64)  # set by run_tasks when a thread stops with an error
         task = _backward_task if backward else _forward_task
-        run_tasks(task, n_seg, flat, index, bounds, p1, p2, acc, hand, hand_least, done)
+        run_tasks(task, n_seg, flat, index, bounds, p1, p2, acc, hand, hand_least, done, abort, abort=abort)
     return _pack(acc, index, n_disp, dense)
 
 
@@ -109,20 +110,20 @@ def _column_cells(index):
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _forward_task(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done):
+def _forward_task(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, abort):
     """Segment i of the first sweep: the left path stores, the down path adds."""
-    _sweep_segment(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, 1, 1)
+    _sweep_segment(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, abort, 1, 1)
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _backward_task(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done):
+def _backward_task(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, abort):
     """Segment n - 1 - i of the second sweep (tasks start at the right): the right path
     adds, the up path adds and scales by a quarter."""
-    _sweep_segment(n - 1 - i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, -1, 2)
+    _sweep_segment(n - 1 - i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, abort, -1, 2)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _sweep_segment(j, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, step, mode):
+def _sweep_segment(j, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, abort, step, mode):
     """The rows of segment j, in sweep order (``step`` 1: top down, left to right; -1:
     bottom up, right to left), each pixel's row path step then its column path step.
 
@@ -130,7 +131,9 @@ def _sweep_segment(j, n, cost, index, bounds, p1, p2, acc, hand, hand_least, don
     the row (``done``); this segment hands its own on (``hand[boundary, v]``, the least in
     ``hand_least``) and counts the row done.  Tasks are taken in sweep order, so the
     segment waited for is always being worked on: no wait can deadlock, whatever the
-    number of threads."""
+    number of threads.  Unless it failed, or was never taken (Ctrl-C between two tasks):
+    then :func:`d3cli.kernels.pool.run_tasks` sets ``abort[0]``, and a waiting segment
+    stops where it is (the call raises that error; nothing of this volume is used)."""
     h, w = index.shape[0], index.shape[1]
     size = hand.shape[2]
     u0, u1 = bounds[j], bounds[j + 1]
@@ -156,6 +159,8 @@ def _sweep_segment(j, n, cost, index, bounds, p1, p2, acc, hand, hand_least, don
         if has_up:
             spins = 0
             while _load_acquire(done, up) <= i:
+                if _load_acquire(abort, 0) != 0:
+                    return
                 spins += 1
                 _spin_pause(spins % SGM_SPINS == 0)
             x[:] = hand[take, v]

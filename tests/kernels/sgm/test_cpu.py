@@ -198,3 +198,25 @@ def test_segments_share_the_band_cells():
     # narrow images: no segment narrower than SGM_MIN_SEGMENT columns
     assert sgm_cpu._segment_bounds(index, 64).shape[0] - 1 == w // sgm_cpu.SGM_MIN_SEGMENT
     assert sgm_cpu._segment_bounds(index[:, :sgm_cpu.SGM_MIN_SEGMENT + 1], 2).tolist() == [0, sgm_cpu.SGM_MIN_SEGMENT + 1]
+
+
+def test_a_segment_waiting_for_one_that_failed_gives_up_on_abort():
+    # segment 1 waits for segment 0's rows; segment 0 never ran (it failed, or Ctrl-C came
+    # before it was taken): with abort set the wait ends instead of spinning for good
+    import threading
+
+    cost, lo, hi, _ = random_bands(23, 4, 9, 6, lo_below=2, width_below=4)
+    vol = banded(cost, lo, hi)
+    bounds = np.array([0, 4, 9], np.int64)
+    n_disp = vol.n_disp
+    acc = np.zeros_like(vol.cost)
+    hand = np.zeros((1, 4, n_disp + 2), F32)
+    hand_least = np.zeros((1, 4), F32)
+    done = np.zeros(2, np.int64)
+    abort = np.ones(1, np.int64)
+    args = (1, 2, vol.cost, vol.index, bounds, F32(0.1), F32(0.5), acc, hand, hand_least, done, abort)
+    worker = threading.Thread(target=sgm_cpu._forward_task, args=args, daemon=True)
+    worker.start()
+    worker.join(timeout=120)  # the first call compiles
+    assert not worker.is_alive()
+    assert done.tolist() == [0, 0] and not acc.any()  # stopped before its first row
