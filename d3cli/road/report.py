@@ -20,6 +20,7 @@ import numpy as np
 from ..data.formats import atomic_write, write_image, write_pfm
 from ..data.legend import put_text, text_px, text_size, vertical_colour_bar
 from .defects import find_defects
+from .morphology import dilate_near
 from .plane import fit_road_plane, height_map, seen_by_both
 from .pointcloud import Camera, disparity_to_points
 from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, rematch
@@ -176,8 +177,8 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
     out = disparity.copy()
     for region in regions:
-        inner = cv2.dilate(region.astype(np.uint8), ring).astype(bool)
-        zone = cv2.dilate(inner.astype(np.uint8), ring).astype(bool) & finite
+        inner = dilate_near(region, ring)
+        zone = dilate_near(inner, ring) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
         for window in WINDOWS:
             new, got = rematch(left, right, disparity, zone, window=window)

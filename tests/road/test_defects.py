@@ -290,3 +290,46 @@ def test_a_pit_inside_a_shallower_pothole_is_one_defect():
     assert len(pits) == 1
     assert pits[0].max_depth_mm == pytest.approx(50.0, rel=0.03)
     assert pits[0].area_m2 == pytest.approx(_union_area(NESTED), rel=0.05)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_each_part_measured_in_its_window_equals_it_measured_on_the_whole_map(seed):
+    # find_defects measures each candidate part in a window around it (its walls, rings
+    # and noise annulus); the reference measures every part on the whole map, as before
+    # 2026-11-28: the same defects, field for field (outlines and at_border included), and
+    # the same masks, on a noisy map with holes whose noise makes dozens of parts, some
+    # cut by the border
+    from d3cli.road import defects as road_defects
+    from d3cli.road.splitting import split_parts
+
+    disp, cam, _ = pothole_scene(width=480, height=360, f=450.0, depth=0.06, radius=0.3)
+    rng = np.random.default_rng(seed)
+    noise = cv2.GaussianBlur(rng.normal(0, 1, disp.shape).astype(np.float32), (0, 0), 5)
+    noisy = disp + noise * np.where(np.arange(360)[:, None] < 90, 0.5, 0.12).astype(np.float32) / noise.std()
+    noisy[rng.random(noisy.shape) < 0.03] = np.inf
+    h, valid, plane = _heights(noisy, cam, 0.25)
+    decided = valid & (rng.random(valid.shape) < 0.9)
+    road, tuning = RoadConfig(), DefectTuning(mean_noise_k=0.0)  # many parts get measured in full
+    got, got_regions = find_defects(h, decided, cam, plane, road, tuning, return_regions=True)
+
+    s = road_defects._scene(h, decided, cam, plane, road, tuning)
+    want = []
+    for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
+        with np.errstate(invalid="ignore"):
+            cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
+        other = s.finite & (np.abs(s.smooth) > min(road.min_depth_mm, road.min_height_mm) * 1e-3)
+        n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
+        level = max(thr_mm * 1e-3, s.split_noise)
+        for comp in split_parts(labels, n, sign * s.smooth, s.footprint, level=level,
+                                prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
+                                smooth_px=tuning.split_smooth_px, neck=road.split_neck,
+                                min_part_m2=road.split_min_area_m2, step=level):
+            measured = road_defects._measure(s, comp, other, sign, thr_mm)
+            if measured is not None:
+                want.append((kind, *measured))
+    want.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
+    assert len(got) == len(want) >= 10
+    assert any(d.at_border for d in got)
+    for d, region, (kind, want_region, fields) in zip(got, got_regions, want):
+        assert d.kind == kind and {k: getattr(d, k) for k in fields} == fields
+        assert np.array_equal(region, want_region)

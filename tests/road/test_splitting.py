@@ -31,3 +31,15 @@ def test_a_fragment_enclosed_by_the_other_parts_is_merged_into_one_of_them():
     assert np.array_equal(np.logical_or.reduce(parts), region)
     rim = cv2.dilate((~region).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     assert all((p & rim).any() for p in parts)
+
+
+def test_parts_cut_to_their_boxes_are_the_whole_image_parts():
+    depth = _floor_with_spots()
+    region = (depth > 0.01) | (np.hypot(*np.mgrid[-20:240, -20:240]) < 12)  # and a blob at the corner
+    n, labels = cv2.connectedComponents(region.astype(np.uint8))
+    kw = dict(level=0.01, prominence=0.006, smooth_px=2.0, neck=0.9, min_part_m2=0.01, step=0.01)
+    whole = list(split_parts(labels, n, depth, np.full(depth.shape, 1e-5), **kw))
+    boxed = list(split_parts(labels, n, depth, np.full(depth.shape, 1e-5), boxes=True, **kw))
+    assert len(whole) == len(boxed) == 4
+    for mask, (piece, box) in zip(whole, boxed):
+        assert piece.shape == mask[box].shape and np.array_equal(mask[box], piece) and mask.sum() == piece.sum()

@@ -1,0 +1,45 @@
+"""Morphology of one region's mask at the cost of the region, not of the image.
+
+Used by :mod:`d3cli.road.defects` and :mod:`d3cli.road.report`, which dilate every candidate
+region of a map by the reference ring and the local-noise disc.  May import numpy, OpenCV
+and the standard library only.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def dilate_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """``cv2.dilate(mask, kernel)`` of a bool mask, as bool, computed on the mask's bounding
+    box grown by the kernel's reach only.
+
+    The same pixels as the dilation of the whole image (outside that box it is empty, and
+    inside it the pixels beyond the box are zero either way: OpenCV's border of a dilation
+    adds nothing), at the cost of the box: the local-noise disc of
+    :func:`d3cli.road.defects.find_defects` (161 px) took 13 ms per full 640x480 dilation,
+    and a noisy map has hundreds of candidate regions (10.6 s per map before).
+
+    Parameters
+    ----------
+    mask : ndarray, bool, (H, W)
+    kernel : ndarray, uint8, (kh, kw)
+        A structuring element with odd sides, anchored at its centre (OpenCV's default).
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+    """
+    if kernel.shape[0] % 2 == 0 or kernel.shape[1] % 2 == 0:
+        raise ValueError(f"dilate_near needs a kernel with odd sides, got {kernel.shape}")
+    out = np.zeros(mask.shape, bool)
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return out
+    cols = np.flatnonzero(mask.any(axis=0))
+    ry, rx = kernel.shape[0] // 2, kernel.shape[1] // 2
+    y0, y1 = max(int(rows[0]) - ry, 0), min(int(rows[-1]) + ry + 1, mask.shape[0])
+    x0, x1 = max(int(cols[0]) - rx, 0), min(int(cols[-1]) + rx + 1, mask.shape[1])
+    out[y0:y1, x0:x1] = cv2.dilate(mask[y0:y1, x0:x1].astype(np.uint8), kernel).astype(bool)
+    return out

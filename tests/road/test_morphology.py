@@ -1,0 +1,42 @@
+"""A region's dilation at the cost of its box (d3cli.road.morphology) equals OpenCV's on the
+whole image."""
+
+import cv2
+import numpy as np
+import pytest
+
+from d3cli.road.morphology import dilate_near
+
+KERNELS = [cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)) for k in (3, 5, 25, 161)] + [
+    cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3)), np.ones((5, 9), np.uint8)]
+
+
+def _masks():
+    rng = np.random.default_rng(4)
+    h, w = 120, 170
+    yield np.zeros((h, w), bool)  # empty
+    for corner in ((0, 0), (0, w - 1), (h - 1, 0), (h - 1, w - 1)):  # a pixel in each corner
+        m = np.zeros((h, w), bool)
+        m[corner] = True
+        yield m
+    for _ in range(4):  # blobs anywhere, some cut by the border
+        m = np.zeros((h, w), bool)
+        for _ in range(rng.integers(1, 4)):
+            cy, cx, r = rng.integers(-10, h + 10), rng.integers(-10, w + 10), rng.integers(1, 25)
+            v, u = np.mgrid[0:h, 0:w]
+            m |= np.hypot(v - cy, u - cx) < r
+        yield m
+    yield rng.random((h, w)) < 0.01  # scattered pixels: the box is the image
+
+
+@pytest.mark.parametrize("k", range(len(KERNELS)))
+def test_dilate_near_equals_the_whole_image_dilation(k):
+    kernel = KERNELS[k]
+    for mask in _masks():
+        want = cv2.dilate(mask.astype(np.uint8), kernel).astype(bool)
+        np.testing.assert_array_equal(dilate_near(mask, kernel), want)
+
+
+def test_dilate_near_refuses_a_kernel_with_an_even_side():
+    with pytest.raises(ValueError, match="odd sides"):
+        dilate_near(np.ones((4, 4), bool), np.ones((4, 3), np.uint8))
