@@ -332,11 +332,13 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     n_px = int((region & finite).sum())
     mean_raw = float(np.mean(depth[region & finite])) if n_px else 0.0
     cells = np.sqrt(tuning.noise_cell_px / max(n_px, tuning.noise_cell_px))
-    for sigma_h in (_map_sigma_h(s, region), None):
-        if sigma_h is None:
-            sigma_h = _local_sigma_h(s, comp, region)
-        if peak < tuning.noise_k * sigma_h or mean_raw < tuning.mean_noise_k * sigma_h * cells:
-            return None
+
+    def fails(sigma_h):
+        return peak < tuning.noise_k * sigma_h or mean_raw < tuning.mean_noise_k * sigma_h * cells
+
+    sigma_h = _map_sigma_h(s, region)
+    if fails(sigma_h) or fails(_local_sigma_h(s, comp, sigma_h)):
+        return None
     # Pixels without any estimate that the region encloses are unmeasured parts of it.
     enclosed = ndimage.binary_fill_holes(region)
     share = float((s.decided & finite)[enclosed].mean())
@@ -413,14 +415,13 @@ def _map_sigma_h(s: _Scene, region: np.ndarray) -> float:
     return plane.offset * z_region / (camera.f * camera.baseline) * s.sigma_d
 
 
-def _local_sigma_h(s: _Scene, comp: np.ndarray, region: np.ndarray) -> float:
-    """Height noise a region's depth is tested against, metres.
+def _local_sigma_h(s: _Scene, comp: np.ndarray, sigma_h: float) -> float:
+    """Height noise a region's depth is tested against, metres: the map's noise at its
+    distance, ``sigma_h`` (:func:`_map_sigma_h`), or the noise around it where that is higher.
 
-    Significance: the peak must stand above the height noise at that distance
-    (:func:`_map_sigma_h`), not only above the fixed threshold: far, noisy road otherwise
-    yields false potholes.
+    Significance: the peak must stand above the height noise at that distance, not only
+    above the fixed threshold: far, noisy road otherwise yields false potholes.
     """
-    sigma_h = _map_sigma_h(s, region)
     # The local noise where it is higher: the map's error is not uniform (a dark or far
     # part of the image matches worse), and a blob of that local noise passes a test made
     # with the map's median noise.  Robust spread (1.4826 MAD) of every height in an
