@@ -10,7 +10,11 @@ For every case (a stereo pair + a config):
   ``result.timings`` (pyramid, cost per level, seeds, diffusion, sgm, finish, ...) is printed,
   the semi-global smoothing's share of the time (median of the reps' shares, where it runs),
   and the md5 of the d3stereo disparity map (a speed-up that should change no output
-  must leave it as it was).
+  must leave it as it was).  Each rep's own ratio (the d3stereo call against the SGBM call
+  right after it) is printed too, least / median / most: on a shared host the machine
+  runs in spells of seconds at about half or full speed, which move the two methods
+  differently (docs/performance.md, 'Current figures', session 19), and their spread
+  shows how far one run's ratio can be trusted.
 * **memory**: one fresh process per method does a single call and reads its peak
   resident set size, ``VmHWM`` of ``/proc/self/status`` (``ru_maxrss`` would carry the
   parent's peak across ``exec``); this is the whole process, interpreter and libraries
@@ -150,6 +154,9 @@ def _child_time(spec: dict) -> dict:
         "backend": res.info.get("backend", "?"), "pt": res.info.get("pt", {}).get("applied")
         if isinstance(res.info.get("pt"), dict) else None,
         "cold_s": cold, "d3_s": statistics.median(d3), "sgbm_s": statistics.median(sg),
+        # each rep's own ratio (d3stereo against the SGBM call right after it): their spread
+        # shows how much the machine moved during the run (a shared host's slow and fast spells)
+        "paired_ratios": sorted(a / b for a, b in zip(d3, sg)),
         "steps": {k: statistics.median(v) for k, v in steps.items()},
         "sgm_share": statistics.median(sgm_share) if sgm_share else None,
         # bit-identity check of a speed-up: the same md5 before and after the change
@@ -243,6 +250,10 @@ def main(argv=None) -> int:
                   f"{r['d3_s']:.3f} | {r['sgbm_s']:.3f} | {ratio:.2f}x | {mem} | {r['cold_s']:.2f} |")
         else:
             print(f"{r['case']:<11} {r['d3_s']:7.3f} s  SGBM {r['sgbm_s']:6.3f} s  {ratio:5.2f}x  MB {mem}")
+    print("\nper-rep ratios, each d3stereo call against the SGBM call after it (min / median / max):")
+    for r in rows:
+        paired = r["paired_ratios"]
+        print(f"  {r['case']}: {paired[0]:.2f} / {statistics.median(paired):.2f} / {paired[-1]:.2f}")
     timed = [r for r in rows if r.get("against_s") is not None]
     if timed:
         print(f"\nagainst {args.against} (the same process, alternating):")

@@ -115,7 +115,7 @@ def test_kernels_never_import_config_data_or_click():
 
 
 #: The kernels' step packages and the kernels' shared modules they may import.
-KERNEL_STEPS = ("cost", "aggregation", "sgm", "decisive", "perspective", "finishing")
+KERNEL_STEPS = ("cost", "aggregation", "sgm", "decisive", "perspective", "finishing", "pyramid")
 KERNEL_SHARED = {"pixel", "volume", "cache", "intrinsics", "cpu_common", "cuda_launch", "device_counts", "pool"}
 #: Outside d3cli, what a step module may import.
 KERNEL_STEP_LIBRARIES = {"__future__", "logging", "math", "platform", "types", "typing", "numba", "numpy", "llvmlite"}

@@ -49,6 +49,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "features.std": (lambda v: len(v) in (1, 3) and all(s > 0 for s in v), "a list of 1 or 3 numbers > 0"),
     "aggregation.t_max": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
     "aggregation.finest_t_max": (lambda v: v is None or 0 <= v <= 64, "an integer in [0, 64] or null"),
+    "aggregation.level_t_max": (lambda v: all(0 <= t <= 64 for t in v), "a list of integers in [0, 64]"),
     "aggregation.sigma_space": (lambda v: v > 0, "a number > 0"),
     "aggregation.sigma_color": (lambda v: v > 0, "a number > 0"),
     "aggregation.kappa_a": (lambda v: 0 <= v <= 32, "an integer in [0, 32]"),

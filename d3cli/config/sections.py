@@ -82,6 +82,10 @@ class AggregationConfig:
     # the bands narrow (0 there too doubled the decisions' and the diffusion's time).
     # docs/performance.md, 'Default settings'; paper.yaml: None (the paper's RBF everywhere)
     finest_t_max: int | None = 0
+    # RBF passes per level, finest first (the last value for every coarser level); () uses
+    # finest_t_max and t_max.  road.yaml: (0, 4, 0): on its 25-pixel windows only the
+    # passes of the second level change the maps (docs/performance.md, 'Default settings')
+    level_t_max: tuple[int, ...] = ()
     sigma_space: float = 1.5  # sigma_1 in eq. 3, pixels
     sigma_color: float = 12.0  # sigma_2 in eq. 3, grey levels (0-255)
     kappa_a: int = 4  # radius of the plain bilateral filter used when rbf is False
@@ -274,14 +278,18 @@ class Config:
         return self.refine.subpixel_fit == "equiangular"
 
     def level_t_max(self, level: int) -> int:
-        """RBF passes at ``level`` (0 = full resolution): ``aggregation.finest_t_max`` at
-        level 0 where it is set, else ``aggregation.t_max``.
+        """RBF passes at ``level`` (0 = full resolution): ``aggregation.level_t_max[level]``
+        where that list is given (its last value below its end), else
+        ``aggregation.finest_t_max`` at level 0 where it is set, else ``aggregation.t_max``.
 
         Parameters
         ----------
         level : int
             Pyramid level, 0 at full resolution.
         """
+        per_level = self.aggregation.level_t_max
+        if per_level:
+            return per_level[min(level, len(per_level) - 1)]
         return _at_level(level, self.aggregation.finest_t_max, self.aggregation.t_max)
 
     def level_band_tile(self, level: int) -> int:

@@ -1,7 +1,7 @@
 """Compute kernels, by pipeline step, and the choice of backend.
 
-Each step package (``cost/``, ``aggregation/``, ``sgm/``, ``decisive/``, ``perspective/``,
-``finishing/``) holds the step's per-pixel math (``pixel*.py``: one body compiled for the CPU
+Each step package (``cost/``, ``aggregation/``, ``sgm/``, ``decisive/``, ``perspective/``;
+``finishing/`` and ``pyramid/`` are host-only kernels that serve both backends) holds the step's per-pixel math (``pixel*.py``: one body compiled for the CPU
 with ``numba.njit`` and for CUDA with ``numba.cuda.jit(device=True)``), its CPU driver and its
 CUDA driver side by side.  ``cpu.py`` and ``cuda.py`` are the two backends (thin facades over
 the steps), ``backend.py`` their contract; :func:`get_backend` picks one.  Shared pieces:

@@ -18,6 +18,7 @@ import pytest
 from tests.helpers import textured_pair
 
 from d3cli import D3Stereo, load_config
+from d3cli.errors import ConfigError
 from d3cli.kernels import cpu
 from d3cli.method.cost import aggregate, aggregation_halo, bilateral_sigma_space
 
@@ -120,8 +121,8 @@ def test_aggregation_switch_runs_rbf_passes_or_one_scaled_bilateral_pass(pair, m
         assert calls == [("bf", 3, 3.75, 10.0)] * 3
 
 
-@pytest.mark.parametrize("finest, passes", [("null", [3, 3, 3]), ("0", [3, 3]), ("2", [3, 3, 2])])
-def test_finest_t_max_sets_the_passes_at_full_resolution_only(pair, monkeypatch, finest, passes):
+def rbf_passes(monkeypatch):
+    """The passes of every RBF call the CPU backend gets from now on, in a list."""
     calls = []
     real_rbf = cpu.rbf_filter
 
@@ -130,8 +131,31 @@ def test_finest_t_max_sets_the_passes_at_full_resolution_only(pair, monkeypatch,
         return real_rbf(cost, weights, t_max, **kw)
 
     monkeypatch.setattr(cpu, "rbf_filter", rbf_filter)
+    return calls
+
+
+@pytest.mark.parametrize("finest, passes", [("null", [3, 3, 3]), ("0", [3, 3]), ("2", [3, 3, 2])])
+def test_finest_t_max_sets_the_passes_at_full_resolution_only(pair, monkeypatch, finest, passes):
+    calls = rbf_passes(monkeypatch)
     per_level(pair, "aggregation.t_max=3", f"aggregation.finest_t_max={finest}")
     assert calls == passes
+
+
+@pytest.mark.parametrize("per_level_passes, passes", [("[1,2,0]", [2, 1]), ("[5]", [5, 5, 5]), ("[0,4]", [4, 4])])
+def test_level_t_max_sets_the_passes_of_each_level(pair, monkeypatch, per_level_passes, passes):
+    """Finest first, its last value for every coarser level; it overrides t_max and
+    finest_t_max (the calls come coarsest level first; 0 passes: no call)."""
+    calls = rbf_passes(monkeypatch)
+    per_level(pair, "aggregation.t_max=3", "aggregation.finest_t_max=null",
+              f"aggregation.level_t_max={per_level_passes}")
+    assert calls == passes
+    cfg = load_config(None, [f"aggregation.level_t_max={per_level_passes}"])
+    assert [aggregation_halo(cfg, level) for level in range(3)] == [cfg.level_t_max(level) for level in range(3)]
+
+
+def test_level_t_max_rejects_passes_out_of_range():
+    with pytest.raises(ConfigError, match=r"aggregation\.level_t_max.*a list of integers in \[0, 64\]"):
+        load_config(None, ["aggregation.level_t_max=[2,65]"])
 
 
 @pytest.mark.parametrize("finest, halo", [("null", 3), ("0", 0), ("2", 2)])
