@@ -104,6 +104,16 @@ def _load(spec: dict):
     return np.load(cache / "left.npy"), np.load(cache / "right.npy"), dmax, f"synth road {width}x{height}"
 
 
+def case_spec(case: str, data: str, **options) -> dict | None:
+    """The spec of a case (its pair or synthetic size and config, ``data``, ``options``),
+    or None, said on stderr, when its real pair is not in ``data``."""
+    spec = dict(CASES[case], case=case, data=data, **options)
+    if spec.get("pair") and not (Path(data) / spec["pair"]).is_dir():
+        print(f"{case}: {Path(data) / spec['pair']} not found, skipped", file=sys.stderr)
+        return None
+    return spec
+
+
 def _config(spec: dict, extra=()):
     from d3cli import load_config
 
@@ -218,11 +228,9 @@ def main(argv=None) -> int:
 
     rows = []
     for case in args.cases or DEFAULT_CASES:
-        spec = dict(CASES[case], case=case, data=args.data, seed=args.seed, reps=args.reps,
-                    backend=args.backend, sgbm_block=args.sgbm_block or None, overrides=args.overrides,
-                    against=args.against)
-        if spec.get("pair") and not (Path(args.data) / spec["pair"]).is_dir():
-            print(f"{case}: {Path(args.data) / spec['pair']} not found, skipped", file=sys.stderr)
+        spec = case_spec(case, args.data, seed=args.seed, reps=args.reps, backend=args.backend,
+                         sgbm_block=args.sgbm_block or None, overrides=args.overrides, against=args.against)
+        if spec is None:
             continue
         row = _spawn(dict(spec, mode="time"))
         if row is None:

@@ -62,10 +62,9 @@ def main(argv=None) -> int:
     parser.add_argument("--fast", type=float, default=1.4, help="a rep is fast when its probe took < FAST x the quickest")
     args = parser.parse_args(argv)
     for case in args.cases:
-        spec = dict(bs.CASES[case], case=case, data=args.data, seed=3, reps=1, backend="cpu", sgbm_block=5,
-                    overrides=[])
-        if spec.get("pair") and not (Path(args.data) / spec["pair"]).is_dir():
-            print(f"{case}: {Path(args.data) / spec['pair']} not found, skipped", file=sys.stderr)
+        # bench_speed's defaults: the road pairs of seed 3, SGBM with block 5
+        spec = bs.case_spec(case, args.data, seed=3, backend="cpu", sgbm_block=5, overrides=[])
+        if spec is None:
             continue
         left, right, dmax, _ = bs._load(spec)
         cfg = bs._config(spec)

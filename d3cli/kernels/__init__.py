@@ -1,9 +1,10 @@
 """Compute kernels, by pipeline step, and the choice of backend.
 
-Each step package (``cost/``, ``aggregation/``, ``sgm/``, ``decisive/``, ``perspective/``;
-``finishing/`` and ``pyramid/`` are host-only kernels that serve both backends) holds the step's per-pixel math (``pixel*.py``: one body compiled for the CPU
-with ``numba.njit`` and for CUDA with ``numba.cuda.jit(device=True)``), its CPU driver and its
-CUDA driver side by side.  ``cpu.py`` and ``cuda.py`` are the two backends (thin facades over
+Each step package (``cost/``, ``aggregation/``, ``sgm/``, ``decisive/``, ``perspective/``)
+holds the step's per-pixel math (``pixel*.py``: one body compiled for the CPU with
+``numba.njit`` and for CUDA with ``numba.cuda.jit(device=True)``), its CPU driver and its
+CUDA driver side by side; ``finishing/`` and ``pyramid/`` hold host-only kernels that serve
+both backends.  ``cpu.py`` and ``cuda.py`` are the two backends (thin facades over
 the steps), ``backend.py`` their contract; :func:`get_backend` picks one.  Shared pieces:
 ``pixel.py`` (per-pixel helpers of several steps), ``volume.py`` (banded volume layout),
 ``cache.py`` (numba cache folder, stale-cache drop), ``intrinsics.py`` (LLVM intrinsics),
