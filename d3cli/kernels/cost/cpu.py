@@ -20,6 +20,9 @@ _cosine_cost = ops.cosine_cost
 _box_sum = ops.box_sum
 
 
+_ncc_finish = ops.ncc_finish
+
+
 #: Rows per parallel task of the NCC driver (one running window sum per task).
 NCC_BLOCK_ROWS = 32
 
@@ -35,6 +38,8 @@ GRID_BITS = (6, 20)
 #: Bands of at most this many unclipped cells take the NCC row's one-loop slide (below a
 #: vector's few steps, one loop over the cells beats two).
 NCC_NARROW = 8
+
+_F32_ONE = np.float32(1.0)
 
 
 @njit(cache=True, error_model="numpy")
@@ -161,8 +166,10 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance, n_thr
         mr = np.zeros(w, np.float64)
         vr = np.zeros(w, np.float64)
         rev = np.empty((2, w), np.float64)  # mr, vr reversed (_reversed_stats)
-        num = np.zeros(max_row, np.float64)  # per cell of a row: NCC numerator, denominator^2
-        den = np.zeros(max_row, np.float64)
+        # per cell of a row: NCC numerator, denominator^2, rounded to float32 as they are
+        # stored (ncc_finish rounds them first: the same bits, half the bytes of float64)
+        num = np.zeros(max_row, np.float32)
+        den = np.zeros(max_row, np.float32)
         r_in = np.empty(w, np.float64)  # a right row reversed, float64 (_add_row_products)
         r_out = np.empty(w, np.float64)
         for y in range(max(0, vb0 - r), min(h - 1, vb0 + r) + 1):
@@ -403,12 +410,7 @@ def _costs_from_terms(out, num, den):
     numerators and variance products, one loop over the contiguous cells."""
     for j in range(out.shape[0]):
         den_j = den[j]
-        ncc = num[j] / np.sqrt(den_j)
-        if ncc > 1.0:
-            ncc = 1.0
-        elif ncc < -1.0:
-            ncc = -1.0
-        out[j] = 0.5 * (1.0 - ncc) if den_j >= 0.0 else 1.0  # a flat window: NCC undefined
+        out[j] = _ncc_finish(num[j], den_j) if den_j >= 0.0 else _F32_ONE  # a flat window: NCC undefined
 
 
 @njit(cache=True, error_model="numpy")

@@ -182,3 +182,23 @@ def test_ncc_cost_volume_is_the_per_cell_formula_bit_for_bit(window, min_varianc
                 want[v, u, d] = cpu.ops.ncc_cost(wl.size, wl.sum(), (wl * wl).sum(), wr.sum(), (wr * wr).sum(),
                                                  (wl * wr).sum(), min_variance)
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
+def test_ncc_finish_is_the_float64_formula_to_float32_rounding():
+    # The square root and the division run in float32 (both targets, ops.ncc_finish):
+    # within 2 ulp of 1.0 of the float64 formula rounded to float32, clipped to [0, 1].
+    rng = np.random.default_rng(11)
+    den = rng.uniform(1e-4, 3e8, 20000) ** rng.choice([1.0, 0.5], 20000)
+    num = np.sqrt(den) * rng.uniform(-1.2, 1.2, 20000)  # NCC beyond +-1 too (rounding)
+    got = np.array([cpu.ops.ncc_finish(a, b) for a, b in zip(num, den)])
+    want = 0.5 * (1.0 - np.clip(num / np.sqrt(den), -1.0, 1.0))
+    assert np.array_equal(got.astype(np.float32), got) and (got >= 0).all() and (got <= 1).all()
+    np.testing.assert_allclose(got, want, rtol=0, atol=2 * np.finfo(np.float32).eps)
+
+
+def test_ncc_finish_of_a_variance_product_below_float32_is_no_nan():
+    # A product of variances this small (min_variance 0) flushes to 0 in float32: without
+    # the floor at float32's least normal it was 0 / 0, a NaN cost.
+    assert cpu.ops.ncc_finish(0.0, 1e-300) == 0.5
+    assert cpu.ops.ncc_finish(1.0, 1e-300) == 0.0
+    assert cpu.ops.ncc_finish(-1.0, 1e-300) == 1.0
