@@ -21,12 +21,13 @@ def build(jit, shared):
     @jit
     def ncc_finish(num, den):
         """``(1 - NCC) / 2`` from the numerator ``num`` and the variance product ``den``
-        (float64, den > 0), the square root, the division and the rest in float32.
+        (den > 0; float64, or float32 already rounded), the square root, the division and
+        the clip in float32 (docs/design.md, step 2).
 
-        The cost is stored as float32 anyway; in float64 the square root and the division
-        were the NCC's slowest operations (on the CPU 4 lanes per vector instead of 8: a
-        third of the time of the row's last pass, measured).  The float32 result is
-        within 2 ulp of the float64 one (7e-8 on costs <= 1), and both targets do it alike.
+        The cost is stored as float32 anyway, and in float64 the square root and the
+        division ran 4 lanes per vector on the CPU instead of 8 (the row's last pass 2.6x
+        slower, docs/performance.md).  The result is within 2 ulp of 1.0 of the float64
+        formula's (7e-8), and both targets compute it alike (IEEE float32 operations).
         """
         # den at least float32's least normal: a product of two variances that small
         # (min_variance 0) would flush to 0 and make 0 / 0
