@@ -12,6 +12,7 @@ from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder fi
 from ..cpu_common import _on_grid, _pack, _row_layout, _unpack, ops
 from ..pixel import UINT
 from ..volume import dense_index
+from .pixel import F32_ONE
 
 
 _cosine_cost = ops.cosine_cost
@@ -38,8 +39,6 @@ GRID_BITS = (6, 20)
 #: Bands of at most this many unclipped cells take the NCC row's one-loop slide (below a
 #: vector's few steps, one loop over the cells beats two).
 NCC_NARROW = 8
-
-_F32_ONE = np.float32(1.0)
 
 
 @njit(cache=True, error_model="numpy")
@@ -410,7 +409,7 @@ def _costs_from_terms(out, num, den):
     numerators and variance products, one loop over the contiguous cells."""
     for j in range(out.shape[0]):
         den_j = den[j]
-        out[j] = _ncc_finish(num[j], den_j) if den_j >= 0.0 else _F32_ONE  # a flat window: NCC undefined
+        out[j] = _ncc_finish(num[j], den_j) if den_j >= 0.0 else F32_ONE  # a flat window: NCC undefined
 
 
 @njit(cache=True, error_model="numpy")
