@@ -7,7 +7,8 @@ Python entry points::
     result.disparity  # float32 (H, W), inf where invalid when filling is off
 """
 
-__version__ = "0.1.0"
+#: The release, the one place it is written (pyproject.toml reads it; CHANGELOG.md names it).
+__version__ = "1.0.0"
 
 from .errors import BackendUnavailable, ConfigError, D3Error, InputError, OutputError  # noqa: E402
 

@@ -15,6 +15,7 @@ import pytest
 from click.testing import CliRunner
 from tests.helpers import write_png
 
+from d3cli import __version__
 import d3cli.batch.methods
 import d3cli.batch.outputs
 import d3cli.batch.runner
@@ -449,7 +450,7 @@ def test_eval_missing_prediction_folder(tmp_path, pairs_root):
 def test_info():
     result = invoke("info")
     assert result.exit_code == 0, result.output
-    assert "d3stereo 0.1.0" in result.output
+    assert f"d3stereo {__version__}" in result.output
     for word in ("numpy", "numba threads", "cv2", "skimage", "cpu count", "cuda", "config"):
         assert word in result.output
     assert "Traceback" not in result.output
@@ -457,7 +458,9 @@ def test_info():
 
 def test_version():
     result = invoke("--version")
-    assert result.exit_code == 0 and "0.1.0" in result.output
+    assert result.exit_code == 0
+    assert result.output == f"d3stereo, version {__version__}\n"
+    assert __version__ == "1.0.0"
 
 
 @pytest.mark.skipif(importlib.util.find_spec("d3cli.data.synth") is None, reason="d3cli.data.synth is not written yet")

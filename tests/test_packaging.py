@@ -5,6 +5,7 @@ fresh environment and checks its contents; these tests check the source of each.
 from __future__ import annotations
 
 import os
+import re
 import sys
 import typing
 from pathlib import Path
@@ -27,11 +28,15 @@ else:  # pragma: no cover - python 3.10
     tomllib = pytest.importorskip("tomli")
 
 
-def test_the_configs_ship_inside_the_package():
+def test_the_configs_ship_inside_the_package_from_the_top_level_folder():
     configs = bundled_configs()
     assert list(configs) == NAMES
-    assert {Path(p).resolve() for p in configs.values()} == {PACKAGE / "configs" / f"{n}.yaml" for n in NAMES}
-    assert not (REPO / "configs").exists()  # one copy, the one the wheel carries
+    # One copy: configs/ at the top of the repository, which users copy and edit; the
+    # package's d3cli/configs is a link to it, so the wheel carries the same files.
+    assert sorted(p.stem for p in (REPO / "configs").glob("*.yaml")) == NAMES
+    assert not (REPO / "configs").is_symlink()
+    assert (PACKAGE / "configs").is_symlink()
+    assert {Path(p).resolve() for p in configs.values()} == {REPO / "configs" / f"{n}.yaml" for n in NAMES}
 
 
 def test_load_config_by_name_from_any_folder(tmp_path, monkeypatch):
@@ -41,7 +46,7 @@ def test_load_config_by_name_from_any_folder(tmp_path, monkeypatch):
     assert road != Config()
     assert road.pyramid.levels == load_config(PACKAGE / "configs" / "road.yaml").pyramid.levels
     assert load_config("road.yaml") == road
-    assert load_config("configs/road.yaml") == road  # the checkout path the older README gives
+    assert load_config("configs/road.yaml") == road  # the path in a checkout, from anywhere
     assert load_config("kitti").aggregation.sgm_p2 == 1.2
 
 
@@ -106,3 +111,20 @@ def test_public_api_has_type_hints():
     assert fields["disparity"] is np.ndarray and fields["valid"] is np.ndarray
     hints = typing.get_type_hints(load_config)
     assert hints["return"] is Config and hints["overrides"] == typing.Iterable[str]
+
+
+def test_one_version_everywhere_and_a_changelog_section_for_it():
+    import d3cli
+
+    pyproject = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))
+    assert "version" in pyproject["project"]["dynamic"]
+    assert pyproject["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "d3cli.__version__"}
+    changelog = (REPO / "CHANGELOG.md").read_text(encoding="utf-8")
+    releases = re.findall(r"^## \[([^\]]+)\](?: - (\d{4}-\d{2}-\d{2}))?$", changelog, flags=re.M)
+    assert releases[0] == ("Unreleased", "")
+    assert releases[1][0] == d3cli.__version__ == "1.0.0"  # the newest release is this version
+    # Keep a Changelog: every heading below a release is one of its kinds of change.
+    kinds = set(re.findall(r"^### (.+)$", changelog, flags=re.M))
+    assert kinds <= {"Added", "Changed", "Deprecated", "Removed", "Fixed", "Security"}
+    section = changelog.split(f"## [{d3cli.__version__}]", 1)[1].split("\n## [", 1)[0]
+    assert {"### Added", "### Changed", "### Fixed", "### Removed"} <= set(re.findall(r"^### \w+", section, flags=re.M))
