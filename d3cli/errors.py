@@ -42,7 +42,7 @@ class Terminated(KeyboardInterrupt):
     ``terminated`` tells the CLI to exit with 143 (128 + SIGTERM) instead of 130.  One
     class for the batch runner (SIGTERM during a batch) and the CLI (before or after it):
     with two, a SIGTERM that stopped the batch before its pairs began (taking the lock,
-    starting the workers) came out as exit 130 (``tests/test_cli_interrupts.py``).
+    starting the workers) would come out as exit 130 (``tests/test_cli_interrupts.py``).
     """
 
     terminated = True

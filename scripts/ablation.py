@@ -41,7 +41,7 @@ from d3cli.config import read_yaml_lines, resolve_config
 from d3cli.data.layouts import discover
 from d3cli.errors import D3Error
 
-PAPER_CONFIG = "paper"  # the bundled d3cli/configs/paper.yaml
+PAPER_CONFIG = "paper"  # the bundled configs/paper.yaml
 
 SWITCHES = {"PT": "pt.enabled", "PRC": "inheritance.prc", "RBF": "aggregation.rbf", "ARS": "pyramid.ars"}
 

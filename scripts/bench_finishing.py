@@ -5,8 +5,8 @@ Per case (the pairs and configs of ``scripts/bench_speed.py``) one process:
 1. runs ``D3Stereo(cfg).compute`` once and records the real inputs of every finishing
    function (``occluded_by_uniqueness``, ``out_of_view``, ``fill_holes``,
    ``smooth_disparity``) as ``D3Stereo._finish`` calls them;
-2. times each function on those inputs, the NumPy/OpenCV formulation it replaced
-   ("before": the references of ``tests/kernels/test_finishing.py``) and the current one
+2. times each function on those inputs, its NumPy/OpenCV reference formulation
+   ("before": the references of ``tests/kernels/finishing/references.py``) and the current one
    ("after") **alternately**, ``--reps`` times after a warm-up, and checks that both give
    the same bytes;
 3. times the whole ``finish`` step of ``compute`` (``result.timings["finish"]``) with the

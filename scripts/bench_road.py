@@ -18,7 +18,7 @@ SOURCE.txt's pair_seed: ``d3cli.data.synth.pothole_depth_image``).  A detection 
 which lies on pothole pixels stands for the pothole holding most of its pixels, and matches it
 when it covers at least half of its deep part or its deepest point.  One to one: of several
 detections matching a pothole the one covering most of its deep part wins (then the one with
-more pixels on it).  ``--rule footprint`` is the earlier rule: a detection and a pothole can
+more pixels on it).  ``--rule footprint`` is the overlap rule: a detection and a pothole can
 match when at least ``--min-inside`` (0.5) of the detection lies on that pothole and it covers at
 least ``--min-cover`` (0.3) of the pothole's pixels, largest overlap first.  Under both rules a
 detection that matches nothing is a **false defect** when less than half of it lies on pothole
@@ -244,7 +244,7 @@ def main(argv=None) -> int:
     ap.add_argument("out_root", type=Path, help="output folder of `run --road-report`")
     ap.add_argument("--min-gt-depth-mm", type=float, default=20.0)
     ap.add_argument("--rule", choices=("deep", "footprint"), default="deep",
-                    help="match rule: deep (half the deep part or the deepest point) or footprint (the earlier one)")
+                    help="match rule: deep (half the deep part or the deepest point) or footprint (overlap shares)")
     ap.add_argument("--threshold-mm", type=float, default=10.0,
                     help="the report's depth threshold (road.min_depth_mm): a pothole's deep part is deeper")
     ap.add_argument("--min-inside", type=float, default=0.5,

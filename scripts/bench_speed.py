@@ -13,7 +13,7 @@ For every case (a stereo pair + a config):
   must leave it as it was).  Each rep's own ratio (the d3stereo call against the SGBM call
   right after it) is printed too, least / median / most: on a shared host the machine
   runs in spells of seconds at about half or full speed, which move the two methods
-  differently (docs/performance.md, 'Current figures', session 19), and their spread
+  differently (docs/performance.md, 'Current figures'; ``scripts/bench_spells.py``), and their spread
   shows how far one run's ratio can be trusted.
 * **memory**: one fresh process per method does a single call and reads its peak
   resident set size, ``VmHWM`` of ``/proc/self/status`` (``ru_maxrss`` would carry the
@@ -27,7 +27,8 @@ drift apart more than the setting changes.
 
 SGBM is ``d3cli.batch.compute_pair("sgbm", ...)`` with the case's config and the same
 disparity range: OpenCV StereoSGBM, 3-way, block ``sgbm.block_size`` (5 by default,
-forced to 5 on every case with ``--sgbm-block 5``, as in issue 10's table).
+forced to 5 on every case with ``--sgbm-block 5``, the reference of the speed figures in
+docs/performance.md).
 
 Cases (``--cases``, default all that exist)::
 
@@ -36,7 +37,7 @@ Cases (``--cases``, default all that exist)::
     middlebury    middlebury2014-adirondack-Q, config middlebury
     kitti         kitti2015-000000_10, config kitti
     road-1440     2560x1440 synthetic road pair, config road
-    road-2160     3840x2160 synthetic road pair, config road (issue 10: PT within 4 GB)
+    road-2160     3840x2160 synthetic road pair, config road (memory bound: PT within 4 GB)
 
 Usage::
 
@@ -209,7 +210,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=3, help="seed of the synthetic road pairs")
     parser.add_argument("--backend", default="cpu", choices=("cpu", "cuda", "auto"))
     parser.add_argument("--sgbm-block", type=int, default=5,
-                        help="SGBM block size for the reference (default 5, issue 10's baseline; 0: the config's)")
+                        help="SGBM block size for the reference (default 5, the speed figures' baseline; 0: the config's)")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         help="config override for every case, e.g. --set pyramid.band=false")
     parser.add_argument("--against", action="append", default=[], metavar="KEY=VALUE",

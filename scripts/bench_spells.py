@@ -1,9 +1,9 @@
 """d3stereo against OpenCV SGBM in the machine's fast and slow spells (a shared host).
 
-On the development machine of 2026-11-28 (a 2-vCPU virtual machine) the same kernel call
-takes about twice as long for seconds at a time, then runs at full speed again: the host's
-spells, not the code.  SGBM and d3stereo slow down by different amounts in a slow spell,
-so the ratio that ``scripts/bench_speed.py`` reports depends on which spells its reps fell
+On a shared host (a 2-vCPU virtual machine, say) the same kernel call can take about
+twice as long for seconds at a time, then run at full speed again: the host's spells,
+not the code.  SGBM and d3stereo slow down by different amounts in a slow spell, so the
+ratio that ``scripts/bench_speed.py`` reports depends on which spells its reps fall
 in.  This script tells them apart: it repeats, for ``--seconds``, a probe (the finest
 level's inheritance call of the case, captured from one d3stereo call; a fixed input, so
 its time is the machine's speed), then SGBM, then d3stereo; a rep whose probe took less

@@ -9,7 +9,7 @@ md5 of the disparity map (the same as bench_speed's).
 
 ``--capture DIR`` also saves the inputs of the finest level's NCC, inheritance and
 diffusion calls of the last rep and of its RBF weights at the widest level that runs the
-filter (since 2026-11-28 the shipped configs run none at full resolution)
+filter (the shipped configs run none at full resolution)
 (``DIR/<case>_ncc.npz``, ``_rbf``, ``_inherit``, ``_diffuse``; the last two hold the volume's ``cost``, ``index``, ``n_disp`` and the
 call's other arguments as ``a1``, ``a2``, ...), for kernel A/B timings of an old and a
 new driver in one process.

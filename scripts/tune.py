@@ -1,9 +1,9 @@
-"""Parameter sweep used to choose the defaults in d3cli/configs/ (issue: defaults by measurement).
+"""Parameter sweep used to choose the defaults in configs/ (docs/design.md: defaults are measured).
 
 Each ``--grid section.key=v1,v2,...`` adds an axis; every combination is run with
 d3stereo on the pairs with ground truth and ranked by mean EPE and mean PEP2.
 
-Usage (the sweep behind d3cli/configs/default.yaml)::
+Usage (the sweep behind configs/default.yaml)::
 
     python scripts/tune.py DATA --family middlebury \\
         --grid seeds.pkrn_min=1.2,1.5,2.0 --grid diffusion.max_gap=-1,0.02,0.05,0.1 \\

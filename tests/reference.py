@@ -213,7 +213,7 @@ def ref_accepts(cost, v, u, s, c):
 
 
 def ref_diffuse_pixel(cost, disp, least, max_gap, v, u, tau, kappa_d, adversarial):
-    """New state of (u, v) from the previous map ``disp`` (paper eq. 5-6)."""
+    """New state of (u, v) from the previous map ``disp`` (paper eq. 4-5)."""
     h, w = disp.shape
     n_disp = cost.shape[2]
     candidates = set()
@@ -323,7 +323,7 @@ def ref_pixel_decisive(cost, v, x, d, right_view, prc, least_out, dfm_pkrn_min, 
 
 
 def ref_inherit_pixel(cost, coarse, v, u, prc, dfm_pkrn_min, epsilon, candidates="symmetric"):
-    """Inherited disparity of fine pixel (u, v), or -1 (paper Algorithm 2, eq. 7-9).
+    """Inherited disparity of fine pixel (u, v), or -1 (paper Algorithm 2, eq. 6-8).
 
     Coarse pixel (u // 2, v // 2) with disparity dc; d = 2 dc; left patch rows
     2(v // 2) + {0, 1}, columns u0 = 2(u // 2) + {0, 1}; right patch columns u0 - d + {0, 1}.

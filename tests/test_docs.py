@@ -18,6 +18,10 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 PAGES = ["index", "getting-started", "cli", "datasets", "configuration", "road", "scaling", "gpu",
          "failures", "method", "metrics", "results", "paper", "performance", "design", "api"]
+#: The pages that describe the product (using it, the method, the reference): no project
+#: history and no numbers the program cannot keep true.
+PRODUCT_PAGES = ["index", "getting-started", "cli", "datasets", "configuration", "failures", "method",
+                 "metrics", "paper", "design", "development", "api"]
 
 
 @pytest.fixture(scope="module")
@@ -83,3 +87,75 @@ def test_readme_picture_is_in_the_repository_and_small():
     pictures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", readme)
     assert pictures == ["docs/_static/panel-motorcycle.png"]
     assert (ROOT / pictures[0]).stat().st_size < 300_000
+
+
+def _markdown(name: str) -> str:
+    return (DOCS / f"{name}.md").read_text(encoding="utf-8")
+
+
+def test_the_compile_notice_quoted_in_the_docs_is_the_one_the_code_prints(monkeypatch):
+    from d3cli.batch.warmup import CompileProgress
+    from d3cli.kernels import cachedir
+
+    # What a first run prints where no earlier compile was recorded: the built-in estimate.
+    monkeypatch.setattr(cachedir, "compile_estimate", lambda method: dict(cachedir.COLD_ESTIMATE))
+    monkeypatch.setattr(cachedir, "cache_root", lambda cache_dir=None: "DIR")
+    notice = f"NOTE: {cachedir.compile_notice('d3stereo')}"
+    texts = {path.name: path.read_text(encoding="utf-8")
+             for path in [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]}
+    quoted = {name: re.findall(r"NOTE: compiling the kernels[^`\n]*", text) for name, text in texts.items()}
+    estimates = [(name, line) for name, lines in quoted.items() for line in lines if re.search(r"about \d", line)]
+    assert ("failures.md", notice) in estimates
+    assert [(name, line) for name, line in estimates if line != notice] == []
+    # The progress lines, as failures.md writes them with placeholders.
+    progress = CompileProgress(expected=300)
+    progress.compiled = 40
+    template = re.search(r"`NOTE: (compiled K of about N kernel functions \(S s\))`", texts["failures.md"])
+    assert template is not None
+    assert template.group(1).replace("K", "40").replace("N", "300").replace("S s", "31 s") == progress.line(31.4)
+
+
+def test_the_bundled_motorcycle_sample_is_described_by_its_size():
+    from d3cli.data.formats import read_image
+
+    left = read_image(ROOT / "d3cli" / "data" / "samples" / "motorcycle" / "left.png")
+    height, width = left.shape[:2]
+    assert f"one-eighth size, {width}x{height}" in _markdown("getting-started")
+
+
+def test_the_product_pages_tell_no_history_and_no_fragile_counts():
+    found = []
+    for name in PRODUCT_PAGES:
+        for number, line in enumerate(_markdown(name).splitlines(), 1):
+            if re.search(r"session \d+|issue \d+|\b20\d\d-\d\d-\d\d\b|\b\d+ kernel functions", line, re.I):
+                found.append(f"{name}.md:{number}: {line.strip()}")
+    assert found == []
+
+
+def test_configuration_prose_restates_no_default_and_its_example_edits_the_road_config(tmp_path):
+    page = _markdown("configuration")
+    prose = page[:page.index("## Reference")]
+    # Defaults live in the generated reference only: no "key: value" or "key = value" of the
+    # default config in the prose above it.
+    cfg = Config()
+    restated = []
+    for section in dataclasses.fields(Config):
+        for key in dataclasses.fields(section.default_factory):
+            value = getattr(getattr(cfg, section.name), key.name)
+            for text in (f"{key.name}: {value}", f"{key.name} = {value}", f"{key.name}={value}"):
+                if text in prose:
+                    restated.append(text)
+    assert restated == []
+    # "copy configs/road.yaml and change cost.window" gives the config that
+    # "-c road --set cost.window=N" gives.
+    from d3cli import load_config
+
+    window = int(re.search(r"-c road --set cost\.window=(\d+)", prose).group(1))
+    assert f"`window: {window}`" in prose and "cp configs/road.yaml my-road.yaml" in prose
+    road = (ROOT / "configs" / "road.yaml").read_text(encoding="utf-8")
+    edited, count = re.subn(r"(?m)^(  window:) \d+", rf"\1 {window}", road)
+    assert count == 1
+    (tmp_path / "my-road.yaml").write_text(edited, encoding="utf-8")
+    mine = load_config(tmp_path / "my-road.yaml")
+    assert mine == load_config("road", [f"cost.window={window}"])
+    assert mine.cost.window != load_config("road").cost.window

@@ -2,9 +2,9 @@
 
 Before any pair runs the scheduler must answer a plain ``identity`` request within
 :data:`CONNECT_TIMEOUT_S` seconds (:func:`probe_scheduler`): distributed's own client
-waited forever for a listener that accepts and never answers, and a listener sending
-random bytes made its handshake try to allocate exabytes.  Only then is a client made,
-and it is always closed by d3stereo (left to its ``__del__`` it printed ``Exception
+waits forever for a listener that accepts and never answers, and a listener sending
+random bytes makes its handshake try to allocate exabytes.  Only then is a client made,
+and it is always closed by d3stereo (left to its ``__del__`` it prints ``Exception
 ignored in: Client.__del__`` 10 s after the error line).  distributed's log lines are
 held back while d3stereo is its client (shown with ``-v``): its errors reach the user
 as d3stereo's own ``Error:`` lines.
@@ -199,7 +199,7 @@ class DaskExecutor:
         return False
 
     def _close(self) -> None:
-        """Close the client (never left to its ``__del__``, which printed a traceback 10 s
+        """Close the client (never left to its ``__del__``, which prints a traceback 10 s
         after an error) and give distributed's loggers their level back."""
         try:
             if self.client is not None:

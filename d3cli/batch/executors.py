@@ -448,8 +448,8 @@ def make_executor(workers: int = 1, scheduler: str | None = None, out: Path | No
     1 worker is serial, or pipelined with ``prefetch`` >= 1).
 
     A pool gets at most ``n_pairs`` workers: more would only start, load the kernels one
-    after the other and idle (``--workers 1000`` on two pairs kept 999 processes alive
-    long after both pairs were done).  ``prefetch`` (None: ``auto``, resolved for ``cfg``
+    after the other and idle (``--workers 1000`` on two pairs would keep 999 processes
+    alive long after both pairs are done).  ``prefetch`` (None: ``auto``, resolved for ``cfg``
     and ``method`` by :func:`resolve_prefetch`) applies to a batch in this process only:
     a pool's or a cluster's workers take whole pairs.
     """

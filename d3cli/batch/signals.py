@@ -100,9 +100,9 @@ def terminate_after_batch(run_json, message: str, *, exit_status: int = 143) -> 
     ``run_json`` (``interrupted: true``, ``stop_reason``) and end the process with
     ``exit_status`` after printing ``message``, as the README promises (143).
 
-    Until now SIGTERM was ignored once the command's status was decided, so one that came
-    while the summary lines were printed or Python shut down gave exit 0 and a run.json
-    saying nothing happened.  The handler exits at once (``os._exit``): the batch is
+    Ignored there instead, a SIGTERM that comes while the summary lines are printed or
+    Python shuts down would give exit 0 and a run.json saying nothing happened.  The
+    handler exits at once (``os._exit``): the batch is
     written and recorded, nothing is left to clean up.  An ``atexit`` hook gives a signal
     that came after the command returned one more chance to be handled.
     """
@@ -128,7 +128,7 @@ def _ignore_sigterm_from_now() -> None:
     """Shutdown hook of :func:`terminate_after_batch`: its bytecode gives a pending SIGTERM
     its handler (exit 143), then SIGTERM is ignored for the rest of the shutdown (exit 0,
     everything written).  CPython's finalisation puts a Python-level handler back to the
-    default action, so a SIGTERM there killed the process (status -15, nothing said;
+    default action, so a SIGTERM there would kill the process (status -15, nothing said;
     tests/test_adversarial.py, seed 5, in a fresh environment); an ignored one stays ignored."""
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
 

@@ -23,8 +23,8 @@ import warnings
 
 # Worker threads of numba's OpenMP layer sleep when a parallel loop ends instead of
 # spinning (GNU OpenMP's default).  The pipeline runs many short parallel loops with
-# serial steps in between; on a busy machine the spinning threads took the cores those
-# steps (and other processes, and --workers siblings) needed (docs/performance.md has the
+# serial steps in between; on a busy machine spinning threads take the cores those
+# steps (and other processes, and --workers siblings) need (docs/performance.md has the
 # measurement).  Must be set before the OpenMP runtime loads (the first parallel kernel
 # call); a value the user set is kept.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")

@@ -171,7 +171,7 @@ class Backend(Protocol):
         ...
 
     def diffuse(self, cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweeps) -> Any:
-        """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 5-6).
+        """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 4-5).
 
         Parameters
         ----------
@@ -200,10 +200,10 @@ class Backend(Protocol):
         ...
 
     def inherit(self, cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0) -> Any:
-        """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
+        """Inter-scale decisive inheritance (paper Algorithm 2, eq. 6-8).
 
-        The patch tests (eq. 7-8) run once per coarse pixel and serve the four fine pixels
-        of its 2x2 patch; the pixel test (eq. 9) per fine pixel.
+        The patch tests (eq. 6-7) run once per coarse pixel and serve the four fine pixels
+        of its 2x2 patch; the pixel test (eq. 8) per fine pixel.
 
         Parameters
         ----------

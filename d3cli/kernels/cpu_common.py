@@ -19,8 +19,8 @@ from .volume import Volume, dense_index
 # error_model="numpy" (here and on every driver): a float division by zero gives inf/nan
 # instead of raising, so numba emits no zero test per division and a loop with a
 # division can vectorise.  Every division the kernels do has a non-zero divisor (a zero
-# one would have raised before), so the results are the same (checked with the md5 that
-# scripts/bench_speed.py prints per case, before and after).
+# one would raise under numba's default "python" model), so the results are the same as
+# under that model (scripts/bench_speed.py prints the disparity md5 per case to check it).
 ops = build_ops(njit(cache=True, error_model="numpy"))
 
 

@@ -184,7 +184,7 @@ def build_ops(jit):
         diffuse_at, inherit_patch, inherit_pixel, inherit_at, inherit_quad, subpixel_at,
         pt_shift, bilinear_at, pt_restore_at`` and the helpers they use.  The
         drivers inherit with ``inherit_quad`` (one 2x2 patch, each cell read once); the
-        per-pixel form ``inherit_at`` states eq. 7-9 literally and the tests hold the two
+        per-pixel form ``inherit_at`` states eq. 6-8 literally and the tests hold the two
         to each other.
 
     Notes

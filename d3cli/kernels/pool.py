@@ -1,13 +1,13 @@
 """The task pool of the host kernels: ``func(i, n, *args)`` for every task i, on threads.
 
-The kernels that run here (today the finishing, :mod:`d3cli.kernels.finishing`, and the
+The kernels that run here (the finishing, :mod:`d3cli.kernels.finishing`, and the
 semi-global smoothing's sweeps, :mod:`d3cli.kernels.sgm`) are numba functions compiled
 with ``nogil``; :func:`run_tasks` runs their tasks on the calling thread and a pool,
 numba's thread count of threads in all, and :func:`row_tasks` says how many blocks of rows
 a map is cut into.  Tasks write disjoint cells, so results do not depend on the thread
 count.  Tasks are taken in increasing order, each by a thread that runs it to the end: a
-task may wait for a lower one (the smoothing's segments do), never for a higher one.  A thread pool, not ``prange``: OpenMP's spin-waiting made the parallel
-kernels slower than one thread whenever the machine was shared with other work; idle pool
+task may wait for a lower one (the smoothing's segments do), never for a higher one.  A thread pool, not ``prange``: OpenMP's spin-waiting makes the parallel
+kernels slower than one thread whenever the machine is shared with other work; idle pool
 threads block instead of spinning.
 
 May import: the standard library and numba only (no kernel module: every step may use it).
@@ -57,9 +57,9 @@ def run_tasks(func, n_tasks, *args, abort=None):
     if (os.getpid(), func) not in _LOADED:
         # The first call of a kernel in a process compiles it or loads it from numba's
         # cache: do that here, in the calling thread, with task 0, and fan out after.
-        # A pool thread loading a kernel while Ctrl-C interrupted the main thread hung
-        # once in llvmlite's global lock (seen in gdb, 1 of 13 runs of the interrupt
-        # tests); with the loading in the main thread an interrupt cannot strand it.
+        # A pool thread loading a kernel while Ctrl-C interrupts the main thread can hang
+        # in llvmlite's global lock (seen in gdb, 1 of 13 runs of the interrupt tests);
+        # with the loading in the main thread an interrupt cannot strand it.
         func(0, n_tasks, *args)
         _LOADED.add((os.getpid(), func))
         start = 1

@@ -214,7 +214,7 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
     cost = cost if visible is None else Volume(cost.cost, visible, cost.n_disp)
     if level == 0 and agg.sgm_p2 > 0:
         # Semi-global smoothing of the finest aggregated cost, four paths: it lowers
-        # PEP1 on driving scenes (docs/design.md, 'Semi-global smoothing'; d3cli/configs/kitti.yaml)
+        # PEP1 on driving scenes (docs/design.md, 'Semi-global smoothing'; configs/kitti.yaml)
         t0 = time.perf_counter()
         cost = backend.sgm_smooth(cost, agg.sgm_p1, agg.sgm_p2)
         if step_times is not None:

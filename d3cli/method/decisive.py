@@ -2,8 +2,8 @@
 
 - Step 4, decisive seeds at the coarsest level (WTA + PKRN + left-right check, paper
   section III-B);
-- step 5, intra-scale decisive diffusion (paper Algorithm 1, eq. 5-6);
-- step 7, inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
+- step 5, intra-scale decisive diffusion (paper Algorithm 1, eq. 4-5);
+- step 7, inter-scale decisive inheritance (paper Algorithm 2, eq. 6-8).
 
 Each function turns keyword scalars into one kernel call of the backend
 (:mod:`d3cli.kernels`); the per-pixel rules live in :mod:`d3cli.kernels.pixel`.
@@ -53,11 +53,11 @@ def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, a
         Accepted states cost at most the pixel's least cost + ``max_gap`` (an addition
         to the paper, see ``DiffusionConfig.max_gap``); < 0 turns the test off.
     tau : int
-        Candidates are neighbour disparities + r, r in [-tau, tau] (eq. 5).
+        Candidates are neighbour disparities + r, r in [-tau, tau] (eq. 4).
     kappa_d : int
         Neighbourhood radius.
     adversarial : bool
-        Decided pixels switch to a strictly cheaper accepted candidate (eq. 6).
+        Decided pixels switch to a strictly cheaper accepted candidate (eq. 5).
     max_sweeps : int
         Safeguard; diffusion stops earlier when a sweep changes nothing.
     backend : module
@@ -89,7 +89,7 @@ def inherit(cost, coarse, *, prc: bool, dfm_pkrn_min: float, epsilon: float, bac
         Disparity map of the coarser level (-1 undecided), shape (H // 2, W // 2) or
         larger.
     prc : bool
-        Patch reliability + local-minimum constraints (eq. 7-9); False: the DFM-style
+        Patch reliability + local-minimum constraints (eq. 6-8); False: the DFM-style
         PKRN test in the patch (ablation).
     dfm_pkrn_min, epsilon : float
         PKRN threshold and epsilon of the DFM-style test.

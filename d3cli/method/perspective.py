@@ -147,9 +147,9 @@ def _draw_triples(rng, n, count):
     drawn again.
 
     One call instead of ``count`` calls of ``Generator.choice(n, 3, replace=False)``,
-    which took 4.4 ms a road pair (200 calls of Python and small-array overhead; 3 % of
+    which take 4.4 ms a road pair (200 calls of Python and small-array overhead; 3 % of
     the pair's time on 2 cores); the same distribution, another stream of the same seed
-    (the road check of docs/road.md, re-run with it).
+    (the road check of docs/road.md runs with it).
     """
     picks = rng.integers(0, n, size=(count, 3))
     while True:
@@ -193,8 +193,8 @@ def _ransac(u, v, d, threshold, rng):
 def _irls(u, v, d, sol, threshold, iterations):
     """Tukey-biweight IRLS from ``sol``; the scale never drops below the threshold.
 
-    Compiled (:func:`d3cli.kernels.perspective.road_fit.irls`): the NumPy loop it replaced
-    took 2.9 ms of a 720p road pair's 3.9 ms fit; the same rounds, sums in another order
+    Compiled (:func:`d3cli.kernels.perspective.road_fit.irls`): as a NumPy loop the rounds
+    take 2.9 ms of a 720p road pair's 3.9 ms fit; the same rounds, sums in another order
     (the models agree to about 1e-12: tests/method/test_perspective.py holds the two).
     """
     from ..kernels.perspective.road_fit import irls
@@ -279,7 +279,7 @@ def restored_validity(valid: np.ndarray, narrow: np.ndarray, restored: np.ndarra
     * estimates at either end of the narrow range (``narrow <= 0`` or ``>= narrow_range``):
       the true disparity most likely lies outside the band (obstacle, kerb, deep
       pothole); a clipped value would be wrong (measured: EPE 0.317 vs 0.340 kept, see
-      d3cli/configs/road.yaml);
+      configs/road.yaml);
     * restored disparities whose match ``u - d`` falls left of the right image;
     * negative restored disparities: disparities are >= 0 by contract, and a negative one
       comes from a wrong narrow match where the shift ``s(u, v)`` is below zero (far road,

@@ -104,8 +104,8 @@ def _float_images_scaled(left, right):
     """Two float images on the 0-255 scale, by the rule float image files follow
     (:func:`d3cli.data.layouts.normalise_bit_depth`): [0, 1] (scikit-image's convention)
     times 255, up to 255 unchanged, larger values as integer counts; negative values are
-    an InputError.  Taken as 0-255 as they were, [0, 1] images gave a far worse map with
-    only "no decisive seeds" as a hint.  Other dtypes, or one float view, are unchanged.
+    an InputError.  Taken as 0-255 unchanged, [0, 1] images would give a far worse map
+    with only "no decisive seeds" as a hint.  Other dtypes, or one float view, are unchanged.
     """
     arrays = [np.asarray(left), np.asarray(right)]
     if any(arr.dtype.kind != "f" or arr.size == 0 for arr in arrays):

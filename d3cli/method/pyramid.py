@@ -23,8 +23,8 @@ def downsample(img: np.ndarray) -> np.ndarray:
     -------
     ndarray, float32, (H // 2, W // 2)
     """
-    # the kernel: the float32 sum of the four, in that order, times 0.25 (the NumPy
-    # expression it replaced, bit for bit; d3cli.kernels.pyramid)
+    # the kernel: the float32 sum of the four, in that order, times 0.25 (a NumPy
+    # expression's bytes, bit for bit; d3cli.kernels.pyramid)
     return halve_area(img)
 
 

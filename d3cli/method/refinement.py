@@ -1,8 +1,8 @@
 """Step 8: sub-pixel refinement and the finishing (docs/design.md, 'Finishing').
 
 The occlusion tests, the speckle filter, the filling and the smoothing run on the host for
-every backend, as numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of the
-NumPy/OpenCV formulation they replaced bit for bit (that formulation is the reference in
+every backend, as numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of a
+NumPy/OpenCV formulation bit for bit (that formulation is the reference in
 ``tests/kernels/finishing/references.py``).
 """
 

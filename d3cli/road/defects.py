@@ -108,7 +108,7 @@ class DefectTuning:
         errors: ``se = sigma_h sqrt(noise_cell_px / max(n, noise_cell_px))``.
         ``noise_cell_px`` is the correlation area of the disparity error: its integral
         ``sum rho`` measured 670-940 px on the sun/dusk synth pairs (cost window 25,
-        smoothing radius 15 of d3cli/configs/road.yaml).  5 standard errors: the map holds
+        smoothing radius 15 of configs/road.yaml).  5 standard errors: the map holds
         ~10^3 such cells per kind, and the errors of the noisy pairs have heavier tails
         than a Gaussian (the usual 5-sigma allowance for looking everywhere).
     split_smooth_px : float
@@ -261,7 +261,7 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
         # Measured in a window around the part that holds everything its measurement
         # reads (its walls, rings and noise annulus): the same pixels, the same results,
         # at the cost of the window instead of the map (a noisy 720p map has hundreds of
-        # candidate parts: 7.9 s a map before, whole-image masks and dilations per part).
+        # candidate parts; whole-image masks and dilations per part take seconds a map).
         window = _window(s, box, int(piece.sum()))
         local = _crop(s, window)
         comp = np.zeros(local.height.shape, bool)
@@ -301,7 +301,7 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     if footprint[comp].sum() < 0.25 * road.min_area_m2:
         return None  # cannot pass the area test even with its rim
     # The reference ring lies beyond the walls: a ring drawn right outside the part deeper
-    # than the threshold sat on a gentle wall (a cone's or a bowl's) and took the
+    # than the threshold sits on a gentle wall (a cone's or a bowl's) and takes the
     # reference, and with it depth, area and volume, millimetres too low.
     whole = _with_walls(s, comp, sign, other)
     grown = dilate_near(whole, s.kernel_gap)
@@ -379,9 +379,9 @@ def _with_walls(s: _Scene, comp: np.ndarray, sign: float, other: np.ndarray, *, 
     lowest value out to ``4 ring_px`` or the radius of a disc of ``comp``'s area, whichever
     is more (a cone twice as deep as the threshold has a wall as wide as that radius).
 
-    A wall ends where the surface stops rising: a fixed depth level to grow through ended
+    A wall ends where the surface stops rising: a fixed depth level to grow through ends
     a cone's or a bowl's gentle wall millimetres below the road (2 sigma_h of a dark map is
-    more than the threshold), and the reference ring beyond it then sat on the pothole.
+    more than the threshold), and the reference ring beyond it then sits on the pothole.
     The band medians are taken over whole bands, so the stereo noise does not decide
     where the growth stops; out to the first near-minimum, so a neighbouring pothole
     further out does not pull it on."""
@@ -426,9 +426,9 @@ def _local_sigma_h(s: _Scene, comp: np.ndarray, sigma_h: float) -> float:
     # part of the image matches worse), and a blob of that local noise passes a test made
     # with the map's median noise.  Robust spread (1.4826 MAD) of every height in an
     # annulus outside the ring: other defects there are a minority, which the median
-    # ignores.  Leaving out the heights beyond the map's noise_k sigma_h instead cut the
+    # ignores.  Leaving out the heights beyond the map's noise_k sigma_h instead cuts the
     # spread of a noisy part off at that level: on the dark far field of dusk pairs the
-    # estimate came out too small and blobs of noise passed as defects.
+    # estimate comes out too small and blobs of noise pass as defects.
     annulus = dilate_near(comp, s.kernel_local) & ~dilate_near(comp, s.kernel_ring) & s.finite
     if annulus.sum() >= 50:
         local = s.height[annulus]

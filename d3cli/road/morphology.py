@@ -18,8 +18,8 @@ def dilate_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     The same pixels as the dilation of the whole image (outside that box it is empty, and
     inside it the pixels beyond the box are zero either way: OpenCV's border of a dilation
     adds nothing), at the cost of the box: the local-noise disc of
-    :func:`d3cli.road.defects.find_defects` (161 px) took 13 ms per full 640x480 dilation,
-    and a noisy map has hundreds of candidate regions (10.6 s per map before).
+    :func:`d3cli.road.defects.find_defects` (161 px) takes 13 ms per full 640x480 dilation,
+    and a noisy map has hundreds of candidate regions (seconds per map on the whole image).
 
     Parameters
     ----------

@@ -136,8 +136,9 @@ def seen_by_both(disparity: np.ndarray) -> np.ndarray:
     Left of that (the left-border strip, ``u < d``) the right camera does not see the
     point: a disparity there is no measurement but the row-wise hole filling's
     extrapolation (horizontal streaks), so the road outputs treat it as no estimate.
-    On the dusk-cement synth pairs 99.7 % of that strip was filled, not decided, and it
-    held a third of the false defects (seed 7: 8 of 25 candidate regions).
+    On the dusk-cement synth pairs 99.7 % of that strip is filled, not decided, and
+    without this rule it holds a third of the false defects (seed 7: 8 of 25 candidate
+    regions).
     """
     d = np.asarray(disparity)
     u = np.arange(d.shape[1], dtype=np.float64)[None, :]

@@ -1,11 +1,11 @@
 """Re-measure the disparity inside road defects with a small matching window.
 
-Where the bias came from: the road configuration matches with a 25 x 25 NCC window and
+Where the bias comes from: the road configuration matches with a 25 x 25 NCC window and
 smooths the restored map over a box of radius 15 (configs/road.yaml): both average a
-pothole's bottom with its shallower walls.  A pothole 190 mm across at 640x360 (30 px) came
-out 15.4 mm deep instead of 30.2 (synth --seed 3 pair 0); on the exact disparity the
-detector itself measured 33.5 mm (the floor relief included), so the loss was the map's,
-not the detector's.  Matching again in the defect only, with a small window and a narrow
+pothole's bottom with its shallower walls.  A pothole 190 mm across at 640x360 (30 px)
+comes out 15.4 mm deep instead of 30.2 on that map (synth --seed 3 pair 0); on the exact
+disparity the detector itself measures 33.5 mm (the floor relief included), so the loss
+is the map's, not the detector's.  Matching again in the defect only, with a small window and a narrow
 search around the stored disparity, keeps the method's result everywhere else (the
 stored disp.pfm is not changed) and gives the detector the floor's own depth.
 """
@@ -24,8 +24,8 @@ WINDOW, REACH, STEP = 9, 3.0, 0.25
 WINDOWS, NOISE_M = (9, 13, 17, 25), 1.5e-3
 #: A re-matched pixel whose best ZNCC score is below this, or whose best offset is an end
 #: of the search, keeps the stored disparity: on wet and dark pairs such pixels (specular
-#: highlights, untextured floors) were 0.5-4 px off the true disparity (median), and their
-#: few deepest values became the reported maximum depth.
+#: highlights, untextured floors) are 0.5-4 px off the true disparity (median), and their
+#: few deepest values would become the reported maximum depth.
 MIN_SCORE = 0.9
 #: A window is used only where at least this share of the defect's zone matched reliably
 #: (:data:`MIN_SCORE`): a few reliable pixels among stored ones are the noisiest matches

@@ -244,7 +244,7 @@ def _merge_nested(parts: list, outside: np.ndarray, share: float = 0.5) -> list:
     The ground truth's rule (:func:`d3cli.data.synth.pothole_groups`): a pit inside a
     shallower pothole's outline is a deeper spot of it.  The cues cut such a union (a
     shelf around a deeper core, deeper blobs on a wet floor) into fragments, each of
-    which measured a part of one pothole.
+    which measures a part of one pothole.
     """
     if len(parts) < 2:
         return list(parts)

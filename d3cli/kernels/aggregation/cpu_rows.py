@@ -101,7 +101,7 @@ def _rbf_interior(stage, up, cur, centre, w):
     """The weights of pixels 1..W-2 of a row with rows above and below, into ``stage``;
     the number of uncertain quotients (:func:`_rbf_quotient`): the row must then be
     redone exactly.  One division per pixel (the reciprocal of the sum) instead of nine:
-    the divider was the bottleneck (two cycles per float64 lane)."""
+    the divider is the bottleneck (two cycles per float64 lane)."""
     a0 = up[3]
     a1 = up[2]
     a2 = up[1]

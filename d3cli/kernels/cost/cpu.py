@@ -272,8 +272,8 @@ def _window_stats(ii, ii2, v0, v1, r, inv, mean, var):
     The box sums are :func:`_box_sum`'s expression ``ii[r1+1, c1+1] - ii[r0, c1+1] -
     ii[r1+1, c0] + ii[r0, c0]`` and the moments :func:`pixel.ncc_cost`'s (``s inv``,
     ``ss inv - m m``), so the values are bit for bit those the formula computed per
-    cell; written over slices (non-negative subscripts) the loop vectorises (the
-    per-column box sums had taken a third of the NCC time).
+    cell; written over slices (non-negative subscripts) the loop vectorises (scalar
+    per-column box sums take a third of the NCC time).
     """
     m = ii.shape[1] - 1 - 2 * r  # columns with an unclipped window
     if m <= 0:
@@ -419,9 +419,9 @@ def _clipped_terms(index, v, acc, num, den, start, ii_l, ii_ll, ii_r, ii_rr, v0,
 
     Operation for operation :func:`pixel.ncc_window_cost` up to the square root and the
     division, which the row's pass does for them too (done per cell, serially, after that
-    pass, these cells took longer).  Each window sum of L*R is summed up from 0 over its columns
-    as before: summing column by column over a pixel's cells (one vector loop per
-    column) measured slower on these 5-20 cell bands.
+    pass, these cells take longer).  Each window sum of L*R is summed up from 0 over its
+    columns: summing column by column over a pixel's cells (one vector loop per column) is
+    slower on these 5-20 cell bands.
     """
     n_disp = acc.shape[1]
     # Where the window starts at column d (c0 = d: clipped by the right image's edge),

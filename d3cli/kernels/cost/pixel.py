@@ -25,7 +25,7 @@ def build(jit, shared):
         the clip in float32 (docs/design.md, step 2).
 
         The cost is stored as float32 anyway, and in float64 the square root and the
-        division ran 4 lanes per vector on the CPU instead of 8 (the row's last pass 2.6x
+        division run 4 lanes per vector on the CPU instead of 8 (the row's last pass 2.6x
         slower, docs/performance.md).  The result is within 2 ulp of 1.0 of the float64
         formula's (7e-8), and both targets compute it alike (IEEE float32 operations).
         """

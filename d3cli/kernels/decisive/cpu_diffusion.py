@@ -32,7 +32,7 @@ def _evaluate_pixels(cost, index, flat_index, disp, min_cost, max_gap, active, i
 
     Block by block, the next block's cells are prefetched first (the frontier is sparse,
     its cells are not in the cache and the hardware prefetcher cannot guess them).  A
-    prefetch per pixel inside the loop made the loop compile worse.
+    prefetch per pixel inside the loop makes the loop compile worse.
     """
     w = UINT(disp.shape[1])
     for b in range(i0, i1, PREFETCH_BLOCK):
@@ -221,7 +221,7 @@ def _build_frontier(changed, n_changed, listed, row_listed, active, h, w, kappa_
 
 
 def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweeps):
-    """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 5-6).
+    """Intra-scale decisive diffusion with a frontier (paper Algorithm 1, eq. 4-5).
 
     ``min_cost`` None: ``pixel.diffuse_at`` finds the least cost for the few pixels whose
     candidate gets as far as the gap test (no :func:`min_cost` pass over the volume).

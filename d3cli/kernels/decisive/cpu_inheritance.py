@@ -1,5 +1,5 @@
 """CPU driver of the disparity inheritance to the next finer level (paper
-Algorithm 2, eq. 7-9).  The contract: :mod:`d3cli.kernels.backend`."""
+Algorithm 2, eq. 6-8).  The contract: :mod:`d3cli.kernels.backend`."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ _inherit_patch_into = ops.inherit_patch_into
 
 # ----------------------------------------------------------------------------- inheritance (step 7)
 def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
-    """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
+    """Inter-scale decisive inheritance (paper Algorithm 2, eq. 6-8).
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.inherit`.
     """

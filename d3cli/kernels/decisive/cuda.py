@@ -76,7 +76,7 @@ def _inherit_kernel(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates,
 
 
 def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
-    """Inter-scale decisive inheritance (paper Algorithm 2, eq. 7-9).
+    """Inter-scale decisive inheritance (paper Algorithm 2, eq. 6-8).
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.inherit`.
     """

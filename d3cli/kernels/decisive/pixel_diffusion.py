@@ -1,4 +1,4 @@
-"""Per-pixel functions of the decisive diffusion (pipeline step 5, paper eq. 5-6).
+"""Per-pixel functions of the decisive diffusion (pipeline step 5, paper eq. 4-5).
 Compiled for every target by :func:`build` (composed by
 :func:`d3cli.kernels.pixel.build_ops`)."""
 
@@ -54,14 +54,14 @@ def build(jit, shared):
 
     @jit
     def diffuse_at(cost, index, disp, min_cost, max_gap, v, u, tau, kappa_d, adversarial):
-        """New state of pixel (u, v) in one Jacobi diffusion sweep (paper eq. 5-6).
+        """New state of pixel (u, v) in one Jacobi diffusion sweep (paper eq. 4-5).
 
         The candidates are ``D(q) + r`` for every decided neighbour q within radius
         ``kappa_d`` (p itself excluded) and r in [-tau, tau]; the state ``s`` is the
         candidate of least cost (smaller disparity on ties).  An undecided pixel takes
         ``s`` when it passes hypotheses (2)-(3); a decided pixel switches to ``s`` only in
         the adversarial mode and only when s also costs strictly less than its current
-        disparity (eq. 6).  Reads ``disp`` (the previous sweep) only.
+        disparity (eq. 5).  Reads ``disp`` (the previous sweep) only.
 
         Near-optimality (``max_gap >= 0``; an addition to the paper, see
         ``DiffusionConfig.max_gap``): the accepted state must also cost at most

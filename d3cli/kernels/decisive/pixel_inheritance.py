@@ -1,4 +1,4 @@
-"""Per-pixel functions of the disparity inheritance (paper Algorithm 2, eq. 7-9): the
+"""Per-pixel functions of the disparity inheritance (paper Algorithm 2, eq. 6-8): the
 literal per-pixel form and the fast per-patch form the drivers run.  Compiled for
 every target by :func:`build` (composed by :func:`d3cli.kernels.pixel.build_ops`)."""
 
@@ -65,7 +65,7 @@ def build(jit, shared):
 
     @jit
     def patch_reliable(cost, index, y0, x0, d, right_view, candidates):
-        """Patch reliability constraint (PRC, paper eq. 7-8) in one view.
+        """Patch reliability constraint (PRC, paper eq. 6-7) in one view.
 
         The 2x2 patch at rows y0, y0+1 and columns x0, x0+1 of the chosen view (the left
         patch for the left view, the right patch for the right view), with the
@@ -92,7 +92,7 @@ def build(jit, shared):
         """Best in-patch disparity of one pixel if it passes the pixel test, else -1.
 
         With ``prc``: local minimum C(d*) < C(d* +- 1) and below the patch's least outside
-        cost (eq. 9).  Without (DFM-style ablation): PKRN of the best against the second
+        cost (eq. 8).  Without (DFM-style ablation): PKRN of the best against the second
         best in-patch cost >= dfm_pkrn_min.
         """
         best_d, best_c = best_of_three(cost, index, v, x, d, right_view, candidates)
@@ -124,7 +124,7 @@ def build(jit, shared):
 
     @jit
     def inherit_patch(cost, index, coarse, pv, pu, prc, candidates):
-        """Patch part of inheritance (eq. 7-8) for the coarse pixel (pu, pv).
+        """Patch part of inheritance (eq. 6-7) for the coarse pixel (pu, pv).
 
         Returns ``(d, least_out_l, least_out_r)``: ``d = 2 dc`` the doubled coarse
         disparity and the least outside costs of the left and the right patch, or
@@ -154,7 +154,7 @@ def build(jit, shared):
 
     @jit
     def inherit_pixel(cost, index, v, u, d, least_out_l, least_out_r, prc, dfm_pkrn_min, epsilon, candidates):
-        """Pixel part of inheritance (eq. 9) for fine pixel (u, v) of a patch that passed
+        """Pixel part of inheritance (eq. 8) for fine pixel (u, v) of a patch that passed
         :func:`inherit_patch` with ``(d, least_out_l, least_out_r)``; bidirectional as in
         LRDC: the matched right pixel must pass its own test with the same disparity."""
         dl = pixel_decisive(cost, index, v, u, d, False, prc, least_out_l, dfm_pkrn_min, epsilon, candidates)
@@ -260,7 +260,7 @@ def build(jit, shared):
 
         ``best_k, best_c``: the least in-patch cell (:func:`window_best`; the disparity
         is d - 2 + best_k); ``out_c``: the least outside cell (:func:`outside_cost`);
-        ``local_min``: C(best) < C(best - 1) and C(best) < C(best + 1) (eq. 9).  The
+        ``local_min``: C(best) < C(best - 1) and C(best) < C(best + 1) (eq. 8).  The
         patch test and the pixel test of the same pixel share it.
         """
         lo, hi = candidate_range(x, d, right_view, candidates)
@@ -421,7 +421,7 @@ def build(jit, shared):
     def inherit_at(cost, index, coarse, v, u, prc, dfm_pkrn_min, epsilon, candidates):
         """Inherited disparity of fine pixel (u, v) from the coarser map, or UNDECIDED.
 
-        Paper Algorithm 2, eq. 7-9.  The coarse pixel (u//2, v//2) with disparity dc maps
+        Paper Algorithm 2, eq. 6-8.  The coarse pixel (u//2, v//2) with disparity dc maps
         to the 2x2 left patch at columns u0 = 2(u//2) + {0, 1} and the right patch at
         x0 = u0 - 2 dc + {0, 1}; co-row partners give the in-patch disparities
         {2dc - 1, 2dc, 2dc + 1} and the pixels just beside the partner patch the outside

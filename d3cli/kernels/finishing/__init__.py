@@ -15,8 +15,8 @@ what each step means.  By concern:
   road plane map and the clamp of negative values;
 - ``range_box.py``: the box range-kernel smoothing.
 
-Every kernel gives exactly the values of the NumPy/OpenCV formulation it replaced (kept as
-the reference in ``tests/kernels/finishing/references.py``): the same float32/float64
+Every kernel gives exactly the values of a NumPy/OpenCV formulation of the same step (the
+reference in ``tests/kernels/finishing/references.py``): the same float32/float64
 operations in the same order, bit for bit.  The kernels release the GIL (``nogil``) and run
 as tasks over blocks of rows (or groups of range levels) on :mod:`d3cli.kernels.pool`; tasks
 write disjoint cells, so the results do not depend on the thread count.  This package

@@ -74,7 +74,7 @@ def numpy_expf(x):
 
     Why not numba's ``math.exp``: it calls the C library's ``expf``, which differs from
     NumPy's in the last bit for about a third of the arguments, and the smoothing's
-    reference (and so the maps this package produced so far) used ``np.exp``.
+    reference (and so every map the package writes) uses ``np.exp``.
     """
     nan = x != x
     big = x >= _EXP_XMAX

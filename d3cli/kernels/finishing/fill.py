@@ -3,7 +3,7 @@
 Row-wise filling with the smaller side (:func:`fill_rows_smaller_side`), the median of the
 four nearest values inside surfaces (:func:`nearest_along_columns`, :func:`fill_inside`),
 empty rows from the nearest filled row (:func:`copy_nearest_rows`) and the median's
-write-back (:func:`keep_valid`); each the bytes of the NumPy formulation it replaced
+write-back (:func:`keep_valid`); each the bytes of its NumPy reference formulation
 (docs/design.md, 'Finishing').
 """
 

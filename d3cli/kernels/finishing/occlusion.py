@@ -3,7 +3,7 @@
 The uniqueness test (a right-image column claimed by a larger disparity), the left-border
 test (out of view), both fused with the masking of the pipeline (:func:`drop_occluded`),
 and the validity after the restore of the perspective transformation
-(:func:`restored_validity`).  Each gives the bytes of the NumPy formulation it replaced
+(:func:`restored_validity`).  Each gives the bytes of its NumPy reference formulation
 (``tests/kernels/finishing/references.py``); see docs/design.md, 'Finishing'.
 """
 

@@ -10,7 +10,7 @@ accuracy on KITTI (README "Beside the peers"; docs/design.md, 'Finishing').
 
 The kernels run as tasks over blocks of rows on the task pool
 (:func:`d3cli.kernels.pool.run_tasks`), not with ``prange``: on a shared machine OpenMP's
-spin-waiting made two threads slower than one.
+spin-waiting makes two threads slower than one.
 """
 
 from __future__ import annotations

@@ -499,7 +499,7 @@ def _combine_task(task, tasks, low, up, base, disp, non_negative):
             d = disp[y, u]
             x = ((_F32_ZERO + low[y, u]) + up[y, u]) + base[y, u] if np.isfinite(d) else d
             # written over low through low itself: with a separate output argument that is
-            # low, the vectorised loop's runtime overlap check failed and the scalar loop ran
+            # low, the vectorised loop's runtime overlap check fails and the scalar loop runs
             low[y, u] = at_least_zero(x) if non_negative else x
 
 

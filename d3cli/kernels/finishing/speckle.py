@@ -98,8 +98,8 @@ def _drop_marked_task(task, tasks, disp, valid, fixed, out, counts):
             valid[y, u] = keep
             x = d if keep else _F32_INF
             # in place through disp itself (no output map): a separate output argument
-            # that is disp failed the vectorised loop's overlap check and the scalar loop
-            # ran
+            # that is disp fails the vectorised loop's overlap check and the scalar loop
+            # runs
             if in_place:
                 disp[y, u] = x
             else:

@@ -28,8 +28,8 @@ def ransac_inlier_counts(sols, us, vs, ds, threshold):
     -------
     ndarray, int64, (N,)
         ``count_nonzero(|ds - (a0 + b1 vs + b2 us)| <= threshold)`` per hypothesis: the
-        same float64 expression, in the same order, as the NumPy broadcast it replaced
-        (which built 50 x M temporaries per chunk), so the same counts.
+        same float64 expression, in the same order, as the NumPy broadcast of the
+        reference (which builds 50 x M temporaries per chunk), so the same counts.
     """
     out = np.empty(sols.shape[0], np.int64)
     for j in range(sols.shape[0]):
@@ -92,7 +92,7 @@ def solve_weighted(u, v, d, w, singular):
 @njit(cache=True, nogil=True, error_model="numpy")
 def irls(u, v, d, sol, threshold, iterations, tukey_c, singular):
     """Tukey-biweight IRLS of the road model from ``sol`` (a0, b1, b2): the loop of
-    :func:`d3cli.method.perspective._irls` compiled (a round there made about 25 NumPy
+    :func:`d3cli.method.perspective._irls` compiled (a round there makes about 25 NumPy
     calls over the 14,000 coarse points of a 720p road pair: 2.9 ms a fit in all, here
     a few passes).  Each round: residuals, their median absolute value as the scale
     (never below ``threshold / 2.5``), the biweights, and :func:`solve_weighted`; it

@@ -4,8 +4,8 @@ Host only: both backends build their pyramids on the host (the CUDA backend uplo
 levels), so one kernel serves both.  ``d3cli.method.pyramid`` calls it; its docstrings say
 what a level means.
 
-- ``halve.py``: the 2x2 area average that halves an image, the bytes of the NumPy
-  expression it replaced (``tests/kernels/test_pyramid.py`` holds it to that expression).
+- ``halve.py``: the 2x2 area average that halves an image, the bytes of a NumPy
+  expression (``tests/kernels/test_pyramid.py`` holds it to that expression).
 
 May import: ``d3cli.kernels.pool``, ``d3cli.kernels.cache`` (the numba cache folder, chosen on
 import), numba and numpy; no other kernel step.

@@ -4,7 +4,7 @@
 ``(0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])).astype(np.float32)``
 on a float32 image: the same three float32 additions in the same order, then the float32
 product with 0.25 (NumPy 2 keeps a Python float scalar at the array's precision).  In NumPy
-the four strided views and three temporaries took about 1.2 ms per 720p pyramid, three
+the four strided views and three temporaries take about 1.2 ms per 720p pyramid, three
 pyramids per road pair; the kernel about a tenth of that (docs/performance.md).
 """
 

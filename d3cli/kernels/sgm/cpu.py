@@ -33,9 +33,9 @@ def sgm_smooth(cost, p1, p2):
     finishes the row (a wavefront: segment j works on row v while segment j - 1 works
     further down).  Two paths per visit of a cell instead of one: each cell's cost is read
     twice instead of four times, the sums read and written twice instead of four times, a
-    pixel's band set up half as often.  A KITTI finest volume (15.4 M cells, 2 threads, in
-    one process with the driver before, which walked the row paths by rows and the column
-    paths by strips of columns): 39.0 against 44.9 ms; in the pipeline 36.8 against 42.2.
+    pixel's band set up half as often.  A driver that walks the row paths by rows and the
+    column paths by strips of columns takes about 15 % longer on a KITTI finest volume
+    (15.4 M cells, 2 threads; ``scripts/bench_speed.py``).
     """
     flat, index, n_disp, dense = _unpack(cost)
     # not zeroed in a pass of its own: the first sweep writes every cell of a band and
@@ -67,8 +67,8 @@ SGM_MIN_SEGMENT = 64
 
 #: The sweeps prefetch the cells of the pixel this many steps ahead on its row (in the
 #: volume and in the sums): a segment's stretch of a row is contiguous, but the hardware's
-#: prefetcher loses it at each page (without it a KITTI volume took 70 ms against 39-44;
-#: 8 to 16 pixels measured the same, 24 and 32 a little slower, a row ahead 43).
+#: prefetcher loses it at each page (without it a KITTI volume takes 70 ms instead of 39-44;
+#: 8 to 16 pixels give the same time, 24 and 32 a little more, a row ahead 43).
 SGM_PREFETCH_PIXELS = 8
 
 
@@ -94,7 +94,7 @@ def _segment_bounds(index, n_threads):
 
 
 #: Rows between two rows counted for the segments' shares of the cells (the bands change
-#: from tile to tile, not from row to row: every row took 0.85 ms on KITTI, every 8th 0.15).
+#: from tile to tile, not from row to row: counting every row takes 0.85 ms on KITTI, every 8th 0.15).
 SGM_SHARE_ROWS = 8
 
 
@@ -379,13 +379,13 @@ def _sgm_pixel(cost, index, v, u, p1, p2, acc, mode, pbuf_a, base_a, pm_a, cbuf_
     of n_disp + 2 cells, ``pm`` the least path cost of its previous pixel, inf at the
     path's start), in blocks of :data:`SGM_LANES` disparities.  Returns the least of this
     pixel's path costs on each path: their next steps' ``pm``, taken from the blocks as
-    they are written instead of a scan of the band (a serial chain of compares that took a
+    they are written instead of a scan of the band (a serial chain of compares that takes a
     fifth of the smoothing's time).
 
     The buffers hold inf outside the band last written into them: ``cbuf`` still holds the
     band of the pixel two steps back on its path (``back``: its (lo, hi), (0, 0) for
     none: all inf), and only its cells outside this pixel's band go back to inf (resetting
-    the whole previous band cost more: neighbouring bands mostly overlap)."""
+    the whole previous band costs more: neighbouring bands mostly overlap)."""
     off = index[v, u, 0]
     lo = index[v, u, 1]
     hi = index[v, u, 2]

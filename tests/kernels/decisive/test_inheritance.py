@@ -185,7 +185,7 @@ def test_windows_hold_the_cells_of_cost_or_inf():
 @pytest.mark.parametrize("prc", [True, False])
 def test_driver_equals_the_per_pixel_functions_on_banded_volumes(prc, candidates):
     """The drivers' per-patch form (``inherit_quad``: each cell read once) decides as the
-    per-pixel composition ``inherit_at`` of eq. 7-9 (best_of_three, outside_cost, ...)."""
+    per-pixel composition ``inherit_at`` of eq. 6-8 (best_of_three, outside_cost, ...)."""
     ops = build_ops(identity)
     rng = np.random.default_rng(50 + 2 * prc + candidates)
     n_decided = 0
