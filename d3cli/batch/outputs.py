@@ -65,8 +65,8 @@ PAIR_FILES = (RESULT_FILE, *OUTPUT_FILES, ERROR_MAP, CLOUD_FILE, PANEL_FILE, OVE
 
 def check_output_folder(out: Path, pairs) -> None:
     """Refuse an output folder whose writing could touch an input file (a ground truth
-    named ``disp.png`` in the input folder was once replaced by the prediction and then
-    scored; a link ``OUT/p1`` into the input pair had the user's files overwritten).
+    named ``disp.png`` in the input folder would be replaced by the prediction and then
+    scored; a link ``OUT/p1`` into the input pair would have the user's files overwritten).
 
     Compared by real path, so links and ``..`` hide nothing:
 
@@ -173,7 +173,7 @@ def write_disparity_outputs(
     valid : ndarray, bool, (H, W)
         Pixels the method decided itself.
     vmax : float, keyword-only
-        Unused (kept for callers of the old fixed [0, max disparity] range).
+        Unused (accepted for callers that pass a fixed [0, max disparity] range).
     left : ndarray, optional
         Left image; with it ``valid_overlay.png`` is written.
     color_range : (float, float), optional

@@ -50,7 +50,7 @@ class BatchResult:
     def counts_line(self) -> str:
         """``N ok (C computed, S skipped as complete), F failed of T pairs``: run.json's counts."""
         return (f"{self.n_computed + self.n_skipped} ok ({self.n_computed} computed, {self.n_skipped} skipped "
-                f"as complete), {self.n_failed} failed of {self.n_pairs} pairs")
+                f"as complete), {self.n_failed} failed of {self.n_pairs} pair{'' if self.n_pairs == 1 else 's'}")
 
     @property
     def n_pairs(self) -> int:

@@ -151,8 +151,8 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
         publish(staging, pair_dir, PAIR_FILES)
     except BaseException as exc:  # Ctrl-C, a full disk, a broken writer: no half pair stays behind
         discard(staging, PAIR_FILES)
-        # The old files are stale now (another fingerprint, or a failed check): as before
-        # staging, a pair that could not be written leaves nothing.
+        # The old files are stale now (another fingerprint, or a failed check): a pair
+        # that could not be written leaves nothing.
         remove_pair_files(pair_dir, remove_folder=True)
         if isinstance(exc, D3Error):
             raise named_as_target(exc, staging, pair_dir) from None
@@ -314,7 +314,7 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
         When ``cfg.run.backend`` is ``cuda`` and CUDA cannot be used (checked up front).
     """
     out, pairs = _prepare(pairs, out_dir, cfg=cfg, method=method, scheduler=scheduler, shard=shard)
-    # SIGTERM handled before the lock file exists: a kill between the two left a lock behind.
+    # SIGTERM handled before the lock file exists: a kill between the two would leave a lock behind.
     previous = sigterm_as_interrupt()
     try:
         batch = _lock_and_run(pairs, out, shard=shard, break_lock=break_lock, workers=workers, scheduler=scheduler,
@@ -423,7 +423,7 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
             # Compile before the first pair (and before a pool fans out): no pair's time includes it.
             # Ctrl-C/SIGTERM are held until the kernels are loaded: numba loads a cached
             # kernel through a ctypes callback of llvmlite, and a KeyboardInterrupt raised
-            # inside it crashed the process (SIGSEGV, exit -11 instead of 130; seen once in
+            # inside it can crash the process (SIGSEGV, exit -11 instead of 130; rare, seen in
             # tests/batch/test_interrupts.py).  The interrupt is delivered right after.
             with signals_deferred():
                 meta["compile_s"] = round(executor.warm(cfg, method), 3) if pairs else 0.0
@@ -456,8 +456,8 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
     except KeyboardInterrupt as exc:
         # After the last pair, while the summary files are written: recorded as an
         # interruption (a rerun writes them) unless run.json already records the batch
-        # complete.  Then a Ctrl-C is ignored (exit 0; it gave 130 and "rerun the same
-        # command to resume" beside a run.json saying the batch was complete: CI,
+        # complete.  Then a Ctrl-C is ignored (exit 0, not 130 and "rerun the same command
+        # to resume" beside a run.json saying the batch was complete:
         # tests/batch/test_interrupts.py's eight moments) and a SIGTERM recorded (143).
         if not batch.recorded:
             raise _interrupted(batch, records, meta, None, exc) from None

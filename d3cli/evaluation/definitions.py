@@ -1,8 +1,9 @@
 """Names, units and exact definitions of every metric column, for people reading a report.
 
-One table (:data:`METRICS`) that report.html's column headers and definitions section,
+One table (:data:`METRICS`) that report.html's column heads and definitions section,
 summary.md's tables and the terminal table all read, so a column has the same name and
-unit everywhere ("EPE [px]", "bad 2 (non-occ.) [%]", "PEP 3 [%]").
+unit everywhere ("EPE [px]", "bad 2 (non-occ.) [%]", "PEP 3 [%]").  Which columns a
+report shows is chosen in one place, :func:`d3cli.evaluation.summary.shown_columns`.
 """
 
 from __future__ import annotations
@@ -30,8 +31,6 @@ class Metric:
         Unit ("px", "%", "dB", "s"); empty for a pure number.
     decimals : int
         Decimals shown in tables.
-    short : str
-        Column head of the fixed-width terminal table.
     definition : str
         One sentence that says exactly how the value is computed.
     """
@@ -39,7 +38,6 @@ class Metric:
     name: str
     unit: str
     decimals: int
-    short: str
     definition: str
 
     @property
@@ -74,52 +72,67 @@ def _benchmark_metrics() -> dict[str, Metric]:
     """The KITTI/Middlebury figures of :func:`d3cli.evaluation.metrics.benchmark_metrics`."""
     out: dict[str, Metric] = {}
     for mask, where in _MASK_NAMES.items():
-        out[f"d1_{mask}"] = Metric(f"D1 ({where})", "%", 2, f"D1{mask}", (
+        out[f"d1_{mask}"] = Metric(f"D1 ({where})", "%", 2, (
             f"KITTI outliers: 100 x share of the pixels with e > {D1_PIXELS:g} px and e > "
             f"{100 * D1_RELATIVE:g} % of gt."))
         for t in BAD_THRESHOLDS:
-            out[f"bad_{t:g}_{mask}"] = Metric(f"bad {t:g} ({where})", "%", 2, f"bad{t:g}{mask}", (
+            out[f"bad_{t:g}_{mask}"] = Metric(f"bad {t:g} ({where})", "%", 2, (
                 f"Middlebury bad-{t:g}: 100 x share of the pixels with e > {t:g} px."))
-        out[f"avgerr_{mask}"] = Metric(f"avg. error ({where})", "px", 3, f"avg{mask}", "Mean of e.")
-        out[f"rms_{mask}"] = Metric(f"RMS ({where})", "px", 3, f"rms{mask}", "Root of the mean of e squared.")
+        out[f"avgerr_{mask}"] = Metric(f"avg. error ({where})", "px", 3, "Mean of e.")
+        out[f"rms_{mask}"] = Metric(f"RMS ({where})", "px", 3, "Root of the mean of e squared.")
         for q in QUANTILES:
             k = round(q * 100)
-            out[f"a{k}_{mask}"] = Metric(f"A{k} ({where})", "px", 3, f"A{k}{mask}", (
+            out[f"a{k}_{mask}"] = Metric(f"A{k} ({where})", "px", 3, (
                 f"Error quantile: the smallest e with at least {k} % of the pixels at or below it."))
     for part, what in (("bg", "background (KITTI object map 0)"), ("fg", "foreground (object map > 0)")):
-        out[f"d1_{part}"] = Metric(f"D1 ({part})", "%", 2, f"D1{part}", f"D1 over the {what} pixels with ground truth.")
+        out[f"d1_{part}"] = Metric(f"D1 ({part})", "%", 2, f"D1 over the {what} pixels with ground truth.")
     return out
 
 
 def _pixel_metrics() -> dict[str, Metric]:
     """EPE, PEP and density of :func:`d3cli.evaluation.metrics.disparity_errors`."""
-    out = {"epe": Metric("EPE", "px", 3, "EPE", (
+    out = {"epe": Metric("EPE", "px", 3, (
         "End-point error: mean of e, over the non-occluded pixels where a mask exists, else all."))}
     for t in PEP_THRESHOLDS:
-        out[pep_key(t)] = Metric(f"PEP {t:g}", "%", 2, f"PEP{t:g}", (
+        out[pep_key(t)] = Metric(f"PEP {t:g}", "%", 2, (
             f"Percentage of error pixels: 100 x share of EPE's pixels with e > {t:g} px."))
-    out["density"] = Metric("density", "%", 2, "dens%", "100 x share of EPE's pixels that have an estimate.")
+    out["density"] = Metric("density", "%", 2, "100 x share of EPE's pixels that have an estimate.")
     return out
 
 
 #: Every metric column: key -> :class:`Metric`.
 METRICS: dict[str, Metric] = {
     **_pixel_metrics(),
-    "mse": Metric("MSE", "", 2, "MSE", (
+    "mse": Metric("MSE", "", 2, (
         "Photometric: mean squared difference (0-255 scale) between the left image and the right "
         "image warped into the left view with the estimate, over the covered pixels.")),
-    "psnr": Metric("PSNR", "dB", 2, "PSNR", "10 log10(255^2 / MSE)."),
-    "ssim": Metric("SSIM", "", 4, "SSIM", (
+    "psnr": Metric("PSNR", "dB", 2, "10 log10(255^2 / MSE)."),
+    "ssim": Metric("SSIM", "", 4, (
         "Structural similarity of the left and the warped right image (Gaussian window, sigma 1.5), "
         "mean over the covered pixels.")),
-    "coverage": Metric("coverage", "%", 2, "cov%", (
+    "coverage": Metric("coverage", "%", 2, (
         "100 x share of all pixels with an estimate whose match lies inside the right image.")),
     **_benchmark_metrics(),
-    "time_s": Metric("time", "s", 2, "time_s", (
+    "time_s": Metric("time", "s", 2, (
         "Wall time of the pair in the run that made its map: reading, matching, writing and scoring.")),
 }
 
 
+#: Columns measured without ground truth (photometric scores, time).
+WITHOUT_GT = frozenset({"mse", "psnr", "ssim", "coverage", "time_s"})
+
+
+def pixels_note(keys) -> str:
+    """What the definitions of ``keys`` rest on: :data:`EVALUATED` when a ground-truth
+    column is among them, and :data:`PIXEL_SETS` when one is named "(all)" or "(non-occ.)";
+    "" for columns that need neither."""
+    keys = list(keys)
+    parts = [EVALUATED] if any(key not in WITHOUT_GT for key in keys) else []
+    if any("(all)" in metric(key).name or "(non-occ.)" in metric(key).name for key in keys):
+        parts.append(PIXEL_SETS)
+    return " ".join(parts)
+
+
 def metric(key: str) -> Metric:
     """The :class:`Metric` of a column; an unknown key is its own name, with no unit or definition."""
-    return METRICS.get(key) or Metric(key, "", 3, key, "")
+    return METRICS.get(key) or Metric(key, "", 3, "")

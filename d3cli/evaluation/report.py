@@ -8,7 +8,11 @@ A *row* is one pair's outcome, a plain dict::
 ``status`` is ``"ok"``, ``"failed"`` (``error`` holds the message) or ``"skipped"``
 (``error`` holds the reason).  Metric keys are those of :data:`METRIC_COLUMNS`
 (see :mod:`d3cli.evaluation.metrics`); a missing or NaN value means "not measured" (e.g. no
-ground truth), never zero.
+ground truth), never zero.  ``warnings`` (optional) lists the pair's warnings as its
+result.json has them (e.g. "were left and right swapped?").
+
+metrics.csv and summary.json keep every figure; the tables people read (terminal,
+summary.md, report.html) show the columns :func:`shown_columns` chooses.
 
 Means (:func:`summarize`) are plain means of the per-pair values over the ``ok`` pairs
 that have the value: EPE/PEP/density over the pairs with ground truth, photometric
@@ -37,14 +41,17 @@ from .summary import (  # noqa: F401 - the row columns and summarize are read fr
     METRIC_COLUMNS,
     NO_FAMILY,
     PHOTOMETRIC_COLUMNS,
+    SHOWN_GT_COLUMNS,
+    SHOWN_PHOTOMETRIC_COLUMNS,
     STATUSES,
+    plural,
+    shown_columns,
     summarize,
 )
 from .tables import (  # noqa: F401 - the tables are read from here too
     DECIMALS,
     LABELS,
     MISSING,
-    SHORT_LABELS,
     counts_sentence,
     format_table,
     one_line,

@@ -1,4 +1,5 @@
-"""Summaries of pair rows: counts, per-family and overall means, failures and warnings.
+"""Summaries of pair rows: counts, per-family and overall means, failures and warnings,
+and the columns every report shows (:func:`shown_columns`).
 
 Rows are described in :mod:`d3cli.evaluation.report`.  Means are plain means of the
 per-pair values over the ``ok`` pairs that have the value; failed pairs are listed with
@@ -43,6 +44,15 @@ MEAN_KEYS = [*METRIC_COLUMNS, *BENCHMARK_COLUMNS, "time_s"]
 #: Family label of rows whose ``family`` is empty.
 NO_FAMILY = "other"
 
+#: Ground-truth columns the reports show (terminal, summary.md, report.html), in order:
+#: the mean error, the paper's three outlier shares, KITTI's D1 and the density.  PEP 3 is
+#: left out (it is D1 without D1's 5 % clause); metrics.csv and summary.json keep every figure.
+SHOWN_GT_COLUMNS = ["epe", "pep_0.5", "pep_1", "pep_2", "d1_all", "density"]
+
+#: Photometric columns the reports show for pairs without ground truth (MSE is left out:
+#: PSNR is MSE on a log scale).
+SHOWN_PHOTOMETRIC_COLUMNS = ["psnr", "ssim", "coverage"]
+
 
 def summarize(rows: Iterable[Mapping]) -> dict:
     """Counts, overall and per-family means, and the list of failures.
@@ -64,7 +74,9 @@ def summarize(rows: Iterable[Mapping]) -> dict:
         ``failures``: ``[{"pair", "family", "error"}]``;
         ``skipped``: ``[{"pair", "family", "reason"}]``;
         ``warnings``: ``[{"pair", "family", "warning"}]``, one per entry of a row's
-        ``warnings`` list (e.g. "the pair may be unrectified or swapped").
+        ``warnings`` list (e.g. "the pair may be unrectified or swapped");
+        ``columns``: the metric keys every report of these rows shows, then ``time_s``
+        (:func:`shown_columns`).
 
     Raises
     ------
@@ -98,7 +110,57 @@ def summarize(rows: Iterable[Mapping]) -> dict:
             for row in rows
             for text in (row.get("warnings") or [])
         ],
+        "columns": shown_columns(rows),
     }
+
+
+def shown_columns(rows: Iterable[Mapping]) -> list[str]:
+    """The columns the terminal, summary.md and report.html show for ``rows``, in order.
+
+    The ground-truth columns (:data:`SHOWN_GT_COLUMNS`) when some ok pair has ground truth
+    (a numeric EPE); the photometric ones (:data:`SHOWN_PHOTOMETRIC_COLUMNS`) when some ok
+    pair without ground truth has photometric scores, so a batch mixing road sequences with
+    benchmark pairs shows both; of each set only the columns some ok pair has a value for;
+    then ``time_s``, always.  An unscored run (no ``--eval``) shows time alone.
+    """
+    ok = [row for row in rows if row.get("status") == "ok"]
+    with_gt = [row for row in ok if as_number(row.get("epe")) is not None]
+    without_gt = [row for row in ok if as_number(row.get("epe")) is None]
+
+    def present(keys: list[str], some: list[Mapping]) -> list[str]:
+        return [key for key in keys if any(as_number(row.get(key)) is not None for row in some)]
+
+    return [*present(SHOWN_GT_COLUMNS, with_gt), *present(SHOWN_PHOTOMETRIC_COLUMNS, without_gt), "time_s"]
+
+
+def columns_of(summary: Mapping) -> list[str]:
+    """``summary["columns"]``; for a summary without them (an older summary.json), the same
+    choice made from the overall means."""
+    if summary.get("columns"):
+        return list(summary["columns"])
+    overall = summary["overall"]
+    means = overall["means"]
+    gt = [key for key in SHOWN_GT_COLUMNS if means.get(key) is not None] if overall["with_gt"] else []
+    photometric = ([key for key in SHOWN_PHOTOMETRIC_COLUMNS if means.get(key) is not None]
+                   if overall["ok"] > overall["with_gt"] else [])
+    return [*gt, *photometric, "time_s"]
+
+
+def plural(n: int, word: str, words: str | None = None) -> str:
+    """``1 pair``, ``2 pairs``, ``0 pairs``; ``words`` for an irregular plural."""
+    return f"{n} {word if n == 1 else words or word + 's'}"
+
+
+def problems_sentence(summary: Mapping) -> str:
+    """The per-pair warnings and errors counted: ``3 warnings on 1 pair, 1 error.`` (an
+    error: a failed pair's message); ``No warnings, no errors.`` when there are none."""
+    n_warnings = len(summary.get("warnings") or [])
+    warned = len({item["pair"] for item in summary.get("warnings") or []})
+    n_errors = len(summary.get("failures") or [])
+    if not n_warnings and not n_errors:
+        return "No warnings, no errors."
+    text = plural(n_warnings, "warning") + (f" on {plural(warned, 'pair')}" if n_warnings else "")
+    return f"{text}, {plural(n_errors, 'error')}."
 
 
 def checked_row(row: Mapping) -> dict:

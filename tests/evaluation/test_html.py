@@ -121,39 +121,44 @@ def test_histogram_of_equal_values_near_the_float_limit():
     assert svg.count(": 1</title>") == 2
 
 
-def test_columns_have_names_with_units_and_are_defined_in_the_page(tmp_path):
+def test_columns_have_names_with_units_and_only_the_shown_ones_are_defined(tmp_path):
     rows = [{"pair": "a", "family": "k", "status": "ok", "epe": 1.25, "d1_all": 4.0, "bad_2_noc": 7.5,
              "pep_3": 3.0, "a90_noc": 2.0, "time_s": 1.5},
             {"pair": "b", "family": "k", "status": "failed", "error": "b: right.png: not a PNG file;\n  fix it"},
             {"pair": "c", "family": "k", "status": "skipped", "error": "no right image"}]
     text = write_report_html(tmp_path, rows, title="t").read_text()
     heads = re.findall(r'<th title="[^"]*">([^<]*)</th>', text[:text.index("<h2>Means per family")])
-    assert heads == ["EPE [px]", "D1 (all) [%]", "bad 2 (non-occ.) [%]", "A90 (non-occ.) [px]", "PEP 3 [%]", "time [s]"]
+    # The shown columns (summary.shown_columns): bad 2, A90 and PEP 3 stay in metrics.csv.
+    assert heads == ["EPE [px]", "D1 (all) [%]", "time [s]"]
     d1_definition = "KITTI outliers: 100 x share of the pixels with e &gt; 3 px and e &gt; 5 % of gt."
     assert f'<th title="{d1_definition}">D1 (all) [%]</th>' in text
     definitions = text[text.index('<h2 id="definitions">'):text.index("<h2>Config")]
-    assert re.findall(r"<dt>(.*?)</dt>", definitions) == heads
-    assert "<dd>Middlebury bad-2: 100 x share of the pixels with e &gt; 2 px.</dd>" in definitions
+    assert re.findall(r"<dt>(.*?)</dt>", definitions) == heads  # defined: what is shown, nothing else
+    assert "bad-2" not in text and "A90" not in text and "PEP 3" not in text
     assert "a pixel without an estimate counts as d = 0" in definitions and "README" not in text
     failed = text[text.index('<h2 id="failures">Failed pairs</h2>'):text.index('<h2 id="definitions">')]
     assert "<li><b>b</b>: right.png: not a PNG file; fix it</li>" in failed  # the pair named once
-    assert '<td title="b: right.png: not a PNG file;\n  fix it"><a href="#failures">failed</a></td>' in text
+    pair_b = text[text.index('<tbody><tr class="failed"><td class="t">b</td>'):]
+    pair_b = pair_b[:pair_b.index("</tbody>")]
+    assert '<a href="#failures">failed</a>' in pair_b  # the status links to the list ...
+    assert pair_b.endswith('<tr class="failed"><td class="msg" colspan="6">right.png: not a PNG file; fix it</td></tr>')
     assert '<h2 id="skipped">Left-out pairs</h2><ul class="failed">\n<li><b>c</b>: no right image</li>' in failed
-    assert "<b>a</b> EPE 1.250 px, D1 (all) 4.00 %, A90 (non-occ.) 2.000 px<br>" in text
+    assert "<b>a</b> EPE 1.250 px, D1 (all) 4.00 %<br>" in text
     assert "<h2>Histogram of per-pair EPE [px]</h2>" in text
+    assert '<p class="problems failed">0 warnings, <a href="#failures">1 error</a>.' in text
 
 
 def test_summary_md_names_the_columns_as_the_page_does_and_defines_them(tmp_path):
     from d3cli.evaluation.report import write_summary
 
-    rows = [{"pair": "a", "family": "k", "status": "ok", "epe": 1.0, "pep_3": 2.0, "time_s": 1.0}]
+    rows = [{"pair": "a", "family": "k", "status": "ok", "epe": 1.0, "pep_1": 2.0, "time_s": 1.0}]
     _, md = write_summary(tmp_path, rows, method="m")
     lines = md.read_text().splitlines()
-    assert "| pair | status | EPE [px] | PEP 3 [%] | time [s] |" in lines
+    assert "| pair | status | EPE [px] | PEP 1 [%] | time [s] |" in lines
     tail = lines[lines.index("## Definitions"):]
     assert tail[4:] == ["- **EPE [px]**: End-point error: mean of e, over the non-occluded pixels where a mask "
                         "exists, else all.",
-                        "- **PEP 3 [%]**: Percentage of error pixels: 100 x share of EPE's pixels with e > 3 px.",
+                        "- **PEP 1 [%]**: Percentage of error pixels: 100 x share of EPE's pixels with e > 1 px.",
                         "- **time [s]**: Wall time of the pair in the run that made its map: reading, matching, "
                         "writing and scoring."]
 

@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -172,19 +173,23 @@ def test_summary_markdown_tables_and_failures(tmp_path):
     assert "6 pairs: 4 ok, 1 failed, 1 skipped." in lines
     for family in ("kitti2012", "middlebury2014", "road", "Overall", "Failed pairs", "Skipped pairs"):
         assert f"## {family}" in lines
+    assert "0 warnings, 1 error." in lines
+    # The columns every report shows (summary.shown_columns): ground-truth ones for the pairs
+    # with ground truth, photometric ones (no MSE) for the road pair without; PEP 3 stays in
+    # metrics.csv.
     header = (
-        "| pair | status | EPE [px] | PEP 0.5 [%] | PEP 1 [%] | PEP 2 [%] | PEP 3 [%] | density [%] "
-        "| MSE | PSNR [dB] | SSIM | coverage [%] | time [s] |"
+        "| pair | status | EPE [px] | PEP 0.5 [%] | PEP 1 [%] | PEP 2 [%] | density [%] "
+        "| PSNR [dB] | SSIM | coverage [%] | time [s] |"
     )
     assert header in lines
-    no_photo = "| n/a | n/a | n/a | n/a |"
-    no_gt = "| n/a | n/a | n/a | n/a | n/a | n/a |"
-    assert f"| kitti2012_a | ok | 1.000 | 40.00 | 20.00 | 10.00 | 5.00 | 90.00 {no_photo} 2.00 |" in lines
-    assert f"| kitti2012_f | failed {no_gt} n/a | n/a | n/a | n/a | n/a |" in lines
-    assert f"| **mean** | 2 ok | 1.500 | 50.00 | 25.00 | 15.00 | 10.00 | 80.00 {no_photo} 3.00 |" in lines
-    assert f"| road | 1 | 0 {no_gt} 10.00 | 38.12 | 0.9000 | 95.00 | 3.00 |" in lines
-    overall = "| **overall** | 4 | 3 | 1.167 | 36.67 | 18.33 | 10.67 | 7.00 | 86.33 "
-    assert overall + "| 10.00 | 38.12 | 0.9000 | 95.00 | 2.50 |" in lines
+    no_photo = "| n/a | n/a | n/a |"
+    no_gt = "| n/a | n/a | n/a | n/a | n/a |"
+    assert f"| kitti2012_a | ok | 1.000 | 40.00 | 20.00 | 10.00 | 90.00 {no_photo} 2.00 |" in lines
+    assert f"| kitti2012_f | failed {no_gt} n/a | n/a | n/a | n/a |" in lines
+    assert f"| **mean** | 2 ok | 1.500 | 50.00 | 25.00 | 15.00 | 80.00 {no_photo} 3.00 |" in lines
+    assert f"| road | 1 | 0 {no_gt} 38.12 | 0.9000 | 95.00 | 3.00 |" in lines
+    overall = "| **overall** | 4 | 3 | 1.167 | 36.67 | 18.33 | 10.67 | 86.33 "
+    assert overall + "| 38.12 | 0.9000 | 95.00 | 2.50 |" in lines
     assert lines.index("## Overall") > lines.index("## road")
     assert f"- kitti2012_f: {FAIL_MSG}" in lines
     assert "- road_s: no right image" in lines
@@ -225,13 +230,12 @@ def test_side_by_side_layout():
     lines = side_by_side({"d3stereo": ours, "sgbm": sgbm}).splitlines()
     assert lines[0] == "| family | metric | d3stereo | sgbm |"
     assert lines[1] == "| --- | --- | ---: | ---: |"
-    assert lines[2:11] == [
+    assert lines[2:10] == [
         "| kitti2012 | pairs with gt | 2 | 2 |",
         "|  | EPE [px] | 1.500 | 2.500 |",
         "|  | PEP 0.5 [%] | 50.00 | 70.00 |",
         "|  | PEP 1 [%] | 25.00 | 35.00 |",
         "|  | PEP 2 [%] | 15.00 | 20.00 |",
-        "|  | PEP 3 [%] | 10.00 | 12.50 |",
         "|  | density [%] | 80.00 | 60.00 |",
         "|  | time [s] | 3.00 | 0.38 |",
         "| middlebury2014 | pairs with gt | 1 | 0 |",
@@ -242,7 +246,6 @@ def test_side_by_side_layout():
     road = lines.index("| road | pairs with gt | 0 | 0 |")
     overall = lines.index("| **overall** | pairs with gt | 3 | 2 |")
     assert lines[road + 1 : overall] == [  # no method has ground truth here: no EPE rows
-        "|  | MSE | 10.00 | n/a |",
         "|  | PSNR [dB] | 38.12 | n/a |",
         "|  | SSIM | 0.9000 | n/a |",
         "|  | coverage [%] | 95.00 | n/a |",
@@ -260,13 +263,67 @@ def test_format_table_is_fixed_width():
     lines = format_table(summary).splitlines()
     assert lines[0] == "d3stereo: 4 ok, 1 failed, 1 skipped of 6 pairs"
     header, *body = lines[1:6]
-    assert header.split() == ["family", "ok", "gt", "EPE", "PEP0.5", "PEP1", "PEP2", "PEP3", "dens%",
-                              "MSE", "PSNR", "SSIM", "cov%", "time_s"]
+    assert re.split(r"\s{2,}", header) == ["family", "ok", "with gt", "EPE [px]", "PEP 0.5 [%]", "PEP 1 [%]",
+                                           "PEP 2 [%]", "density [%]", "PSNR [dB]", "SSIM", "coverage [%]", "time [s]"]
     assert [line.split()[0] for line in body] == ["kitti2012", "middlebury2014", "road", "overall"]
     assert body[0].split()[:4] == ["kitti2012", "2", "2", "1.500"]
     assert body[-1].split()[3] == "1.167"
     assert len({len(line) for line in [header, *body]}) == 1  # right-aligned numbers: same width
     assert lines[6] == f"failed kitti2012_f: {FAIL_MSG}"
+    assert len(lines) == 7  # no warnings: no warnings line
+
+
+def test_terminal_summary_md_and_page_show_the_same_columns(tmp_path):
+    from d3cli.evaluation.html import write_report_html
+
+    rows = make_rows()
+    rows[0]["d1_all"], rows[0]["a90_noc"] = 4.0, 2.5  # D1 is shown, A90 is not
+    rows[1]["warnings"] = ["were left and right swapped?", "few seeds"]
+    summary = {"method": "m", **summarize(rows)}
+    terminal = format_table(summary).splitlines()
+    terminal_heads = re.split(r"\s{2,}", terminal[1])
+    _, md = write_summary(tmp_path, rows, method="m")
+    md_lines = md.read_text().splitlines()
+    overall = md_lines[md_lines.index("## Overall") + 2]
+    md_heads = [cell.strip() for cell in overall.strip("|").split("|")]
+    page = write_report_html(tmp_path, rows, title="t").read_text()
+    means = page[page.index("<h2>Means per family"):page.index("</thead>", page.index("<h2>Means per family"))]
+    page_heads = re.findall(r"<th[^>]*>([^<]*)</th>", means)
+    expected = ["family", "ok", "with gt", "EPE [px]", "PEP 0.5 [%]", "PEP 1 [%]", "PEP 2 [%]", "D1 (all) [%]",
+                "density [%]", "PSNR [dB]", "SSIM", "coverage [%]", "time [s]"]
+    assert terminal_heads == md_heads == page_heads == expected
+    # The per-pair tables too: summary.md's family tables and the page's pair table.
+    pair_md = next(line for line in md_lines if line.startswith("| pair | status |"))
+    pairs = page[page.index('<h2 id="pairs">'):page.index("</thead>", page.index('<h2 id="pairs">'))]
+    assert [c.strip() for c in pair_md.strip("|").split("|")][2:] == re.findall(r"<th[^>]*>([^<]*)</th>", pairs)[3:]
+    # The same means in all three: kitti2012's D1 is the one pair's 4.00.
+    assert terminal[2].split()[:9] == ["kitti2012", "2", "2", "1.500", "50.00", "25.00", "15.00", "4.00", "80.00"]
+    assert "| kitti2012 | 2 | 2 | 1.500 | 50.00 | 25.00 | 15.00 | 4.00 | 80.00 | n/a | n/a | n/a | 3.00 |" in md_lines
+    assert ("<tr><td class=\"t\">kitti2012</td><td>2</td><td>2</td><td>1.500</td><td>50.00</td><td>25.00</td>"
+            "<td>15.00</td><td>4.00</td><td>80.00</td>") in page
+    # The warnings: counted in the terminal, beside the pair in summary.md, counted at its top.
+    assert terminal[-1] == ("2 warnings on 1 pair: kitti2012_b (each pair's warnings are in report.html and "
+                            "its result.json)")
+    assert any(line.startswith("| kitti2012_b | ok, 2 warnings | 2.000 |") for line in md_lines)
+    assert "2 warnings on 1 pair, 1 error. Each warning is listed under Warnings below." in md_lines
+    # Definitions: the shown columns, no other.
+    defined = [line.split("**")[1] for line in md_lines[md_lines.index("## Definitions"):] if line.startswith("- **")]
+    assert defined == expected[3:]
+
+
+def test_one_pair_is_one_pair(tmp_path):
+    rows = [gt_row("a", "synth", 1.0, (1.0, 1.0, 1.0, 1.0), 100.0, 1.0)]
+    summary = summarize(rows)
+    assert format_table(summary).splitlines()[0] == "1 ok, 0 failed, 0 skipped of 1 pair"
+    _, md = write_summary(tmp_path, rows, method="m")
+    assert "1 pair: 1 ok, 0 failed, 0 skipped." in md.read_text().splitlines()
+    assert "No warnings, no errors." in md.read_text().splitlines()
+    rows += [gt_row("b", "synth", 1.0, (1.0, 1.0, 1.0, 1.0), 100.0, 1.0)]
+    rows[1]["warnings"] = ["one"]
+    assert format_table(summarize(rows)).splitlines()[-1].startswith("1 warning on 1 pair: b ")
+    _, md = write_summary(tmp_path, rows, method="m")
+    assert "2 pairs: 2 ok, 0 failed, 0 skipped." in md.read_text().splitlines()
+    assert "| b | ok, 1 warning | 1.000 | 1.00 | 1.00 | 1.00 | 100.00 | 1.00 |" in md.read_text().splitlines()
 
 
 def test_metric_columns_order():
@@ -276,7 +333,7 @@ def test_metric_columns_order():
 def test_huge_values_are_written_in_exponent_notation(tmp_path):
     from d3cli.evaluation.html import write_report_html
 
-    rows = [{"pair": "a", "family": "k", "status": "ok", "epe": 3e38, "pep_3": 100.0, "time_s": 1.0}]
+    rows = [{"pair": "a", "family": "k", "status": "ok", "epe": 3e38, "pep_1": 100.0, "time_s": 1.0}]
     _, md = write_summary(tmp_path, rows, method="m")
     assert "| a | ok | 3.000e+38 | 100.00 | 1.00 |" in md.read_text().splitlines()
     page = write_report_html(tmp_path, rows, title="t").read_text()
