@@ -21,7 +21,8 @@ PAGES = ["index", "getting-started", "cli", "datasets", "configuration", "road",
 #: The pages that describe the product (using it, the method, the reference): no project
 #: history and no numbers the program cannot keep true.
 PRODUCT_PAGES = ["index", "getting-started", "cli", "datasets", "configuration", "failures", "method",
-                 "metrics", "paper", "design", "development", "api"]
+                 "metrics", "paper", "design", "development", "api", "results", "road", "scaling", "gpu",
+                 "performance"]
 
 
 @pytest.fixture(scope="module")
@@ -159,3 +160,8 @@ def test_configuration_prose_restates_no_default_and_its_example_edits_the_road_
     mine = load_config(tmp_path / "my-road.yaml")
     assert mine == load_config("road", [f"cost.window={window}"])
     assert mine.cost.window != load_config("road").cost.window
+
+
+def test_the_performance_page_is_figures_not_a_chronicle():
+    # The current figures, how to reproduce them and a short table of alternatives not taken.
+    assert len(_markdown("performance").splitlines()) <= 300
