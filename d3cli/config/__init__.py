@@ -3,7 +3,7 @@
 A configuration is built in three layers, later ones winning:
 
 1. the defaults written in the dataclasses (``sections``),
-2. a YAML file (``-c FILE``) or a bundled config (``-c road``; ``d3cli/configs/default.yaml``
+2. a YAML file (``-c FILE``) or a bundled config (``-c road``; ``configs/default.yaml``
    documents every key),
 3. ``--set section.key=value`` overrides (values parsed as YAML scalars).
 
@@ -21,7 +21,7 @@ May import: :mod:`d3cli.errors` only (and PyYAML); every other room may import t
 """
 
 from ..errors import ConfigError
-from .checks import MAX_CONFIG_INT, QUOTE_CHARS, quote
+from .checks import MAX_CONFIG_INT, QUOTE_CHARS, quote, shorten
 from .load import bundled_configs, config_from_dict, load_config, resolve_config
 from .sections import (
     BACKENDS,
@@ -83,6 +83,7 @@ __all__ = [
     "parse_override",
     "parse_yaml",
     "quote",
+    "shorten",
     "read_bounded",
     "read_yaml",
     "read_yaml_lines",

@@ -1,8 +1,9 @@
 """Building a configuration: defaults, then a YAML file, then ``--set`` overrides.
 
 A config is a YAML file or the name of one of the configs bundled in the package
-(``d3cli/configs/NAME.yaml``: ``road``, ``kitti``, ...), so ``-c road`` and
-``load_config("road")`` work from an installed wheel as from a checkout.
+(``configs/NAME.yaml`` of the checkout, shipped in the wheel as ``d3cli/configs``:
+``road``, ``kitti``, ...), so ``-c road`` and ``load_config("road")`` work from an
+installed wheel as from a checkout.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from pathlib import Path
 from typing import Iterator, Mapping
 
 from ..errors import ConfigError
-from .checks import apply_mapping
+from .checks import apply_mapping, shorten
 from .sections import Config
 from .yamlfile import parse_override, read_yaml_lines
 
@@ -40,8 +41,9 @@ def bundled_configs() -> dict[str, Path]:
 
 
 def _bundled_name(given: Path) -> str | None:
-    """The bundled config a value may name: ``road``, ``road.yaml`` or, as in a source
-    checkout before the configs moved into the package, ``configs/road.yaml``."""
+    """The bundled config a value may name: ``road``, ``road.yaml`` or ``configs/road.yaml``
+    (its path in a source checkout, whose top-level ``configs/`` folder the package's
+    ``d3cli/configs`` links to), so the checkout's path works from any folder."""
     parts = given.parts
     if len(parts) == 2 and parts[0] == BUNDLED_FOLDER and given.suffix == ".yaml":
         return given.stem
@@ -141,7 +143,8 @@ def load_config(path: str | os.PathLike | None = None, overrides: typing.Iterabl
         cfg = apply_mapping(cfg, data, str(path), lines)
     for text in overrides:
         section, key, value = parse_override(text)
-        cfg = apply_mapping(cfg, {section: {key: value}}, f"--set {text}")
+        # The option as written, cut: a 100,000-character value must not fill the message.
+        cfg = apply_mapping(cfg, {section: {key: value}}, f"--set {shorten(text)}")
     where = " and ".join(filter(None, [str(path) if path is not None else "", "--set" if overrides else ""]))
     _check_depth_range(cfg, where or "defaults")
     return cfg

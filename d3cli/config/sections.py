@@ -1,6 +1,6 @@
 """The configuration's sections: one frozen dataclass per YAML section, with every default.
 
-``d3cli/configs/default.yaml`` documents every key; :mod:`d3cli.config.checks` holds the range
+``configs/default.yaml`` (in the wheel ``d3cli/configs``) documents every key; :mod:`d3cli.config.checks` holds the range
 checks and :mod:`d3cli.config.load` builds a :class:`Config` from a file and ``--set``.
 """
 
@@ -33,9 +33,9 @@ class PyramidConfig:
     band: bool = True  # levels below the coarsest search a band around the coarser level's map (docs/design.md, 'Pyramid and bands')
     band_margin: int = 2  # the band: 2 d_coarse +- this many disparities, hull over a tile and its neighbours
     band_tile: int = 32  # tile size (pixels of the level); a tile searches the hull over itself and its 8 neighbours
-    # The tile at full resolution (level 1); None: band_tile.  16 by default since
-    # 2026-11-28 (session 16): on the 22 Middlebury pairs the same maps to 0.01 EPE as 32
-    # (1.351 / 20.09 / 12.53 / 8.89 against 1.350 / 20.09 / 12.51 / 8.85; 8: 1.386) in about
+    # The tile at full resolution (level 1); None: band_tile.  16 by default: on the 22
+    # Middlebury pairs the same maps to 0.01 EPE as 32 (EPE / PEP0.5 / PEP1 / PEP2 1.351 /
+    # 20.09 / 12.53 / 8.89 against 1.350 / 20.09 / 12.51 / 8.85; 8: EPE 1.386) in about
     # 7 % less time on Middlebury-Q (the finest level's bands are its NCC, smoothing,
     # inheritance and diffusion cells); tiles of 16 at every level lose (1.395: a coarse
     # band too narrow is not made good below).  kitti.yaml takes 24.  docs/performance.md
@@ -74,17 +74,17 @@ class AggregationConfig:
 
     rbf: bool = True  # False: one-pass plain bilateral filter of radius kappa_a (ablation)
     t_max: int = 4  # RBF passes of the 3x3 kernel (every level below full resolution, see finest_t_max)
-    # RBF passes at full resolution (level 1); None: t_max.  0 by default since 2026-11-28:
-    # there the semi-global smoothing of the cost (below) follows, and the raw NCC under it
-    # measured better than 4 passes on the Middlebury and KITTI pairs (EPE and PEP1) at a
-    # third less time per pair (the filter and its weights were a quarter of it); below full
+    # RBF passes at full resolution (level 1); None: t_max.  0 by default: there the
+    # semi-global smoothing of the cost (below) follows, and the raw NCC under it measures
+    # better than 4 passes on the Middlebury and KITTI pairs (EPE and PEP1) at a third less
+    # time per pair (the filter and its weights take a quarter of it); below full
     # resolution, where no smoothing runs, the filter keeps the coarse maps and with them
-    # the bands narrow (0 there too doubled the decisions' and the diffusion's time).
+    # the bands narrow (0 there too doubles the decisions' and the diffusion's time).
     # docs/performance.md, 'Default settings'; paper.yaml: None (the paper's RBF everywhere)
     finest_t_max: int | None = 0
     # RBF passes per level, finest first (the last value for every coarser level); () uses
-    # finest_t_max and t_max.  No shipped config sets it: (0, 4, 0) for road.yaml kept the
-    # maps and saved 1-4 % of the time but doubled the road check's false defects (docs/road.md)
+    # finest_t_max and t_max.  No shipped config sets it: (0, 4, 0) for road.yaml keeps the
+    # maps and saves 1-4 % of the time but doubles the road check's false defects (docs/road.md)
     level_t_max: tuple[int, ...] = ()
     sigma_space: float = 1.5  # sigma_1 in eq. 3, pixels
     sigma_color: float = 12.0  # sigma_2 in eq. 3, grey levels (0-255)
@@ -95,10 +95,10 @@ class AggregationConfig:
     # Semi-global smoothing of the full-resolution aggregated cost (docs/design.md,
     # 'Semi-global smoothing'): the mean of four path costs (left, down, right, up) with
     # penalties P1 (one-disparity step) and P2 (larger jump) in cost units
-    # ((1 - NCC) / 2); sgm_p2 0: off (the paper's method, d3cli/configs/paper.yaml).  On
+    # ((1 - NCC) / 2); sgm_p2 0: off (the paper's method, configs/paper.yaml).  On
     # by default: with finest_t_max 0, P1 0.1 / P2 1.2 chosen on the Middlebury pairs and
     # checked leave-one-out (docs/performance.md, 'Default settings');
-    # d3cli/configs/kitti.yaml uses 0.6 / 1.2
+    # configs/kitti.yaml uses 0.6 / 1.2
     sgm_p1: float = 0.1
     sgm_p2: float = 1.2
 
@@ -116,18 +116,18 @@ class SeedConfig:
 
 @dataclass(frozen=True)
 class DiffusionConfig:
-    """Intra-scale decisive diffusion, paper eq. 5-6 and Algorithm 1."""
+    """Intra-scale decisive diffusion, paper eq. 4-5 and Algorithm 1."""
 
     tau: int = 1  # disparity search tolerance r in [-tau, tau]
     kappa_d: int = 1  # neighbourhood radius
-    adversarial: bool = True  # decided pixels may switch to a better candidate (eq. 6)
+    adversarial: bool = True  # decided pixels may switch to a better candidate (eq. 5)
     max_sweeps: int = 100000  # safeguard; diffusion normally stops when nothing changes
     max_gap: float = 0.0  # accepted states cost <= the pixel's least cost + this; -1: off (paper)
 
 
 @dataclass(frozen=True)
 class InheritanceConfig:
-    """Inter-scale decisive inheritance, paper eq. 7-9 and Algorithm 2."""
+    """Inter-scale decisive inheritance, paper eq. 6-8 and Algorithm 2."""
 
     prc: bool = True  # patch reliability constraint; False: DFM-style PKRN test in the patch
     dfm_pkrn_min: float = 1.05  # PKRN threshold of the DFM-style test (prc False)
@@ -205,7 +205,7 @@ class CameraConfig:
     baseline: float | None = None  # metres
     cx: float | None = None  # principal point, pixels; None: image centre
     cy: float | None = None
-    # Depth range of cloud.ply points, metres (near-zero disparities gave points at 1e33 m).  100 m: KITTI's useful range is about 80 m; road scenes are closer.
+    # Depth range of cloud.ply points, metres (near-zero disparities give points at 1e33 m).  100 m: KITTI's useful range is about 80 m; road scenes are closer.
     min_depth_m: float = 0.0
     max_depth_m: float = 100.0
 

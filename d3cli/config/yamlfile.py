@@ -15,7 +15,7 @@ from typing import Any
 import yaml
 
 from ..errors import ConfigError
-from .checks import quote
+from .checks import quote, shorten
 
 #: Largest config or manifest file read (bytes): a YAML file bigger than this is a mistake.
 MAX_YAML_BYTES = 1_000_000
@@ -47,7 +47,7 @@ _CORE_SCHEMA = (
     ("tag:yaml.org,2002:float",
      r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$",
      list("-+0123456789.")),
-    ("tag:yaml.org,2002:merge", r"^<<$", ["<"]),  # anchors merged into mappings, as before
+    ("tag:yaml.org,2002:merge", r"^<<$", ["<"]),  # anchors merged into mappings, as SafeLoader does
 )
 
 _UniqueKeyLoader.yaml_implicit_resolvers = {}
@@ -252,7 +252,7 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     """Split ``section.key=value`` into (section, key, YAML-parsed value)."""
     if "=" not in text or "." not in text.split("=", 1)[0]:
         raise ConfigError(
-            f"--set {text}: expected section.key=value (e.g. diffusion.tau=2); fix the option"
+            f"--set {shorten(text)}: expected section.key=value (e.g. diffusion.tau=2); fix the option"
         )
     dotted, raw = text.split("=", 1)
     section, key = dotted.strip().split(".", 1)
@@ -261,5 +261,5 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     except yaml.YAMLError:
         value = raw
     except RecursionError:
-        raise _too_deep(f"--set {text[:60]}", ConfigError) from None
+        raise _too_deep(f"--set {shorten(text)}", ConfigError) from None
     return section, key, value

@@ -38,7 +38,7 @@ def _img(path: Path, h=6, w=10, colour=False, seed=0, dtype=np.uint8) -> Path:
     return path
 
 
-def _kitti_gt(path: Path, h=6, w=10, value=10.5) -> Path:
+def _kitti_gt(path: Path, h=6, w=10, value=4.5) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     raw = np.zeros((h, w), np.uint16)
     raw[2:, 3:] = int(value * 256)
@@ -52,7 +52,7 @@ def _pair_folder(folder: Path, *, h=6, w=10, source: str | None = None, gt: str 
     if source is not None:
         (folder / "SOURCE.txt").write_text(source)
     if gt == "png8":
-        raw = np.full((h, w), 48, np.uint8)
+        raw = np.full((h, w), 24, np.uint8)
         raw[0, 0] = 0
         cv2.imwrite(str(folder / "disp_gt.png"), raw)
     elif gt == "pfm":
@@ -87,7 +87,7 @@ def test_pair_folders_layout(tmp_path):
     assert teddy.nocc.name == "mask0nocc.png" and teddy.calib.name == "calib.txt"
     assert road.gt is None and road.gt_invalid == "auto"
     gt, mask = load_ground_truth(art, (6, 10, 3))
-    assert gt[0, 0] == np.inf and gt[1, 1] == 16.0
+    assert gt[0, 0] == np.inf and gt[1, 1] == 8.0
     assert mask is None
 
 
@@ -205,7 +205,7 @@ def test_kitti2012_layout(tmp_path):
     assert first.nocc == train / "disp_noc" / "000000_10.png" and first.calib == train / "calib" / "000000.txt"
     assert pairs[2].gt is None and pairs[2].left.parent.name == "image_0"
     gt, mask = load_ground_truth(first, (6, 10))
-    assert np.isinf(gt[0, 0]) and gt[3, 4] == 10.5 and mask[3, 4] and not mask[0, 0]
+    assert np.isinf(gt[0, 0]) and gt[3, 4] == 4.5 and mask[3, 4] and not mask[0, 0]
     assert io.read_calib(first.calib)["baseline"] == pytest.approx(0.5)
     # the training folder given directly
     assert [p.name for p in discover(train)] == ["kitti2012-000000_10", "kitti2012-000001_10"]
@@ -240,7 +240,7 @@ def test_udtiri_stereo_layout(tmp_path):
             _img(root / split / "left" / f"{stem}.png")
             _img(root / split / "right" / f"{stem}.png")
     (root / "train" / "disparity_noc").mkdir()
-    disp = np.full((6, 10), 12.75, np.float32)
+    disp = np.full((6, 10), 7.75, np.float32)
     disp[0, 0] = 0.0
     disp[0, 1] = np.nan
     np.save(root / "train" / "disparity_noc" / "0001.npy", disp)
@@ -251,7 +251,8 @@ def test_udtiri_stereo_layout(tmp_path):
     train = pairs[2]
     assert train.family == "udtiri" and train.gt.suffix == ".npy" and pairs[0].gt is None
     gt, mask = load_ground_truth(train, (6, 10))
-    assert np.isinf(gt[0, :2]).all() and gt[5, 5] == 12.75 and mask is None
+    # .npy: non-finite is "no ground truth" (as in PFM); 0 is read as 0, which no metric scores.
+    assert gt[0, 0] == 0.0 and np.isinf(gt[0, 1]) and gt[5, 5] == 7.75 and mask is None
     # a root without splits
     flat = tmp_path / "flat"
     _img(flat / "left" / "a.png")
@@ -323,7 +324,7 @@ def test_manifest_pairs_defaults_and_relative_root(tmp_path):
                      gt_scale=256.0, gt_invalid="zero", family="mine")
     assert (b.family, b.max_disparity, b.gt) == ("other", 5, None)
     gt, _ = load_ground_truth(a, (6, 10))
-    assert gt[3, 4] == 10.5
+    assert gt[3, 4] == 4.5
 
 
 def test_manifest_with_layout_and_defaults(tmp_path):

@@ -16,6 +16,7 @@ def test_disp_noc_png_is_the_mask(tmp_path):
     noc = gt.copy()
     noc[:, :2] = np.inf  # occluded: 0 in the uint16 PNG
     io.write_kitti_png(pair_dir / "disp_noc.png", noc)
+    (pair_dir / "SOURCE.txt").write_text("gt_scale: 256\n")  # KITTI's encoding (read with 1: 1280 px, refused)
     (pair,) = datasets.discover([tmp_path / "p"])
     assert pair.nocc is not None and pair.nocc.name == "disp_noc.png"
     _, mask = datasets.load_ground_truth(pair, img.shape)

@@ -243,7 +243,9 @@ def test_read_disparity_npy(tmp_path):
     arr = np.array([[1.5, 0.0, np.nan], [-2.0, np.inf, 40.0]], np.float64)
     np.save(tmp_path / "d.npy", arr)
     disp = io.read_disparity(tmp_path / "d.npy")
-    np.testing.assert_array_equal(disp, [[1.5, np.inf, np.inf], [np.inf, np.inf, 40.0]])
+    np.testing.assert_array_equal(disp, [[1.5, 0.0, np.inf], [-2.0, np.inf, 40.0]])  # non-finite only, as PFM
+    zero = io.read_disparity(tmp_path / "d.npy", invalid="zero")
+    np.testing.assert_array_equal(zero, [[1.5, np.inf, np.inf], [-2.0, np.inf, 40.0]])
     assert disp.dtype == np.float32
     none = io.read_disparity(tmp_path / "d.npy", invalid="none")
     assert none[1, 0] == -2.0 and none[0, 1] == 0.0 and np.isnan(none[0, 2])

@@ -17,7 +17,7 @@ Conventions used everywhere in d3stereo:
   KITTI ``.png``  uint16 / 256                            0
   ``.png/.pgm``   8/16-bit / scale (Middlebury 2001-2006:  0
                   /8 or /16, /4, /3)
-  ``.npy``        float                                   non-finite, <= 0
+  ``.npy``        float                                   non-finite (as PFM)
   ==============  ======================================  =================
 
 Every writer is atomic (a temporary file in the same folder, then ``os.replace``), so an
@@ -34,8 +34,8 @@ May import: :mod:`d3cli.errors` only (no config, no layouts, no synth).
 from __future__ import annotations
 
 from .atomic import DISK_FULL_ERRNOS, atomic_write, is_disk_full
-from .images import (IMAGE_EXTENSIONS, MAX_IMAGE_PIXELS, image_size, read_image, regular_file, special_file_kind,
-                     to_grey, write_encoded, write_image)
+from .images import (IMAGE_EXTENSIONS, MAX_IMAGE_PIXELS, image_size, read_image, regular_file, shown_path,
+                     special_file_kind, to_grey, unreadable, write_encoded, write_image)
 from .pfm import read_pfm, read_pfm_raw, write_pfm
 from .kitti_png import encode_kitti, read_kitti_png, write_kitti_png
 from .disparity import DISPARITY_EXTENSIONS, INVALID_CONVENTIONS, read_disparity, read_mask
@@ -62,8 +62,10 @@ __all__ = [
     "read_pfm",
     "read_pfm_raw",
     "regular_file",
+    "shown_path",
     "special_file_kind",
     "to_grey",
+    "unreadable",
     "write_encoded",
     "write_image",
     "write_kitti_png",

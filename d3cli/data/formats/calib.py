@@ -9,6 +9,7 @@ import re
 
 import numpy as np
 
+from ...errors import InputError, where_what_fix
 from .images import _read_bytes, regular_file
 
 
@@ -50,7 +51,9 @@ def _numbers(text: str) -> list[float]:
     return [float(x) for x in re.findall(_NUMBER, text)]
 
 
-def _calib_from_projections(matrices: dict[str, np.ndarray], pairs=_PROJECTION_PAIRS) -> dict:
+def _calib_from_projections(matrices: dict[str, np.ndarray], pairs=_PROJECTION_PAIRS) -> tuple[dict, str]:
+    """(f, cx, cy, baseline) from the first left/right matrices present, and their names
+    (``"P0 and P1"``); ({}, "") when none are."""
     for left_key, right_key in pairs:
         if left_key in matrices and right_key in matrices:
             left, right = matrices[left_key], matrices[right_key]
@@ -63,8 +66,33 @@ def _calib_from_projections(matrices: dict[str, np.ndarray], pairs=_PROJECTION_P
                 "cy": float(left[1, 2]),
                 # P[0, 3] = -f * (camera x offset), so the baseline is the difference.
                 "baseline": float(left[0, 3] - right[0, 3]) / f,
-            }
-    return {}
+            }, f"{left_key} and {right_key}"
+    return {}, ""
+
+
+def _check_camera(path, calib: dict, matrices: str, baseline_unit: float = 1.0) -> None:
+    """Refuse a focal length or baseline the file gives as 0 or less.
+
+    Without this, a point cloud or road report of the pair says "focal length or baseline
+    unknown; add calib.txt" to a user whose calib.txt is there, with a value of 0.
+    ``matrices`` names the projection matrices the baseline came from ("" when a line of
+    the file gave it); ``baseline_unit`` turns the baseline back into the file's unit
+    (1000 for Middlebury's millimetres), so the message quotes what the file says.
+    """
+    for key in ("f", "baseline"):
+        value = calib.get(key)
+        if value is None or value > 0:
+            continue
+        if key == "baseline":
+            value *= baseline_unit
+        if key == "baseline" and matrices:
+            left, right = matrices.split(" and ")
+            raise InputError(where_what_fix(
+                str(path), f"the baseline from {matrices} is {value:g}, must be > 0",
+                f"{left} must be the left camera's matrix and {right} the right one's"))
+        raise InputError(where_what_fix(
+            str(path), f"{key} {value:g} must be > 0",
+            "write the camera's value there, or remove the line and set it in the camera section of the config"))
 
 
 def _roi_size(numbers: list[float]) -> tuple[int, int] | None:
@@ -75,7 +103,7 @@ def _roi_size(numbers: list[float]) -> tuple[int, int] | None:
     return int(round(x1 - x0)) + 1, int(round(y1 - y0)) + 1
 
 
-def read_calib(path: str | os.PathLike, *, image_size: tuple[int, int] | None = None) -> dict:
+def read_calib(path: str | os.PathLike, *, image_size: tuple[int, int] | None = None, camera: bool = True) -> dict:
     """Read a stereo calibration file.
 
     Understands Middlebury 2014 ``calib.txt`` (``cam0=[f 0 cx; 0 f cy; 0 0 1]``,
@@ -94,6 +122,10 @@ def read_calib(path: str | os.PathLike, *, image_size: tuple[int, int] | None = 
     image_size : (width, height), optional, keyword-only
         Size of the images the calibration is for: picks the projections (full or
         ``roi``) that match it.
+    camera : bool, keyword-only
+        Check the camera values (a focal length or baseline of 0 or less is an error
+        naming the file).  False when only the disparity range is read (``ndisp``): a
+        pair whose calib.txt has no usable camera still gets its map.
 
     Returns
     -------
@@ -101,6 +133,12 @@ def read_calib(path: str | os.PathLike, *, image_size: tuple[int, int] | None = 
         Whatever of ``f`` (px), ``baseline`` (m), ``cx``, ``cy`` (px), ``doffs`` (px),
         ``ndisp``, ``width``, ``height`` (px), ``height_m`` (m), ``pitch_deg``,
         ``roll_deg``, ``vmin``, ``vmax`` the file defines.
+
+    Raises
+    ------
+    InputError
+        The file is missing or unreadable; with ``camera``, a focal length or baseline
+        of 0 or less (or a baseline from swapped projection matrices).
     """
     path = regular_file(path, "calibration file")
     text = _read_bytes(path).decode("utf-8", errors="replace")
@@ -137,6 +175,10 @@ def read_calib(path: str | os.PathLike, *, image_size: tuple[int, int] | None = 
     pairs = _PROJECTION_PAIRS
     if all(key in matrices for key in _ROI_PAIR) and (image_size is None or tuple(image_size) == roi):
         pairs = (_ROI_PAIR,)
-    for key, value in _calib_from_projections(matrices, pairs).items():
+    projected, names = _calib_from_projections(matrices, pairs)
+    given_baseline = "baseline" in calib
+    for key, value in projected.items():
         calib.setdefault(key, value)
+    if camera:
+        _check_camera(path, calib, "" if given_baseline else names, 1000.0 if middlebury else 1.0)
     return calib

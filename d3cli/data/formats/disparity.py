@@ -96,9 +96,12 @@ def read_disparity(path: str | os.PathLike, *, scale: float = 1.0, invalid: str 
         Stored value per pixel of disparity: disparity = value / scale (KITTI 256,
         Middlebury 2001 8 or 16, 2003 quarter 4, 2005/2006 third 3).
     invalid : {"auto", "zero", "inf", "none"}, keyword-only
-        Which stored values mean "no ground truth". ``"auto"`` by format: PFM non-finite;
-        PNG/PGM 0; npy non-finite or <= 0. ``"zero"``: 0 (and NaN); ``"inf"``: non-finite;
-        ``"none"``: nothing is converted. ``"0"`` is accepted for ``"zero"``.
+        Which stored values mean "no value". ``"auto"`` by format: float formats (PFM,
+        npy) non-finite, one rule for both, so a map scores the same in either; integer
+        images (PNG/PGM/TIFF, KITTI's encoding) 0, their formats' own rule. ``"zero"``: 0
+        (and NaN); ``"inf"``: non-finite; ``"none"``: nothing is converted. ``"0"`` is
+        accepted for ``"zero"``.  Ground truth <= 0 is never scored either way
+        (:mod:`d3cli.evaluation.metrics` evaluates finite, positive ground truth only).
 
     Returns
     -------
@@ -115,7 +118,7 @@ def read_disparity(path: str | os.PathLike, *, scale: float = 1.0, invalid: str 
         auto = "inf"
     elif ext == ".npy":
         raw = _load_npy(path)
-        auto = "npy"
+        auto = "inf"
     elif ext in DISPARITY_EXTENSIONS:
         raw = _single_channel(path, _decode_unchanged(path), "disparity image")
         auto = "zero"
@@ -134,8 +137,6 @@ def read_disparity(path: str | os.PathLike, *, scale: float = 1.0, invalid: str 
     bad = ~np.isfinite(raw64)
     if mode == "zero":
         bad |= raw64 == 0
-    elif mode == "npy":
-        bad |= raw64 <= 0
     disp[bad] = np.inf
     return disp
 

@@ -5,6 +5,7 @@ conversion, and the atomic image writer.
 from __future__ import annotations
 
 import contextlib
+import errno
 import logging
 import os
 import re
@@ -71,6 +72,55 @@ def special_file_kind(path: str | os.PathLike) -> str | None:
     return kind
 
 
+#: Most characters of a path an error message shows (its start and end): a path longer
+#: than the system allows is thousands of characters, and the line must stay readable.
+SHOWN_PATH_CHARS = 120
+
+
+def shown_path(path: str | os.PathLike) -> str:
+    """``path`` for a message: whole up to :data:`SHOWN_PATH_CHARS` characters, else its
+    first 60 and last 57 around ``...``."""
+    text = os.fspath(path)
+    text = text if isinstance(text, str) else os.fsdecode(text)
+    if len(text) <= SHOWN_PATH_CHARS:
+        return text
+    return f"{text[:60]}...{text[-(SHOWN_PATH_CHARS - 63):]}"
+
+
+def _system_limit(name: str, default: int) -> int:
+    try:
+        return int(os.pathconf("/", name))
+    except (OSError, ValueError):
+        return default
+
+
+def unreadable(given: str | os.PathLike, exc: OSError) -> InputError:
+    """The error for a path the system refuses to examine (``os.stat`` failing with
+    something other than "not found"): a path longer than PATH_MAX (a working folder
+    nested that deep), a name longer than NAME_MAX, no permission, an I/O error.
+
+    ``given`` is the path as the user gave it (relative or not), named when the failure
+    is its own; a file under it that fails is named instead.
+    """
+    given_text = os.fspath(given)
+    failed = os.fspath(exc.filename) if exc.filename is not None else given_text
+    own = os.path.abspath(failed) == os.path.abspath(given_text)
+    where = shown_path(given_text if own else failed)
+    if exc.errno == errno.ENAMETOOLONG:
+        name_max = _system_limit("PC_NAME_MAX", 255)
+        if any(len(os.fsencode(part)) > name_max for part in Path(failed).parts):
+            return InputError(where_what_fix(where, f"a name in this path is longer than the system allows "
+                                                    f"({name_max} bytes)", "give a shorter name"))
+        path_max = _system_limit("PC_PATH_MAX", 4096)
+        absolute = os.path.abspath(failed)
+        fix = ("move the data to a shorter path" if os.path.isabs(given_text)
+               else "run d3stereo from a shallower folder, or move the data to a shorter path")
+        return InputError(where_what_fix(where, f"its absolute path is {len(os.fsencode(absolute))} bytes long, "
+                                                f"more than the system allows ({path_max})", fix))
+    fix = "check its permissions" if exc.errno in (errno.EACCES, errno.EPERM) else "check the path and the disk"
+    return InputError(where_what_fix(where, f"cannot read it ({exc.strerror or exc})", fix))
+
+
 def regular_file(path: str | os.PathLike, what: str = "file") -> Path:
     """``path`` as a Path when it is an existing regular file (or a link to one); special
     files (a FIFO, a device) are named as such and never opened.
@@ -79,12 +129,17 @@ def regular_file(path: str | os.PathLike, what: str = "file") -> Path:
     ------
     InputError
         ``<path>: <what> not found``, ``is a folder, not a file`` or ``not a regular file
-        (a FIFO)`` (a device, a socket, a link to one), each with the fix.
+        (a FIFO)`` (a device, a socket, a link to one), or a path the system refuses to
+        examine (:func:`unreadable`), each with the fix.
     """
     path = Path(path)
-    if not path.exists():
+    try:
+        exists, folder = path.exists(), path.is_dir()
+    except OSError as exc:  # a name or path longer than the system allows, no permission
+        raise unreadable(path, exc) from None
+    if not exists:
         raise InputError(where_what_fix(str(path), f"{what} not found", "check the path"))
-    if path.is_dir():
+    if folder:
         raise InputError(where_what_fix(str(path), "is a folder, not a file", "give the file itself"))
     kind = special_file_kind(path)
     if kind is not None:
@@ -126,16 +181,51 @@ def image_size(path: str | os.PathLike) -> tuple[int, int] | None:
         return None
 
 
-def _opencv_max_side() -> int:
-    """Longest image side OpenCV's decoders accept: 2**20 unless the user raised it with
-    ``OPENCV_IO_MAX_IMAGE_WIDTH`` / ``OPENCV_IO_MAX_IMAGE_HEIGHT`` (OpenCV's own variables)."""
-    limits = []
-    for name in ("OPENCV_IO_MAX_IMAGE_WIDTH", "OPENCV_IO_MAX_IMAGE_HEIGHT"):
-        try:
-            limits.append(int(os.environ.get(name, 1 << 20)))
-        except ValueError:
-            limits.append(1 << 20)
-    return min(limits)
+#: OpenCV's own decoder limits: (environment variable, default, what an image exceeds).
+_OPENCV_LIMITS = (("OPENCV_IO_MAX_IMAGE_WIDTH", 1 << 20, "is wider than"),
+                  ("OPENCV_IO_MAX_IMAGE_HEIGHT", 1 << 20, "is taller than"),
+                  ("OPENCV_IO_MAX_IMAGE_PIXELS", 1 << 30, "has more pixels than"))
+
+
+def _opencv_limit(name: str, default: int) -> tuple[int, bool]:
+    """(limit, set by the user) of one of OpenCV's variables; a value that is no integer
+    counts as unset (OpenCV's default)."""
+    text = os.environ.get(name)
+    if text is None:
+        return default, False
+    try:
+        return int(text), True
+    except ValueError:
+        return default, False
+
+
+def _opencv_refusal(path: Path, width: int, height: int) -> InputError | None:
+    """The error for an image OpenCV's decoders would refuse by its size, or None.
+
+    OpenCV refuses a side longer than 2**20 pixels, or more than 2**30 pixels, unless
+    ``OPENCV_IO_MAX_IMAGE_WIDTH`` / ``HEIGHT`` / ``PIXELS`` say otherwise; a limit set in
+    the environment is named with its value, so that a pair failing on it is not blamed
+    on the image.
+    """
+    for (name, default, verb), size in zip(_OPENCV_LIMITS, (width, height, width * height)):
+        limit, from_env = _opencv_limit(name, default)
+        if size <= limit:
+            continue
+        if from_env:
+            return InputError(where_what_fix(
+                str(path), f"image of {width}x{height} pixels {verb} {name}={limit} (set in the environment) "
+                           "lets OpenCV decode", f"raise or unset {name}"))
+        if name != "OPENCV_IO_MAX_IMAGE_PIXELS":  # the default pixel limit is above MAX_IMAGE_PIXELS
+            return InputError(where_what_fix(
+                str(path), f"image of {width}x{height} pixels has a side longer than {limit} pixels, "
+                           "the most OpenCV decodes",
+                "crop or downscale it (a stereo pair this wide is likely a mistake)"))
+    return None
+
+
+def _opencv_variables_set() -> list[str]:
+    """``NAME=value`` of OpenCV's size variables set in the environment."""
+    return [f"{name}={os.environ[name]}" for name, _, _ in _OPENCV_LIMITS if name in os.environ]
 
 
 #: One decode at a time swaps file descriptor 2 (:func:`_decoder_messages_logged`): two
@@ -193,14 +283,11 @@ def _decode_unchanged(path: Path) -> np.ndarray:
             str(path), f"image of {size[0]}x{size[1]} pixels is larger than {MAX_IMAGE_PIXELS} pixels "
                        f"(about {size[0] * size[1] * 6 / 1e9:.1f} GB to decode)",
             "give an image of at most 16384x16384 pixels, or crop or downscale it"))
-    side = _opencv_max_side()
-    if size is not None and max(size) > side:
-        # OpenCV would refuse it with its own assertion text (or libpng lines on stderr)
-        # and no file name.
-        raise InputError(where_what_fix(
-            str(path), f"image of {size[0]}x{size[1]} pixels has a side longer than {side} pixels, "
-                       "the most OpenCV decodes",
-            "crop or downscale it (a stereo pair this wide is likely a mistake)"))
+    # OpenCV would refuse it with its own assertion text (or libpng lines on stderr) and
+    # no file name.
+    refusal = _opencv_refusal(path, *size) if size is not None else None
+    if refusal is not None:
+        raise refusal
     data = np.frombuffer(_read_bytes(path), dtype=np.uint8)
     try:
         with _decoder_messages_logged(path):
@@ -209,8 +296,11 @@ def _decode_unchanged(path: Path) -> np.ndarray:
         # "OpenCV(4.9.0) /path/loadsave.cpp:77: error: (-215:Assertion failed) ... in function
         # '...'": the part after "error:" says what is wrong.
         reason = " ".join(str(exc).split()).rpartition(" error: ")[2][:160]
-        raise InputError(where_what_fix(str(path), f"cannot decode image (OpenCV: {reason})",
-                                        "give an 8/16-bit PNG, JPEG, PPM/PGM or TIFF of a sensible size")) from None
+        fix = "give an 8/16-bit PNG, JPEG, PPM/PGM or TIFF of a sensible size"
+        variables = _opencv_variables_set()
+        if "CV_IO_MAX_IMAGE" in reason and variables:  # a size limit the user set
+            fix = f"raise or unset {', '.join(variables)} (set in the environment)"
+        raise InputError(where_what_fix(str(path), f"cannot decode image (OpenCV: {reason})", fix)) from None
     if image is None:
         raise InputError(
             where_what_fix(
@@ -256,7 +346,8 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     Raises
     ------
     InputError
-        The file is missing, unreadable, corrupt, or not 8/16-bit.
+        The file is missing, unreadable, corrupt, not 8/16-bit, or a float image with
+        non-finite or negative samples.
     """
     path = regular_file(path, "image file")
     image = _decode_unchanged(path)
@@ -265,6 +356,10 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         if not np.isfinite(image).all():
             raise InputError(where_what_fix(str(path), "float image with NaN or inf samples",
                                             "give finite intensities (or an 8/16-bit image)"))
+        low = float(image.min(initial=0.0))
+        if low < 0:  # named here, by the file: the pair's check cannot tell which view it is
+            raise InputError(where_what_fix(str(path), f"negative intensities (down to {low:g}) in a float image",
+                                            "give intensities >= 0 (0-1, 0-255 or integer counts)"))
     elif image.dtype not in (np.uint8, np.uint16):
         raise InputError(
             where_what_fix(

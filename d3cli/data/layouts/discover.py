@@ -17,6 +17,26 @@ from .pair import MANIFEST_EXTENSIONS, Pair, _EXPECTED, _abs, family_from_name, 
 _GENERIC_LEFT_STEMS = {"left", "im0", "iml", "view1", "image_l", "l", "im2"}
 
 
+def _add_input(item: Path, pairs: list[Pair], images: list[Path]) -> None:
+    """Add the pairs of one input (a folder or a manifest) to ``pairs``, or the input to
+    ``images`` when it is an image file."""
+    if item.is_dir():
+        pairs += expand_layout(item)
+    elif item.is_file() and item.suffix.lower() in MANIFEST_EXTENSIONS:
+        pairs += load_manifest(item)
+    elif item.is_file() and _is_image(item):
+        images.append(item)
+    elif formats.special_file_kind(item) is not None:
+        raise InputError(where_what_fix(str(item), f"not a regular file ({formats.special_file_kind(item)})",
+                                        "give the file itself"))
+    elif item.exists():
+        raise InputError(
+            where_what_fix(str(item), f"not a folder, manifest or image ({item.suffix or 'no extension'})", f"give {_EXPECTED}")
+        )
+    else:
+        raise InputError(where_what_fix(str(item), *_missing_why(item)))
+
+
 def _pair_from_two_files(left: Path, right: Path) -> Pair:
     stem = left.stem.lower()
     base = left.parent.name if stem in _GENERIC_LEFT_STEMS and left.parent.name else left.stem
@@ -58,31 +78,20 @@ def discover(inputs: Sequence[str | os.PathLike] | str | os.PathLike) -> list[Pa
     ------
     InputError
         Missing paths, an unknown layout, a folder without pairs, an incomplete pair, a
-        bad manifest, or a number of image files other than two.
+        bad manifest, a number of image files other than two, or a path the system
+        refuses to examine (longer than it allows, no permission).
     """
-    if isinstance(inputs, (str, os.PathLike)):
-        inputs = [inputs]
-    inputs = [_abs(item) for item in inputs]
+    inputs = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
     if not inputs:
         raise InputError(where_what_fix("discover", "no inputs given", f"give {_EXPECTED}"))
     pairs: list[Pair] = []
     images: list[Path] = []
-    for item in inputs:
-        if item.is_dir():
-            pairs += expand_layout(item)
-        elif item.is_file() and item.suffix.lower() in MANIFEST_EXTENSIONS:
-            pairs += load_manifest(item)
-        elif item.is_file() and _is_image(item):
-            images.append(item)
-        elif formats.special_file_kind(item) is not None:
-            raise InputError(where_what_fix(str(item), f"not a regular file ({formats.special_file_kind(item)})",
-                                            "give the file itself"))
-        elif item.exists():
-            raise InputError(
-                where_what_fix(str(item), f"not a folder, manifest or image ({item.suffix or 'no extension'})", f"give {_EXPECTED}")
-            )
-        else:
-            raise InputError(where_what_fix(str(item), *_missing_why(item)))
+    for given in inputs:
+        item = _abs(given)
+        try:
+            _add_input(item, pairs, images)
+        except OSError as exc:  # not "not found" (that is _add_input's own error): too long, no permission, I/O
+            raise formats.unreadable(given, exc) from None
     if images:
         if len(images) != 2:
             raise InputError(

@@ -113,7 +113,7 @@ def read_pair_folder(folder: str | os.PathLike) -> Pair:
     max_disparity = _source_number(source, "max_disparity", source_path, int) if source_path else None
     if max_disparity is None and calib is not None:
         size = _image_size(source)
-        max_disparity = _max_disparity_from_calib(formats.read_calib(calib), size[0] if size else None)
+        max_disparity = _max_disparity_from_calib(formats.read_calib(calib, camera=False), size[0] if size else None)
     name = safe_name(folder.name)
     family = _first_word(source.get("family", "")) or family_from_name(name)
     gt_scale = _source_number(source, "gt_scale", source_path) if source_path else None

@@ -184,7 +184,8 @@ def load_ground_truth(pair: Pair, shape: Sequence[int]) -> tuple[np.ndarray | No
     Raises
     ------
     InputError
-        Unreadable file, or ground truth / mask of another size than the images.
+        Unreadable file, ground truth / mask of another size than the images, or ground
+        truth with disparities of the image width or more (a wrong ``gt_scale``).
     """
     if pair.gt is None:
         return None, None
@@ -198,6 +199,7 @@ def load_ground_truth(pair: Pair, shape: Sequence[int]) -> tuple[np.ndarray | No
                 "give ground truth of the left image's size",
             )
         )
+    _check_gt_values(pair, gt, width)
     mask = None
     if pair.nocc is not None:
         mask = formats.read_mask(pair.nocc, min_value=_nocc_min_value(Path(pair.nocc)))
@@ -212,8 +214,28 @@ def load_ground_truth(pair: Pair, shape: Sequence[int]) -> tuple[np.ndarray | No
     return gt, mask
 
 
-def _max_disparity_from_gt(pair: Pair) -> int | None:
+def _check_gt_values(pair: Pair, gt: np.ndarray, width: int) -> None:
+    """Refuse ground truth with disparities no pixel of an image ``width`` wide can have.
+
+    A left pixel ``u`` matches the right pixel ``u - d``, so ``d < width``: larger values
+    mean the file was read with the wrong ``gt_scale`` (a KITTI x256 PNG read with
+    ``gt_scale: 1`` gives disparities of thousands of pixels and an EPE to match).
+    """
+    with np.errstate(invalid="ignore"):
+        finite = gt[np.isfinite(gt)]
+    top = float(finite.max()) if finite.size else 0.0
+    if top >= width:
+        raise InputError(where_what_fix(
+            pair.name,
+            f"ground truth {Path(pair.gt).name} holds disparities up to {top:g} px, more than the image width "
+            f"({width} px) allows",
+            f"it is read with gt_scale {pair.gt_scale:g}: set gt_scale to the scale the file was written with "
+            "(256 for KITTI PNGs) in SOURCE.txt or the manifest"))
+
+
+def _max_disparity_from_gt(pair: Pair, width: int) -> int | None:
     gt = formats.read_disparity(pair.gt, scale=pair.gt_scale, invalid=pair.gt_invalid)
+    _check_gt_values(pair, gt, width)
     finite = gt[np.isfinite(gt) & (gt > 0)]
     if finite.size == 0:
         return None
@@ -245,7 +267,8 @@ def resolve_max_disparity(pair: Pair, width: int, override: int | None = None) -
     Raises
     ------
     InputError
-        A user or dataset value outside ``[1, width - 1]``.
+        A user or dataset value outside ``[1, width - 1]``, or ground truth with
+        disparities of the image width or more (a wrong ``gt_scale``).
     """
     if override is not None:
         if isinstance(override, bool) or not isinstance(override, (int, np.integer)) or not 0 < override < width:
@@ -275,7 +298,7 @@ def resolve_max_disparity(pair: Pair, width: int, override: int | None = None) -
     if width < 2:
         raise InputError(where_what_fix(pair.name, f"an image {width} pixel wide has no disparity to search",
                                         "give images at least 2 pixels wide"))
-    derived = _max_disparity_from_gt(pair) if pair.gt is not None else None
+    derived = _max_disparity_from_gt(pair, width) if pair.gt is not None else None
     if derived is None:
         derived = width // 4
     # At least 1 (what --max-disparity 1 gives): width // 4 is 0 below 4 pixels.

@@ -25,7 +25,7 @@ def _middlebury_scene(scene: Path, resolution: str | None) -> Pair:
     calib = files.get("calib.txt")
     max_disparity = None
     if calib is not None:
-        max_disparity = _max_disparity_from_calib(formats.read_calib(calib), None)
+        max_disparity = _max_disparity_from_calib(formats.read_calib(calib, camera=False), None)
     name = f"middlebury2014-{scene.name.lower()}" + (f"-{resolution.upper()}" if resolution else "")
     return Pair(
         name=safe_name(name),

@@ -84,7 +84,7 @@ def _stereo_road_pairs(root: Path) -> list[Pair]:
         for left, right in _matched_views(left_dir, right_dir):
             own_calib = split / "calib" / f"{left.stem}.txt"
             calib = own_calib if _present(own_calib) else shared_calib
-            max_disparity = _max_disparity_from_calib(formats.read_calib(calib), None) if calib else None
+            max_disparity = _max_disparity_from_calib(formats.read_calib(calib, camera=False), None) if calib else None
             parts = ["stereo-road", split_name, left.stem]
             pairs.append(
                 Pair(

@@ -30,12 +30,95 @@ def _check_choice(name: str, value: str, choices) -> None:
 
 
 #: Image sides accepted by the generator: smaller cannot hold a road scene, larger would
-#: need tens of GB while rendering (a 200000-pixel width used to end in a MemoryError).
+#: need tens of GB while rendering (a 200000-pixel width would end in a MemoryError).
 MIN_SIDE, MAX_SIDE = 32, 8192
 
 
 #: The file that marks a folder as one synthetic dataset (seed and size).
 DATASET_FILE = "synth.json"
+
+#: Memory rendering one pair takes, bytes per pixel: the peak grew by 174 B/px from
+#: 1024x1024 to 2048x2048 (height field, mip-mapped texture, both views' radiance and
+#: ray buffers scale with the pixels), so 8192x8192 needs about 13 GB; with a margin.
+SYNTH_BYTES_PER_PIXEL = 200
+
+
+def _proc_kib(path: str, field: str) -> int | None:
+    """``field`` (kB) of a /proc file as bytes, or None where there is none."""
+    try:
+        with open(path, encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def memory_left() -> tuple[int, str] | None:
+    """(bytes this process can still allocate, what limits it), or None when unknown.
+
+    The tightest of the address-space and data limits (``ulimit -v``, ``ulimit -d``) less
+    what the process already uses, the memory the system has free (RAM and swap) and what
+    a container's memory limit leaves.
+    """
+    try:
+        import resource
+    except ImportError:  # not a POSIX system: no such limits
+        resource = None
+    left = []
+    limits = (((resource.RLIMIT_AS, "VmSize", "ulimit -v"), (resource.RLIMIT_DATA, "VmData", "ulimit -d"))
+              if resource is not None else ())
+    for limit, used_field, what in limits:
+        soft = resource.getrlimit(limit)[0]
+        used = _proc_kib("/proc/self/status", used_field)
+        if soft != resource.RLIM_INFINITY and used is not None:
+            left.append((max(soft - used, 0), f"this process may still use under its limit of {soft / 1e9:.1f} GB "
+                                              f"({what})"))
+    available, swap = _proc_kib("/proc/meminfo", "MemAvailable"), _proc_kib("/proc/meminfo", "SwapFree")
+    if available is not None:
+        left.append((available + (swap or 0), "the system has free (RAM and swap)"))
+    try:  # a container's limit (cgroup v2), which /proc/meminfo does not show
+        with open("/sys/fs/cgroup/memory.max", encoding="ascii") as fh:
+            cap = fh.read().strip()
+        with open("/sys/fs/cgroup/memory.current", encoding="ascii") as fh:
+            current = int(fh.read().strip())
+        if cap != "max":
+            left.append((max(int(cap) - current, 0), f"the container's memory limit of {int(cap) / 1e9:.1f} GB "
+                                                     "leaves"))
+    except (OSError, ValueError):
+        pass
+    return min(left) if left else None
+
+
+def _size_text(n_bytes: float) -> str:
+    """``13.4 GB``, or ``12 MB`` below a tenth of a GB."""
+    return f"{n_bytes / 1e9:.1f} GB" if n_bytes >= 1e8 else f"{n_bytes / 1e6:.0f} MB"
+
+
+def _check_memory(width: int, height: int) -> None:
+    """Refuse a size whose rendering cannot fit in memory, before any work: at 8192x8192
+    under a 6 GB address-space limit the renderer would run for minutes and then die
+    inside OpenBLAS's allocator, with no message of ours."""
+    need = width * height * SYNTH_BYTES_PER_PIXEL
+    left = memory_left()
+    if left is None or need <= left[0]:
+        return
+    room, what = left
+    shrink = math.sqrt(room / need)
+    smaller_w, smaller_h = int(width * shrink) // 16 * 16, int(height * shrink) // 16 * 16
+    fix = (f"use a smaller --width/--height (about --width {smaller_w} --height {smaller_h} fits)"
+           if min(smaller_w, smaller_h) >= MIN_SIDE else "free memory, or raise the limit")
+    raise InputError(where_what_fix("synth", f"rendering a {width}x{height} pair needs about {_size_text(need)} "
+                                             f"of memory, more than {what}: {_size_text(room)}", fix))
+
+
+def _out_of_memory(width: int, height: int) -> InputError:
+    """The error for a MemoryError while rendering (an estimate that was not enough)."""
+    need = width * height * SYNTH_BYTES_PER_PIXEL
+    return InputError(where_what_fix("synth", f"out of memory rendering a {width}x{height} pair "
+                                              f"(it needs about {_size_text(need)})",
+                                     "use a smaller --width/--height, or free memory"))
 
 
 def _check_size(width: int, height: int) -> None:
@@ -116,6 +199,12 @@ def render_pair(
     SynthPair
         Images uint8 (H, W), disparity float32 (H, W) (inf invalid), nocc bool (H, W),
         calib and info dicts.
+
+    Raises
+    ------
+    InputError
+        An unknown choice, a bad size, or a size whose rendering needs more memory than
+        the process may use (before rendering) or runs out of it.
     """
     _check_choice("variant", variant, VARIANTS)
     _check_choice("material", material, MATERIALS)
@@ -123,13 +212,16 @@ def render_pair(
     _check_choice("pothole shapes", shapes, ("varied", "classic"))
     if int(supersample) < 1:
         raise InputError(where_what_fix("synth", f"supersample is {supersample}", "use 1 or more rays per axis"))
+    _check_memory(width, height)
     rng = np.random.default_rng(seed)
-    scene = _build_scene(rng, width, height, variant, material, potholes, flat, shapes)
-    left_img, right_img = _render_views(scene, width, height, int(supersample), rng, noise)
-
-    disparity, nocc, points = _ground_truth(scene.rig, scene.field_, scene.h_top)
-    pothole_ids, defects_gt = pothole_truth(scene.road.holes, scene.rig, points,
-                                            scene.field_ if shapes == "varied" else None)
+    try:
+        scene = _build_scene(rng, width, height, variant, material, potholes, flat, shapes)
+        left_img, right_img = _render_views(scene, width, height, int(supersample), rng, noise)
+        disparity, nocc, points = _ground_truth(scene.rig, scene.field_, scene.h_top)
+        pothole_ids, defects_gt = pothole_truth(scene.road.holes, scene.rig, points,
+                                                scene.field_ if shapes == "varied" else None)
+    except MemoryError:
+        raise _out_of_memory(width, height) from None
     finite = disparity[np.isfinite(disparity)]
     calib = scene.rig.calib()
     calib["ndisp"] = int(math.ceil(float(finite.max()))) + 8 if finite.size else width // 4
@@ -309,12 +401,19 @@ def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, 
     -------
     list of Path
         The pair folders, in index order.
+
+    Raises
+    ------
+    InputError
+        A bad count, seed or size, or a size whose rendering needs more memory than the
+        process may use (checked before anything is written) or runs out of it.
     """
     if int(n) < 1:
         raise InputError(where_what_fix("synth", f"--n is {n}", "ask for at least one pair"))
     if int(seed) < 0:  # numpy's SeedSequence takes non-negative integers only
         raise InputError(where_what_fix("synth", f"--seed is {seed}", "give a seed >= 0 (the same seed gives the same pairs)"))
     _check_size(width, height)
+    _check_memory(width, height)  # before the folder is made: a refused size leaves nothing
     out_dir = Path(out_dir)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -328,9 +427,12 @@ def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, 
         variant = VARIANTS[index % len(VARIANTS)]
         material = MATERIALS[index % len(MATERIALS)]
         pair_seed = int(np.random.SeedSequence([int(seed), index]).generate_state(1)[0])
-        pair = render_pair(seed=pair_seed, width=width, height=height, variant=variant, material=material)
         folder = out_dir / pair_name(index, variant, material)
-        folders.append(_write_pair(folder, pair, dataset_seed=int(seed), index=index))
+        try:
+            pair = render_pair(seed=pair_seed, width=width, height=height, variant=variant, material=material)
+            folders.append(_write_pair(folder, pair, dataset_seed=int(seed), index=index))
+        except MemoryError:
+            raise _out_of_memory(width, height) from None
         finite = pair.disparity[np.isfinite(pair.disparity)]
         log.info("synth: wrote %s (disparity %.1f-%.1f px)", folder.name, finite.min(), finite.max())
     return folders

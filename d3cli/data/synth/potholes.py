@@ -9,7 +9,7 @@ profile:
 ============  ==========================================================================
 family        profile
 ============  ==========================================================================
-classic       flat floor, raised-cosine walls (the only shape before families existed)
+classic       flat floor, raised-cosine walls (every pothole of ``shapes="classic"``)
 bowl          ``1 - rho^p``, p in [1.6, 4] (paraboloid p = 2; larger p: flatter bottom)
 flat-steep    flat floor, raised-cosine walls as narrow as the slope limit allows
 flat-gentle   flat floor, raised-cosine walls over half the radius or more
@@ -115,7 +115,7 @@ def _flat_fraction(rng, depth: float, semi_b: float, wall_share: tuple[float, fl
 
 
 def varied_pothole(classic: Pothole, shape_rng, shape: str) -> Pothole:
-    """``classic`` (a pothole as drawn before families existed: position, size, depth,
+    """``classic`` (the seed's pothole as ``shapes="classic"`` draws it: position, size, depth,
     outline) reshaped into family ``shape`` with ``shape_rng`` (a stream of its own, so the
     rest of the scene stays that of the seed)."""
     depth = float(np.clip(classic.depth * shape_rng.uniform(0.8, 1.4), 0.018, 0.075))
