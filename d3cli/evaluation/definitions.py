@@ -56,16 +56,30 @@ class Metric:
 
 
 #: The pixels every disparity figure is computed over, and how a missing estimate counts.
-EVALUATED = ("Over the pixels with finite, positive ground truth; e = |d - gt|, and a pixel "
-             "without an estimate counts as d = 0 (an error of gt).")
+EVALUATED = ("Over the pixels with finite, positive ground truth; e = |d - gt|. EPE, PEP: a pixel "
+             "without an estimate counts as d = 0 (an error of gt); the KITTI and Middlebury figures "
+             "treat such holes as their benchmark's own code does (see each definition).")
 #: What the two pixel sets of the benchmark figures are.
 PIXEL_SETS = ("(all) = every pixel with ground truth; (non-occ.) = those inside the non-occlusion "
-              "mask (KITTI disp_noc, Middlebury mask0nocc); no mask: the (non-occ.) figures are empty.")
+              "mask (KITTI disp_noc, whose own values are the ground truth there; Middlebury mask0nocc); no mask: "
+              "the (non-occ.) figures are empty.")
 #: How the per-family and overall rows are made.
 MEANS = ("Means: plain means of the per-pair values over the ok pairs that have the value; "
          "failed pairs are listed, never averaged in.")
 
 _MASK_NAMES = {"all": "all", "noc": "non-occ."}
+
+#: How KITTI's devkit fills holes before it counts D1 (io_disp.h, interpolateBackground).
+KITTI_FILL = ("holes (no estimate, or d <= 0: a 0 in KITTI's PNG) are first filled as the KITTI devkit "
+              "does: in each row a gap takes the smaller of its two neighbours, the row's ends its first "
+              "and last estimate, then empty rows at the top and bottom the nearest filled row (an empty "
+              "row between filled ones stays d = -1)")
+#: How the Middlebury SDK counts holes (evaldisp.cpp).
+MIDDLEBURY_HOLES = ("a hole (no estimate) is in the total but not bad (the SDK's totbad = bad + invalid); "
+                    "estimates below 0 count as 0, as in the SDK")
+#: Which pixels the Middlebury error statistics average over.
+MIDDLEBURY_VALID = ("over the pixels with an estimate (holes left out, as the Middlebury SDK's avgErr does; "
+                    "their share is invalid)")
 
 
 def _benchmark_metrics() -> dict[str, Metric]:
@@ -73,17 +87,23 @@ def _benchmark_metrics() -> dict[str, Metric]:
     out: dict[str, Metric] = {}
     for mask, where in _MASK_NAMES.items():
         out[f"d1_{mask}"] = Metric(f"D1 ({where})", "%", 2, (
-            f"KITTI outliers: 100 x share of the pixels with e > {D1_PIXELS:g} px and e > "
-            f"{100 * D1_RELATIVE:g} % of gt."))
+            f"KITTI devkit outliers: {KITTI_FILL}; then 100 x share of the pixels with e > {D1_PIXELS:g} px "
+            f"and e > {100 * D1_RELATIVE:g} % of gt."))
         for t in BAD_THRESHOLDS:
             out[f"bad_{t:g}_{mask}"] = Metric(f"bad {t:g} ({where})", "%", 2, (
-                f"Middlebury bad-{t:g}: 100 x share of the pixels with e > {t:g} px."))
-        out[f"avgerr_{mask}"] = Metric(f"avg. error ({where})", "px", 3, "Mean of e.")
-        out[f"rms_{mask}"] = Metric(f"RMS ({where})", "px", 3, "Root of the mean of e squared.")
+                f"Middlebury SDK bad-{t:g}: 100 x share of the pixels with an estimate and e > {t:g} px, "
+                f"among all the pixels: {MIDDLEBURY_HOLES}."))
+        out[f"invalid_{mask}"] = Metric(f"invalid ({where})", "%", 2, (
+            "Middlebury SDK invalid: 100 x share of the pixels without an estimate."))
+        out[f"avgerr_{mask}"] = Metric(f"avg. error ({where})", "px", 3, (
+            "Middlebury SDK avgErr: mean of e over the pixels with an estimate (holes left out; their share is "
+            "invalid)."))
+        out[f"rms_{mask}"] = Metric(f"RMS ({where})", "px", 3, f"Root of the mean of e squared, {MIDDLEBURY_VALID}.")
         for q in QUANTILES:
             k = round(q * 100)
             out[f"a{k}_{mask}"] = Metric(f"A{k} ({where})", "px", 3, (
-                f"Error quantile: the smallest e with at least {k} % of the pixels at or below it."))
+                f"Error quantile: the smallest e with at least {k} % of the pixels at or below it, "
+                f"{MIDDLEBURY_VALID}."))
     for part, what in (("bg", "background (KITTI object map 0)"), ("fg", "foreground (object map > 0)")):
         out[f"d1_{part}"] = Metric(f"D1 ({part})", "%", 2, f"D1 over the {what} pixels with ground truth.")
     return out

@@ -9,7 +9,13 @@ Definitions (docs/design.md, 'Metrics'), fixed so that nobody can misread a tabl
   (strictly greater: an error of exactly delta is not an error).
 * A pixel the method left **without an estimate** (non-finite ``d``) counts as an error
   of ``|gt|``, as if ``d = 0``; **density** (%) is the share of evaluated pixels that
-  have an estimate, reported beside the errors so a sparse method cannot hide.
+  have an estimate, reported beside the errors so a sparse method cannot hide.  These
+  are the project's own figures.
+* **Benchmark figures** (:func:`benchmark_metrics`) compute what the benchmark's own code
+  computes, holes included: KITTI D1 fills the holes first as the devkit does
+  (:func:`interpolate_background`) and scores the non-occluded pixels against
+  ``disp_noc``'s own values; the Middlebury figures leave holes out of the errors and
+  report their share as ``invalid`` (:func:`middlebury_errors`).
 * **Photometric** (no ground truth): the right image warped into the left view with
   the estimate, scored over the pixels that have an estimate whose match lies inside
   the right image; **coverage** (%) is that share of all pixels.
@@ -339,43 +345,177 @@ QUANTILES = (0.50, 0.90, 0.95, 0.99)
 D1_PIXELS = 3.0
 D1_RELATIVE = 0.05
 
+#: The KITTI devkit's value of a pixel without a disparity (``DisparityImage::setInvalid``);
+#: a pixel that :func:`interpolate_background` cannot fill keeps it and is scored as ``d = -1``.
+KITTI_INVALID = -1.0
 
-def standard_errors(error: np.ndarray, gt: np.ndarray) -> dict:
-    """KITTI D1 and the Middlebury figures of one set of evaluated pixels.
+#: Figures of :func:`benchmark_metrics` per pixel set, in column order.
+BENCHMARK_FIGURES = ("d1", *(f"bad_{t:g}" for t in BAD_THRESHOLDS), "invalid", "avgerr", "rms",
+                     *(f"a{round(q * 100)}" for q in QUANTILES), "n_px")
+
+
+def kitti_estimates(pred: np.ndarray) -> np.ndarray:
+    """Pixels that hold an estimate for the KITTI devkit: finite and > 0.
+
+    The devkit reads a uint16 PNG in which 0 means "no estimate"; ``export --format kitti``
+    (:func:`d3cli.data.formats.encode_kitti`) writes non-finite values and values <= 0 as
+    that 0, so the other pixels are the holes the devkit sees in an exported map.
+    """
+    pred = np.asarray(pred, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(pred) & (pred > 0)
+
+
+def interpolate_background(pred: np.ndarray) -> np.ndarray:
+    """Fill the holes of a disparity map as the KITTI devkit does before it counts D1.
+
+    The KITTI stereo/scene-flow devkit (``devkit/cpp/io_disp.h``,
+    ``DisparityImage::interpolateBackground()``, run by ``evaluate_scene_flow.cpp`` on every
+    submitted map: ``D_ipol = D_orig; D_ipol.interpolateBackground()``) does, in this order:
+
+    1. in each row, a run of holes with an estimate on both sides takes the *smaller* of
+       the two neighbouring values (``std::min(getDisp(u1-1,v), getDisp(u2+1,v))``: the
+       farther surface, background);
+    2. in each row, the holes left of the first estimate take its value and the holes
+       right of the last estimate take the last one's; a row without any estimate stays
+       empty;
+    3. in each column, the pixels above the first filled row take that row's value and
+       the pixels below the last filled row the last row's value.  Empty rows *between*
+       filled rows are not filled: they keep the devkit's invalid value -1
+       (:data:`KITTI_INVALID`), and the devkit scores them as ``d = -1``; so does a map
+       without any estimate.
 
     Parameters
     ----------
-    error : ndarray, float, (N,)
-        ``|d - gt|`` in pixels of the evaluated pixels (a missing estimate already
-        counted as ``|gt|``, see :func:`disparity_errors`).
+    pred : ndarray, float, (H, W)
+        Disparity in pixels; holes are the pixels outside :func:`kitti_estimates`.
+
+    Returns
+    -------
+    ndarray, float64, (H, W)
+        The filled map: the estimates unchanged, every hole filled, -1 where the devkit
+        leaves one.
+
+    Examples
+    --------
+    >>> interpolate_background(np.array([[np.inf, 5.0, np.nan, 0.0, 9.0, -2.0]]))
+    array([[5., 5., 5., 5., 9., 9.]])
+    """
+    pred = np.asarray(pred, dtype=np.float64)
+    if pred.ndim != 2:
+        _check_same_2d_shape("interpolate_background", prediction=pred)
+    height, width = pred.shape
+    valid = kitti_estimates(pred)
+    filled = np.where(valid, pred, KITTI_INVALID)
+    if valid.all() or not valid.any():
+        return filled
+    # On the flattened map (1-D accumulations are fast): the index of the nearest estimate
+    # at or before / at or after each pixel, kept when it lies in the pixel's own row.
+    flat, ok = filled.ravel(), valid.ravel()
+    index = np.arange(flat.size)
+    row_start = index - index % width
+    left = np.maximum.accumulate(np.where(ok, index, -1))
+    right = np.minimum.accumulate(np.where(ok, index, flat.size)[::-1])[::-1]
+    has_left, has_right = left >= row_start, right < row_start + width
+    left_value = flat[np.clip(left, 0, flat.size - 1)]
+    right_value = flat[np.clip(right, 0, flat.size - 1)]
+    hole = ~ok
+    out = flat.copy()
+    both = hole & has_left & has_right
+    out[both] = np.minimum(left_value[both], right_value[both])  # step 1
+    before = hole & ~has_left & has_right
+    out[before] = right_value[before]  # step 2, left of the row's first estimate
+    after = hole & has_left & ~has_right
+    out[after] = left_value[after]  # step 2, right of the row's last estimate
+    filled = out.reshape(height, width)
+    filled_rows = np.flatnonzero(valid.any(axis=1))
+    first, last = filled_rows[0], filled_rows[-1]
+    filled[:first] = filled[first]  # step 3
+    filled[last + 1:] = filled[last]
+    return filled
+
+
+def kitti_d1(filled: np.ndarray, gt: np.ndarray) -> float:
+    """KITTI D1 (%) of a set of pixels: the devkit's ``disparityErrorsOutlier``.
+
+    Parameters
+    ----------
+    filled : ndarray, float, (N,)
+        Disparities after :func:`interpolate_background`.
     gt : ndarray, float, (N,)
-        Ground-truth disparity of the same pixels (for D1's relative test).
+        Ground truth of the same pixels (all > 0).
+
+    Returns
+    -------
+    float
+        100 x share of the pixels with ``|gt - d| > 3`` **and** ``|gt - d| / |gt| > 0.05``;
+        NaN for no pixel.
+    """
+    filled = np.asarray(filled, dtype=np.float64).ravel()
+    gt = np.asarray(gt, dtype=np.float64).ravel()
+    if gt.size == 0:
+        return math.nan
+    error = np.abs(gt - filled)
+    outliers = (error > D1_PIXELS) & (error > D1_RELATIVE * np.abs(gt))
+    return 100.0 * float(np.count_nonzero(outliers)) / gt.size
+
+
+def middlebury_errors(pred: np.ndarray, gt: np.ndarray, *, max_disparity: float | None = None) -> dict:
+    """The Middlebury figures of one set of evaluated pixels, with the MiddEval3 SDK's rule for holes.
+
+    The SDK's ``evaldisp`` (MiddEval3 SDK, ``code/evaldisp/evaldisp.cpp``, function
+    ``evaldisp()``, run per dataset by ``runeval``) goes over the pixels with known ground
+    truth (inside the mask): an estimate of INFINITY is *invalid* (a hole in a sparse
+    map); a valid one is clipped to ``[0, maxdisp]`` and has ``err = |d - gt|``.  It counts
+    ``n`` (every evaluated pixel, holes included), ``bad`` (valid estimates with
+    ``err > badthresh``) and ``invalid`` (holes), and prints ``bad% = 100 bad / n`` (a hole
+    is in the total but not bad), ``invalid% = 100 invalid / n``, ``totbad% = bad% +
+    invalid%`` and ``avgErr = sum(err) / (n - invalid)`` (holes left out).  Non-finite
+    values are this project's holes; ``export --format middeval3`` writes them as INFINITY.
+
+    Parameters
+    ----------
+    pred : ndarray, float, (N,)
+        Estimates of the evaluated pixels; non-finite = hole.
+    gt : ndarray, float, (N,)
+        Ground truth of the same pixels.
+    max_disparity : float, optional, keyword-only
+        evaldisp's ``maxdisp``; None clips only at 0 (evaldisp's default is 99999).
 
     Returns
     -------
     dict
-        ``d1`` (%, share with ``error > 3`` and ``error > 0.05 gt``), ``bad_<x>`` (%,
-        share with ``error > x`` for x in :data:`BAD_THRESHOLDS`), ``avgerr`` (px, mean),
-        ``rms`` (px, ``sqrt(mean(error^2))``), ``a<q>`` (px, the error quantile: the
-        smallest error e such that at least q of the pixels have an error <= e, i.e.
-        ``sorted(error)[ceil(q N) - 1]``) and ``n_px``.  NaN floats when ``N == 0``.
+        ``bad_<x>`` (%, the SDK's bad column, x in :data:`BAD_THRESHOLDS`), ``invalid``
+        (%), ``avgerr`` (px), ``rms`` (px, ``sqrt(mean(err^2))``), ``a<q>`` (px, the
+        error quantile: the smallest err such that at least q of the pixels have an error
+        <= it, ``sorted(err)[ceil(q M) - 1]``) and ``n_px`` (``n``).  evaldisp prints no
+        RMS or quantile: they are taken over avgErr's pixels, the ``M = n - invalid``
+        valid estimates.  With ``n == 0`` every float is NaN; with ``M == 0`` avgerr, rms
+        and the quantiles are.
     """
-    error = np.asarray(error, dtype=np.float64).ravel()
+    pred = np.asarray(pred, dtype=np.float64).ravel()
     gt = np.asarray(gt, dtype=np.float64).ravel()
-    n = int(error.size)
-    keys = ["d1", *(f"bad_{t:g}" for t in BAD_THRESHOLDS), "avgerr", "rms",
-            *(f"a{round(q * 100)}" for q in QUANTILES)]
+    if max_disparity is not None and not (isinstance(max_disparity, (int, float, np.number))
+                                          and math.isfinite(max_disparity) and max_disparity > 0):
+        raise InputError(where_what_fix("middlebury_errors", f"max_disparity is {max_disparity!r}",
+                                        "give a positive number of pixels, or None"))
+    n = int(gt.size)
+    result = {key: math.nan for key in BENCHMARK_FIGURES if key not in ("d1", "n_px")}
+    result["n_px"] = n
     if n == 0:
-        return {**{k: math.nan for k in keys}, "n_px": 0}
-    result = {"d1": 100.0 * float(np.count_nonzero((error > D1_PIXELS) & (error > D1_RELATIVE * gt))) / n}
+        return result
+    valid = np.isfinite(pred)
+    d = np.clip(pred[valid], 0.0, math.inf if max_disparity is None else float(max_disparity))
+    error = np.abs(d - gt[valid])
     for t in BAD_THRESHOLDS:
         result[f"bad_{t:g}"] = 100.0 * float(np.count_nonzero(error > t)) / n
-    result["avgerr"] = float(error.mean())
-    result["rms"] = float(math.sqrt(float(np.mean(error**2))))
-    for q in QUANTILES:
-        # inverted_cdf = Middlebury's "error threshold that q of the pixels stay under".
-        result[f"a{round(q * 100)}"] = float(np.quantile(error, q, method="inverted_cdf"))
-    result["n_px"] = n
+    result["invalid"] = 100.0 * float(n - error.size) / n
+    if error.size:
+        result["avgerr"] = float(error.mean())
+        result["rms"] = float(math.sqrt(float(np.mean(error**2))))
+        for q in QUANTILES:
+            # inverted_cdf = Middlebury's "error threshold that q of the pixels stay under".
+            result[f"a{round(q * 100)}"] = float(np.quantile(error, q, method="inverted_cdf"))
     return result
 
 
@@ -384,48 +524,72 @@ def benchmark_metrics(
     gt: np.ndarray,
     *,
     noc_mask: np.ndarray | None = None,
+    noc_gt: np.ndarray | None = None,
     object_map: np.ndarray | None = None,
+    max_disparity: float | None = None,
 ) -> dict:
-    """KITTI D1 and Middlebury bad-x / avgerr / rms / A-quantiles on *all* and *noc* pixels.
+    """KITTI D1 and the Middlebury figures on *all* and *noc* pixels, as each benchmark's code computes them.
+
+    * D1 (``d1_*``, ``d1_bg``, ``d1_fg``): the KITTI devkit's rule.  The map's holes are
+      filled first (:func:`interpolate_background`), then :func:`kitti_d1` counts the
+      outliers; the *noc* pixels are scored against the non-occluded ground truth's own
+      values (KITTI ``disp_noc``, ``noc_gt``), as the devkit does.
+    * bad-x, invalid, avgerr, rms, A-quantiles: the MiddEval3 SDK's rule for holes
+      (:func:`middlebury_errors`), on the unfilled map.
+
+    The project's own figures, where every hole counts as an error of ``gt``, are
+    :func:`disparity_errors` (EPE, PEP, density).
 
     Parameters
     ----------
     pred : ndarray, float, (H, W)
-        Estimated disparity (px); non-finite = no estimate, scored as ``d = 0``.
+        Estimated disparity (px); non-finite = no estimate (for D1 also values <= 0,
+        see :func:`kitti_estimates`).
     gt : ndarray, float, (H, W)
         Ground truth (px); finite values > 0 are evaluated ("all" = KITTI disp_occ).
     noc_mask : ndarray, bool, (H, W), optional
-        Non-occluded pixels (KITTI disp_noc > 0, Middlebury mask0nocc == 255).  Without
-        it every ``*_noc`` figure is NaN (never silently the "all" figure).
+        Non-occluded pixels (Middlebury mask0nocc == 255, KITTI disp_noc > 0).
+    noc_gt : ndarray, float, (H, W), optional
+        Ground truth of the non-occluded pixels when it is a map of its own (KITTI
+        ``disp_noc``): its finite values > 0 (inside ``noc_mask`` if given) are the *noc*
+        pixels, scored against these values.  Without it the *noc* pixels are ``gt``'s
+        inside ``noc_mask``.  With neither, every ``*_noc`` figure is NaN (never silently
+        the "all" figure).
     object_map : ndarray, (H, W), optional
         KITTI 2015 obj_map: 0 = background, > 0 = foreground (cars); adds ``d1_bg`` and
         ``d1_fg`` on the "all" pixels.
+    max_disparity : float, optional
+        The Middlebury SDK's ``maxdisp`` (see :func:`middlebury_errors`).
 
     Returns
     -------
     dict
-        For each figure of :func:`standard_errors` two keys ``<fig>_all`` and
-        ``<fig>_noc`` (e.g. ``d1_all``, ``bad_2_noc``, ``a90_all``), ``n_px_all``,
-        ``n_px_noc``, and ``d1_bg``/``d1_fg`` with an object map.
+        For each figure of :data:`BENCHMARK_FIGURES` two keys ``<fig>_all`` and
+        ``<fig>_noc`` (e.g. ``d1_all``, ``bad_2_noc``, ``invalid_all``, ``n_px_noc``), and
+        ``d1_bg``/``d1_fg`` with an object map.
     """
     pred = np.asarray(pred, dtype=np.float64)
     gt = np.asarray(gt, dtype=np.float64)
-    _check_same_2d_shape("benchmark_metrics", prediction=pred, ground_truth=gt,
-                         mask=noc_mask, object_map=object_map)
-    valid = _evaluable_ground_truth(gt, None)
-    error = np.abs(np.where(np.isfinite(pred), pred, 0.0) - np.where(valid, gt, 0.0))
-    masks = {"all": valid}
-    if noc_mask is not None:
-        masks["noc"] = valid & (np.asarray(noc_mask) != 0)
+    noc_gt = None if noc_gt is None else np.asarray(noc_gt, dtype=np.float64)
+    _check_same_2d_shape("benchmark_metrics", prediction=pred, ground_truth=gt, mask=noc_mask,
+                         noc_ground_truth=noc_gt, object_map=object_map)
+    filled = interpolate_background(pred)
+    sets = {"all": (gt, _evaluable_ground_truth(gt, None))}
+    if noc_mask is not None or noc_gt is not None:
+        truth = gt if noc_gt is None else noc_gt
+        sets["noc"] = (truth, _evaluable_ground_truth(truth, noc_mask))
     out = {}
     for name in ("all", "noc"):
-        if name in masks:
-            figures = standard_errors(error[masks[name]], gt[masks[name]])
+        if name in sets:
+            truth, selected = sets[name]
+            figures = {"d1": kitti_d1(filled[selected], truth[selected]),
+                       **middlebury_errors(pred[selected], truth[selected], max_disparity=max_disparity)}
         else:
-            figures = {k: (0 if k == "n_px" else math.nan) for k in standard_errors(error[:0], gt[:0])}
-        out.update({f"{k}_{name}": v for k, v in figures.items()})
+            figures = {key: (0 if key == "n_px" else math.nan) for key in BENCHMARK_FIGURES}
+        out.update({f"{key}_{name}": figures[key] for key in BENCHMARK_FIGURES})
     if object_map is not None:
         fg = np.asarray(object_map) > 0
-        out["d1_bg"] = standard_errors(error[valid & ~fg], gt[valid & ~fg])["d1"]
-        out["d1_fg"] = standard_errors(error[valid & fg], gt[valid & fg])["d1"]
+        valid = sets["all"][1]
+        out["d1_bg"] = kitti_d1(filled[valid & ~fg], gt[valid & ~fg])
+        out["d1_fg"] = kitti_d1(filled[valid & fg], gt[valid & fg])
     return out

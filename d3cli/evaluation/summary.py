@@ -24,7 +24,7 @@ METRIC_COLUMNS = [*DISPARITY_COLUMNS, *PHOTOMETRIC_COLUMNS]
 #: each on all ground-truth pixels (``_all``) and on the non-occluded ones (``_noc``).
 BENCHMARK_COLUMNS = [
     f"{fig}_{mask}"
-    for fig in ("d1", "bad_0.5", "bad_1", "bad_2", "bad_4", "avgerr", "rms", "a50", "a90", "a95", "a99")
+    for fig in ("d1", "bad_0.5", "bad_1", "bad_2", "bad_4", "invalid", "avgerr", "rms", "a50", "a90", "a95", "a99")
     for mask in ("all", "noc")
 ] + ["d1_bg", "d1_fg"]
 

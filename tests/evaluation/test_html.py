@@ -1,5 +1,6 @@
 """report.html: valid HTML, every pair named, no broken local link, sorted thumbnails."""
 
+import html
 import json
 import re
 from html.parser import HTMLParser
@@ -8,6 +9,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from d3cli.data import formats as io
+from d3cli.evaluation.definitions import metric
 from d3cli.evaluation.html import histogram_svg, write_report_html
 
 
@@ -130,7 +132,8 @@ def test_columns_have_names_with_units_and_only_the_shown_ones_are_defined(tmp_p
     heads = re.findall(r'<th title="[^"]*">([^<]*)</th>', text[:text.index("<h2>Means per family")])
     # The shown columns (summary.shown_columns): bad 2, A90 and PEP 3 stay in metrics.csv.
     assert heads == ["EPE [px]", "D1 (all) [%]", "time [s]"]
-    d1_definition = "KITTI outliers: 100 x share of the pixels with e &gt; 3 px and e &gt; 5 % of gt."
+    d1_definition = html.escape(metric("d1_all").definition)
+    assert d1_definition.startswith("KITTI")
     assert f'<th title="{d1_definition}">D1 (all) [%]</th>' in text
     definitions = text[text.index('<h2 id="definitions">'):text.index("<h2>Config")]
     assert re.findall(r"<dt>(.*?)</dt>", definitions) == heads  # defined: what is shown, nothing else
