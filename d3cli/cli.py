@@ -21,14 +21,20 @@ import click
 
 from . import __version__
 from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, bundled_configs, load_config, resolve_config
-from .errors import D3Error, interrupt_behind, raise_terminated
+from .errors import D3Error, Terminated, interrupt_behind, raise_terminated
+from .evaluation.summary import plural
 
 log = logging.getLogger("d3cli")
+#: --break-lock of run and eval: the one writer of OUT at a time (batch/lock.py).
+BREAK_LOCK_HELP = ("Take over OUT's lock when its record names a run on another host or a live pid that "
+                   "is not writing (check first); a lock held by a running d3stereo is never broken.")
 
 #: Exit code after Ctrl-C (128 + SIGINT, as a shell reports it).
 INTERRUPTED_EXIT = 130
 #: Exit status after SIGTERM: 128 + 15, as a shell reports a process killed by it.
 TERMINATED_EXIT = 143
+#: Exit status after SIGHUP (the terminal or ssh session closed): 128 + 1.
+HUNG_UP_EXIT = 129
 #: Environment variable naming a config file used when -c is not given.
 CONFIG_ENV = "D3STEREO_CONFIG"
 #: Config file picked up from the working folder when neither -c nor the variable is set.
@@ -42,9 +48,11 @@ class _Group(click.Group):
         if _own_process():
             # The batch turns SIGTERM into an interrupt while it runs and puts the previous
             # handler back at its end; with the default one there, a SIGTERM between the
-            # end of the batch and the exit (the summary lines) killed the process by the
-            # signal, status -15 instead of 143 or 0 (seen on a fast machine).
+            # end of the batch and the exit (the summary lines) would kill the process by
+            # the signal, status -15 instead of 143 or 0 (a fast machine gets there).
+            # SIGHUP (the terminal or ssh session closed) likewise, with 129.
             signal.signal(signal.SIGTERM, raise_terminated)
+            signal.signal(signal.SIGHUP, _raise_hung_up)
         try:
             result = super().invoke(ctx)
             _end_of_command()
@@ -63,13 +71,22 @@ class _Group(click.Group):
             _interrupted(ctx, interrupt)
 
 
+def _raise_hung_up(signum, frame):
+    """SIGHUP handler: a :class:`~d3cli.errors.Terminated` named SIGHUP, exit status 129 (as
+    :class:`d3cli.batch.signals.HungUp`, which the batch raises; that module is not imported
+    here: the batch package is heavy)."""
+    exc = Terminated()
+    exc.signal_name, exc.exit_status = "SIGHUP", HUNG_UP_EXIT
+    raise exc
+
+
 def _interrupted(ctx, exc: KeyboardInterrupt):
-    """Say what was kept and exit 130 (143 after SIGTERM), like a shell; click would print
-    "Aborted!" and exit 1."""
+    """Say what was kept and exit 130 (143 after SIGTERM, 129 after SIGHUP), like a shell;
+    click would print "Aborted!" and exit 1."""
     _end_of_command()  # first: a second Ctrl-C from here on must not end us by the signal
     # No import here: Ctrl-C may have landed in the middle of importing the batch
-    # package (numpy, scipy...), and importing it again recursed until a
-    # RecursionError traceback came out instead of this line.
+    # package (numpy, scipy...), and importing it again recurses until a
+    # RecursionError traceback comes out instead of this line.
     batch = sys.modules.get(f"{__package__}.batch")
     interrupted = getattr(batch, "BatchInterrupted", None)
     if interrupted is not None and isinstance(exc, interrupted):
@@ -77,7 +94,26 @@ def _interrupted(ctx, exc: KeyboardInterrupt):
     else:
         message = "Interrupted; rerun the same command to resume"
     click.echo(message, err=True)
-    ctx.exit(TERMINATED_EXIT if getattr(exc, "terminated", False) else INTERRUPTED_EXIT)
+    status = getattr(exc, "exit_status", TERMINATED_EXIT) if getattr(exc, "terminated", False) else INTERRUPTED_EXIT
+    _exit_if_compiling(status)
+    ctx.exit(status)
+
+
+def _exit_if_compiling(status: int) -> None:
+    """End the process with ``status`` now when the interrupt left the kernels' compile
+    running in its thread (:func:`d3cli.batch.warmup.compiling_in_background`): an ordinary
+    exit would finalise the interpreter and LLVM under that thread's feet.  What it compiled
+    is in the cache already; its own files are written whole or not at all.  In the
+    command's own process only."""
+    warmup = sys.modules.get(f"{__package__}.batch.warmup")  # no import: see _interrupted
+    if _own_process() and warmup is not None and warmup.compiling_in_background():
+        logging.shutdown()
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (AttributeError, OSError, ValueError):  # closed, or None: nothing to flush
+                pass
+        os._exit(status)
 
 
 def _own_process() -> bool:
@@ -91,7 +127,7 @@ def _own_process() -> bool:
 def _end_of_command() -> None:
     """The command's exit status is decided: make sure the process ends with it.
 
-    Two ways a handled Ctrl-C still ended a ``d3stereo`` process by the signal (status
+    Two ways a handled Ctrl-C would still end a ``d3stereo`` process by the signal (status
     -2 instead of 130):
 
     * a second SIGINT during the interpreter's shutdown (atexit, thread joins): SIGINT
@@ -108,13 +144,18 @@ def _end_of_command() -> None:
     """
     if _own_process():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        if not getattr(signal.getsignal(signal.SIGTERM), "after_batch", False):  # run's own: exits 143
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # the status is decided: exit with it
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            if not getattr(signal.getsignal(sig), "after_batch", False):  # run's own: exits 143 / 129
+                signal.signal(sig, signal.SIG_IGN)  # the status is decided: exit with it
         exec("pass")  # noqa: S102 - clears the flag, see above
 
 
 class _StderrHandler(logging.StreamHandler):
-    """Writes to whatever sys.stderr is at the time of each record (click's test runner swaps it)."""
+    """Writes to whatever sys.stderr is at the time of each record (click's test runner swaps it).
+
+    While a progress bar is on the terminal a line goes above it (``tqdm.write``: the bar
+    is cleared, the line written, the bar drawn again below), never glued to the bar's end.
+    """
 
     @property
     def stream(self):
@@ -124,17 +165,47 @@ class _StderrHandler(logging.StreamHandler):
     def stream(self, _value):
         pass
 
+    def emit(self, record):
+        if self.stream is None:  # closed where the program started (outside the d3stereo command)
+            return
+        bars = sys.modules.get("tqdm")  # no bar without tqdm imported: not imported here
+        if bars is None:
+            super().emit(record)
+            return
+        try:
+            bars.tqdm.write(self.format(record), file=self.stream)
+            self.flush()  # as StreamHandler.emit does: the line is out before the next stdout line
+        except Exception:  # noqa: BLE001 - logging's own rule: a failed line never ends the command
+            self.handleError(record)
 
-def _setup_logging(verbose: bool, quiet: bool) -> None:
+
+class _OwnLines(logging.Filter):
+    """Lets through d3stereo's own records at any level the logger allows, other loggers'
+    (Pillow, distributed, Python warnings) only from WARNING up unless ``libraries``."""
+
+    def __init__(self, libraries: bool):
+        super().__init__()
+        self.libraries = libraries
+
+    def filter(self, record):
+        own = record.name == "d3cli" or record.name.startswith("d3cli.")
+        return own or self.libraries or record.levelno >= logging.WARNING
+
+
+def _setup_logging(verbose: int, quiet: bool) -> None:
+    """Log lines on stderr: warnings and errors; ``-q`` errors only; ``-v`` d3stereo's debug
+    lines too; ``-vv`` the libraries' debug lines and Python warnings as well."""
     level = logging.DEBUG if verbose else logging.ERROR if quiet else logging.WARNING
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", handlers=[_StderrHandler()], force=True)
+    handler = _StderrHandler()
+    handler.addFilter(_OwnLines(libraries=verbose >= 2))
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", handlers=[handler], force=True)
     # numba logs its compiler passes at DEBUG; they drown the useful lines.
     logging.getLogger("numba").setLevel(max(level, logging.INFO))
     route_library_warnings(verbose)
 
 
 class _AsDebug(logging.Filter):
-    """Turns a record into a DEBUG one: shown with -v only."""
+    """Turns a record into a DEBUG one: shown with -vv only."""
 
     def filter(self, record):
         record.levelno, record.levelname = logging.DEBUG, "DEBUG"
@@ -146,12 +217,13 @@ def route_library_warnings(verbose: bool) -> None:
     DeprecationWarning) to the log at DEBUG instead of stderr.
 
     On stderr a user sees only d3stereo's own ``Error:`` and ``WARNING:`` lines; what
-    a warning says about an input is d3stereo's to report.  ``-v`` shows them.
+    a warning says about an input is d3stereo's to report.  ``-vv`` shows them (``-v``
+    shows d3stereo's own lines only: the handler's filter, :func:`_setup_logging`).
 
     Parameters
     ----------
-    verbose : bool
-        Whether the command runs with ``-v`` (the root logger then shows DEBUG).
+    verbose : int or bool
+        Whether the command runs with ``-v`` or ``-vv`` (the root logger then shows DEBUG).
     """
     logging.captureWarnings(True)
     channel = logging.getLogger("py.warnings")
@@ -161,7 +233,9 @@ def route_library_warnings(verbose: bool) -> None:
 
 def _verbosity(fn):
     fn = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress bar.")(fn)
-    fn = click.option("-v", "--verbose", is_flag=True, help="Debug logging.")(fn)
+    fn = click.option("-v", "--verbose", count=True,
+                      help="d3stereo's debug lines; -vv also the libraries' own (Pillow, numba, Python "
+                           "warnings).")(fn)
     return fn
 
 
@@ -210,9 +284,7 @@ def main():
 @click.option("--eval/--no-eval", "evaluate", default=False,
               help="Score each pair (ground truth where present, photometric always).")
 @click.option("--overwrite", is_flag=True, help="Compute pairs again even when their outputs are complete.")
-@click.option("--break-lock", is_flag=True,
-              help="Take over OUT's lock when its record names a run on another host or a live pid that "
-                   "is not writing (check first); a lock held by a running d3stereo is never broken.")
+@click.option("--break-lock", is_flag=True, help=BREAK_LOCK_HELP)
 @click.option("--no-fill", is_flag=True, help="Leave undecided pixels invalid (inf) instead of filling them.")
 @click.option("--pointcloud", is_flag=True,
               help="Also write OUT/<pair>/cloud.ply (x, y, z metres in the left camera frame, colour from the "
@@ -278,9 +350,10 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
                              config_source=source, pointcloud=pointcloud, workers=n_workers,
                              scheduler=scheduler, shard=shard_of, break_lock=break_lock, prefetch=n_ahead,
                              on_recorded=_batch_recorded)
-    if _own_process():  # a SIGTERM from now on still exits 143, recorded in run.json
-        batch.terminate_after_batch(result.run_json, f"Terminated (SIGTERM): {result.n_computed + result.n_skipped} "
-                                                     f"of {result.n_pairs} pairs done; rerun the same command to resume")
+    if _own_process():  # a SIGTERM (SIGHUP) from now on still exits 143 (129), recorded in run.json
+        batch.terminate_after_batch(result.run_json, f"{result.n_computed + result.n_skipped} of "
+                                                     f"{plural(result.n_pairs, 'pair')} done; rerun the same "
+                                                     "command to resume")
     if not quiet:
         # The counts as run.json has them: "skipped" = kept complete from an earlier run
         # (an ok result in the table), never a pair left out.
@@ -297,9 +370,9 @@ def _batch_recorded() -> None:
     """run.json has just recorded the batch complete (called by the batch, signals held):
     a Ctrl-C from here on is ignored (exit 0, everything written; README "Failure
     behaviour"), in the command's own process.  One during the summary lines, or between
-    run.json and the batch's return (CI, tests/batch/test_interrupts.py), ended the command
-    with 130 and the resume line although nothing was left to resume.  SIGTERM still stops
-    the command there (143)."""
+    run.json and the batch's return (tests/batch/test_interrupts.py), would otherwise end
+    the command with 130 and the resume line although nothing is left to resume.  SIGTERM
+    still stops the command there (143)."""
     if _own_process():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
@@ -312,7 +385,7 @@ def _say_where(folder: Path, with_summary: bool = True) -> None:
 
 
 def config_by_name(config_path):
-    """``-c road`` -> the bundled ``d3cli/configs/road.yaml`` unless a file ``road`` (or,
+    """``-c road`` -> the bundled ``configs/road.yaml`` unless a file ``road`` (or,
     for a bare name, ``./road.yaml``) exists (:func:`d3cli.config.resolve_config`); a
     value that names nothing is returned unchanged, so the usual "not found" error names it.
     """
@@ -354,7 +427,7 @@ def _finish(failures, n_total: int, where) -> None:
         prefix = "" if message.startswith(f"{pair}:") else f"{pair}: "
         click.echo(f"failed: {prefix}{message}", err=True)
     if failures:
-        raise click.ClickException(f"{len(failures)} of {n_total} pairs failed (see {where})")
+        raise click.ClickException(f"{len(failures)} of {plural(n_total, 'pair')} failed (see {where})")
 
 
 # ----------------------------------------------------------------------------- eval
@@ -364,8 +437,9 @@ def _finish(failures, n_total: int, where) -> None:
               help="The pairs with ground truth (any layout `run` accepts); repeatable.")
 @click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), required=True,
               help="Folder for the reports (the prediction folders are only read).")
+@click.option("--break-lock", is_flag=True, help=BREAK_LOCK_HELP)
 @_verbosity
-def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
+def eval_(pred_dirs, gt_input, out_dir, break_lock, verbose, quiet):
     """Score the predictions in PRED_DIR(s) against the pairs of --gt.
 
     A prediction is <pair>/disp.{pfm,png,npy} or <pair>.{pfm,png,npy} (PNG: KITTI
@@ -378,7 +452,7 @@ def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
 
     _setup_logging(verbose, quiet)
     pairs = datasets.discover(list(gt_input))
-    outcome = batch.evaluate_folders(pred_dirs, pairs, out_dir=out_dir, progress=not quiet)
+    outcome = batch.evaluate_folders(pred_dirs, pairs, out_dir=out_dir, progress=not quiet, break_lock=break_lock)
     if outcome["comparison"] is not None:
         click.echo(outcome["comparison"])
     elif not quiet:
@@ -405,12 +479,29 @@ def eval_(pred_dirs, gt_input, out_dir, verbose, quiet):
 @_verbosity
 def synth(out_dir, n, seed, width, height, verbose, quiet):
     """Write N synthetic road stereo pairs with exact ground truth into OUT_DIR."""
+    from tqdm import tqdm
+
     from .data import synth as synth_mod
 
     _setup_logging(verbose, quiet)
-    written = synth_mod.generate_dataset(out_dir, n=n, seed=seed, width=width, height=height)
+    # A pair takes seconds: a bar on a terminal, else one line per pair (as `run` does); -q: neither.
+    on_terminal = sys.stderr is not None and sys.stderr.isatty()
+    bar = tqdm(total=n, desc="synth", unit="pair", disable=quiet or not on_terminal)
+
+    def written_one(index: int, folder: Path, seconds: float) -> None:
+        if not bar.disable:
+            bar.set_postfix_str(folder.name, refresh=False)
+            bar.update()
+        elif not quiet:
+            click.echo(f"[{index + 1}/{n}]  {folder.name}  written  {seconds:.1f} s", err=True)
+
+    try:
+        written = synth_mod.generate_dataset(out_dir, n=n, seed=seed, width=width, height=height,
+                                             on_pair=written_one)
+    finally:
+        bar.close()
     if not quiet:
-        click.echo(f"wrote {len(written)} pairs to {out_dir}")
+        click.echo(f"wrote {plural(len(written), 'pair')} to {out_dir}")
 
 
 # ----------------------------------------------------------------------------- export
@@ -423,10 +514,15 @@ def synth(out_dir, n, seed, width, height, verbose, quiet):
 @click.option("--algorithm", default="D3Stereo", show_default=True, metavar="ALG",
               help="Algorithm name in MiddEval3's file names.")
 @click.option("--split", default=None, metavar="SPLIT",
-              help="MiddEval3 split (e.g. trainingQ) of pairs whose input path names none.")
+              help="MiddEval3 split (e.g. trainingQ) of pairs whose input path and pair name give none.")
 @_verbosity
 def export(out_dir, fmt, submission, algorithm, split, verbose, quiet):
-    """Write the benchmark submission layout of the complete pairs of a run's OUT_DIR."""
+    """Write the benchmark submission layout of the complete pairs of a run's OUT_DIR.
+
+    A pair whose result.json is damaged, or whose disp.pfm is not the one the run wrote
+    (size and SHA-256 in result.json), is left out with a "failed:" line; the others are
+    written and the exit code is 1.
+    """
     from .batch.export import export_submission
 
     _setup_logging(verbose, quiet)
@@ -434,8 +530,14 @@ def export(out_dir, fmt, submission, algorithm, split, verbose, quiet):
     if done.incomplete:
         click.echo(f"skipped {len(done.incomplete)} pair folders without a complete result: "
                    f"{', '.join(done.incomplete)}", err=True)
+    for _pair, message in done.failed:  # damaged pairs: the others are exported, the exit is 1
+        click.echo(f"failed: {message}", err=True)
     if not quiet:
-        click.echo(f"wrote {len(done.pairs)} pairs ({fmt}, {len(done.files)} files) to {submission}")
+        click.echo(f"wrote {plural(len(done.pairs), 'pair')} ({fmt}, {plural(len(done.files), 'file')}) to {submission}")
+    if done.failed:
+        raise click.ClickException(f"{out_dir}: {len(done.failed)} of "
+                                   f"{plural(len(done.failed) + len(done.pairs), 'pair')} not exported (see the failed: lines); fix each as its line says, then export "
+                                   "again")
 
 
 # ----------------------------------------------------------------------------- info

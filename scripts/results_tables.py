@@ -348,7 +348,7 @@ def render_photometric_table(rows) -> str:
     best = {"psnr": max(methods, key=lambda m: means[m]["psnr"]), "ssim": max(methods, key=lambda m: means[m]["ssim"]),
             "mse": min(methods, key=lambda m: means[m]["mse"])}
     formats = {"psnr": "{:.2f}", "ssim": "{:.3f}", "mse": "{:.0f}", "coverage": "{:.1f}"}
-    lines = [f"| method ({len(rows)} pairs) | PSNR dB | SSIM | MSE | coverage % |", "|---|---|---|---|---|"]
+    lines = [f"| method ({len(rows)} pair{'' if len(rows) == 1 else 's'}) | PSNR dB | SSIM | MSE | coverage % |", "|---|---|---|---|---|"]
     for name in methods:
         cells = []
         for k in ("psnr", "ssim", "mse", "coverage"):

@@ -179,7 +179,7 @@ def test_odd_bit_depths_are_read(tmp_path, kind):
 def _failed_pair(tmp_path, pair_message: str, *, args=(), eval_failure=False):
     out = tmp_path / "out"
     _check(tmp_path, ["run", tmp_path / "in", "-o", out, "--method", "sgbm", *args], code=1,
-           error=f"Error: 1 of 1 pairs failed (see {out / 'run.json'})", failed=f"failed: p: {pair_message}", out=out)
+           error=f"Error: 1 of 1 pair failed (see {out / 'run.json'})", failed=f"failed: p: {pair_message}", out=out)
     run = json.loads((out / "run.json").read_text())
     assert run["n_failed"] == 1 and run["interrupted"] is False
     if eval_failure:  # the maps are kept, only the evaluation failed

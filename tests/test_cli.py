@@ -147,7 +147,7 @@ def test_failed_rerun_keeps_the_earlier_complete_result(tmp_path, make_pair_fold
     assert invoke("run", root, "-o", out, "--method", "sgbm").exit_code == 0
     stamp = (out / "p" / "result.json").stat().st_mtime_ns
     result = invoke("run", root, "-o", out, "--method", "sgbm", "--max-disparity", "200")
-    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert_user_error(result, contains="1 of 1 pair failed")
     assert result.output.count("failed: p: ") == 1 and "p: p:" not in result.output
     assert (out / "p" / "result.json").stat().st_mtime_ns == stamp
     assert invoke("run", root, "-o", out, "--method", "sgbm").exit_code == 0
@@ -213,7 +213,7 @@ def test_size_mismatch(tmp_path, make_pair_folder):
     folder = make_pair_folder(root, "p", size=(48, 96))
     write_png(folder / "right.png", np.zeros((48, 90), np.uint8))
     result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm")
-    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert_user_error(result, contains="1 of 1 pair failed")
     assert "48x96" in result.output and "48x90" in result.output
 
 
@@ -222,7 +222,7 @@ def test_corrupt_image(tmp_path, make_pair_folder):
     folder = make_pair_folder(root, "p")
     (folder / "left.png").write_bytes(b"\x89PNG\r\n\x1a\n this is not an image")
     result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm")
-    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert_user_error(result, contains="1 of 1 pair failed")
     assert "left.png" in result.output
 
 
@@ -241,7 +241,7 @@ def test_gt_of_another_size(tmp_path, make_pair_folder):
     folder = make_pair_folder(root, "p", size=(48, 96))
     d3cli.data.formats.write_pfm(folder / "disp_gt.pfm", np.full((40, 96), 5, np.float32))
     result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm", "--eval")
-    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert_user_error(result, contains="1 of 1 pair failed")
     assert "disp_gt.pfm" in result.output or "ground truth" in result.output
 
 
@@ -255,7 +255,7 @@ def test_max_disparity_not_below_width(tmp_path, make_pair_folder):
     root = tmp_path / "pairs"
     make_pair_folder(root, "p", size=(48, 96))
     result = invoke("run", root, "-o", tmp_path / "out", "--method", "sgbm", "--max-disparity", "96")
-    assert_user_error(result, contains="1 of 1 pairs failed")
+    assert_user_error(result, contains="1 of 1 pair failed")
     assert "max" in result.output.lower() and "96" in result.output
 
 

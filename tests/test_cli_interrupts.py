@@ -94,7 +94,7 @@ def test_ctrl_c_inside_a_kernel_during_the_jit_warm_up_is_an_interrupt(tmp_path,
         """
     done = _run_python(code, tmp_path)
     assert done.returncode == 130, done.stderr
-    assert done.stderr == "Interrupted: 0 of 1 pairs done; rerun the same command to resume\n"
+    assert done.stderr == "Interrupted: 0 of 1 pair done; rerun the same command to resume\n"
     assert (tmp_path / "out" / "run.json").is_file() and not (tmp_path / "out" / ".d3stereo.lock").exists()
 
 
@@ -126,7 +126,7 @@ def test_sigterm_after_the_batch_exits_143_not_by_the_signal(tmp_path, make_pair
     done = _run_python(code, tmp_path)
     assert done.returncode == 143, (done.returncode, done.stderr)
     assert done.stderr.strip().splitlines()[-1] == (
-        "Terminated (SIGTERM): 1 of 1 pairs done; rerun the same command to resume")
+        "Terminated (SIGTERM): 1 of 1 pair done; rerun the same command to resume")
     run = json.loads((tmp_path / "out" / "run.json").read_text())
     # run.json agrees with the exit status (it said "not interrupted" beside exit 143)
     assert run["interrupted"] is True and run["n_failed"] == 0

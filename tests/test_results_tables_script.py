@@ -125,7 +125,7 @@ def test_photometric_table_bolds_the_highest_psnr_and_ssim_and_the_lowest_mse(rt
 
     rows = [{"pair": "k", "family": "road", "d3stereo+pt": photo(24.0, 0.86, 400), "sgbm": photo(22.0, 0.90, 600)}]
     table = rt.render_photometric_table(rows).splitlines()
-    assert table[0].startswith("| method (1 pairs) | PSNR dB |")
+    assert table[0].startswith("| method (1 pair) | PSNR dB |")
     assert table[2] == "| d3stereo, PT on (PT-D3Stereo) | **24.00** | 0.860 | **400** | 90.0 |"
     assert table[3] == "| SGBM | 22.00 | **0.900** | 600 | 90.0 |"
     assert set(rt.build({"road-photo": rows}, {}, None, "m")) == {"road-photometric"}

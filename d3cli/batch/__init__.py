@@ -8,7 +8,7 @@
 - ``evaluate``: scoring a pair or folders of predictions (``d3stereo eval``);
 - ``outputs``: the per-pair files, written atomically, read back, removed;
 - ``fingerprint``: what a stored result depends on (resume decisions), versions;
-- ``lock``: one run per output folder (one per shard with ``--shard``);
+- ``lock``: one writer per output folder (a run or an eval), or the shards of one batch together;
 - ``executors``: where pairs run - here, a local process pool; shards;
 - ``pipelined``: one process, reading ahead and writing behind the pair computing;
 - ``cluster``: the Dask executor (``--scheduler``), its scheduler probe;

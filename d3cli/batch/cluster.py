@@ -6,7 +6,7 @@ waits forever for a listener that accepts and never answers, and a listener send
 random bytes makes its handshake try to allocate exabytes.  Only then is a client made,
 and it is always closed by d3stereo (left to its ``__del__`` it prints ``Exception
 ignored in: Client.__del__`` 10 s after the error line).  distributed's log lines are
-held back while d3stereo is its client (shown with ``-v``): its errors reach the user
+held back while d3stereo is its client (shown with ``-vv``): its errors reach the user
 as d3stereo's own ``Error:`` lines.
 """
 

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 from typing import Iterable, Sequence
 
+import numpy as np
 from tqdm import tqdm
 
 from ..data import formats as io, layouts as datasets
@@ -20,8 +21,9 @@ from ..errors import D3Error, InputError, where_what_fix
 from ..evaluation import metrics, pictures, report
 from ..evaluation.html import write_report_html
 from .fingerprint import object_map_path, package_versions
-from .lock import ensure_writable
-from .outputs import ERROR_MAP, RESULT_FILE, RUN_FILE
+from .lock import acquire_lock, ensure_writable, release_lock
+from .outputs import ERROR_MAP, RESULT_FILE, RUN_FILE, check_batch_files, check_pair_name
+from .signals import signals_deferred
 
 log = logging.getLogger(__name__)
 
@@ -33,8 +35,12 @@ def pair_row(pair, status: str, *, time_s: float | None = None, error: str = "",
 
 
 def progress_bar(pairs: Sequence, enabled: bool, desc: str):
-    bar = tqdm(pairs, desc=desc, unit="pair", disable=not (enabled and sys.stderr.isatty()))
-    bar.lines = enabled and not sys.stderr.isatty()  # no terminal: one line per pair instead
+    """A tqdm bar on a terminal; else (``lines``) one line per pair; neither without stderr
+    (None: closed where the program started) or when not ``enabled``."""
+    stream = sys.stderr
+    on_terminal = stream is not None and stream.isatty()
+    bar = tqdm(pairs, desc=desc, unit="pair", disable=not (enabled and on_terminal))
+    bar.lines = enabled and stream is not None and not on_terminal  # no terminal: one line per pair instead
     return bar
 
 
@@ -57,8 +63,9 @@ def progress_done(bar, row: dict) -> None:
         parts.append(f"{row['time_s']:.2f} s")
     if isinstance(row.get("epe"), (int, float)):
         parts.append(f"EPE {row['epe']:.3f}")
-    sys.stderr.write("  ".join(parts) + "\n")
-    sys.stderr.flush()
+    if sys.stderr is not None:
+        sys.stderr.write("  ".join(parts) + "\n")
+        sys.stderr.flush()
 
 
 def failed_row(pair, message: str, wall: float):
@@ -78,7 +85,8 @@ def evaluate_pair(pair, left, right, disparity, pair_dir: Path) -> dict:
     if gt is not None:
         scores.update(metrics.disparity_errors(disparity, gt, mask=mask))
         object_map = _object_map(pair, gt.shape)
-        scores.update(metrics.benchmark_metrics(disparity, gt, noc_mask=mask, object_map=object_map))
+        noc_gt = _noc_ground_truth(pair, gt) if mask is not None else None
+        scores.update(metrics.benchmark_metrics(disparity, gt, noc_mask=mask, noc_gt=noc_gt, object_map=object_map))
         # Name the pixels behind the _all and _noc figures (a NaN _noc = no mask file).
         scores["mask_all"] = f"{Path(pair.gt).name} > 0"
         scores["mask_noc"] = f"{Path(pair.nocc).name}" if mask is not None else ""
@@ -86,6 +94,33 @@ def evaluate_pair(pair, left, right, disparity, pair_dir: Path) -> dict:
         io.write_image(pair_dir / ERROR_MAP, pictures.error_picture(disparity, gt, noc_mask=mask))
     scores.update(metrics.photometric_scores(io.to_grey(left), io.to_grey(right), disparity))
     return scores
+
+
+def _noc_ground_truth(pair, gt):
+    """KITTI's non-occluded ground truth (``disp_noc*``), whose own values the devkit scores
+    on the non-occluded pixels; None for a mask file (Middlebury ``mask0nocc.png``...).
+
+    Read like the pair's ground truth (``gt_scale``, ``gt_invalid``).  Where both maps
+    have a value they agree but at a few pixels, so a median ratio off 1 means the two
+    files were written with different scales.
+
+    Raises
+    ------
+    InputError
+        The two maps disagree in scale.
+    """
+    path = Path(pair.nocc)
+    if not (path.name.lower().startswith("disp_noc") or path.parent.name.lower().startswith("disp_noc")):
+        return None
+    noc = io.read_disparity(path, scale=pair.gt_scale, invalid=pair.gt_invalid)
+    with np.errstate(invalid="ignore"):
+        both = np.isfinite(noc) & (noc > 0) & np.isfinite(gt) & (gt > 0)
+    ratio = float(np.median(noc[both] / gt[both])) if both.any() else 1.0
+    if not 0.99 <= ratio <= 1.01:
+        raise InputError(where_what_fix(
+            pair.name, f"non-occluded ground truth {path.name} holds {ratio:.3g} times the disparities of "
+            f"{Path(pair.gt).name}", "write both with the same scale: gt_scale applies to both"))
+    return noc
 
 
 def _object_map(pair, shape):
@@ -158,7 +193,7 @@ def read_prediction(path: str | os.PathLike):
     """Disparity (px, float, inf = no estimate) of a prediction file.
 
     PFM: float values, non-finite = no estimate; PNG: KITTI uint16, value / 256,
-    0 = no estimate; NPY: float values, non-finite or <= 0 = no estimate.
+    0 = no estimate; NPY: float values, non-finite = no estimate (as PFM).
     """
     path = Path(path)
     if path.suffix.lower() == ".png":
@@ -188,6 +223,7 @@ def evaluate_predictions(
         t0 = time.perf_counter()
         pred_path = find_prediction(pred_dir, pair.name)
         try:
+            check_pair_name(pair.name, report_dir)  # its error map's folder would take a report's name
             if pred_path is None:
                 raise InputError(where_what_fix(str(pred_dir / pair.name), "no prediction for this pair",
                                                 "give <pair>/disp.{pfm,png,npy} or <pair>.{pfm,png,npy}"))
@@ -274,6 +310,7 @@ def evaluate_folders(
     *,
     out_dir: str | os.PathLike,
     progress: bool = True,
+    break_lock: bool = False,
 ) -> dict:
     """Score one or more prediction folders against the same pairs and write the reports.
 
@@ -282,7 +319,9 @@ def evaluate_folders(
     ``out_dir`` (never into a prediction folder): one folder gives ``metrics.csv``,
     ``summary.json``, ``summary.md``, ``<pair>/error.png`` in ``out_dir``; several give
     each folder's reports in ``out_dir/<method>/`` and the side-by-side table
-    ``out_dir/comparison.md``.
+    ``out_dir/comparison.md``.  Each folder written is locked as a run's ``-o`` folder is
+    (``break_lock``: ``--break-lock``), so no run, shard or other eval writes there
+    meanwhile; a pair named like a report file fails alone (:func:`check_pair_name`).
 
     Returns
     -------
@@ -297,6 +336,11 @@ def evaluate_folders(
         A prediction folder does not exist, ``out_dir`` overlaps a prediction or
         ground-truth folder (:func:`check_report_folder`), or no pair has a prediction
         everywhere.
+    OutputError
+        Another d3stereo command (a run, a shard, an eval) writes into a report folder, or
+        left a lock there that may still be in use (:func:`d3cli.batch.lock.acquire_lock`;
+        ``break_lock`` takes over the latter); a report file's name is a folder
+        (:func:`d3cli.batch.outputs.check_batch_files`).
     """
     pred_dirs = [Path(p) for p in pred_dirs]
     out = Path(out_dir)
@@ -312,10 +356,39 @@ def evaluate_folders(
     if not_compared:
         log.warning("not compared (no prediction in every folder): %s", ", ".join(not_compared))
     names = method_names(pred_dirs)
+    targets = [out] if len(pred_dirs) == 1 else [out / name for name in names]
+    for target in dict.fromkeys([out, *targets]):
+        check_batch_files(target)  # before any pair is scored
     ensure_writable(out)
+    # The lock of every folder written (as `d3stereo run` takes it): no run, shard or
+    # other eval writes there meanwhile.  Taken whole, a Ctrl-C meanwhile delivered after.
+    locks = []
+    try:
+        with signals_deferred():
+            for folder in dict.fromkeys([out, *targets]):
+                locks.append(acquire_lock(ensure_writable(folder), command="d3stereo eval", break_lock=break_lock))
+        results, summaries, comparison, comparison_path = _evaluate_locked(
+            pred_dirs, names, targets, compared, not_compared, out=out, progress=progress)
+    finally:
+        for lock in reversed(locks):
+            release_lock(lock)
+    return {
+        "results": results,
+        "summaries": summaries,
+        "comparison": comparison,
+        "comparison_path": comparison_path,
+        "n_failed": sum(r["status"] == "failed" for rows in results.values() for r in rows),
+        "n_rows": sum(len(rows) for rows in results.values()),
+        "out_dir": out,
+        "not_compared": not_compared,
+    }
+
+
+def _evaluate_locked(pred_dirs, names, targets, compared, not_compared, *, out: Path, progress: bool):
+    """The body of :func:`evaluate_folders`, run while holding the report folders' locks:
+    (results, summaries, comparison, comparison_path)."""
     results, summaries = {}, {}
-    for folder, name in zip(pred_dirs, names):
-        target = out if len(pred_dirs) == 1 else ensure_writable(out / name)
+    for folder, name, target in zip(pred_dirs, names, targets):
         rows = evaluate_predictions(folder, compared, report_dir=target, progress=progress)
         report.write_summary(target, rows, method=name,
                              extra={"predictions": str(folder), "not_compared": not_compared})
@@ -328,14 +401,6 @@ def evaluate_folders(
     if len(pred_dirs) > 1:
         comparison = report.side_by_side(results)
         comparison_path = out / "comparison.md"
-        io.atomic_write(comparison_path, lambda tmp: Path(tmp).write_text(comparison + "\n", encoding="utf-8"))
-    return {
-        "results": results,
-        "summaries": summaries,
-        "comparison": comparison,
-        "comparison_path": comparison_path,
-        "n_failed": sum(r["status"] == "failed" for rows in results.values() for r in rows),
-        "n_rows": sum(len(rows) for rows in results.values()),
-        "out_dir": out,
-        "not_compared": not_compared,
-    }
+        io.atomic_write(comparison_path, lambda tmp: Path(tmp).write_text(report.readable(comparison) + "\n",
+                                                                              encoding="utf-8"))
+    return results, summaries, comparison, comparison_path

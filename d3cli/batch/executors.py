@@ -45,7 +45,7 @@ from typing import Callable, Iterator, Sequence
 
 from ..data import formats as io
 from ..errors import ConfigError, D3Error
-from .warmup import warm_jit
+from .warmup import call_interruptibly, warm_jit
 
 log = logging.getLogger(__name__)
 
@@ -245,10 +245,14 @@ def _init_pool_worker(threads: int, log_level: int, cfg, method: str | None, jit
         cv2.setNumThreads(threads)  # OpenCV's own pool too: workers x threads <= cores
     except ImportError:  # pragma: no cover - opencv is a dependency
         pass
-    # Ctrl-C goes to the whole process group; the parent decides, the worker finishes its pair.
+    # Ctrl-C and a closed terminal's SIGHUP go to the whole process group; the parent
+    # decides, the worker finishes its pair.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
     logging.basicConfig(level=log_level, format="%(levelname)s: %(message)s", force=True)
-    logging.getLogger("numba").setLevel(max(log_level, logging.INFO))
+    # numba's compiler passes and Pillow's chunk reads log at DEBUG: -v shows d3stereo's lines.
+    for library in ("numba", "PIL"):
+        logging.getLogger(library).setLevel(max(log_level, logging.INFO))
     if method is not None:
         with jit_lock:
             _WORKER_WARM_S = warm_jit(cfg, method)
@@ -351,11 +355,29 @@ class PoolExecutor:
             max_workers=self.workers, mp_context=ctx, initializer=_init_pool_worker,
             initargs=(self.threads, logging.getLogger().getEffectiveLevel(), cfg, method, ctx.Lock(), forked))
         try:
-            # Returns once one worker is ready, i.e. has compiled (or loaded) the kernels.
-            return self._pool.submit(_worker_warm_seconds).result()
+            # Returns once one worker is ready, i.e. has compiled (or loaded) the kernels:
+            # minutes on a cold cache, waited for in short steps so that Ctrl-C and SIGTERM
+            # are answered at once (the workers ignore SIGINT and would compile on).
+            ready = self._pool.submit(_worker_warm_seconds)
+            _, signals = call_interruptibly(ready.result)
+            if signals:
+                self._stop_workers()
+                signum, handler = signals[0]
+                handler(signum, None)  # raises the interrupt, or holds it for the batch
+                return 0.0
+            return ready.result()
         except BrokenProcessPool:
             raise D3Error(f"the --workers processes could not start ({self.start_method}); "
                           f"run with --workers 1, or set {START_METHOD_ENV}=spawn") from None
+
+    def _stop_workers(self) -> None:
+        """End the worker processes now (an interrupt during their compile): what they
+        compiled is in the cache already, each entry written whole (numba renames it into
+        place), so the next run compiles only the rest."""
+        pool, self._pool = self._pool, None
+        for process in list((getattr(pool, "_processes", None) or {}).values()):
+            process.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
 
     def imap(self, task: Callable, pairs: Sequence) -> Iterator:
         """Yield ``(pair, result)`` as pairs complete, largest pairs first, with at most

@@ -6,9 +6,11 @@ A rerun skips a pair only when the :func:`pair_fingerprint` stored in its
 * the settings (:func:`settings_fingerprint`): the method, every config key the method
   can read, the ``--max-disparity`` override, ``run.color_range`` (disp_color.png) and
   the package versions (d3stereo and the libraries that shape results);
-* the pair (:func:`input_identity`): name, size and modification time (ns) of each of its
-  files (left, right, ground truth, non-occlusion mask, calibration, KITTI ``obj_map``),
-  and the dataset values read from SOURCE.txt or a manifest (``gt_scale``,
+* the pair (:func:`input_identity`): real path, size, modification time (ns) and SHA-256
+  of each of its files (left, right, ground truth, non-occlusion mask, calibration, KITTI
+  ``obj_map``), so another dataset with the same names, sizes and times, or files
+  replaced in place with their times kept (``rsync -a``), is computed again; and the
+  dataset values read from SOURCE.txt or a manifest (``gt_scale``,
   ``gt_invalid``, ``max_disparity``, ``bit_depth``).  The resolved disparity range is a
   function of these (the override, the manifest value, or the ground truth and the
   image width), so it is covered without reading the ground truth to skip a pair.
@@ -35,9 +37,11 @@ Config keys left out, and why:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import os
+import stat
 from pathlib import Path
 
 from .. import __version__
@@ -88,19 +92,40 @@ def settings_fingerprint(cfg: Config, method: str, max_disparity: int | None) ->
 
 
 def file_identity(path) -> list | None:
-    """``[file name, size in bytes, modification time in ns]`` of ``path``; None without one.
+    """``[real path, size in bytes, modification time in ns, SHA-256]`` of ``path``; None
+    without one.
 
-    A file that cannot be read gives ``[name, None, None]``: the pair then fails when it
-    is loaded, and a fingerprint is still defined.
+    The real path (links and ``..`` resolved) lets an absolute, a relative and a linked
+    spelling of one file agree.  The SHA-256 costs about 1.5 ms for a 2 MB 1280x720 PNG
+    (reading it as an image: about 40 ms), once per file and process
+    (:func:`_content_digest`).  Only a regular file is read (a FIFO would block); another
+    file, or one that cannot be read, has a None hash and, if it cannot be found, size and
+    time: the pair then fails when it is loaded, and a fingerprint is still defined.
     """
     if path is None:
         return None
-    path = Path(path)
+    real = os.path.realpath(path)
     try:
-        st = os.stat(path)
+        st = os.stat(real)
     except OSError:
-        return [path.name, None, None]
-    return [path.name, st.st_size, st.st_mtime_ns]
+        return [real, None, None, None]
+    digest = None
+    if stat.S_ISREG(st.st_mode):
+        digest = _content_digest(real, st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    return [real, st.st_size, st.st_mtime_ns, digest]
+
+
+@functools.lru_cache(maxsize=512)
+def _content_digest(path: str, *stat_key) -> str | None:
+    """SHA-256 of the file ``path``, None when it cannot be read.  Cached by its stat
+    (device, inode, size and times; ``ctime`` changes with every write, even when the
+    modification time is set back), so a file every pair reads (an ONNX model) is hashed
+    once."""
+    try:
+        with open(path, "rb") as fh:
+            return hashlib.file_digest(fh, "sha256").hexdigest()
+    except OSError:
+        return None
 
 
 def object_map_path(gt) -> Path | None:
@@ -117,9 +142,9 @@ def object_map_path(gt) -> Path | None:
 def input_identity(pair) -> dict:
     """Everything of a pair (a :class:`d3cli.data.layouts.Pair`) its outputs depend on.
 
-    File fields become :func:`file_identity` (so an absolute and a relative spelling of
-    the same file agree); other fields (``gt_scale``, ``gt_invalid``, ``max_disparity``,
-    ``bit_depth``, ...) are taken as they are.
+    File fields become :func:`file_identity` (so an absolute, a relative and a linked
+    spelling of the same file agree); other fields (``gt_scale``, ``gt_invalid``,
+    ``max_disparity``, ``bit_depth``, ...) are taken as they are.
     """
     out = {}
     for f in dataclasses.fields(pair):

@@ -30,13 +30,15 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 from pathlib import Path
 
 import numpy as np
 
 from ..data.formats import atomic_write, read_image, write_image, write_kitti_png, write_pfm
 from ..evaluation import pictures
-from ..errors import OutputError, where_what_fix
+from ..evaluation.html import REPORT_FILE
+from ..errors import InputError, OutputError, where_what_fix
 from ..evaluation.report import jsonable
 from .staging import file_records
 from ..road.report import CSV_FIELDS as DEFECTS_CSV_FIELDS
@@ -61,6 +63,68 @@ SUMMARY_FILES = ("metrics.csv", "summary.json", "summary.md")
 ROAD_FILES = (HEIGHT_FILE, HEIGHT_COLOR_FILE, DEFECTS_JSON, DEFECTS_PNG)
 #: Every file d3stereo writes into a pair's folder (anything else there is the user's).
 PAIR_FILES = (RESULT_FILE, *OUTPUT_FILES, ERROR_MAP, CLOUD_FILE, PANEL_FILE, OVERLAY_FILE, *ROAD_FILES)
+#: Files of a whole batch (or eval report) in OUT, beside the pairs' folders.
+BATCH_FILES = (RUN_FILE, REPORT_FILE, *SUMMARY_FILES, DEFECTS_CSV)
+#: A shard's run record, ``run-I-of-N.json``.
+_SHARD_RECORD = re.compile(r"run-\d+-of-\d+\.json")
+#: Prefix of d3stereo's hidden files in OUT (lock files, the writability probe).
+_HIDDEN_PREFIX = ".d3stereo"
+
+
+def reserved_name(name: str) -> str | None:
+    """The file of OUT that a pair folder named ``name`` would collide with, or None.
+
+    Compared without case: OUT may lie on a file system that ignores it (macOS, SMB).
+    """
+    folded = name.casefold()
+    for batch_file in BATCH_FILES:
+        if folded == batch_file.casefold():
+            return batch_file
+    if _SHARD_RECORD.fullmatch(folded):
+        return folded
+    if folded.startswith(_HIDDEN_PREFIX):
+        return name
+    return None
+
+
+def check_pair_name(name: str, out: Path) -> None:
+    """Refuse a pair whose folder ``out/<name>`` would take the name of a file the batch
+    writes there (the batch would stop on writing that file, after the pairs).
+
+    Raises
+    ------
+    InputError
+        ``NAME: the pair's name is taken by a file d3stereo writes into the output folder
+        (OUT/run.json); rename the pair (its folder, or its name in the manifest) and rerun``.
+    """
+    taken = reserved_name(name)
+    if taken is not None:
+        raise InputError(where_what_fix(
+            name, f"the pair's name is taken by a file d3stereo writes into the output folder ({Path(out) / taken})",
+            "rename the pair (its folder, or its name in the manifest) and rerun"))
+
+
+def check_batch_files(out: Path) -> None:
+    """Refuse an output folder where the name of a batch file (run.json, report.html, the
+    summary files, a shard's record) is a folder: the batch could not be recorded (a pair
+    folder of that name, written by an earlier d3stereo).
+
+    Raises
+    ------
+    OutputError
+        ``OUT/run.json: is a folder, where d3stereo writes a file of the batch; move it away
+        (a pair's folder: rename the pair) or choose another -o folder``.
+    """
+    try:
+        names = [name for name in os.listdir(out) if _SHARD_RECORD.fullmatch(name)]
+    except OSError:
+        names = []  # a new folder; one that cannot be read is named by ensure_writable
+    for name in (*BATCH_FILES, *names):
+        entry = Path(out) / name
+        if entry.is_dir() and not entry.is_symlink():
+            raise OutputError(where_what_fix(str(entry), "is a folder, where d3stereo writes a file of the batch",
+                                             "move it away (a pair's folder: rename the pair) or choose another "
+                                             "-o folder"))
 
 
 def check_output_folder(out: Path, pairs) -> None:
@@ -75,13 +139,17 @@ def check_output_folder(out: Path, pairs) -> None:
       the pair is written, never written through, but a link into the inputs says the
       folder was chosen wrongly);
     * OUT may be a new folder inside the inputs' folder (``d3stereo run L.png R.png -o
-      out`` in the images' own folder): nothing is written next to the inputs.
+      out`` in the images' own folder): nothing is written next to the inputs;
+    * no batch file's name may be a folder (:func:`check_batch_files`).
+
+    A pair named like a batch file is left to fail alone (:func:`check_pair_name`).
 
     Raises
     ------
     OutputError
         Naming the folder, the pair and input concerned, and the fix.
     """
+    check_batch_files(Path(out))
     root = Path(os.path.realpath(out))
     for pair in pairs:
         entry = Path(out) / pair.name
@@ -90,7 +158,8 @@ def check_output_folder(out: Path, pairs) -> None:
             raise OutputError(where_what_fix(
                 str(entry), f"is a symbolic link leading outside the output folder (to {target})",
                 "remove the link (what it points to is left alone) or choose another -o folder"))
-        if not entry.is_symlink() and entry.exists() and not entry.is_dir():
+        # A reserved name is never written (the pair fails alone): OUT/run.json is the batch's.
+        if not entry.is_symlink() and entry.exists() and not entry.is_dir() and reserved_name(pair.name) is None:
             raise OutputError(where_what_fix(str(entry), f"is a file, where pair {pair.name} writes its folder",
                                              "move it away or choose another -o folder"))
         for key in ("left", "right", "gt", "nocc", "calib"):

@@ -20,11 +20,12 @@ recorded them (sizes, SHA-256); otherwise it is computed again, with a warning. 
 * A full disk (ENOSPC/EDQUOT on a write): every later pair would fail the same way, so
   the OutputError ends the batch; finished pairs stay complete.
 
-Only one run writes into a folder at a time (:mod:`d3cli.batch.lock`).  Before a pair is
-computed its estimated peak memory is checked (:func:`d3cli.batch.resources.check_memory`;
-a per-pair failure), and after it the map is checked for the symptoms of an unrectified
-or swapped pair (:func:`d3cli.evaluation.diagnostics.suspicious_result`; warnings in
-``result.json``, ``run.json`` and the summary).
+Only one command writes into a folder at a time, or the shards of one batch together
+(:mod:`d3cli.batch.lock`).  Before a pair is computed its estimated peak memory is
+checked (:func:`d3cli.batch.resources.check_memory`; a per-pair failure), and after it the
+map is checked for the symptoms of an unrectified or swapped pair
+(:func:`d3cli.evaluation.diagnostics.suspicious_result`; warnings in ``result.json``,
+``run.json`` and the summary).
 """
 
 from __future__ import annotations
@@ -33,7 +34,6 @@ import dataclasses
 import functools
 import logging
 import os
-import signal
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -43,18 +43,19 @@ from ..config import Config
 from ..data import formats as io, layouts as datasets
 from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind
 from ..evaluation import diagnostics, report
+from ..evaluation.summary import plural
 from ..road.report import DEFECTS_CSV, write_defects_csv
 from . import resources
 from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .executors import make_executor, select_shard
 from .extras import write_extras
 from .fingerprint import feature_files, package_versions, pair_fingerprint, settings_fingerprint
-from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock, shard_lock_name
+from .lock import acquire_lock, ensure_writable, release_lock
 from .methods import compute_pair
 from ..evaluation.html import write_report_html
 from .records import BatchResult, record_complete, write_run_json
-from .signals import (interrupts_unwrapped, mark_terminated, signals_deferred, signals_held,
-                      sigterm_as_interrupt)
+from .signals import (exit_status, interrupts_unwrapped, mark_terminated, restore_handlers, signal_name,
+                      signals_deferred, signals_held, sigterm_as_interrupt)
 from .staging import changed_files, clean_leftovers, discard, named_as_target, new_staging, publish
 from .steps import internal_message, step
 from .outputs import (
@@ -62,6 +63,7 @@ from .outputs import (
     PAIR_FILES,
     RUN_FILE,
     check_output_folder,
+    check_pair_name,
     clipped_warning,
     read_result,
     is_our_summary,
@@ -91,11 +93,13 @@ class BatchInterrupted(KeyboardInterrupt):
         ``run.json`` recording the interruption.
     """
 
-    def __init__(self, n_done: int, n_total: int, run_json: Path, *, terminated: bool = False):
-        what = "Terminated (SIGTERM)" if terminated else "Interrupted"
-        super().__init__(f"{what}: {n_done} of {n_total} pairs done; rerun the same command to resume")
+    def __init__(self, n_done: int, n_total: int, run_json: Path, *, terminated: bool = False,
+                 stopped_by: str = "SIGTERM"):
+        what = f"Terminated ({stopped_by})" if terminated else "Interrupted"
+        super().__init__(f"{what}: {n_done} of {plural(n_total, 'pair')} done; rerun the same command to resume")
         self.n_done, self.n_total, self.run_json = n_done, n_total, run_json
-        self.terminated = terminated  # the shell's exit status is 143 then, 130 for Ctrl-C
+        self.terminated = terminated  # the shell's exit status is 143 (129: SIGHUP) then, 130 for Ctrl-C
+        self.exit_status = exit_status(stopped_by) if terminated else 130
 
     def __str__(self) -> str:
         return self.args[0]
@@ -129,7 +133,7 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
         result = compute_pair(method, cfg, left, right, max_disparity=dmax, pair_dir=Path(pair.left).parent)
     if range_note:
         result.warnings.insert(0, range_note)
-    result.warnings.extend(diagnostics.suspicious_result(result, dmax))
+    result.warnings.extend(diagnostics.suspicious_result(result, dmax, left=left))
     waited += yield from _pause(COMPUTED)
     staging = new_staging(pair_dir)
     try:
@@ -287,8 +291,9 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
         ``workers``.  OUT must be the same path on the client and every worker.
     shard : (int, int), optional, keyword-only
         ``(I, N)``: run only shard I of N (:func:`d3cli.batch.executors.select_shard`),
-        writing ``run-I-of-N.json`` under its own lock, so N runs share one OUT; the
-        summary files are left to ``d3stereo eval`` over OUT.
+        writing ``run-I-of-N.json`` under its own lock and OUT's shared one, so the N runs
+        share one OUT (and nothing else writes there meanwhile); the summary files are
+        left to ``d3stereo eval`` over OUT.
     break_lock : bool, keyword-only
         Take over the folder's lock even when its record names another host or a live
         pid, as long as no running d3stereo holds it (:func:`d3cli.batch.lock.acquire_lock`).
@@ -323,13 +328,19 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
                               pointcloud=pointcloud, on_recorded=on_recorded)
     finally:
         if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+            restore_handlers(previous)
     return batch
+
+
+def _lock_command(shard: tuple[int, int] | None) -> str:
+    """The command a run's lock records, named to a writer refused meanwhile."""
+    return "d3stereo run" if shard is None else "d3stereo run --shard {}/{}".format(*shard)
 
 
 def _lock_and_run(pairs: list, out: Path, *, shard, break_lock, workers, scheduler, prefetch,
                   **batch_args) -> BatchResult:
-    """Take OUT's (or the shard's) lock, run the batch, release the lock.
+    """Take OUT's lock (shared by the shards of one batch, and the shard's own), run the
+    batch, release the lock.
 
     A SIGTERM after run.json recorded the batch complete (while the lock is released) is
     recorded there too, and ends the command with 143 like any other.
@@ -340,8 +351,7 @@ def _lock_and_run(pairs: list, out: Path, *, shard, break_lock, workers, schedul
             # A Ctrl-C in the middle of taking the lock left the lock file behind: it is
             # taken whole, and the interrupt raised once it is held (and released below).
             with signals_deferred():
-                lock = acquire_lock(out, LOCK_FILE if shard is None else shard_lock_name(*shard),
-                                    break_lock=break_lock)
+                lock = acquire_lock(out, shard=shard, command=_lock_command(shard), break_lock=break_lock)
             executor = make_executor(workers, scheduler, out, n_pairs=len(pairs), prefetch=prefetch,
                                      cfg=batch_args["cfg"], method=batch_args["method"])
             batch = _locked_batch(pairs, out, executor=executor, shard=shard, **batch_args)
@@ -351,12 +361,12 @@ def _lock_and_run(pairs: list, out: Path, *, shard, break_lock, workers, schedul
                 # batch delivered once the lock is gone (ignored, it was lost: exit 0).
                 with signals_deferred() if batch is not None else signals_held():
                     release_lock(lock)
-    except Terminated:
+    except Terminated as exc:
         if batch is None:
             raise
-        mark_terminated(batch.run_json)
+        mark_terminated(batch.run_json, signal_name(exc))
         raise BatchInterrupted(batch.n_computed + batch.n_skipped, batch.n_pairs, batch.run_json,
-                               terminated=True) from None
+                               terminated=True, stopped_by=signal_name(exc)) from None
     except KeyboardInterrupt:
         if batch is None or not batch.recorded:
             raise
@@ -421,10 +431,11 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
         with interrupts_unwrapped(), executor:
             meta["execution"] = executor.describe()
             # Compile before the first pair (and before a pool fans out): no pair's time includes it.
-            # Ctrl-C/SIGTERM are held until the kernels are loaded: numba loads a cached
-            # kernel through a ctypes callback of llvmlite, and a KeyboardInterrupt raised
-            # inside it can crash the process (SIGSEGV, exit -11 instead of 130; rare, seen in
-            # tests/batch/test_interrupts.py).  The interrupt is delivered right after.
+            # A KeyboardInterrupt must never be raised inside numba's loading of a cached
+            # kernel (a ctypes callback of llvmlite: the process can crash, SIGSEGV instead
+            # of 130), so signals are deferred here; the warm-up itself waits for the
+            # compile in another thread and answers Ctrl-C, SIGTERM and SIGHUP at once
+            # (warmup.call_interruptibly), and the deferred interrupt is raised right after.
             with signals_deferred():
                 meta["compile_s"] = round(executor.warm(cfg, method), 3) if pairs else 0.0
             bar = progress_bar(None, progress, method)
@@ -462,9 +473,9 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
         if not batch.recorded:
             raise _interrupted(batch, records, meta, None, exc) from None
         if isinstance(exc, Terminated):
-            mark_terminated(batch.run_json)
+            mark_terminated(batch.run_json, signal_name(exc))
             raise BatchInterrupted(batch.n_computed + batch.n_skipped, batch.n_pairs, batch.run_json,
-                                   terminated=True) from None
+                                   terminated=True, stopped_by=signal_name(exc)) from None
     return batch
 
 
@@ -473,9 +484,11 @@ def _interrupted(batch: BatchResult, records: list, meta: dict, current, exc: Ke
     terminated = isinstance(exc, Terminated)
     with signals_held():  # a second Ctrl-C must not cut the record of the first short
         write_run_json(batch, records, **meta, interrupted=True, stopped_at=current and current.name,
-                       stop_reason="terminated (SIGTERM)" if terminated else "interrupted (Ctrl-C / SIGINT)")
+                       stop_reason=(f"terminated ({signal_name(exc)})" if terminated
+                                    else "interrupted (Ctrl-C / SIGINT)"))
     n_done = sum(r["status"] in ("ok", "skipped") for r in records)
-    return BatchInterrupted(n_done, meta["n_total"], batch.run_json, terminated=terminated)
+    return BatchInterrupted(n_done, meta["n_total"], batch.run_json, terminated=terminated,
+                            stopped_by=signal_name(exc))
 
 
 def _record_disk_full(batch: BatchResult, records: list, meta: dict, current, exc: OutputError) -> None:
@@ -546,6 +559,9 @@ def _pair_stages(pair, pair_dir: Path, *, cfg, method, evaluate, overwrite, max_
     t0 = time.perf_counter()
     reused = False
     try:
+        # A pair named like a file of the batch (run.json...): its folder would take that
+        # file's name.  Failed before it is computed; the other pairs run.
+        check_pair_name(pair.name, pair_dir.parent)
         with step("the resume check"):
             # settings, the pair's input files and the feature files it reads
             fingerprint = pair_fingerprint(settings, pair, feature_files(cfg, method, pair))

@@ -10,11 +10,21 @@ A first run compiles for a minute or more: on a cold cache it says so before it 
 (:func:`d3cli.kernels.cachedir.announce`, which the command line calls before its imports)
 and reports progress while it compiles (:class:`CompileProgress`), as log records of level
 :data:`~d3cli.kernels.cachedir.NOTICE`, shown unless ``-q``.
+
+Ctrl-C and SIGTERM are answered within a fraction of a second meanwhile: the compile runs
+in a thread of its own while the main thread waits in short steps
+(:func:`call_interruptibly`).  A signal ends the wait; the compile thread is left
+running (the command line ends the process without waiting for it,
+:func:`compiling_in_background`), every function it finished is in the cache already (numba
+saves each one as it is compiled, writing a file whole or not at all), and how far it got
+is recorded for the next run's notice (:func:`d3cli.kernels.cachedir.record_interrupted`).
 """
 
 from __future__ import annotations
 
 import logging
+import signal
+import threading
 import time
 
 import numpy as np
@@ -24,12 +34,21 @@ from ..config import Config
 from ..errors import D3Error
 from ..kernels import cachedir
 from . import methods
+from .signals import STOP_SIGNALS
 
 log = logging.getLogger(__name__)
 
 NOTICE = cachedir.NOTICE
 #: Seconds between two progress lines while the kernels compile.
 PROGRESS_EVERY_S = 10.0
+#: Seconds the main thread waits for the compile thread at a time (how late a signal is
+#: seen at most, besides waiting for the interpreter's lock).
+WAIT_STEP_S = 0.1
+# The signals that end a wait for the compile (when their handler is a Python function):
+# STOP_SIGNALS, Ctrl-C, SIGTERM and a closed terminal's SIGHUP.
+
+#: Compile threads a signal left running (daemon threads: they never hold up an exit).
+_left_running: list[threading.Thread] = []
 
 #: Methods without numba kernels: nothing to compile.
 _NO_JIT = ("sgbm",)
@@ -86,6 +105,89 @@ class CompileProgress(numba_event.Listener):
         return f"compiled {self.compiled}{total} kernel functions ({seconds:.0f} s)"
 
 
+def compiling_in_background() -> bool:
+    """Whether a compile thread that a signal stopped waiting for still runs.
+
+    The process should then end with ``os._exit`` once its status is decided: an ordinary
+    exit finalises the interpreter and runs the C++ destructors of LLVM while that thread
+    may still be compiling inside LLVM, which can crash the process at exit.
+    """
+    return any(thread.is_alive() for thread in _left_running)
+
+
+def call_interruptibly(fn, *args) -> tuple[bool, list[tuple[int, object]]]:
+    """Call ``fn(*args)`` in a thread of its own and wait for it in steps of
+    :data:`WAIT_STEP_S`, so that Ctrl-C and SIGTERM are seen at once.
+
+    numba compiles and loads kernels for minutes on a cold cache, and a handler that
+    holds signals back while it does (the batch defers them: a KeyboardInterrupt raised
+    inside numba's loading of a cached kernel can crash the process) would hold them for
+    as long.  Here only this thread's wait sees a signal: Python runs signal handlers in
+    the main thread alone, never inside the compile.
+
+    Returns
+    -------
+    finished : bool
+        Whether ``fn`` returned (its exception, if any, is raised here unless a signal
+        came); if not, it goes on in its daemon thread (:func:`compiling_in_background`).
+    signals : list of (signum, handler)
+        Empty when no signal came.  Otherwise the signal that ended the wait, with the
+        handler that was in place for it, which the caller calls (``handler(signum,
+        None)``) once it has recorded what it must: it raises the interrupt, or holds it
+        for later.  Outside the main thread, or where neither signal has a Python
+        handler, ``fn`` runs in this thread: ``(True, [])``.
+    """
+    handlers = {}
+    if threading.current_thread() is threading.main_thread():
+        handlers = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+        handlers = {sig: handler for sig, handler in handlers.items() if callable(handler)}
+    if not handlers:
+        fn(*args)
+        return True, []
+    outcome: list[BaseException] = []
+
+    def run():
+        try:
+            fn(*args)
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
+            outcome.append(exc)
+
+    received: list[int] = []
+
+    def stop(signum, frame):
+        received.append(signum)  # raising here could cut the restoring of handlers short
+
+    worker = threading.Thread(target=run, name="d3stereo-compile", daemon=True)
+    installed = []
+    try:
+        for sig in handlers:
+            signal.signal(sig, stop)
+            installed.append(sig)
+        worker.start()
+        while worker.is_alive() and not received:
+            worker.join(WAIT_STEP_S)
+    finally:
+        for sig in installed:
+            signal.signal(sig, handlers[sig])
+    finished = not worker.is_alive()
+    if not finished:
+        _left_running.append(worker)
+    if received:
+        return finished, [(received[0], handlers[received[0]])]
+    if outcome:
+        raise outcome[0]
+    return True, []
+
+
+def _warm_pair(method: str, cfg: Config, left: np.ndarray, right: np.ndarray) -> None:
+    """Run ``method`` on the warm-up pair; a failure of the pair itself (e.g. no road plane
+    found by PT) is logged and ignored: the kernels it reached are compiled anyway."""
+    try:
+        methods.compute_pair(method, cfg, left, right, max_disparity=_WARM_DMAX)
+    except D3Error as exc:
+        log.debug("JIT warm-up pair failed (ignored): %s", exc)
+
+
 def warm_jit(cfg: Config, method: str) -> float:
     """Run ``method`` with ``cfg`` once on a tiny pair; returns the seconds it took.
 
@@ -94,21 +196,45 @@ def warm_jit(cfg: Config, method: str) -> float:
     found by PT) is logged and ignored: the kernels it reached are compiled anyway.  On
     a cold cache it logs the compile notice first (unless the command line did) and
     progress while compiling.
+
+    Ctrl-C or SIGTERM ends the wait at once (:func:`call_interruptibly`): how far the
+    compile got is recorded and logged, then the signal's handler is called, which raises
+    the interrupt or holds it back until the caller's block ends (the batch's deferral);
+    in the latter case this returns the seconds spent.
     """
     if method in _NO_JIT:
         return 0.0
-    cold = cachedir.announce(method)
-    expected = cachedir.compile_estimate(method)["kernels"] if cold else None
+    compiling = cachedir.announce(method)
+    done = cachedir.resume_point(method) if compiling else None  # what an interrupted compile left
+    before = done or {"seconds": 0.0, "kernels": 0}
+    expected = None
+    if compiling:
+        expected = max(cachedir.compile_estimate(method)["kernels"] - before["kernels"], 0) or None
     left, right = warm_pair()
     t0 = time.perf_counter()
     with numba_event.install_listener("numba:compile", CompileProgress(expected)) as progress:
-        try:
-            methods.compute_pair(method, cfg, left, right, max_disparity=_WARM_DMAX)
-        except D3Error as exc:
-            log.debug("JIT warm-up pair failed (ignored): %s", exc)
+        finished, signals = call_interruptibly(_warm_pair, method, cfg, left, right)
     seconds = time.perf_counter() - t0
-    if cold:
-        cachedir.record_compile(method, seconds, progress.compiled)
-        log.log(NOTICE, f"compiled {progress.compiled} kernel functions in {seconds:.0f} s")
-    log.info("JIT warm-up (%s): %.2f s, %d kernel functions compiled", method, seconds, progress.compiled)
+    compiled = progress.compiled
+    if compiling and not finished:
+        cachedir.record_interrupted(method, before["seconds"] + seconds, before["kernels"] + compiled)
+        log.log(NOTICE, f"compiled {compiled} kernel functions in {seconds:.0f} s before the interrupt; "
+                        "they are kept in the cache, the next run compiles the rest")
+    elif compiling:
+        estimate = cachedir.compile_estimate(method)
+        if done is None:
+            cachedir.record_compile(method, seconds, compiled)
+        elif not compiled:  # nothing was left after all: the estimate stands
+            cachedir.record_compile(method, **estimate)
+        else:
+            # The rest of an interrupted compile: the seconds of both runs, and the estimate's
+            # count of functions unless this run alone compiled more.  Not the sum of both
+            # counts: the functions of numba's own that a kernel's compile compiles with it
+            # (not cached by themselves) are compiled again for the kernels of this run.
+            cachedir.record_compile(method, before["seconds"] + seconds, max(estimate["kernels"], compiled))
+        log.log(NOTICE, f"compiled {compiled} kernel functions in {seconds:.0f} s")
+    log.info("JIT warm-up (%s): %.2f s, %d kernel functions compiled%s", method, seconds, compiled,
+             "" if finished else " (interrupted)")
+    for signum, handler in signals:
+        handler(signum, None)
     return seconds

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..data.formats import atomic_write
 from .definitions import MEANS, metric, pixels_note
-from .report import jsonable
+from .report import jsonable, readable
 from .summary import plural, summarize
 from .tables import HUGE, count_cells, count_heads, counts_sentence, one_line
 
@@ -685,5 +685,5 @@ def write_report_html(out_dir: str | Path, rows: Iterable[Mapping], *, title: st
                       config: Mapping | None = None, versions: Mapping | None = None,
                       run_counts: Mapping | None = None) -> Path:
     """Write ``out_dir/report.html`` atomically (:func:`report_html`); returns its path."""
-    text = report_html(out_dir, rows, title=title, config=config, versions=versions, run_counts=run_counts)
+    text = readable(report_html(out_dir, rows, title=title, config=config, versions=versions, run_counts=run_counts))
     return atomic_write(Path(out_dir) / REPORT_FILE, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))

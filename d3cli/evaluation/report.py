@@ -94,7 +94,7 @@ def write_pair_csv(path: str | Path, rows: Iterable[Mapping]) -> Path:
             writer = csv.writer(handle, lineterminator="\n")
             writer.writerow(columns)
             for row in rows:
-                writer.writerow([_csv_cell(row.get(column)) for column in columns])
+                writer.writerow([readable(_csv_cell(row.get(column))) for column in columns])
 
     path = Path(path)
     atomic_write(path, write)
@@ -208,6 +208,21 @@ def write_summary(
     return json_path, md_path
 
 
+def readable(text: str) -> str:
+    """``text`` that can be written as UTF-8: the bytes of a file name that reached Python
+    as lone surrogates (``os.fsdecode`` of a name that is not valid in the locale's
+    encoding) are shown as the UTF-8 they are (a name with ``é`` under ``LC_ALL=C``) or,
+    where they are not UTF-8 (a Latin-1 byte), as a visible ``\\xNN``; any other lone
+    surrogate as ``\\udNNN``.  Every text file d3stereo writes passes through it: a name
+    written raw would make the file invalid UTF-8, and writing it strictly fails."""
+    if text.isascii():
+        return text
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # a surrogate that no file name decoding made
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def jsonable(value):
     """Plain JSON types: numpy scalars/arrays unwrapped, paths as strings, NaN/inf as None."""
     if isinstance(value, Mapping):
@@ -231,6 +246,6 @@ def jsonable(value):
 def _text_writer(text: str) -> Callable[[Path], None]:
     def write(tmp_path: Path) -> None:
         with open(tmp_path, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
+            handle.write(readable(text))
 
     return write

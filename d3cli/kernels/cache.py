@@ -10,6 +10,11 @@ module and, for each module that changed, deletes the cache of every module that
 it, directly or through others (:func:`importers`, from the relative imports of the
 sources).
 
+A damaged cache entry (an index or data file truncated or overwritten: a full disk, a
+killed copy, a stray write) would make numba's unpickling fail on every run; numba's cache
+loading is therefore wrapped (:func:`tolerate_damage`) so that such an entry of a kernels
+module is removed and compiled again, with one warning per process.
+
 Imported (and :func:`prepare` run) by every kernels module that compiles with
 ``cache=True``, before its first decorator: numba picks a function's cache folder when the
 decorator runs.  May import: numba and the standard library only.
@@ -20,6 +25,7 @@ from __future__ import annotations
 import ast
 import hashlib
 import json
+import logging
 import os
 from pathlib import Path
 
@@ -34,6 +40,12 @@ STAMP = "modules.sha256.json"
 NO_KERNELS = ("cache.py", "cachedir.py")
 
 _prepared = False
+#: Whether this process has warned about a damaged cache entry (once; later ones at DEBUG).
+_damage_reported = False
+
+log = logging.getLogger(__name__)
+#: Module names of d3stereo's own compiled functions (``d3cli.``).
+_PACKAGE_PREFIX = __name__.split(".")[0] + "."
 
 
 def kernel_modules(root: Path = HERE) -> list[Path]:
@@ -127,7 +139,7 @@ def drop_stale(root: Path = HERE, cache_dir: str = "") -> bool:
         for f in list(folder.glob(f"{module.stem}.*.nbi")) + list(folder.glob(f"{module.stem}.*.nbc")):
             f.unlink()
     stamp.parent.mkdir(parents=True, exist_ok=True)
-    stamp.write_text(json.dumps(digests, indent=0, sort_keys=True))
+    stamp.write_text(json.dumps(digests, indent=0, sort_keys=True), encoding="utf-8")
     return True
 
 
@@ -154,6 +166,63 @@ def prepare() -> None:
         drop_stale(HERE, numba_config.CACHE_DIR)
     except OSError:  # no writable cache anywhere: numba then compiles in every process
         pass
+    tolerate_damage()
+
+
+def _drop_damaged(cache, exc: Exception) -> None:
+    """Remove the cache entry of ``cache`` (a numba ``Cache``: its index file and data
+    files) that could not be loaded, and say so: one warning per process, the first
+    entry's; the others at DEBUG (a damaged folder may hold dozens)."""
+    global _damage_reported
+    cache_file = cache._cache_file
+    index = Path(cache_file._index_path)
+    base = index.name[: -len(".nbi")]
+    for path in [index, *index.parent.glob(f"{base}.*.nbc")]:
+        try:
+            path.unlink()
+        except OSError:  # gone already (another process), or not ours to remove: saving replaces it
+            pass
+    reason = f"{type(exc).__name__}: {exc}"[:120]
+    if _damage_reported:
+        log.debug("damaged kernel cache entry %s (%s): removed and compiled again", index, reason)
+        return
+    _damage_reported = True
+    log.warning("damaged kernel cache entry %s (%s): removed and compiled again", index, reason)
+
+
+def tolerate_damage() -> None:
+    """Make numba treat a damaged cache entry of a kernels module as a missing one.
+
+    numba reads a function's index (``*.nbi``) and data (``*.nbc``) files with ``pickle``
+    and lets any error out of them escape the call that compiles: an ``UnpicklingError``
+    traceback on every run, since nothing removes the file.  ``Cache.load_overload`` is
+    wrapped: for a function of d3stereo (the kernels, the synthetic renderer), an error
+    other than ``OSError`` (which numba itself treats as a missing file) while reading or
+    rebuilding the entry removes the entry (:func:`_drop_damaged`) and reports a cache
+    miss, so numba compiles the function and saves a fresh entry (its save re-reads the
+    index: gone now, so not the damaged one).  Functions of other packages keep numba's
+    behaviour.  Once per process; a numba without ``Cache.load_overload`` is left alone.
+    """
+    from numba.core import caching
+
+    load = getattr(caching.Cache, "load_overload", None)
+    if load is None or getattr(load, "tolerates_damage", False):
+        return
+
+    def load_overload(self, sig, target_context):
+        try:
+            return load(self, sig, target_context)
+        except OSError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - any unpickling or rebuilding error: the entry is unusable
+            if not getattr(self._py_func, "__module__", "").startswith(_PACKAGE_PREFIX):
+                raise
+            _drop_damaged(self, exc)
+            return None
+
+    load_overload.tolerates_damage = True
+    load_overload.__doc__ = load.__doc__
+    caching.Cache.load_overload = load_overload
 
 
 prepare()

@@ -77,6 +77,80 @@ def test_touched_right_image_alone_recomputes(tmp_path, one_pair):
     assert statuses(out) == ["ok"]
 
 
+def _pgm_pair(folder: Path, shift: int, seed: int) -> None:
+    """A pair as PGM files (their size depends on the image size only) with its ground truth."""
+    from d3cli.data.formats import write_image
+
+    folder.mkdir(parents=True, exist_ok=True)
+    left, right, gt = textured_pair(shift, (48, 96), seed=seed)
+    write_image(folder / "left.pgm", left)
+    write_image(folder / "right.pgm", right)
+    write_pfm(folder / "disp_gt.pfm", gt)
+    (folder / "SOURCE.txt").write_text("gt_scale: 1\ngt_invalid: inf\n")
+
+
+def _same_times(source: Path, target: Path) -> None:
+    """Give every file of ``target`` the times of its namesake in ``source`` (``cp -p``, ``rsync -a``)."""
+    for path in source.rglob("*"):
+        if path.is_file():
+            st = path.stat()
+            os.utime(target / path.relative_to(source), ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
+def _median_disparity(out: Path) -> float:
+    disp = read_pfm(out / "p" / "disp.pfm")[8:-8, 30:-8]
+    return float(np.nanmedian(np.where(np.isfinite(disp), disp, np.nan)))
+
+
+def test_another_dataset_with_the_same_names_sizes_and_times_recomputes(tmp_path):
+    """Same pair names, file sizes and modification times, other pixels, another folder:
+    other inputs, computed again (it was "skipped as complete" with the first maps)."""
+    first, second, out = tmp_path / "one", tmp_path / "two", tmp_path / "out"
+    _pgm_pair(first / "p", shift=6, seed=0)
+    _pgm_pair(second / "p", shift=11, seed=7)
+    _same_times(first, second)
+    invoke("run", first, "-o", out, "--method", "sgbm", "--max-disparity", "16")
+    assert _median_disparity(out) == pytest.approx(6, abs=0.5)
+    invoke("run", second, "-o", out, "--method", "sgbm", "--max-disparity", "16")
+    assert statuses(out) == ["ok"]
+    assert _median_disparity(out) == pytest.approx(11, abs=0.5)
+    assert stored(out)["inputs"]["left"] == str(second / "p" / "left.pgm")
+    invoke("run", second, "-o", out, "--method", "sgbm", "--max-disparity", "16")
+    assert statuses(out) == ["skipped"]
+
+
+def test_files_replaced_in_place_with_their_times_kept_recompute(tmp_path):
+    """Other pixels under the same paths, sizes and times (a dataset copied over another
+    with ``rsync -a``): the content differs, the pair is computed again."""
+    data, other, out = tmp_path / "data", tmp_path / "other", tmp_path / "out"
+    _pgm_pair(data / "p", shift=6, seed=0)
+    invoke("run", data, "-o", out, "--method", "sgbm", "--max-disparity", "16")
+    _pgm_pair(other / "p", shift=11, seed=7)
+    _same_times(data, other)
+    for path in other.rglob("*"):
+        if path.is_file():
+            target = data / path.relative_to(other)
+            st = target.stat()
+            target.write_bytes(path.read_bytes())
+            os.utime(target, ns=(st.st_atime_ns, st.st_mtime_ns))
+            assert target.stat().st_size == st.st_size
+    invoke("run", data, "-o", out, "--method", "sgbm", "--max-disparity", "16")
+    assert statuses(out) == ["ok"]
+    assert _median_disparity(out) == pytest.approx(11, abs=0.5)
+
+
+def test_the_same_files_under_another_spelling_are_skipped(tmp_path, one_pair, monkeypatch):
+    """A relative and an absolute path, or a link to the pair's folder, name the same files."""
+    out = tmp_path / "out"
+    invoke("run", one_pair, "-o", out, "--method", "sgbm")
+    monkeypatch.chdir(tmp_path)
+    invoke("run", "pairs", "-o", out, "--method", "sgbm")
+    assert statuses(out) == ["skipped"]
+    (tmp_path / "link").symlink_to(one_pair)
+    invoke("run", tmp_path / "link", "-o", out, "--method", "sgbm")
+    assert statuses(out) == ["skipped"]
+
+
 def test_manifest_max_disparity_change_recomputes(tmp_path, one_pair):
     manifest = tmp_path / "m.yaml"
 

@@ -89,4 +89,4 @@ def test_eval_of_a_corrupt_image_prints_only_its_own_lines(tmp_path, make_pair_f
     lines = proc.stderr.splitlines()
     assert lines == [f"failed: pred/a: {pair / 'left.png'}: cannot read image (corrupt or not an image); "
                      "give an 8/16-bit PNG, JPEG, PPM/PGM or TIFF file",
-                     f"Error: 1 of 1 pairs failed (see {tmp_path / 'rep' / 'summary.json'})"]
+                     f"Error: 1 of 1 pair failed (see {tmp_path / 'rep' / 'summary.json'})"]

@@ -141,4 +141,4 @@ def test_cli_prints_one_error_line_for_a_nan_feature_file(tmp_path, make_pair_fo
     failed = [line for line in proc.stderr.splitlines() if "failed: pair:" in line]
     assert len(failed) == 1 and "feat.npz: right_1 has NaN or inf values" in failed[0], proc.stderr
     assert [line for line in proc.stderr.splitlines() if line.startswith("Error:")] == [
-        f"Error: 1 of 1 pairs failed (see {tmp_path / 'out' / 'run.json'})"], proc.stderr
+        f"Error: 1 of 1 pair failed (see {tmp_path / 'out' / 'run.json'})"], proc.stderr

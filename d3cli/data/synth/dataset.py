@@ -8,6 +8,7 @@ import dataclasses
 import json
 import logging
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -375,7 +376,8 @@ def pair_name(index: int, variant: str, material: str) -> str:
     return f"synth-{index:04d}-{variant}-{material}"
 
 
-def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, height: int = 720) -> list[Path]:
+def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, height: int = 720,
+                     on_pair=None) -> list[Path]:
     """Render ``n`` pairs into pair folders under ``out_dir``.
 
     Variants cycle sun, dusk, wet and materials asphalt, cement, so six consecutive
@@ -396,6 +398,9 @@ def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, 
         Seed of the whole set; each pair gets its own seed from it.
     width, height : int
         Image size in pixels.
+    on_pair : callable, optional
+        Called as ``on_pair(index, folder, seconds)`` once each pair is written (a pair
+        takes seconds at the default size: the command's progress).
 
     Returns
     -------
@@ -428,6 +433,7 @@ def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, 
         material = MATERIALS[index % len(MATERIALS)]
         pair_seed = int(np.random.SeedSequence([int(seed), index]).generate_state(1)[0])
         folder = out_dir / pair_name(index, variant, material)
+        started = time.perf_counter()
         try:
             pair = render_pair(seed=pair_seed, width=width, height=height, variant=variant, material=material)
             folders.append(_write_pair(folder, pair, dataset_seed=int(seed), index=index))
@@ -435,6 +441,8 @@ def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, 
             raise _out_of_memory(width, height) from None
         finite = pair.disparity[np.isfinite(pair.disparity)]
         log.info("synth: wrote %s (disparity %.1f-%.1f px)", folder.name, finite.min(), finite.max())
+        if on_pair is not None:
+            on_pair(index, folder, time.perf_counter() - started)
     return folders
 
 
