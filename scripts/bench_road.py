@@ -45,6 +45,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from d3cli.evaluation.html import detection_mask  # a detection's pixels, as report.html scores them
+
 
 def gt_bump_px(gt_dir: Path):
     """(u, v) of the pair's ground-truth bump centre in the left image, or None."""
@@ -63,19 +65,6 @@ def gt_bump_px(gt_dir: Path):
     left_c, _ = rig.centres()
     p = rig.rotation() @ (np.array([float(fields["x"]), float(fields["y"]), float(fields["height"])]) - left_c)
     return float(rig.f * p[0] / p[2] + rig.cx), float(rig.f * p[1] / p[2] + rig.cy)
-
-
-def detection_mask(d: dict, shape) -> np.ndarray:
-    """bool (H, W): the pixels of a detection (its outline polygons, else its bounding box)."""
-    mask = np.zeros(shape, np.uint8)
-    polys = [np.asarray(p, np.int32).reshape(-1, 1, 2) for p in d.get("outline_px") or [] if len(p)]
-    if polys:
-        cv2.fillPoly(mask, polys, 1)
-        cv2.polylines(mask, polys, True, 1)
-    else:
-        u0, v0, u1, v1 = d["bbox_px"]
-        mask[v0:v1 + 1, u0:u1 + 1] = 1
-    return mask.astype(bool)
 
 
 def match_potholes(ids: np.ndarray, pits: list, *, min_inside: float, min_cover: float):

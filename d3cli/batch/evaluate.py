@@ -16,6 +16,7 @@ from typing import Iterable, Sequence
 import numpy as np
 from tqdm import tqdm
 
+from ..config import METHODS
 from ..data import formats as io, layouts as datasets
 from ..errors import D3Error, InputError, where_what_fix
 from ..evaluation import metrics, pictures, report
@@ -136,19 +137,27 @@ def _object_map(pair, shape):
 def method_names(pred_dirs: Sequence[Path]) -> list[str]:
     """Column and folder names for prediction folders, unique and each one safe folder name.
 
-    run.json's method when no other folder has the same one, else the folder's name;
+    run.json's method (one of d3stereo's methods: any other value there is not trusted
+    as a folder name) when no other folder has the same one, else the folder's name;
     folders of the same name take as many parent folder names as tell them apart
     (``exp1/out``, ``exp2/out`` -> ``exp1-out``, ``exp2-out``), the same folder given
     twice a number (``out``, ``out-2``).  Never a path: each report folder is
-    ``-o/<name>``, so a name must not lead out of it.
+    ``-o/<name>``, so a name must not lead out of it, and at most :data:`MAX_NAME`
+    characters (a longer tail keeps its end), so that it is a folder name every file
+    system takes.
     """
     from_run = [_json_value(Path(folder) / RUN_FILE, "method") for folder in pred_dirs]
+    from_run = [name if name in METHODS else None for name in from_run]
     parts = [Path(os.path.realpath(folder)).parts[1:] or ("predictions",) for folder in pred_dirs]
     names = []
     for index, name in enumerate(from_run):
-        unique = isinstance(name, str) and name and from_run.count(name) == 1
-        names.append(datasets.safe_name(name) if unique else _distinct_tail(parts, index))
+        unique = name is not None and from_run.count(name) == 1
+        names.append(name if unique else _distinct_tail(parts, index))
     return _numbered(names)
+
+
+#: Longest report folder name ``method_names`` gives (file systems allow 255 bytes).
+MAX_NAME = 100
 
 
 def _distinct_tail(parts: Sequence[tuple[str, ...]], index: int) -> str:
@@ -158,7 +167,7 @@ def _distinct_tail(parts: Sequence[tuple[str, ...]], index: int) -> str:
     for depth in range(1, len(own) + 1):
         if all(other[-depth:] != own[-depth:] for other in others):
             break
-    return datasets.safe_name("-".join(own[-depth:]))
+    return datasets.safe_name("-".join(own[-depth:]))[-MAX_NAME:].lstrip("-.") or "predictions"
 
 
 def _numbered(names: list[str]) -> list[str]:

@@ -389,7 +389,7 @@ def _road_reports(out_dir: Path, rows: list[dict]) -> list[tuple[str, dict | Non
     return found
 
 
-def _detection_mask(d: Mapping, shape) -> np.ndarray:
+def detection_mask(d: Mapping, shape) -> np.ndarray:
     """bool (H, W): a detection's pixels, its outline polygons filled (its bounding box without them)."""
     mask = np.zeros(shape, np.uint8)
     polys = [np.asarray(p, np.int32).reshape(-1, 1, 2) for p in d.get("outline_px") or [] if len(p)]
@@ -436,7 +436,7 @@ def road_truth(out_dir: str | Path, pair: str, defects: list, *, min_depth_mm: f
     stands_for: dict[int, int] = {}
     pits = [d for d in defects if d.get("kind") == "pothole"]
     for i, d in enumerate(pits):
-        mask = _detection_mask(d, ids.shape)
+        mask = detection_mask(d, ids.shape)
         under = ids[mask]
         on = under[under > 0]
         if mask.any() and on.size >= ON_POTHOLE * mask.sum():

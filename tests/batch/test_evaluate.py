@@ -3,11 +3,15 @@
 import json
 import logging
 import os
+import shutil
 
 import numpy as np
 import pytest
 
+from click.testing import CliRunner
+
 from d3cli.batch import evaluate_folders
+from d3cli.cli import main
 from d3cli.batch.evaluate import find_prediction, read_prediction
 from d3cli.data import formats as io, layouts as datasets
 from d3cli.errors import InputError
@@ -122,7 +126,40 @@ def test_method_names_are_single_safe_folder_names(tmp_path):
         folder.mkdir(parents=True)
         (folder / "run.json").write_text(json.dumps({"method": method}))
         folders.append(folder)
-    assert method_names(folders) == ["m0-pred", "abs_path", "m2-pred"]
+    # Only d3stereo's own methods name a folder; any other run.json value is not trusted.
+    assert method_names(folders) == ["m0-pred", "m1-pred", "m2-pred"]
+    (folders[1] / "run.json").write_text(json.dumps({"method": "sgbm"}))
+    assert method_names(folders) == ["m0-pred", "sgbm", "m2-pred"]
+
+
+def test_a_long_method_name_in_run_json_is_not_blamed_on_the_report_folder(tmp_path, pairs_root):
+    """A 300-character method in run.json: the report goes to a folder named after the
+    prediction folder, and the command succeeds (the name was never the user's -o)."""
+    pairs = datasets.discover([pairs_root])
+    pred = tmp_path / "preds"
+    pred.mkdir()
+    for pair in pairs:
+        io.write_kitti_png(pred / f"{pair.name}.png", gt_of(pair))
+    (pred / "run.json").write_text(json.dumps({"method": "m" * 300}))
+    other = tmp_path / "sgbm-preds"
+    shutil.copytree(pred, other)
+    (other / "run.json").write_text(json.dumps({"method": "sgbm"}))
+    result = CliRunner().invoke(main, ["eval", str(pred), str(other), "--gt", str(pairs_root),
+                                       "-o", str(tmp_path / "rep"), "-q"])
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in (tmp_path / "rep").iterdir() if p.is_dir()) == ["preds", "sgbm"]
+    assert (tmp_path / "rep" / "preds" / "metrics.csv").is_file()
+
+
+def test_report_folder_names_are_at_most_100_characters(tmp_path):
+    from d3cli.batch.evaluate import method_names
+
+    deep = tmp_path / ("a" * 120) / "out"
+    other = tmp_path / ("b" * 120) / "out"
+    for folder in (deep, other):
+        folder.mkdir(parents=True)
+    names = method_names([deep, other])
+    assert [len(n) for n in names] == [100, 100] and names[0].endswith("a-out") and names[1].endswith("b-out")
 
 
 @pytest.mark.parametrize("where", ["gt_root", "gt_pair", "inside_gt_pair", "pred", "parent_of_pred"])
