@@ -63,7 +63,7 @@ def progress_done(bar, row: dict) -> None:
     if isinstance(row.get("time_s"), (int, float)):
         parts.append(f"{row['time_s']:.2f} s")
     if isinstance(row.get("epe"), (int, float)):
-        parts.append(f"EPE {row['epe']:.3f}")
+        parts.append(f"EPE {row['epe']:.3f} px")
     if sys.stderr is not None:
         sys.stderr.write("  ".join(parts) + "\n")
         sys.stderr.flush()

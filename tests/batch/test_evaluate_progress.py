@@ -11,7 +11,7 @@ def test_one_line_per_pair_without_terminal(capsys):
     for pair, epe in zip(bar, (0.25, None)):
         progress_done(bar, {"pair": pair.name, "status": "ok", "time_s": 1.5, "epe": epe})
     lines = capsys.readouterr().err.splitlines()
-    assert lines == ["[1/2]  p1  ok  1.50 s  EPE 0.250", "[2/2]  p2  ok  1.50 s"]
+    assert lines == ["[1/2]  p1  ok  1.50 s  EPE 0.250 px", "[2/2]  p2  ok  1.50 s"]
 
 
 def test_quiet_prints_nothing(capsys):
