@@ -21,8 +21,7 @@ import click
 
 from . import __version__
 from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, bundled_configs, load_config, resolve_config
-from .errors import D3Error, Terminated, interrupt_behind, raise_terminated
-from .evaluation.summary import plural
+from .errors import D3Error, Terminated, interrupt_behind, plural, raise_terminated
 
 log = logging.getLogger("d3cli")
 #: --break-lock of run and eval: the one writer of OUT at a time (batch/lock.py).
@@ -362,6 +361,12 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
             table = report.format_table(result.summary).splitlines()
             counts = "\n".join([counts, *table[1:]])  # the table's first line is its counts line
         click.echo(counts)
+        if cfg.road.report:  # what the road report found, in one line
+            from .road.report import survey_line
+
+            road_line = survey_line(Path(out_dir))
+            if road_line:
+                click.echo(road_line)
         _say_where(Path(out_dir), evaluate)
     _finish(result.failures, result.n_pairs, result.run_json)
 

@@ -30,6 +30,12 @@ class OutputError(D3Error):
     """An output folder or file cannot be written."""
 
 
+def plural(n: int, word: str, words: str | None = None) -> str:
+    """``1 pair``, ``2 pairs``, ``0 pairs``: a count in a message; ``words`` for an
+    irregular plural."""
+    return f"{n} {word if n == 1 else words or word + 's'}"
+
+
 def where_what_fix(where: str, what: str, fix: str) -> str:
     """Format a message as ``<where>: <what>; <fix>`` (the house style)."""
     return f"{where}: {what}; {fix}"

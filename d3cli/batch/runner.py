@@ -41,9 +41,8 @@ from typing import Sequence
 
 from ..config import Config
 from ..data import formats as io, layouts as datasets
-from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind
+from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind, plural
 from ..evaluation import diagnostics, report
-from ..evaluation.summary import plural
 from ..road.report import DEFECTS_CSV, write_defects_csv
 from . import resources
 from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start

@@ -33,6 +33,7 @@ from numba.core import event as numba_event
 from ..config import Config
 from ..errors import D3Error
 from ..kernels import cachedir
+from ..method.pipeline import fallback_settings
 from . import methods
 from .signals import STOP_SIGNALS
 
@@ -181,11 +182,18 @@ def call_interruptibly(fn, *args) -> tuple[bool, list[tuple[int, object]]]:
 
 def _warm_pair(method: str, cfg: Config, left: np.ndarray, right: np.ndarray) -> None:
     """Run ``method`` on the warm-up pair; a failure of the pair itself (e.g. no road plane
-    found by PT) is logged and ignored: the kernels it reached are compiled anyway."""
-    try:
-        methods.compute_pair(method, cfg, left, right, max_disparity=_WARM_DMAX)
-    except D3Error as exc:
-        log.debug("JIT warm-up pair failed (ignored): %s", exc)
+    found by PT) is logged and ignored: the kernels it reached are compiled anyway.
+
+    With ``pt.fallback_config`` the pair runs with those settings too: a pair of the batch
+    that is not a road is matched with them, and their kernels (the semi-global smoothing
+    of the defaults, say) must not be compiled inside that pair's time.
+    """
+    fallback = fallback_settings(cfg) if method == "d3stereo" else None
+    for settings in [cfg] if fallback is None else [cfg, fallback]:
+        try:
+            methods.compute_pair(method, settings, left, right, max_disparity=_WARM_DMAX)
+        except D3Error as exc:
+            log.debug("JIT warm-up pair failed (ignored): %s", exc)
 
 
 def warm_jit(cfg: Config, method: str) -> float:

@@ -71,6 +71,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "pt.min_inlier_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
     "pt.inlier_threshold": (lambda v: v > 0, "a number > 0"),
     "pt.iterations": (lambda v: 1 <= v <= 100, "an integer in [1, 100]"),
+    "pt.max_band_end_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
+    "pt.fallback_config": (lambda v: v == "" or v in _bundled_names(), "\"\" or the name of a bundled config"),
     "refine.smooth_kernel": (lambda v: v in ("gaussian", "box"), "one of gaussian, box"),
     "refine.subpixel_fit": (lambda v: v in ("auto", "parabola", "equiangular"), "one of auto, parabola, equiangular"),
     "refine.speckle_size": (lambda v: 0 <= v <= 100000, "an integer in [0, 100000]"),
@@ -104,6 +106,13 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "sgbm.speckle_range": (lambda v: v >= 0, "an integer >= 0"),
     "sgbm.disp12_max_diff": (lambda v: v >= -1, "an integer >= -1"),
 }
+
+
+def _bundled_names() -> list[str]:
+    """Names of the bundled configs (imported here: the loader imports this module)."""
+    from .load import bundled_configs
+
+    return list(bundled_configs())
 
 
 def _type_name(tp) -> str:

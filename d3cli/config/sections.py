@@ -146,6 +146,8 @@ class PTConfig:
     min_inlier_share: float = 0.5  # below this the scene is not road-like: full range
     inlier_threshold: float = 1.0  # |residual| in coarse-level pixels counted as inlier
     iterations: int = 10  # iteratively re-weighted least-squares rounds
+    max_band_end_share: float = 0.03  # more pixels matched at the narrow range's ends: not a road, full range
+    fallback_config: str = ""  # bundled config whose settings match a pair that is not a road; "": this one's
 
     @property
     def narrow_range(self) -> int:

@@ -34,7 +34,8 @@ import numpy as np
 from ..data.formats import atomic_write
 from .definitions import MEANS, metric, pixels_note
 from .report import jsonable, readable
-from .summary import plural, summarize
+from ..errors import plural
+from .summary import summarize
 from .tables import HUGE, count_cells, count_heads, counts_sentence, one_line
 
 REPORT_FILE = "report.html"

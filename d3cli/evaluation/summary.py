@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 
+from ..errors import plural
+
 #: Metrics computed against ground truth; a pair "has gt" when its EPE is a number.
 DISPARITY_COLUMNS = ["epe", "pep_0.5", "pep_1", "pep_2", "pep_3", "density"]
 
@@ -144,11 +146,6 @@ def columns_of(summary: Mapping) -> list[str]:
     photometric = ([key for key in SHOWN_PHOTOMETRIC_COLUMNS if means.get(key) is not None]
                    if overall["ok"] > overall["with_gt"] else [])
     return [*gt, *photometric, "time_s"]
-
-
-def plural(n: int, word: str, words: str | None = None) -> str:
-    """``1 pair``, ``2 pairs``, ``0 pairs``; ``words`` for an irregular plural."""
-    return f"{n} {word if n == 1 else words or word + 's'}"
 
 
 def problems_sentence(summary: Mapping) -> str:

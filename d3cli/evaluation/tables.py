@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 
+from ..errors import plural
 from .definitions import HUGE, MEANS, METRICS, WITHOUT_GT, pixels_note
 from .summary import (
     SHOWN_GT_COLUMNS,
@@ -18,7 +19,6 @@ from .summary import (
     checked_row,
     columns_of,
     family_of,
-    plural,
     problems_sentence,
     summarize,
     summarize_group,

@@ -13,6 +13,9 @@ potholes do not bend it.  The right image is then warped by the per-pixel shift
 the narrow range [0, 2 delta + slack], and the disparity is restored exactly with
 ``d = d' (1 - b2) + s(u, v)`` (``kernels.*.pt_restore``).
 
+:meth:`RoadModel.off_band` rejects the model after the narrow-range match when too many
+pixels lie off the band (:func:`band_end_share`): the scene is not a road.
+
 :func:`shift_map` gives the shift on the host (the road plane of the smoothing in
 step 8); :func:`match_in_right_image` is the validity test after restoring.
 """
@@ -21,7 +24,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -84,9 +87,71 @@ class RoadModel:
         out = {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in out.items()}
         return out | {"narrow_range": narrow_range if self.road_like else None, "fallback": not self.road_like}
 
-    def fallback_warning(self, max_disparity: int) -> str:
-        """The warning of a pair that is matched over the full range instead."""
-        return f"perspective transformation skipped: {self.reason}; searched the full range 0-{max_disparity}"
+    def fallback_warning(self, max_disparity: int, *, settings: str = "") -> str:
+        """The warning of a pair that is matched over the full range instead.
+
+        Parameters
+        ----------
+        max_disparity : int
+        settings : str, keyword-only
+            The bundled config whose settings match the pair instead (``pt.fallback_config``);
+            "" when the run's own.
+        """
+        with_ = f" with the settings of {settings}.yaml" if settings else ""
+        return f"perspective transformation skipped: {self.reason}; searched the full range 0-{max_disparity}{with_}"
+
+    def off_band(self, share: float, *, limit: float, margin: int) -> "RoadModel":
+        """This model rejected when too much of the image lies off the road band.
+
+        The coarsest-level fit cannot tell an indoor scene from a road: at 1/8 resolution,
+        with an inlier band of one coarse pixel (8 px), the Motorcycle sample's disparities
+        fit a plane as well as a road's do (89 % inliers; its implied camera height and
+        pitch, about 1.7 m and 37 deg, are those of a road camera).  The narrow-range match at
+        full resolution can: a pixel matched at an end of the band (``d' = 0`` or
+        ``2 margin + slack``) has its true disparity more than ``margin`` off the plane.
+
+        Parameters
+        ----------
+        share : float
+            Share of all pixels matched at an end of the narrow range.
+        limit : float, keyword-only
+            Largest share of a road surface (``pt.max_band_end_share``).
+        margin : int, keyword-only
+            ``pt.margin``, for the reason's text.
+
+        Returns
+        -------
+        RoadModel
+            ``self`` when ``share <= limit``; otherwise a copy with ``road_like`` False and
+            the reason.
+        """
+        if share <= limit:
+            return self
+        reason = (f"{100 * share:.1f}% of the pixels lie more than {margin} px of disparity off the "
+                  f"fitted plane (> {100 * limit:.1f}%)")
+        return replace(self, road_like=False, reason=reason)
+
+
+def band_end_share(narrow: np.ndarray, *, narrow_range: int) -> float:
+    """Share of all pixels of a narrow-range map matched at an end of the range.
+
+    The ``range_end_share`` of :func:`restored_validity` (decided pixels at ``d' <= 0``
+    or ``d' >= narrow_range``), before the map is refined and restored.
+
+    Parameters
+    ----------
+    narrow : ndarray, int, (H, W)
+        Full-resolution narrow-range disparities d', ``-1`` undecided.
+    narrow_range : int, keyword-only
+        Largest narrow-range disparity ``2 margin + slack``.
+
+    Returns
+    -------
+    float
+        In [0, 1].
+    """
+    narrow = np.asarray(narrow)
+    return float(np.count_nonzero((narrow == 0) | (narrow >= narrow_range))) / max(narrow.size, 1)
 
 
 def coarse_points(disparity: np.ndarray, *, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import time
@@ -11,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Config
+from ..config import Config, load_config
 from ..data.formats import to_grey
 from ..data.layouts import normalise_bit_depth
 from ..errors import InputError
@@ -20,7 +21,8 @@ from .band import band_indexes
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
-from .perspective import RoadModel, fit_road_model, restored_shares, restored_validity_counts
+from .perspective import (RoadModel, band_end_share, fit_road_model, restored_shares,
+                          restored_validity_counts)
 from .pyramid import build_pyramid, level_max_disparity, usable_levels
 from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel, smooth_disparity
 
@@ -139,6 +141,16 @@ class _Match:
     per_level: list
 
 
+def fallback_settings(cfg: Config) -> Config | None:
+    """The settings a pair that is not a road is matched with: the bundled config
+    ``pt.fallback_config`` names, its perspective transformation off, with ``cfg``'s run
+    section (backend, threads); None when ``cfg`` has no PT or no fallback config."""
+    if not (cfg.pt.enabled and cfg.pt.fallback_config):
+        return None
+    other = load_config(cfg.pt.fallback_config)
+    return dataclasses.replace(other, run=cfg.run, pt=dataclasses.replace(other.pt, enabled=False))
+
+
 class D3Stereo:
     """The D3Stereo stereo matcher (NCC + RBF + decisive diffusion/inheritance).
 
@@ -189,6 +201,7 @@ class D3Stereo:
         cfg = self.cfg
         timings: dict[str, float] = {}
         t_start = time.perf_counter()
+        given = (left, right)  # for a fallback with other settings (pt.fallback_config)
         left, right = _float_images_scaled(left, right)
         grey_l, grey_r, dmax = self._prepare(left, right, max_disparity)
         levels = usable_levels(grey_l.shape, cfg.pyramid.levels)
@@ -202,19 +215,20 @@ class D3Stereo:
         warnings: list[str] = []
         road = None
         search = dmax
+        plain_r = pyr_r  # the unwarped right pyramid, for a fallback after the narrow match
         if cfg.pt.enabled:
             road, pyr_r, search = self._perspective(pyr_l, pyr_r, dmax, timings, info, warnings)
-        features = None
-        if cfg.cost.kind == "features":
-            t0 = time.perf_counter()
-            if cfg.features.npz:
-                features = self._npz_features(grey_l.shape, [tuple(p.shape) for p in pyr_l], pair_dir, road)
-            else:
-                features = self._features(left, right if road is None else self._warped_right(right, road),
-                                          [tuple(p.shape) for p in pyr_l])
-            timings["features"] = time.perf_counter() - t0
-            info["feature_levels"] = [level + 1 for level, f in enumerate(features) if f is not None]
+            if road is None and cfg.pt.fallback_config:
+                return self._fallback(given, dmax, pair_dir, timings, info, warnings, t_start)
+        features = self._pair_features(left, right, grey_l.shape, pyr_l, pair_dir, road, timings, info)
         match = self._match(pyr_l, pyr_r, search, timings, features=features)
+        if road is not None and not self._on_road_band(match, road, dmax, info, warnings):
+            # Not a road after all: the pair is matched again over the full range, unwarped.
+            road, search, match, features = None, dmax, None, None
+            if cfg.pt.fallback_config:
+                return self._fallback(given, dmax, pair_dir, timings, info, warnings, t_start)
+            features = self._pair_features(left, right, grey_l.shape, pyr_l, pair_dir, None, timings, info)
+            match = self._match(pyr_l, plain_r, search, timings, features=features)
         info["per_level"] = match.per_level
         if match.per_level[0].get("seeds", 0) == 0:
             warnings.append(
@@ -253,6 +267,59 @@ class D3Stereo:
                 f"pass --max-disparity in that range"
             )
         return grey_l, grey_r, int(dmax)
+
+    def _pair_features(self, left, right, shape, pyr_l, pair_dir, road, timings: dict, info: dict):
+        """The feature pyramid of the pair (``cost.kind: features``; None otherwise), from
+        the right image warped by ``road`` when there is one."""
+        cfg = self.cfg
+        if cfg.cost.kind != "features":
+            return None
+        t0 = time.perf_counter()
+        shapes = [tuple(p.shape) for p in pyr_l]
+        if cfg.features.npz:
+            features = self._npz_features(shape, shapes, pair_dir, road)
+        else:
+            features = self._features(left, right if road is None else self._warped_right(right, road), shapes)
+        timings["features"] = timings.get("features", 0.0) + time.perf_counter() - t0
+        info["feature_levels"] = [level + 1 for level, f in enumerate(features) if f is not None]
+        return features
+
+    def _fallback(self, given, dmax: int, pair_dir, timings: dict, info: dict, warnings: list,
+                  t_start: float) -> DisparityResult:
+        """A pair that is not a road, matched over the full range with the settings of the
+        bundled config ``pt.fallback_config`` (its perspective transformation off, this
+        run's backend); the road fit's timings, ``info['pt']`` and warnings kept.
+
+        The road settings are chosen for a camera looking down at a road; on other scenes
+        they cost accuracy even over the full range (the Motorcycle sample: EPE 1.734 px
+        with configs/road.yaml's, 0.910 with default.yaml's).
+        """
+        cfg = self.cfg
+        left, right = given
+        result = D3Stereo(fallback_settings(cfg)).compute(left, right, max_disparity=dmax, pair_dir=pair_dir)
+        result.info["pt"] = info["pt"] | {"fallback_config": cfg.pt.fallback_config}
+        result.warnings[:0] = warnings
+        result.timings.update({k: v for k, v in timings.items() if k.startswith("pt_")})
+        result.timings["total"] = time.perf_counter() - t_start  # the road attempt included
+        return result
+
+    def _on_road_band(self, match: "_Match", road: RoadModel, dmax: int, info: dict, warnings: list) -> bool:
+        """Whether the narrow-range match keeps the road model (:meth:`RoadModel.off_band`).
+
+        False, with the fallback in ``info['pt']`` (``band_end_share`` the measured share)
+        and its warning in ``warnings``, when more than ``pt.max_band_end_share`` of the
+        pixels are matched at an end of the narrow range.
+        """
+        pt = self.cfg.pt
+        share = band_end_share(self.backend.to_host(match.disparity), narrow_range=pt.narrow_range)
+        checked = road.off_band(share, limit=pt.max_band_end_share, margin=pt.margin)
+        if checked.road_like:  # the share is recorded as range_end_share by _pt_valid
+            return True
+        info["pt"] = checked.to_info(narrow_range=pt.narrow_range) | {"band_end_share": share}
+        msg = checked.fallback_warning(dmax, settings=pt.fallback_config)
+        log.debug(msg)  # returned in result.warnings; the batch logs those once
+        warnings.append(msg)
+        return False
 
     def _features(self, left, right, shapes):
         """Feature pyramid of the pair (step 2 with deep features), finest level first."""
@@ -462,7 +529,7 @@ class D3Stereo:
         narrow = pt.narrow_range
         info["pt"] = model.to_info(narrow_range=narrow)
         if not model.road_like:
-            msg = model.fallback_warning(dmax)
+            msg = model.fallback_warning(dmax, settings=pt.fallback_config)
             log.debug(msg)  # returned in result.warnings; the batch logs those once
             warnings.append(msg)
             return None, pyr_r, dmax

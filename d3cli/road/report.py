@@ -3,7 +3,8 @@
 Per pair: ``height.pfm`` (signed height above the road plane, metres, + up, inf where no
 estimate), ``height_color.png`` (diverging colour map in mm with a colour bar),
 ``defects.json`` (plane, definitions, potholes and bumps, :mod:`d3cli.road.defects`) and
-``defects.png`` (the left image with each defect outlined and labelled).
+``defects.png`` (the left image with each defect outlined and labelled, and a legend,
+:mod:`d3cli.road.overlay`).
 """
 
 from __future__ import annotations
@@ -18,9 +19,11 @@ import cv2
 import numpy as np
 
 from ..data.formats import atomic_write, write_image, write_pfm
-from ..data.legend import put_text, text_px, text_size, vertical_colour_bar
+from ..errors import plural
+from ..data.legend import vertical_colour_bar
 from .defects import find_defects
 from .morphology import dilate_near
+from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
 from .pointcloud import Camera, disparity_to_points
 from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, rematch
@@ -68,32 +71,6 @@ def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
     return np.concatenate([img, bar], axis=1)
 
 
-def defects_overlay(left: np.ndarray, defects, labels_shape, regions) -> np.ndarray:
-    """RGB uint8: the left image with each defect's outline (pothole red, bump yellow) and label."""
-    img = np.asarray(left)
-    if img.dtype != np.uint8:
-        img = np.clip(img / (257.0 if img.max(initial=0) > 255 else 1.0), 0, 255).astype(np.uint8)
-    if img.ndim == 2:
-        img = np.repeat(img[:, :, None], 3, axis=2)
-    out = np.ascontiguousarray(img[:, :, :3]).copy()
-    thick = max(1, out.shape[0] // 360)
-    scale = text_px(out.shape[1])  # cap height in px
-    for d, mask in zip(defects, regions):
-        colour = (255, 0, 0) if d.kind == "pothole" else (255, 220, 0)
-        contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        cv2.drawContours(out, contours, -1, colour, thick)
-        sign = "-" if d.kind == "pothole" else "+"
-        text = f"#{d.id} {sign}{d.max_depth_mm:.0f} mm" + ("?" if d.low_confidence else "")
-        # Above the outline; below it where the outline touches the top border (the label
-        # was cut off there), clamped into the image.
-        tw, th = text_size(text, scale)
-        u0, v0, _, v1 = (int(x) for x in d.bbox_px)
-        y = v0 - 4 if v0 - 4 - th >= 0 else v1 + th + 4
-        org = (min(max(u0, 0), max(out.shape[1] - tw, 0)), min(max(y, th + 2), out.shape[0] - 3))
-        put_text(out, text, org, scale, colour, outline=(0, 0, 0))
-    return out
-
-
 def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided: np.ndarray,
                 camera: Camera | None, info: dict, road_cfg, *, right: np.ndarray | None = None
                 ) -> tuple[list[dict], list[str]]:
@@ -111,8 +88,10 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     camera : Camera or None
         None: a warning and no road outputs.
     info : dict
-        The pair's result info; ``info['pt']['fallback']`` True (not road-like): height
-        outputs but no defects, and a warning.
+        The pair's result info; ``info['pt']['fallback']`` True (no road surface): height
+        outputs but no defects, defects.json saying so (``road_like`` false, a
+        "no road surface" line with ``info['pt']['reason']``) and no warning returned (the
+        fallback's own warning is the pair's).
     road_cfg : RoadConfig
     right : ndarray, optional, keyword-only
         The right image.  Given, the disparity inside each defect (grown by its ring) is
@@ -124,6 +103,7 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     defects : list of dict
         The defects as written to defects.json.
     warnings : list of str
+        What the run should warn about (also in defects.json's ``warnings``).
     """
     warnings: list[str] = []
     if camera is None:
@@ -140,8 +120,12 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     pt = (info or {}).get("pt")
     fallback = bool(pt and pt.get("fallback"))
     decided_share = float(decided.mean()) if decided.size else 0.0
+    notes: list[str] = []
     if fallback:
-        warnings.append("no defects: the scene is not road-like (perspective transformation fell back)")
+        # No road plane to measure against: no defects.  Said in defects.json (report.html
+        # shows it) but not returned: the pair's warning of the fallback already says why.
+        reason = pt.get("reason") or "the perspective transformation fell back"
+        notes.append(f"no road surface: {reason}; no defects measured")
         defects, regions = [], []
     else:
         defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
@@ -161,9 +145,12 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         "definitions": "depth: below the median height of the surrounding road ring, mm; area_m2: "
                        "area of the road plane covered by the region; volume_l: fill volume up to the "
                        "surrounding surface; severity: ASTM D6433 pothole level from max depth and the "
-                       "equivalent-circle diameter_mm of the area", "defects": items, "warnings": warnings})
-    write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, height.shape, regions))
-    log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
+                       "equivalent-circle diameter_mm of the area", "defects": items, "warnings": warnings + notes})
+    write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, regions))
+    if fallback:
+        log.info("%s: no road surface, no defects measured", pair_dir.name)
+    else:
+        log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
     return items, warnings
 
 
@@ -237,3 +224,52 @@ def write_defects_csv(out: Path, pair_dirs, *, frame_spacing_m: float = 0.0) -> 
     text = buf.getvalue()
     _write_json(Path(out) / SURVEY_JSON, survey_summary(per_pair, frame_spacing_m=frame_spacing_m))
     return atomic_write(Path(out) / DEFECTS_CSV, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+
+
+def survey_line(out: Path) -> str | None:
+    """One line for the terminal after a ``--road-report`` batch: what the road report found.
+
+    ``road: 12 frames, 7 potholes (low 2, medium 4, high 1), 1 bump; deepest 62 mm
+    (synth-0011-wet-cement #2); 3 defects flagged low confidence``, from ``OUT/defects.csv`` and
+    ``OUT/road_survey.json``.  Potholes are counted per ASTM D6433 severity
+    (:mod:`d3cli.road.severity`); those too shallow or narrow for a severity are counted
+    as "too small to grade".  The deepest is the deepest pothole, "low confidence" added
+    when it is flagged.
+
+    Parameters
+    ----------
+    out : Path
+        The batch's output folder.
+
+    Returns
+    -------
+    str or None
+        None when the batch wrote no defects.csv (no pair has road outputs) or it cannot
+        be read.
+    """
+    path = Path(out) / DEFECTS_CSV
+    try:
+        with path.open(encoding="utf-8", newline="") as f:
+            rows = [{**r, "max_depth_mm": float(r["max_depth_mm"])} for r in csv.DictReader(f)]
+    except (OSError, ValueError, KeyError, TypeError, csv.Error):
+        return None  # no road outputs, or a file that is not d3stereo's: no line, never a failed run
+    try:
+        frames = int(json.loads((Path(out) / SURVEY_JSON).read_text(encoding="utf-8"))["frames"])
+    except (OSError, ValueError, KeyError, TypeError):
+        frames = len({r.get("pair") for r in rows})
+    pits = [r for r in rows if r.get("kind") == "pothole"]
+    n_bumps = sum(r.get("kind") == "bump" for r in rows)
+    flagged = sum(r.get("low_confidence") == "True" for r in rows)
+    line = f"road: {plural(frames, 'frame')}, "
+    if pits:
+        counts = [f"{level} {sum(r.get('severity') == level for r in pits)}" for level in ("low", "medium", "high")]
+        ungraded = sum(not r.get("severity") for r in pits)
+        if ungraded:
+            counts.append(f"{ungraded} too small to grade")
+        line += f"{plural(len(pits), 'pothole')} ({', '.join(counts)}), {plural(n_bumps, 'bump')}"
+        deepest = max(pits, key=lambda r: r["max_depth_mm"])
+        low = ", low confidence" if deepest.get("low_confidence") == "True" else ""
+        line += f"; deepest {deepest['max_depth_mm']:.0f} mm ({deepest.get('pair')} #{deepest.get('id')}{low})"
+    else:
+        line += f"no potholes, {plural(n_bumps, 'bump')}"
+    return line + f"; {plural(flagged, 'defect')} flagged low confidence"
