@@ -167,12 +167,14 @@ class _Lines:
         return self.seen
 
 
-def _start(pairs: Path, out: Path, cache: Path) -> tuple[subprocess.Popen, _Lines]:
+def _start(pairs: Path, out: Path, cache: Path, *options: str) -> tuple[subprocess.Popen, _Lines]:
+    """``d3stereo run PAIRS -o OUT [options]`` with a numba cache of its own, in a session
+    of its own (its worker processes can be found and ended by process group)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(REPO)}
     env.pop("NUMBA_DISABLE_JIT", None)
-    proc = subprocess.Popen([sys.executable, "-m", "d3cli", "run", str(pairs), "-o", str(out)],
+    proc = subprocess.Popen([sys.executable, "-m", "d3cli", "run", str(pairs), "-o", str(out), *options],
                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            env=env, text=True)
+                            env=env, text=True, start_new_session=True)
     return proc, _Lines(proc)
 
 
@@ -248,13 +250,7 @@ def test_ctrl_c_during_a_cold_compile_in_the_worker_pool_returns_within_2_s(tmp_
     pairs = tmp_path / "pairs"
     for i, name in enumerate("abc"):
         make_pair_folder(pairs, name, shift=4, seed=i)
-    cache = tmp_path / "cache"
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(REPO)}
-    env.pop("NUMBA_DISABLE_JIT", None)
-    proc = subprocess.Popen([sys.executable, "-m", "d3cli", "run", str(pairs), "-o", str(tmp_path / "out"),
-                             "--workers", "2"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, env=env, text=True, start_new_session=True)
-    lines = _Lines(proc)
+    proc, lines = _start(pairs, tmp_path / "out", tmp_path / "cache", "--workers", "2")
     try:
         assert lines.until(lambda line: line.startswith("NOTE: compiling"), 120) is not None, lines.seen
         time.sleep(8)  # the worker is compiling now
