@@ -260,7 +260,8 @@ def survey_line(out: Path) -> str | None:
     pits = [r for r in rows if r.get("kind") == "pothole"]
     n_bumps = sum(r.get("kind") == "bump" for r in rows)
     flagged = sum(r.get("low_confidence") == "True" for r in rows)
-    line = f"road: {plural(frames, 'frame')}, "
+    no_road = _frames_without_road(Path(out))
+    line = f"road: {plural(frames, 'frame')}" + (f" ({no_road} without a road surface), " if no_road else ", ")
     if pits:
         counts = [f"{level} {sum(r.get('severity') == level for r in pits)}" for level in ("low", "medium", "high")]
         ungraded = sum(not r.get("severity") for r in pits)
@@ -273,3 +274,14 @@ def survey_line(out: Path) -> str | None:
     else:
         line += f"no potholes, {plural(n_bumps, 'bump')}"
     return line + f"; {plural(flagged, 'defect')} flagged low confidence"
+
+
+def _frames_without_road(out: Path) -> int:
+    """Pairs of ``out`` whose defects.json says the frame is not a road surface (PT fell back)."""
+    count = 0
+    for path in out.glob(f"*/{DEFECTS_JSON}"):
+        try:
+            count += json.loads(path.read_text(encoding="utf-8")).get("road_like") is False
+        except (OSError, ValueError, AttributeError):
+            continue  # a damaged file: it is the pair's own business, the line stays a summary
+    return count

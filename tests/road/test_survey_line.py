@@ -58,3 +58,14 @@ def test_run_with_road_report_prints_one_road_line(tmp_path):
         result = runner.invoke(main, ["run", str(data), "-o", str(tmp_path / "out2"), "--method", "sgbm", *extra])
         assert result.exit_code == 0, result.output
         assert not any(line.startswith("road: ") for line in result.stdout.splitlines())
+
+
+def test_survey_line_counts_the_frames_without_a_road_surface(tmp_path):
+    write_survey(tmp_path, [], frames=3)
+    for pair, road_like in (("a", False), ("b", True), ("c", False)):
+        (tmp_path / pair).mkdir()
+        (tmp_path / pair / "defects.json").write_text(json.dumps({"road_like": road_like, "defects": []}))
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "defects.json").write_text("[not json")  # damaged: not counted, no failure
+    assert survey_line(tmp_path) == ("road: 3 frames (2 without a road surface), no potholes, 0 bumps; "
+                                     "0 defects flagged low confidence")
