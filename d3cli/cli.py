@@ -21,7 +21,7 @@ import click
 
 from . import __version__
 from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, bundled_configs, load_config, resolve_config
-from .errors import D3Error, Terminated, interrupt_behind, plural, raise_terminated
+from .errors import D3Error, interrupt_behind, plural, raise_hung_up, raise_terminated
 
 log = logging.getLogger("d3cli")
 #: --break-lock of run and eval: the one writer of OUT at a time (batch/lock.py).
@@ -32,8 +32,6 @@ BREAK_LOCK_HELP = ("Take over OUT's lock when its record names a run on another 
 INTERRUPTED_EXIT = 130
 #: Exit status after SIGTERM: 128 + 15, as a shell reports a process killed by it.
 TERMINATED_EXIT = 143
-#: Exit status after SIGHUP (the terminal or ssh session closed): 128 + 1.
-HUNG_UP_EXIT = 129
 #: Environment variable naming a config file used when -c is not given.
 CONFIG_ENV = "D3STEREO_CONFIG"
 #: Config file picked up from the working folder when neither -c nor the variable is set.
@@ -51,7 +49,7 @@ class _Group(click.Group):
             # the signal, status -15 instead of 143 or 0 (a fast machine gets there).
             # SIGHUP (the terminal or ssh session closed) likewise, with 129.
             signal.signal(signal.SIGTERM, raise_terminated)
-            signal.signal(signal.SIGHUP, _raise_hung_up)
+            signal.signal(signal.SIGHUP, raise_hung_up)
         try:
             result = super().invoke(ctx)
             _end_of_command()
@@ -68,15 +66,6 @@ class _Group(click.Group):
             if interrupt is None:
                 raise
             _interrupted(ctx, interrupt)
-
-
-def _raise_hung_up(signum, frame):
-    """SIGHUP handler: a :class:`~d3cli.errors.Terminated` named SIGHUP, exit status 129 (as
-    :class:`d3cli.batch.signals.HungUp`, which the batch raises; that module is not imported
-    here: the batch package is heavy)."""
-    exc = Terminated()
-    exc.signal_name, exc.exit_status = "SIGHUP", HUNG_UP_EXIT
-    raise exc
 
 
 def _interrupted(ctx, exc: KeyboardInterrupt):

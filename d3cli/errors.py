@@ -52,11 +52,26 @@ class Terminated(KeyboardInterrupt):
     """
 
     terminated = True
+    signal_name = "SIGTERM"
+    exit_status = 143  # 128 + SIGTERM
+
+
+class HungUp(Terminated):
+    """SIGHUP (the terminal or the ssh session closed), raised by :func:`raise_hung_up`;
+    handled everywhere as SIGTERM is, but named SIGHUP and ending with exit status 129."""
+
+    signal_name = "SIGHUP"
+    exit_status = 129  # 128 + SIGHUP
 
 
 def raise_terminated(signum, frame):
     """SIGTERM handler: raise :class:`Terminated` (``signal.signal(SIGTERM, raise_terminated)``)."""
     raise Terminated
+
+
+def raise_hung_up(signum, frame):
+    """SIGHUP handler: raise :class:`HungUp`."""
+    raise HungUp
 
 
 def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:

@@ -23,26 +23,13 @@ import sys
 import threading
 from pathlib import Path
 
-from ..errors import Terminated, interrupt_behind, raise_terminated
+from ..errors import Terminated, interrupt_behind, raise_hung_up, raise_terminated
 
 #: The signals that end a batch like Ctrl-C, with the exit status a shell reports for each
 #: (128 + the signal's number).
 TERMINATING = {signal.SIGTERM: 128 + signal.SIGTERM, signal.SIGHUP: 128 + signal.SIGHUP}
 #: Every signal that stops a batch: Ctrl-C and :data:`TERMINATING`.
 STOP_SIGNALS = (signal.SIGINT, *TERMINATING)
-
-
-class HungUp(Terminated):
-    """SIGHUP (the terminal or the ssh session closed), raised by :func:`raise_hung_up`;
-    handled everywhere as SIGTERM is, but named SIGHUP and ending with exit status 129."""
-
-    signal_name = "SIGHUP"
-    exit_status = TERMINATING[signal.SIGHUP]
-
-
-def raise_hung_up(signum, frame):
-    """SIGHUP handler: raise :class:`HungUp`."""
-    raise HungUp
 
 
 def signal_name(exc: BaseException) -> str:
