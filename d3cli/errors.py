@@ -30,6 +30,32 @@ class OutputError(D3Error):
     """An output folder or file cannot be written."""
 
 
+#: How much of an offending value an error message quotes.
+QUOTE_CHARS = 60
+
+
+def shorten(text: str, limit: int = QUOTE_CHARS) -> str:
+    """``text`` cut to ``limit`` characters (``...`` at the end when cut), for what a
+    message shows of an option as the user wrote it (``--set key=<100,000 characters>``)."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def readable(text: str) -> str:
+    """``text`` that can be written as UTF-8: the bytes of a file name that reached Python
+    as lone surrogates (``os.fsdecode`` of a name that is not valid in the locale's
+    encoding) are shown as the UTF-8 they are (a name with ``é`` under ``LC_ALL=C``) or,
+    where they are not UTF-8 (a Latin-1 byte), as a visible ``\\xNN``; any other lone
+    surrogate as ``\\udNNN``.  Every text file d3stereo writes passes through it, and so does
+    what the terminal cannot encode: a name written raw would make a file invalid UTF-8,
+    and writing it strictly fails."""
+    if text.isascii():
+        return text
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # a surrogate that no file name decoding made
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def plural(n: int, word: str, words: str | None = None) -> str:
     """``1 pair``, ``2 pairs``, ``0 pairs``: a count in a message; ``words`` for an
     irregular plural."""

@@ -98,7 +98,8 @@ def test_a_name_that_is_not_utf8_is_escaped_on_the_terminal(tmp_path):
 
 
 def test_report_writers_escape_name_bytes_that_are_not_utf8(tmp_path):
-    from d3cli.evaluation.report import readable, read_pair_csv, write_summary
+    from d3cli.errors import readable
+    from d3cli.evaluation.report import read_pair_csv, write_summary
 
     name = os.fsdecode(b"p\xe9-\xc3\xa9")
     assert readable(name) == "p\\xe9-é"

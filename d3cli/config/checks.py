@@ -13,13 +13,11 @@ import typing
 from dataclasses import fields, replace
 from typing import Any, Mapping
 
-from ..errors import ConfigError
+from ..errors import QUOTE_CHARS, ConfigError, shorten
 from .sections import BACKENDS, METHODS, Config
 
 #: Integers in a config are bounded: the kernels take 32-bit scalars.
 MAX_CONFIG_INT = 2**31 - 1
-#: How much of an offending value an error message quotes.
-QUOTE_CHARS = 60
 
 
 # ----------------------------------------------------------------------------- checks
@@ -135,12 +133,6 @@ def quote(value: Any, limit: int = QUOTE_CHARS) -> str:
     if isinstance(value, (list, tuple, dict, set)) and len(value) > limit:
         return f"<{type(value).__name__} of {len(value)} items>"
     text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def shorten(text: str, limit: int = QUOTE_CHARS) -> str:
-    """``text`` cut to ``limit`` characters (``...`` at the end when cut), for what a
-    message shows of an option as the user wrote it (``--set key=<100,000 characters>``)."""
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 

@@ -33,7 +33,8 @@ import numpy as np
 
 from ..data.formats import atomic_write
 from .definitions import MEANS, metric, pixels_note
-from .report import jsonable, readable
+from ..errors import readable
+from .report import jsonable
 from ..errors import plural
 from .summary import summarize
 from .tables import HUGE, count_cells, count_heads, counts_sentence, one_line

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OutputError, where_what_fix
+from ..errors import OutputError, readable, where_what_fix
 from ..data.formats import atomic_write
 from .summary import (  # noqa: F401 - the row columns and summarize are read from here too
     BENCHMARK_COLUMNS,
@@ -206,21 +206,6 @@ def write_summary(
     atomic_write(json_path, _text_writer(json_text))
     atomic_write(md_path, _text_writer(summary_markdown(summary, rows)))
     return json_path, md_path
-
-
-def readable(text: str) -> str:
-    """``text`` that can be written as UTF-8: the bytes of a file name that reached Python
-    as lone surrogates (``os.fsdecode`` of a name that is not valid in the locale's
-    encoding) are shown as the UTF-8 they are (a name with ``é`` under ``LC_ALL=C``) or,
-    where they are not UTF-8 (a Latin-1 byte), as a visible ``\\xNN``; any other lone
-    surrogate as ``\\udNNN``.  Every text file d3stereo writes passes through it: a name
-    written raw would make the file invalid UTF-8, and writing it strictly fails."""
-    if text.isascii():
-        return text
-    try:
-        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
-    except UnicodeEncodeError:  # a surrogate that no file name decoding made
-        return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def jsonable(value):
