@@ -191,6 +191,22 @@ def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_insid
         if bump_at is None or not (u0 - m <= bump_at[0] <= u1 + m and v0 - m <= bump_at[1] <= v1 + m):
             false_bumps += 1
     errors = []
+    matched_ids = {id(d) for d in hits.values()}
+    detections = []  # every predicted defect: its class under the match rule and its confidence
+    for d in pits:
+        if id(d) in matched_ids:
+            status = "match"
+        else:
+            m = detection_mask(d, ids.shape)
+            status = "duplicate" if (ids[m] > 0).sum() >= 0.5 * max(int(m.sum()), 1) else "false"
+        detections.append({"kind": "pothole", "status": status, "ok": is_ok(d), "flags": list(d.get("flags", []))})
+    for d in preds:
+        if d["kind"] == "bump":
+            u0, v0, u1, v1 = d["bbox_px"]
+            m = bump_margin_px
+            true = bump_at is not None and u0 - m <= bump_at[0] <= u1 + m and v0 - m <= bump_at[1] <= v1 + m
+            detections.append({"kind": "bump", "status": "match" if true else "false", "ok": is_ok(d),
+                               "flags": list(d.get("flags", []))})
     for gid, d in hits.items():
         g = by_id[gid]
         errors.append({"pair": gt_dir.name, "id": gid, "shape": g.get("shape", "classic"), "gt_depth_mm": g["depth_mm"],
@@ -198,13 +214,87 @@ def score_pair(gt_dir: Path, out_dir: Path, *, min_gt_depth_mm: float, min_insid
                        "area": abs(d["area_m2"] - g["area_m2"]) / g["area_m2"] if g["area_m2"] > 0 else np.nan,
                        "volume": abs(d["volume_l"] - g["volume_l"]) / g["volume_l"],
                        "signed_depth": (d["max_depth_mm"] - g["depth_mm"]) / g["depth_mm"],
-                       "signed_area": (d["area_m2"] - g["area_m2"]) / g["area_m2"] if g["area_m2"] > 0 else np.nan})
+                       "signed_area": (d["area_m2"] - g["area_m2"]) / g["area_m2"] if g["area_m2"] > 0 else np.nan,
+                       "counted": gid in counted, "ok": is_ok(d), "flags": list(d.get("flags", [])),
+                       "evidence": d.get("evidence", {}), "lighting": lighting(gt_dir)})
     return {"pair": gt_dir.name, "gt": len(counted), "found": len(counted & set(hits)), "predicted": len(pits),
             "matched": len(hits), "duplicates": dup, "false": false,
             "gt_shapes": [by_id[i].get("shape", "classic") for i in sorted(counted)],
             "found_shapes": [by_id[i].get("shape", "classic") for i in sorted(counted & set(hits))],
             "bumps": sum(d["kind"] == "bump" for d in preds), "false_bumps": false_bumps, "errors": errors,
-            "has_report": pred_path.is_file()}
+            "has_report": pred_path.is_file(), "lighting": lighting(gt_dir), "detections": detections,
+            "gt_potholes": [{"id": i, "shape": by_id[i].get("shape", "classic"), "found": i in hits,
+                             "ok": i in hits and is_ok(hits[i])} for i in sorted(counted)]}
+
+
+def is_ok(defect: dict) -> bool:
+    """A defect reported ``ok`` (defects.json ``confidence``; outputs without it: not
+    ``low_confidence``)."""
+    if "confidence" in defect:
+        return defect["confidence"] == "ok"
+    return not defect.get("low_confidence", False)
+
+
+def lighting(gt_dir: Path) -> str:
+    """The pair's lighting (SOURCE.txt ``variant``: sun, dusk, wet), "unknown" without it."""
+    source = gt_dir / "SOURCE.txt"
+    if source.is_file():
+        for line in source.read_text().splitlines():
+            if line.startswith("variant:"):
+                return line.split(":", 1)[1].strip() or "unknown"
+    return "unknown"
+
+
+def confidence_summary(rows: list) -> dict:
+    """The targets of the confidence check (docs/road.md) over scored pairs: the share of
+    true potholes found by an ``ok`` defect, the worst depth error of an ``ok`` match, the
+    false ``ok`` defects per pair, and the median errors of all matches and of ``ok`` ones."""
+    counted = [g for r in rows for g in r["gt_potholes"]]
+    matches = [e for r in rows for e in r["errors"]]
+    ok = [e for e in matches if e["ok"]]
+    false_ok = sum(1 for r in rows for d in r["detections"] if d["status"] == "false" and d["ok"])
+    dup_ok = sum(1 for r in rows for d in r["detections"] if d["status"] == "duplicate" and d["ok"])
+
+    def med(errs, key):
+        return float(np.nanmedian([e[key] for e in errs])) if errs else float("nan")
+    return {"pairs": len(rows), "potholes": len(counted), "found_ok": sum(g["ok"] for g in counted),
+            "found_ok_share": sum(g["ok"] for g in counted) / len(counted) if counted else float("nan"),
+            "ok_matches": len(ok), "ok_over_20": sum(e["depth"] > 0.2 for e in ok),
+            "worst_ok_depth": max((e["depth"] for e in ok), default=float("nan")),
+            "false_ok_per_pair": false_ok / len(rows) if rows else float("nan"), "false_ok": false_ok,
+            "duplicates_ok": dup_ok,
+            "depth": med(matches, "depth"), "area": med(matches, "area"), "volume": med(matches, "volume"),
+            "ok_depth": med(ok, "depth"), "ok_area": med(ok, "area"), "ok_volume": med(ok, "volume")}
+
+
+def confidence_table(rows: list, by: str) -> list[dict]:
+    """Per pothole family (``by="family"``) or lighting (``by="lighting"``), and overall: true
+    potholes, found, found ``ok``, matches flagged and why, the median and worst |depth
+    error| of the ``ok`` matches and their median area and volume errors."""
+    def group_of(r, e):
+        return e.get("shape", "classic") if by == "family" else r["lighting"]
+    groups = sorted({group_of(r, g) for r in rows for g in r["gt_potholes"]}
+                    | {group_of(r, e) for r in rows for e in r["errors"]})
+    table = []
+    for group in [*groups, "overall"]:
+        def keep(r, e):
+            return group == "overall" or group_of(r, e) == group
+        counted = [g for r in rows for g in r["gt_potholes"] if keep(r, g)]
+        matches = [e for r in rows for e in r["errors"] if keep(r, e)]
+        ok = [e for e in matches if e["ok"]]
+        reasons: dict = {}
+        for e in matches:
+            for f in e["flags"]:
+                reasons[f] = reasons.get(f, 0) + 1
+
+        def med(key, errs=ok):
+            return float(np.nanmedian([e[key] for e in errs])) if errs else float("nan")
+        table.append({"group": group, "gt": len(counted), "found": sum(g["found"] for g in counted),
+                      "found_ok": sum(g["ok"] for g in counted), "matches": len(matches),
+                      "flagged": len(matches) - len(ok), "reasons": reasons,
+                      "ok_depth": med("depth"), "ok_worst": max((e["depth"] for e in ok), default=float("nan")),
+                      "ok_area": med("area"), "ok_volume": med("volume")})
+    return table
 
 
 def family_table(rows: list) -> list[dict]:
@@ -243,6 +333,8 @@ def main(argv=None) -> int:
     ap.add_argument("--bump-margin-px", type=float, default=10.0)
     ap.add_argument("--min-decided-share", type=float, default=0.0,
                     help="what-if: ignore defects whose decided_share is below this (0: score all)")
+    ap.add_argument("--confidence", action="store_true",
+                    help="also print the confidence check (docs/road.md): ok defects, flags, per family and lighting")
     ap.add_argument("--json", type=Path, help="also write the per-pair scores here")
     args = ap.parse_args(argv)
     pairs = sorted(p for p in args.gt_root.iterdir() if (p / "defects_gt.json").is_file())
@@ -293,10 +385,36 @@ def main(argv=None) -> int:
     for t in table:
         print(f"| {t['family']} | {t['gt']} | {t['found']} | {100 * t['recall']:.0f} % | {100 * t['depth']:.1f} % | "
               f"{100 * t['signed_depth']:+.1f} % | {100 * t['area']:.1f} % | {100 * t['volume']:.1f} % |")
+    if args.confidence:
+        print_confidence(rows)
     if args.json:
         args.json.write_text(json.dumps({"summary": summary, "families": table, "pairs": rows}, indent=2,
                                         default=float))
     return 0
+
+
+def _pct(x: float) -> str:
+    return "-" if x != x else f"{100 * x:.1f} %"
+
+
+def print_confidence(rows: list) -> None:
+    """The confidence check as printed by ``--confidence``: the targets, then one table per
+    pothole family and per lighting."""
+    c = confidence_summary(rows)
+    print(f"confidence: {c['found_ok']}/{c['potholes']} true potholes found ok ({_pct(c['found_ok_share'])}, "
+          f"target >= 85 %); {c['ok_matches']} ok matches, {c['ok_over_20']} of them off by more than 20 % "
+          f"(worst {_pct(c['worst_ok_depth'])}, target none); false ok defects/pair {c['false_ok_per_pair']:.3f} "
+          f"({c['false_ok']}, target <= 0.05); ok duplicates {c['duplicates_ok']}")
+    print(f"medians, all matches: depth {_pct(c['depth'])}, area {_pct(c['area'])}, volume {_pct(c['volume'])}; "
+          f"ok matches: depth {_pct(c['ok_depth'])}, area {_pct(c['ok_area'])}, volume {_pct(c['ok_volume'])}")
+    for by in ("family", "lighting"):
+        print(f"| {by} | potholes > 20 mm | found | found ok | matches flagged | why | ok: median abs depth err "
+              "| ok: worst abs depth err | ok: median abs area err | ok: median abs volume err |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
+        for t in confidence_table(rows, by):
+            why = ", ".join(f"{k} {v}" for k, v in sorted(t["reasons"].items(), key=lambda kv: -kv[1])) or "-"
+            print(f"| {t['group']} | {t['gt']} | {t['found']} | {t['found_ok']} | {t['flagged']}/{t['matches']} | {why} "
+                  f"| {_pct(t['ok_depth'])} | {_pct(t['ok_worst'])} | {_pct(t['ok_area'])} | {_pct(t['ok_volume'])} |")
 
 
 if __name__ == "__main__":

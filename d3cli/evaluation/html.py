@@ -507,7 +507,9 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping], *, min_depth_mm: 
              "<p>Depth: below the surrounding road surface (the median height of a ring of road "
              "around the defect); area: of the road plane covered; volume: to fill it up to the "
              "surrounding surface; decided: share of the defect's pixels the method decided itself "
-             "(not filled); low confidence = few decided pixels.</p>",
+             "(not filled); confidence: ok, or low with the reasons its depth is not trusted (wet or "
+             "specular surface, dark or noisy, few decided pixels, at the image border, possibly merged "
+             "with a neighbour, re-match unreliable; defects.json lists the numbers behind each).</p>",
              '<table><thead><tr><th>pairs with a road report</th><th>with defects</th><th>potholes</th>'
              "<th>bumps</th><th>low confidence</th><th>pothole area [m²]</th><th>pothole volume [l]</th>"
              "<th>deepest pothole</th></tr></thead><tbody>",
@@ -656,7 +658,7 @@ def _road_card(out_dir: Path, pair: str, data: Mapping, truth: Mapping | None = 
                 (d.get("volume_l"), f"{_num(d.get('volume_l')) or 0.0:.2f}"),
                 (None, d.get("severity") or "–"),
                 (d.get("decided_share"), f"{100 * (_num(d.get('decided_share')) or 0.0):.0f}"),
-                (None, "low" if low_d else "ok")]
+                (None, f"low: {d.get('reasons')}" if low_d and d.get("reasons") else "low" if low_d else "ok")]
         cells = "".join(f'<td data-v="{_num(v) if _num(v) is not None else ""}">{e(t)}</td>' for v, t in vals)
         if truth:
             cells += f'<td class="t">{e(_truth_cell(truth, d))}</td>'

@@ -23,22 +23,25 @@ Definitions (what the numbers in defects.json mean):
 * ``volume_l``: sum over the region grown by the ring of ``footprint * max(depth, 0)``,
   litres (1 l = 1e-3 m^3): the material needed to fill it up to the surrounding surface.
 * ``decided_share``: share of the region's pixels (and of the pixels without an estimate
-  that it encloses) whose disparity the method decided itself (valid.png), not filled;
-  below ``min_decided_share`` the defect is flagged ``low_confidence``.
-* ``at_border``: the region reaches the image border; such a defect is ``low_confidence``
-  too (what lies beyond is unmeasured: depth, area and volume are lower bounds).
+  that it encloses) whose disparity the method decided itself (valid.png), not filled.
+* ``at_border``: the region reaches the image border (what lies beyond is unmeasured:
+  area and volume are lower bounds).
+* ``confidence``: ``ok``, or ``low`` with the reasons in ``flags`` and the numbers they
+  were decided from in ``evidence`` (:mod:`d3cli.road.confidence`); ``low_confidence`` is
+  ``confidence == "low"``.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 from scipy import ndimage
 
 from ..config import RoadConfig
+from .confidence import ConfidenceRules, deep_at_border, depressions, flags_of, spikiness
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
 from .morphology import dilate_near
@@ -68,6 +71,11 @@ class Defect:
     # Exterior outline of each connected part of the region: polygons of (u, v) pixel
     # vertices (cv2.approxPolyDP, 1 px), largest part first.
     outline_px: tuple = ()
+    # "ok", or "low" with the reasons in ``flags`` (codes of d3cli.road.confidence.REASONS)
+    # and the numbers they were decided from in ``evidence``; low_confidence is "low".
+    confidence: str = "ok"
+    flags: tuple = ()
+    evidence: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """Plain dict of every field (tuples as lists), as written to defects.json."""
@@ -158,6 +166,7 @@ class _Scene:
     #: window, :func:`_window`; the whole map: (0, 0))
     full_shape: tuple = (0, 0)
     origin: tuple = (0, 0)
+    rules: ConfidenceRules = ConfidenceRules()
 
 
 def find_defects(
@@ -169,6 +178,7 @@ def find_defects(
     tuning: DefectTuning | None = None,
     *,
     return_regions: bool = False,
+    rules: ConfidenceRules | None = None,
 ):
     """Potholes and bumps of one height map.
 
@@ -197,6 +207,8 @@ def find_defects(
         The rest of the tuning (defaults: ``DefectTuning()``).
     return_regions : bool, keyword-only
         Also return each defect's pixel mask (bool (H, W)), same order.
+    rules : ConfidenceRules, optional, keyword-only
+        The thresholds of the confidence flags (:mod:`d3cli.road.confidence`).
 
     Returns
     -------
@@ -204,15 +216,25 @@ def find_defects(
         Potholes first (deepest first), then bumps; ids 1..N in that order.
     """
     road = RoadConfig() if road is None else road
-    scene = _scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning)
+    rules = ConfidenceRules() if rules is None else rules
+    scene = replace(_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
+                    rules=rules)
     found: list = []
     for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
         found += _find_kind(scene, kind, sign, thr_mm)
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
-    defects = [Defect(id=i + 1, kind=kind, **d,
-                      low_confidence=d["decided_share"] < road.min_decided_share or d["at_border"])
+    defects = [with_flags(Defect(id=i + 1, kind=kind, **d, low_confidence=False), road, rules)
                for i, (kind, _, d) in enumerate(found)]
     return (defects, [r for _, r, _ in found]) if return_regions else defects
+
+
+def with_flags(defect: Defect, road: RoadConfig, rules: ConfidenceRules | None = None, **evidence) -> Defect:
+    """``defect`` with its confidence decided from its evidence (plus ``evidence``):
+    ``flags`` (:func:`d3cli.road.confidence.flags_of`), ``confidence`` and ``low_confidence``."""
+    merged = {**defect.evidence, **evidence}
+    flags = flags_of(merged, min_decided_share=road.min_decided_share, rules=rules)
+    return replace(defect, evidence=merged, flags=flags, confidence="low" if flags else "ok",
+                   low_confidence=bool(flags))
 
 
 def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, tuning: DefectTuning) -> _Scene:
@@ -337,7 +359,10 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
         return peak < tuning.noise_k * sigma_h or mean_raw < tuning.mean_noise_k * sigma_h * cells
 
     sigma_h = _map_sigma_h(s, region)
-    if fails(sigma_h) or fails(_local_sigma_h(s, comp, sigma_h)):
+    if fails(sigma_h):
+        return None
+    sigma_local = _local_sigma_h(s, comp, sigma_h)
+    if fails(sigma_local):
         return None
     # Pixels without any estimate that the region encloses are unmeasured parts of it.
     enclosed = ndimage.binary_fill_holes(region)
@@ -350,7 +375,18 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     vs, us = s.v_all[region], s.u_all[region]
     # 3-D centroid from the measured points of the region (footprint weighted).
     pts = _points_at(s.height[region], us, vs, s.camera, s.plane)
+    rules = s.rules
+    evidence = {
+        "spikiness": round(spikiness(depth_s, measured if measured.sum() >= tuning.peak_px else region,
+                                     peak_px=tuning.peak_px, spike_px=rules.spike_px), 3),
+        "snr": round(peak / sigma_local, 1) if sigma_local > 0 else float("inf"),
+        "decided_share": round(share, 3),
+        "deep_at_border": deep_at_border(depth_s, region, peak, s.origin, s.full_shape),
+        "depressions": depressions(depth_s, region, prominence=road.split_prominence_mm * 1e-3,
+                                   smooth_px=tuning.split_smooth_px),
+    }
     return region, dict(
+        evidence=evidence,
         centroid_px=(float(np.average(us, weights=w)), float(np.average(vs, weights=w))),
         bbox_px=(int(us.min()), int(vs.min()), int(us.max()), int(vs.max())),
         centroid_m=tuple(float(x) for x in np.average(pts, axis=0, weights=w)),

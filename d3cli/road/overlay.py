@@ -9,7 +9,8 @@ What makes it readable where potholes touch, on white glare and on dark asphalt:
   the defect's outline.
 * Outlines and leader lines are drawn over a dark halo; a label is white text on a dark,
   semi-transparent box framed in its defect's colour.
-* A legend strip below the picture says what the colours, the label and ``?`` mean.
+* A legend strip below the picture says what the colours, the label, ``?`` and the short
+  reasons after it mean (:mod:`d3cli.road.confidence`).
 """
 
 from __future__ import annotations
@@ -19,20 +20,26 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
+from .confidence import REASONS, SHORT
 from ..data.legend import BLACK, WHITE, put_text, swatch_legend, text_block, text_px, text_size
 
 POTHOLE_COLOUR = (255, 0, 0)
 BUMP_COLOUR = (255, 220, 0)
-#: Appended to the label of a low-confidence defect; the legend says what it means.
+#: Appended to the label of a flagged defect, before its reasons; the legend says what it means.
 LOW_CONFIDENCE_MARK = "?"
-LOW_CONFIDENCE_TEXT = "?: low confidence, depth not trusted (few pixels measured, or cut by the image border)"
+LOW_CONFIDENCE_TEXT = ("? depth not trusted, why: " + ", ".join(f"{SHORT[c]} = {REASONS[c]}" for c in REASONS))
 _BOX_ALPHA = 0.7  # darkening of the picture under a label box
 
 
 def label_text(defect) -> str:
-    """``"#id -depth mm"`` (bumps ``+height``), ``?`` appended when the defect is low confidence."""
+    """``"#id -depth mm"`` (bumps ``+height``); a flagged defect gets ``?`` and its reasons in
+    short (:data:`d3cli.road.confidence.SHORT`): ``"#1 -83 mm ? wet"``."""
     sign = "-" if defect.kind == "pothole" else "+"
-    return f"#{defect.id} {sign}{defect.max_depth_mm:.0f} mm" + (LOW_CONFIDENCE_MARK if defect.low_confidence else "")
+    text = f"#{defect.id} {sign}{defect.max_depth_mm:.0f} mm"
+    if not defect.low_confidence:
+        return text
+    why = ",".join(SHORT.get(code, code) for code in getattr(defect, "flags", ()))
+    return f"{text} {LOW_CONFIDENCE_MARK}" + (f" {why}" if why else "")
 
 
 def _adjacent(box, w: int, h: int, gap: int) -> list[tuple[int, int]]:

@@ -21,7 +21,8 @@ import numpy as np
 from ..data.formats import atomic_write, write_image, write_pfm
 from ..errors import plural
 from ..data.legend import vertical_colour_bar
-from .defects import find_defects
+from .confidence import REASONS, describe
+from .defects import find_defects, with_flags
 from .morphology import dilate_near
 from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
@@ -38,8 +39,8 @@ DEFECTS_PNG = "defects.png"
 DEFECTS_CSV = "defects.csv"
 SURVEY_JSON = "road_survey.json"
 CSV_FIELDS = ("pair", "id", "kind", "u", "v", "x_m", "y_m", "z_m", "area_m2", "max_depth_mm",
-              "mean_depth_mm", "volume_l", "decided_share", "low_confidence", "diameter_mm", "severity",
-              "equivalent_potholes")
+              "mean_depth_mm", "volume_l", "decided_share", "low_confidence", "confidence", "flags", "diameter_mm",
+              "severity", "equivalent_potholes")
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -131,27 +132,47 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
         if right is not None and regions:
             height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
+            stored = list(zip(defects, regions))
             defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
+            defects = [with_flags(d, road_cfg, rematch_change=_rematch_change(d, r, stored))
+                       for d, r in zip(defects, regions)]
         if decided_share < road_cfg.min_decided_share:
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
-            defects = [d.__class__(**{**d.__dict__, "low_confidence": True}) for d in defects]
+            defects = [with_flags(d, road_cfg, map_decided_share=round(decided_share, 3)) for d in defects]
     # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
     write_pfm(pair_dir / HEIGHT_FILE, height)
     write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
-    items = [{**d.to_dict(), **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})}
-             for d in defects]
+    items = [{**d.to_dict(), "reasons": describe(d.flags) if d.flags else "",
+              **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})} for d in defects]
     _write_json(pair_dir / DEFECTS_JSON, {
         "plane": plane.to_info(), "decided_share": decided_share, "road_like": not fallback,
         "definitions": "depth: below the median height of the surrounding road ring, mm; area_m2: "
                        "area of the road plane covered by the region; volume_l: fill volume up to the "
                        "surrounding surface; severity: ASTM D6433 pothole level from max depth and the "
-                       "equivalent-circle diameter_mm of the area", "defects": items, "warnings": warnings + notes})
+                       "equivalent-circle diameter_mm of the area; confidence: ok, or low with the reason "
+                       "codes in flags (in words in reasons) and the numbers they were decided from in "
+                       "evidence", "defects": items, "warnings": warnings + notes})
     write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, regions))
     if fallback:
         log.info("%s: no road surface, no defects measured", pair_dir.name)
     else:
         log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
     return items, warnings
+
+
+def _rematch_change(defect, region: np.ndarray, stored: list) -> float:
+    """Relative change of ``defect``'s depth by the re-match: against the defect of the
+    stored map (``stored``: (defect, region) pairs) that overlaps ``region`` most, of the
+    same kind; 0 when none overlaps (nothing to compare)."""
+    best, overlap = None, 0
+    for other, other_region in stored:
+        if other.kind == defect.kind:
+            n = int(np.count_nonzero(other_region & region))
+            if n > overlap:
+                best, overlap = other, n
+    if best is None or best.max_depth_mm <= 0:
+        return 0.0
+    return round(defect.max_depth_mm / best.max_depth_mm - 1.0, 3)
 
 
 def _rematched_height(left, right, disparity, finite, regions, camera: Camera, plane, road_cfg) -> np.ndarray:
@@ -213,7 +234,9 @@ def write_defects_csv(out: Path, pair_dirs, *, frame_spacing_m: float = 0.0) -> 
                          "z_m": round(d["centroid_m"][2], 4), "area_m2": round(d["area_m2"], 5),
                          "max_depth_mm": round(d["max_depth_mm"], 1), "mean_depth_mm": round(d["mean_depth_mm"], 1),
                          "volume_l": round(d["volume_l"], 3), "decided_share": round(d["decided_share"], 3),
-                         "low_confidence": d["low_confidence"], "diameter_mm": d.get("diameter_mm", ""),
+                         "low_confidence": d["low_confidence"],
+                         "confidence": d.get("confidence", "low" if d["low_confidence"] else "ok"),
+                         "flags": ";".join(d.get("flags", [])), "diameter_mm": d.get("diameter_mm", ""),
                          "severity": d.get("severity") or "", "equivalent_potholes": d.get("equivalent_potholes", "")})
     if not seen:
         return None
@@ -230,11 +253,11 @@ def survey_line(out: Path) -> str | None:
     """One line for the terminal after a ``--road-report`` batch: what the road report found.
 
     ``road: 12 frames, 7 potholes (low 2, medium 4, high 1), 1 bump; deepest 62 mm
-    (synth-0011-wet-cement #2); 3 defects flagged low confidence``, from ``OUT/defects.csv`` and
-    ``OUT/road_survey.json``.  Potholes are counted per ASTM D6433 severity
-    (:mod:`d3cli.road.severity`); those too shallow or narrow for a severity are counted
-    as "too small to grade".  The deepest is the deepest pothole, "low confidence" added
-    when it is flagged.
+    (synth-0011-wet-cement #2); 3 defects flagged (wet or specular surface 2, dark or noisy 1)``,
+    from ``OUT/defects.csv`` and ``OUT/road_survey.json``.  Potholes are counted per ASTM
+    D6433 severity (:mod:`d3cli.road.severity`); those too shallow or narrow for a severity
+    are counted as "too small to grade".  The deepest is the deepest pothole, with its
+    reasons when it is flagged (:mod:`d3cli.road.confidence`); a defect can have several.
 
     Parameters
     ----------
@@ -269,11 +292,25 @@ def survey_line(out: Path) -> str | None:
             counts.append(f"{ungraded} too small to grade")
         line += f"{plural(len(pits), 'pothole')} ({', '.join(counts)}), {plural(n_bumps, 'bump')}"
         deepest = max(pits, key=lambda r: r["max_depth_mm"])
-        low = ", low confidence" if deepest.get("low_confidence") == "True" else ""
+        low = f", flagged: {_reasons_of(deepest)}" if deepest.get("low_confidence") == "True" else ""
         line += f"; deepest {deepest['max_depth_mm']:.0f} mm ({deepest.get('pair')} #{deepest.get('id')}{low})"
     else:
         line += f"no potholes, {plural(n_bumps, 'bump')}"
-    return line + f"; {plural(flagged, 'defect')} flagged low confidence"
+    if not flagged:
+        return line + "; none flagged"
+    reasons: dict = {}
+    for r in rows:
+        for code in (r.get("flags") or "").split(";") if r.get("low_confidence") == "True" else ():
+            if code:
+                reasons[code] = reasons.get(code, 0) + 1
+    why = ", ".join(f"{REASONS.get(code, code)} {n}" for code, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
+    return line + f"; {plural(flagged, 'defect')} flagged" + (f" ({why})" if why else "")
+
+
+def _reasons_of(row: dict) -> str:
+    """The reasons of a defects.csv row in words (``low confidence`` for rows without flags)."""
+    codes = [c for c in (row.get("flags") or "").split(";") if c]
+    return describe(codes) if codes else "low confidence"
 
 
 def _frames_without_road(out: Path) -> int:

@@ -73,7 +73,8 @@ def survey_summary(per_pair: dict, *, frame_spacing_m: float = 0.0) -> dict:
     Returns
     -------
     dict
-        ``frames``, ``potholes``, ``bumps``, ``low_confidence``, ``by_severity``
+        ``frames``, ``potholes``, ``bumps``, ``low_confidence`` (defects flagged),
+        ``flagged_by_reason`` (reason code -> defects with it), ``by_severity``
         (low/medium/high/none: equivalent potholes), ``potholes_per_frame`` and, with a
         spacing, ``length_km`` and ``potholes_per_km``.
     """
@@ -88,9 +89,20 @@ def survey_summary(per_pair: dict, *, frame_spacing_m: float = 0.0) -> dict:
         else:
             by[level] = round(by[level] + float(d.get("equivalent_potholes", 1.0)), 2)
     out = {"frames": frames, "potholes": len(pits), "bumps": sum(d.get("kind") == "bump" for d in items),
-           "low_confidence": sum(bool(d.get("low_confidence")) for d in items), "by_severity": by,
+           "low_confidence": sum(bool(d.get("low_confidence")) for d in items),
+           "flagged_by_reason": _by_reason(items), "by_severity": by,
            "potholes_per_frame": round(len(pits) / frames, 3) if frames else 0.0}
     if frame_spacing_m > 0 and frames:
         km = frames * frame_spacing_m / 1e3
         out.update(frame_spacing_m=frame_spacing_m, length_km=round(km, 4), potholes_per_km=round(len(pits) / km, 2))
     return out
+
+
+def _by_reason(items: list) -> dict:
+    """Reason code -> number of flagged defects with it (a defect counts once per reason)."""
+    counts: dict = {}
+    for d in items:
+        if d.get("low_confidence"):
+            for code in d.get("flags", []):
+                counts[code] = counts.get(code, 0) + 1
+    return dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))

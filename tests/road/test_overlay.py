@@ -61,11 +61,12 @@ def test_label_edges_and_the_top_border():
     assert rect[1] >= 31
 
 
-def defect(i, kind, box, depth, low=False):
+def defect(i, kind, box, depth, low=False, flags=()):
     u0, v0, u1, v1 = box
     return Defect(id=i, kind=kind, centroid_px=((u0 + u1) / 2, (v0 + v1) / 2), bbox_px=box,
                   centroid_m=(0.0, 0.0, 2.0), area_m2=0.1, max_depth_mm=depth, mean_depth_mm=depth / 2,
-                  volume_l=1.0, decided_share=0.9, low_confidence=low)
+                  volume_l=1.0, decided_share=0.9, low_confidence=low or bool(flags), flags=tuple(flags),
+                  confidence="low" if low or flags else "ok")
 
 
 def disc(shape, box):
@@ -79,7 +80,7 @@ def disc(shape, box):
 def test_picture_has_labels_readable_on_any_background_and_a_legend(grey):
     shape = (240, 400)
     boxes = [(100, 100, 140, 140), (141, 100, 181, 140), (300, 60, 340, 100)]
-    defects = [defect(1, "pothole", boxes[0], 41.2), defect(2, "pothole", boxes[1], 30.0, low=True),
+    defects = [defect(1, "pothole", boxes[0], 41.2), defect(2, "pothole", boxes[1], 30.0, flags=("specular", "noisy")),
                defect(3, "bump", boxes[2], 12.0)]
     left = np.full(shape, grey, np.uint8)
     img = defects_overlay(left, defects, [disc(shape, b) for b in boxes])
@@ -97,7 +98,7 @@ def test_picture_has_labels_readable_on_any_background_and_a_legend(grey):
         assert dark.sum() > 3 * 400
     else:
         assert white.sum() > 3 * 100
-    assert [label_text(d) for d in defects] == ["#1 -41 mm", "#2 -30 mm?", "#3 +12 mm"]
+    assert [label_text(d) for d in defects] == ["#1 -41 mm", "#2 -30 mm ? wet,dark", "#3 +12 mm"]
 
 
 def test_labels_without_room_are_listed_in_the_legend():

@@ -37,12 +37,13 @@ def test_wider_than_750_mm_counts_by_area():
 
 def test_survey_counts_per_frame_and_per_km():
     per_pair = {"a": [{"kind": "pothole", "severity": "low", "equivalent_potholes": 1.0},
-                      {"kind": "bump", "low_confidence": True}],
+                      {"kind": "bump", "low_confidence": True, "flags": ["specular", "noisy"]}],
                 "b": [{"kind": "pothole", "severity": "high", "equivalent_potholes": 2.0},
                       {"kind": "pothole", "severity": None}],
                 "c": []}
     assert survey_summary(per_pair, frame_spacing_m=5.0) == {
         "frames": 3, "potholes": 3, "bumps": 1, "low_confidence": 1,
+        "flagged_by_reason": {"noisy": 1, "specular": 1},
         "by_severity": {"low": 1.0, "medium": 0.0, "high": 2.0, "none": 1}, "potholes_per_frame": 1.0,
         "frame_spacing_m": 5.0, "length_km": 0.015, "potholes_per_km": 200.0}
     assert "potholes_per_km" not in survey_summary(per_pair)

@@ -1,0 +1,214 @@
+"""Whether a defect's measurement can be acted on: ``ok``, or flagged with the reasons why not.
+
+A crew acts on single potholes, so a depth that stereo cannot measure must be reported as
+such, with its outline, instead of as a confident wrong number.  Every reason is computed
+from the images and the maps of the pair (never from ground truth), and every number it is
+computed from is written beside it (defects.json ``evidence``), so a user can see why.
+
+Reasons (defects.json ``flags``, in this order):
+
+``specular``
+    Wet or specular surface: the defect's deepest pixels stand more than
+    :attr:`ConfidenceRules.max_spikiness` above the deepest pixels of the same depth
+    median-filtered over :attr:`ConfidenceRules.spike_px` pixels.  A wet floor mirrors the
+    sky, and a reflection matched by stereo lies as far below the surface as its source lies
+    above it: isolated, deep spikes on the floor.  A real pothole's deepest part is wider
+    than the filter (a cone's tip loses a few percent).
+``noisy``
+    Dark or noisy: the depth is less than :attr:`ConfidenceRules.min_snr` times the height
+    noise around the defect (1.4826 MAD of the heights in an annulus around it,
+    :func:`d3cli.road.defects.find_defects`).  The deepest pixels of a noisy map read deep
+    by a few noise levels.
+``few_decided``
+    Fewer than ``road.min_decided_share`` of the defect's pixels were decided by the method
+    itself; the rest is hole filling, an extrapolation.
+``at_border``
+    The defect's deep part (deeper than half its depth) reaches the image border: its
+    deepest point may lie beyond.  A defect whose rim only touches the border keeps its
+    depth (``at_border`` in defects.json says that area and volume are lower bounds).
+``merged``
+    The region holds two or more depressions, each standing ``road.split_prominence_mm``
+    above the saddle between them, that the splitting did not cut because the map's noise
+    is larger (:func:`d3cli.road.splitting.split_parts`): possibly two potholes as one.
+``rematch``
+    The small-window re-match (:mod:`d3cli.road.rematch`) changed the depth by more than
+    :attr:`ConfidenceRules.max_rematch_change` of the stored map's: two measurements of
+    the same floor disagree.
+
+The thresholds were chosen on synthetic pairs with exact ground truth (docs/road.md, "The
+confidence check"), where every flag marks measurements that are off by more than 20 %
+far more often than the defects left ``ok``.
+
+May import numpy and OpenCV only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+#: Reason code -> the words a report prints for it.
+REASONS = {
+    "specular": "wet or specular surface",
+    "noisy": "dark or noisy",
+    "few_decided": "few decided pixels",
+    "at_border": "at the image border",
+    "merged": "possibly merged with a neighbour",
+    "rematch": "re-match unreliable",
+}
+
+#: Short labels for pictures (defects.png).
+SHORT = {"specular": "wet", "noisy": "dark", "few_decided": "filled", "at_border": "edge", "merged": "merged",
+         "rematch": "rematch"}
+
+
+@dataclass(frozen=True)
+class ConfidenceRules:
+    """Thresholds of the reasons (module docstring); fixed by measurement, changed in tests
+    and experiments only.
+
+    Attributes
+    ----------
+    max_spikiness : float
+        ``specular`` above this ratio of the peak depth to the peak of the depth
+        median-filtered over ``spike_px`` pixels.
+    spike_px : int
+        Odd side of that median filter, pixels.
+    min_snr : float
+        ``noisy`` below this ratio of the depth to the height noise around the defect.
+    max_rematch_change : float
+        ``rematch`` above this relative change of the depth by the re-match.
+    """
+
+    max_spikiness: float = 1.10
+    spike_px: int = 15
+    min_snr: float = 10.0
+    max_rematch_change: float = 0.30
+
+
+def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules | None = None) -> tuple:
+    """The reason codes of one defect from its evidence (keys as written by
+    :func:`d3cli.road.defects.find_defects` and :func:`d3cli.road.report.road_report`; a
+    missing key raises no flag).
+
+    Parameters
+    ----------
+    evidence : dict
+        ``spikiness``, ``snr``, ``decided_share``, ``deep_at_border``, ``depressions``,
+        ``rematch_change`` (absent without a re-match) and ``map_decided_share`` (present
+        when the whole map's decided share is below ``min_decided_share``: every defect
+        is ``few_decided``).
+    min_decided_share : float, keyword-only
+        ``road.min_decided_share``.
+    rules : ConfidenceRules, optional
+
+    Returns
+    -------
+    tuple of str
+        Codes of :data:`REASONS`, in its order; empty: ``ok``.
+    """
+    rules = ConfidenceRules() if rules is None else rules
+    raised = {
+        "specular": evidence.get("spikiness", 1.0) > rules.max_spikiness,
+        "noisy": evidence.get("snr", np.inf) < rules.min_snr,
+        "few_decided": min(evidence.get("decided_share", 1.0), evidence.get("map_decided_share", 1.0))
+        < min_decided_share,
+        "at_border": bool(evidence.get("deep_at_border", False)),
+        "merged": evidence.get("depressions", 1) >= 2,
+        "rematch": abs(evidence.get("rematch_change", 0.0)) > rules.max_rematch_change,
+    }
+    return tuple(code for code in REASONS if raised[code])
+
+
+def describe(flags) -> str:
+    """``"ok"`` or the reasons in words, for reports: ``"wet or specular surface; dark or noisy"``."""
+    return "; ".join(REASONS.get(f, f) for f in flags) or "ok"
+
+
+def spikiness(depth: np.ndarray, inside: np.ndarray, *, peak_px: int, spike_px: int) -> float:
+    """Ratio of the peak depth of ``depth`` over ``inside`` to the peak of ``depth``
+    median-filtered over ``spike_px`` pixels (1 where the filtered peak is not positive).
+
+    The peak is the mean of the ``peak_px`` largest values, as the reported maximum depth
+    (:func:`d3cli.road.defects.find_defects`).  The filter is evaluated only at the pixels
+    around the deepest ones (the ``16 peak_px`` deepest of ``inside``): a median of a window
+    is at most the window's largest value, so the filtered peak lies where the depth is deep.
+
+    Parameters
+    ----------
+    depth : ndarray, float, (H, W)
+        Depth below the surrounding surface, metres (finite where ``inside``).
+    inside : ndarray, bool, (H, W)
+        The pixels the peak is taken over.
+    peak_px, spike_px : int, keyword-only
+    """
+    values = depth[inside]
+    if values.size < peak_px:
+        return 1.0
+    k = min(peak_px, values.size)
+    peak = float(np.mean(np.partition(values, values.size - k)[values.size - k:]))
+    v, u = np.nonzero(inside)
+    n = min(values.size, 16 * peak_px)
+    top = np.argpartition(values, values.size - n)[values.size - n:]
+    r = spike_px // 2
+    h, w = depth.shape
+    filtered = np.empty(n, np.float64)
+    finite = np.where(np.isfinite(depth), depth, np.nan)
+    for i, j in enumerate(top):
+        window = finite[max(v[j] - r, 0):min(v[j] + r + 1, h), max(u[j] - r, 0):min(u[j] + r + 1, w)]
+        filtered[i] = np.nanmedian(window)
+    filtered = filtered[np.isfinite(filtered)]
+    if filtered.size == 0:
+        return 1.0
+    k = min(peak_px, filtered.size)
+    smooth_peak = float(np.mean(np.partition(filtered, filtered.size - k)[filtered.size - k:]))
+    return peak / smooth_peak if smooth_peak > 0 and peak > 0 else 1.0
+
+
+def deep_at_border(depth: np.ndarray, region: np.ndarray, peak: float, origin: tuple, full_shape: tuple) -> bool:
+    """Whether the part of ``region`` deeper than half ``peak`` reaches the image border.
+
+    ``depth`` and ``region`` are a window of the image starting at ``origin`` (row, column)
+    in an image of ``full_shape``.
+    """
+    with np.errstate(invalid="ignore"):
+        deep = region & (depth > 0.5 * peak)
+    if not deep.any():
+        return False
+    v, u = np.nonzero(deep)
+    v0, u0 = origin
+    return bool(v.min() + v0 == 0 or u.min() + u0 == 0 or v.max() + v0 == full_shape[0] - 1
+                or u.max() + u0 == full_shape[1] - 1)
+
+
+def depressions(depth: np.ndarray, region: np.ndarray, *, prominence: float, smooth_px: float) -> int:
+    """Number of depressions of ``region``: regional maxima of ``depth`` (Gaussian-smoothed
+    with ``smooth_px``, as the splitting sees it) that stand at least ``prominence`` above
+    the saddle to any deeper one (the h-maxima, metres), the deepest counting always.
+
+    The smoothed depth varies over ``smooth_px``, so it is counted on a grid of
+    ``smooth_px / 3`` pixels: the same maxima at a fraction of the cost.
+    """
+    from skimage.morphology import h_maxima
+
+    if not region.any():
+        return 0
+    v, u = np.nonzero(region)
+    box = (slice(v.min(), v.max() + 1), slice(u.min(), u.max() + 1))
+    inside = region[box].astype(np.float32)
+    d = np.where(region[box] & np.isfinite(depth[box]), depth[box], 0.0).astype(np.float32)
+    if smooth_px > 0:
+        d = cv2.GaussianBlur(d, (0, 0), smooth_px)
+    step = max(int(smooth_px // 3), 1)
+    if step > 1 and min(d.shape) > 2 * step:
+        size = (max(d.shape[1] // step, 1), max(d.shape[0] // step, 1))
+        d = cv2.resize(d, size, interpolation=cv2.INTER_AREA)
+        inside = cv2.resize(inside, size, interpolation=cv2.INTER_AREA)
+    keep = inside > 0.5
+    if not keep.any():
+        return 1
+    d = np.where(keep, d, float(d[keep].min()) - prominence).astype(np.float64)
+    peaks = h_maxima(d, prominence) & keep
+    return max(int(cv2.connectedComponents(peaks.astype(np.uint8), connectivity=8)[0]) - 1, 1)
