@@ -12,7 +12,7 @@ from tests.volumes import sparse_map
 from d3cli import D3Stereo, load_config
 from d3cli.kernels import cpu
 from d3cli.kernels.volume import to_dense
-from d3cli.method.band import band_indexes
+from d3cli.kernels.host import band_indexes
 from d3cli.method.cost import aggregation_halo, level_cost
 
 

@@ -84,7 +84,7 @@ def resolve_prefetch(prefetch: int | None, cfg=None, method: str | None = None) 
     if prefetch is not None:
         return prefetch
     from ...kernels import chosen_backend
-    from ...kernels.cachedir import KERNEL_METHODS
+    from ...kernels.cache_location import KERNEL_METHODS
 
     if cfg is None or method not in KERNEL_METHODS:  # sgbm, elas, pandora-sgm never use the device
         return 0
