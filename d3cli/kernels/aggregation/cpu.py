@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit, prange
 
 from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
-from .cpu_rows import covered_bands, _rbf_forward_row, rbf_normalise_row
+from .cpu_rows import _rbf_forward_row, covered_bands, rbf_normalise_row
 from .cpu_vector import RBF_MAX_LANES, _rbf_row, _run_ends
 from ..cpu_common import on_grid, ops, pack_volume, row_layout, unpack_volume
 from ..intrinsics import store_fence

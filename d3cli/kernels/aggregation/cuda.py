@@ -7,7 +7,7 @@ import numba
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import device_copy, on_device, as_f64, grid_2d, pack_volume, unpack_volume, ops
+from ..cuda_launch import as_f64, device_copy, grid_2d, on_device, ops, pack_volume, unpack_volume
 
 
 _rbf_weight = ops.rbf_weight

@@ -9,7 +9,7 @@ import numpy as np
 from numba import njit, prange
 
 from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import on_grid, pack_volume, row_layout, unpack_volume, ops
+from ..cpu_common import on_grid, ops, pack_volume, row_layout, unpack_volume
 from ..pixel import UINT
 from ..volume import dense_index
 from .pixel import F32_ONE

@@ -7,7 +7,7 @@ import numba
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import on_device, as_f64, grid_1d, grid_2d, is_device, pack_volume, unpack_volume, ops
+from ..cuda_launch import as_f64, grid_1d, grid_2d, is_device, on_device, ops, pack_volume, unpack_volume
 from ..volume import dense_index
 
 

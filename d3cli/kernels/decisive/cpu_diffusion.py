@@ -8,7 +8,7 @@ from numba import njit, prange
 from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import unpack_volume, ops
+from ..cpu_common import ops, unpack_volume
 from ..intrinsics import prefetch_cells
 from ..pixel import UINT, UNDECIDED
 

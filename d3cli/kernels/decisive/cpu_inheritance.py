@@ -7,7 +7,7 @@ import numpy as np
 from numba import njit, prange
 
 from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import unpack_volume, ops
+from ..cpu_common import ops, unpack_volume
 from ..pixel import UNDECIDED
 
 

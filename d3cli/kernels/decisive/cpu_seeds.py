@@ -8,8 +8,8 @@ import numpy as np
 from numba import njit, prange
 
 from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import unpack_volume, ops
-from ..intrinsics import prefetch_cell, prefetch_band
+from ..cpu_common import ops, unpack_volume
+from ..intrinsics import prefetch_band, prefetch_cell
 from ..pixel import UNDECIDED
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import on_device, as_f64, per_pixel, ops
+from ..cuda_launch import as_f64, on_device, ops, per_pixel
 
 
 _pt_shift = ops.pt_shift

@@ -7,7 +7,7 @@ import numba
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import pack_volume, unpack_volume, device_zeros
+from ..cuda_launch import device_zeros, pack_volume, unpack_volume
 
 #: Threads per line: a warp, the band's disparities spread over them (as libSGM does).
 LANES = 32
