@@ -314,7 +314,7 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     if road_report:
         cfg = replace(cfg, road=replace(cfg.road, report=True))
     method = cfg.run.method
-    from .kernels.cachedir import announce
+    from .kernels.cache_location import announce
 
     announce(method)  # a cold cache: say so before the imports below (numba: a second or more)
     from . import batch

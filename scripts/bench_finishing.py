@@ -6,7 +6,7 @@ Per case (the pairs and configs of ``scripts/bench_speed.py``) one process:
    function (``occluded_by_uniqueness``, ``out_of_view``, ``fill_holes``,
    ``smooth_disparity``) as ``D3Stereo._finish`` calls them;
 2. times each function on those inputs, its NumPy/OpenCV reference formulation
-   ("before": the references of ``tests/kernels/finishing/references.py``) and the current one
+   ("before": the references of ``tests/reference/finishing.py``) and the current one
    ("after") **alternately**, ``--reps`` times after a warm-up, and checks that both give
    the same bytes;
 3. times the whole ``finish`` step of ``compute`` (``result.timings["finish"]``) with the
@@ -44,7 +44,7 @@ ALL_NAMES = ("fit_road_model", "occluded_by_uniqueness", "out_of_view", "speckle
 
 
 def _references():
-    from tests.kernels.finishing import references as t
+    from tests.reference import finishing as t
 
     return {"occluded_by_uniqueness": t.ref_occluded_by_uniqueness, "out_of_view": t.ref_out_of_view,
             "fill_holes": t.ref_fill_holes, "smooth_disparity": t.ref_smooth_disparity}

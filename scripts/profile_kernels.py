@@ -47,9 +47,9 @@ def _width(args) -> int:
     return 0
 
 
-def _wrap(backend, totals: dict, captured: dict) -> None:
-    """Replace every driver of :data:`DRIVERS` on ``backend`` by a timed one."""
-    for name in DRIVERS:
+def _wrap(backend, totals: dict, captured: dict, names=DRIVERS) -> None:
+    """Replace every driver of ``names`` (default :data:`DRIVERS`) on ``backend`` by a timed one."""
+    for name in names:
         if not hasattr(backend, name):
             continue
 
@@ -91,6 +91,7 @@ def main(argv=None) -> int:
 
     from d3cli.batch import compute_pair
     from d3cli.kernels import cpu as backend
+    from d3cli.method import pipeline
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", default=os.environ.get("D3STEREO_DATA", ""))
@@ -101,6 +102,7 @@ def main(argv=None) -> int:
     totals: dict = {}
     captured: dict = {}
     _wrap(backend, totals, captured)
+    _wrap(pipeline, totals, captured, ("band_indexes",))  # from the host facade, not the backend
     for case in args.cases:
         spec = dict(bs.CASES[case], case=case, data=args.data, seed=3, reps=args.reps, backend="cpu",
                     sgbm_block=5, overrides=[])

@@ -1,9 +1,12 @@
-"""The package layout: rooms by concern, imports pointing one way, no private reach-ins.
+"""The package layout: rooms by concern, imports pointing one way, no circles, no private
+reach-ins, the backend contract kept.
 
 The rule (README "Architecture"): cli -> batch -> method / baselines / evaluation / road
 -> kernels / data -> config / errors.  Every import inside ``d3cli`` (module level or
 inside a function) is checked against it, so a new module cannot quietly pull a higher
-room into a lower one.
+room into a lower one; the modules' imports form no circle; a module's private names are
+used only inside its own package; :mod:`d3cli.method` and :mod:`d3cli.baselines` reach
+the kernels only through the backend object and the host facade.
 """
 
 from __future__ import annotations
@@ -115,8 +118,8 @@ def test_kernels_never_import_config_data_or_click():
 
 
 #: The kernels' step packages and the kernels' shared modules they may import.
-KERNEL_STEPS = ("cost", "aggregation", "sgm", "decisive", "perspective", "finishing", "pyramid")
-KERNEL_SHARED = {"pixel", "volume", "cache", "intrinsics", "cpu_common", "cuda_launch", "device_counts", "pool"}
+KERNEL_STEPS = ("cost", "aggregation", "sgm", "decisive", "subpixel", "perspective", "finishing", "pyramid")
+KERNEL_SHARED = {"pixel", "volume", "compile_cache", "intrinsics", "cpu_common", "cuda_launch", "device_counts", "pool"}
 #: Outside d3cli, what a step module may import.
 KERNEL_STEP_LIBRARIES = {"__future__", "logging", "math", "platform", "types", "typing", "numba", "numpy", "llvmlite"}
 
@@ -159,3 +162,192 @@ def test_the_tests_mirror_the_package():
     rooms = {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file()} - {"samples"}
     mirrored = {p.name for p in TESTS.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
     assert rooms <= mirrored, rooms - mirrored
+
+
+# ----------------------------------------------------------------------------- no circles
+def _module_names() -> dict[str, Path]:
+    return {_module_name(p): p for p in _sources()}
+
+
+def _import_edges(path: Path, modules) -> set[str]:
+    """The d3cli modules ``path`` imports (module level or inside a function).
+
+    ``from A import n`` counts as an import of the module ``A.n`` where there is one, else
+    of ``A``; ``import A.B`` of ``A.B``.  The packages above an imported module, which
+    Python runs first, are not counted: a package's ``__init__`` that names its own
+    modules would otherwise close a circle with each of them.
+    """
+    name = _module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names if alias.name.split(".")[0] == "d3cli"}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.split(".")[0] != "d3cli":
+                continue
+            for alias in node.names:
+                found.add(f"{target}.{alias.name}" if f"{target}.{alias.name}" in modules else target)
+    return {m for m in found if m in modules and m != name}
+
+
+def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), sorted."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(found)
+
+
+def test_the_import_graph_of_the_package_has_no_circle():
+    """No module imports, directly or through others, a module that imports it back:
+    each concept has one home below its users (imports inside functions count too)."""
+    modules = _module_names()
+    graph = {name: _import_edges(path, modules) for name, path in modules.items()}
+    assert _circles(graph) == []
+
+
+def test_the_circle_finder_finds_a_circle():
+    assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _circles({"a": {"b"}, "b": set()}) == []
+
+
+# ----------------------------------------------------------------------------- private names
+def _package_of(module: str, modules) -> str:
+    """The package a module belongs to: itself for a package, else its parent."""
+    return module if modules[module].name == "__init__.py" else module.rpartition(".")[0]
+
+
+def _private_uses(path: Path, modules, own_package: str | None, allowed=frozenset()) -> list[str]:
+    """``line: module._name`` for every private attribute read of a d3cli module, bound by
+    an import in ``path``, whose package is not ``own_package`` (modules in ``allowed`` aside)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    name = _module_name(path) if own_package is not None else ""
+    package = (name if path.name == "__init__.py" else name.rpartition(".")[0]) if name else ""
+    bound: dict[str, str] = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name in modules:
+                    bound[alias.asname or alias.name.split(".")[0]] = alias.name if alias.asname else "d3cli"
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            for alias in node.names:
+                if f"{target}.{alias.name}" in modules:
+                    bound[alias.asname or alias.name] = f"{target}.{alias.name}"
+    bad = []
+    for node in ast.walk(tree):
+        if not (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")):
+            continue
+        chain, value = [], node.value
+        while isinstance(value, ast.Attribute):
+            chain.append(value.attr)
+            value = value.value
+        if not isinstance(value, ast.Name) or value.id not in bound:
+            continue
+        module = ".".join([bound[value.id]] + chain[::-1]) if bound[value.id] != "d3cli" else ".".join(
+            [value.id] + chain[::-1])
+        if module in modules and _package_of(module, modules) != own_package and module not in allowed:
+            bad.append(f"{node.lineno}: {module}.{node.attr}")
+    return bad
+
+
+#: Modules whose tests still read their private helpers: the road model's defect
+#: measurement and the plane fit of the perspective transformation.
+PRIVATE_READS_ALLOWED = {"d3cli.road.defects", "d3cli.method.perspective"}
+
+
+def test_no_module_reads_a_private_name_of_a_module_of_another_package():
+    """``module._name`` of a d3cli module is read only inside that module's package: a
+    name another package (or a test) needs is public where it lives, not re-exported."""
+    modules = _module_names()
+    bad = []
+    for path in _sources():
+        name = _module_name(path)
+        own = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        bad += [f"{path.relative_to(PACKAGE.parent)}:{use}" for use in _private_uses(path, modules, own)]
+    for path in sorted(TESTS.rglob("*.py")):
+        bad += [f"tests/{path.relative_to(TESTS)}:{use}"
+                for use in _private_uses(path, modules, None, PRIVATE_READS_ALLOWED)]
+    assert bad == []
+
+
+def test_the_private_name_check_sees_an_aliased_module(tmp_path):
+    probe = tmp_path / "probe.py"
+    secret, hidden = "_" + "secret", "_" + "hidden"  # spelt apart: this file is scanned too
+    probe.write_text(f"from d3cli.kernels import cpu_common as c\nimport d3cli.kernels.volume\n"
+                     f"c.{secret}(1)\nd3cli.kernels.volume.{hidden}\nc.public\n", encoding="utf-8")
+    assert sorted(_private_uses(probe, _module_names(), None)) == [
+        f"3: d3cli.kernels.cpu_common.{secret}", f"4: d3cli.kernels.volume.{hidden}"]
+
+
+# ----------------------------------------------------------------------------- the backend contract
+#: What method/ and baselines/ may import of the kernels: the package (get_backend), the
+#: contract (the backend object's type) and the facade of the host-only kernels.
+KERNEL_ENTRIES = {"d3cli.kernels", "d3cli.kernels.backend", "d3cli.kernels.host"}
+
+
+@pytest.mark.parametrize("room", ["method", "baselines"])
+def test_the_pipeline_reaches_the_kernels_through_the_backend_and_the_host_facade(room):
+    """d3cli/method and d3cli/baselines never import kernels.cpu, kernels.cuda or a step's
+    modules: they compute through the backend object (``backend: Backend``) and the host
+    facade (:mod:`d3cli.kernels.host`), so both backends serve them alike."""
+    modules = _module_names()
+    bad = []
+    for path in sorted((PACKAGE / room).rglob("*.py")):
+        for target in sorted(_import_edges(path, modules)):
+            if target.startswith("d3cli.kernels") and target not in KERNEL_ENTRIES:
+                bad.append(f"{path.relative_to(PACKAGE.parent)}: imports {target}")
+    assert bad == []
+
+
+@pytest.mark.parametrize("backend", ["cpu", "cuda"])
+def test_each_backend_names_exactly_the_contract(backend):
+    """kernels/cpu.py and kernels/cuda.py define or import every method of
+    :class:`d3cli.kernels.backend.Backend` and no other public function or private name."""
+    contract = {n for n in vars(__import__("d3cli.kernels.backend", fromlist=["Backend"]).Backend)
+                if not n.startswith("_")}
+    tree = ast.parse((PACKAGE / "kernels" / f"{backend}.py").read_text(encoding="utf-8"))
+    named = set()
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.level:
+            named |= {alias.asname or alias.name for alias in node.names}
+        elif isinstance(node, ast.FunctionDef):
+            named.add(node.name)
+    functions = {n for n in named if not n.startswith("_") and not n.isupper()}
+    assert functions == contract
+    assert {n for n in named if n.startswith("_")} <= {"_compile_cache"}  # imported for its side effect

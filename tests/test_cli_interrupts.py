@@ -196,7 +196,7 @@ def test_ctrl_c_during_the_kernel_warm_up_waits_for_it_then_exits_130(tmp_path, 
     make_pair_folder(tmp_path / "pairs", "a")
     code = """
         import os, signal, sys, time
-        import d3cli.batch.executors as executors
+        import d3cli.batch.warmup as warmup
 
         def warm_jit(cfg, method):  # the warm-up, interrupted in its middle
             os.kill(os.getpid(), signal.SIGINT)
@@ -204,7 +204,7 @@ def test_ctrl_c_during_the_kernel_warm_up_waits_for_it_then_exits_130(tmp_path, 
             open("warm-finished", "w").close()
             return 0.0
 
-        executors.warm_jit = warm_jit
+        warmup.warm_jit = warm_jit
         sys.argv = ["d3stereo", "run", "pairs", "-o", "out", "--method", "d3stereo", "-q"]
         from d3cli.__main__ import entry
         entry()

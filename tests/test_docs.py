@@ -96,12 +96,12 @@ def _markdown(name: str) -> str:
 
 def test_the_compile_notice_quoted_in_the_docs_is_the_one_the_code_prints(monkeypatch):
     from d3cli.batch.warmup import CompileProgress
-    from d3cli.kernels import cachedir
+    from d3cli.kernels import cache_location
 
     # What a first run prints where no earlier compile was recorded: the built-in estimate.
-    monkeypatch.setattr(cachedir, "compile_estimate", lambda method: dict(cachedir.COLD_ESTIMATE))
-    monkeypatch.setattr(cachedir, "cache_root", lambda cache_dir=None: "DIR")
-    notice = f"NOTE: {cachedir.compile_notice('d3stereo')}"
+    monkeypatch.setattr(cache_location, "compile_estimate", lambda method: dict(cache_location.COLD_ESTIMATE))
+    monkeypatch.setattr(cache_location, "cache_root", lambda cache_dir=None: "DIR")
+    notice = f"NOTE: {cache_location.compile_notice('d3stereo')}"
     texts = {path.name: path.read_text(encoding="utf-8")
              for path in [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]}
     quoted = {name: re.findall(r"NOTE: compiling the kernels[^`\n]*", text) for name, text in texts.items()}

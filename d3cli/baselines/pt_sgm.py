@@ -29,7 +29,7 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
     SGBM on the pair downsampled to the coarsest pyramid level (``cfg.pyramid.levels``,
     area averaging, range ``ceil(max_disparity / 2^(k-1))``; a finer level when SGBM's
     empty left strip would cover more than half of the coarse image); the right image is warped
-    with the same kernel as PT-D3Stereo (``kernels.cpu.pt_warp``), SGBM searches the
+    with the same kernel as PT-D3Stereo (``kernels.host.pt_warp``), SGBM searches the
     narrow range [0, 2 margin + slack] (``numDisparities = 16 ceil((2 margin + slack + 1)
     / 16)``), and the disparity is restored with ``d = d' (1 - b2) + s(u, v)``.
     Estimates at the ends of the narrow range, and matches left of the right image,
@@ -50,7 +50,7 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
     DisparityResult
         As :func:`sgbm_disparity`; ``info['pt']`` holds the fitted model.
     """
-    from ..kernels import cpu  # compiled numba code: loaded when PT-SGM actually runs
+    from ..kernels import host  # compiled numba code: loaded when PT-SGM actually runs
 
     if max_disparity < 1:
         raise InputError(f"pair: max disparity {max_disparity} must be >= 1; pass --max-disparity 1 or more")
@@ -69,9 +69,9 @@ def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int,
         result.timings["total"] = time.perf_counter() - t0
         return result
     margin = float(pt.margin)
-    warped = cpu.pt_warp(np.ascontiguousarray(grey_r, dtype=np.float32), model.a0, model.b1, model.b2, margin)
+    warped = host.pt_warp(np.ascontiguousarray(grey_r, dtype=np.float32), model.a0, model.b1, model.b2, margin)
     d_prime, valid = _sgbm_raw(_to_uint8(grey_l), _to_uint8(warped), narrow, cfg.sgbm)
-    disp = cpu.pt_restore(np.where(valid, d_prime, np.inf).astype(np.float32), model.a0, model.b1, model.b2, margin)
+    disp = host.pt_restore(np.where(valid, d_prime, np.inf).astype(np.float32), model.a0, model.b1, model.b2, margin)
     valid, shares = restored_validity(valid, d_prime, disp, narrow_range=narrow)  # as PT-D3Stereo
     pt_info.update(shares)
     disp[~valid] = np.inf

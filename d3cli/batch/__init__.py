@@ -9,9 +9,12 @@
 - ``outputs``: the per-pair files, written atomically, read back, removed;
 - ``fingerprint``: what a stored result depends on (resume decisions), versions;
 - ``lock``: one writer per output folder (a run or an eval), or the shards of one batch together;
-- ``executors``: where pairs run - here, a local process pool; shards;
-- ``pipelined``: one process, reading ahead and writing behind the pair computing;
-- ``cluster``: the Dask executor (``--scheduler``), its scheduler probe;
+- ``executors/``: where pairs run, one module per executor behind one ``Executor``
+  protocol (``base``, with ``--workers`` and ``--shard``): ``local`` (here, one pair
+  after the other), ``pooled`` (a local process pool), ``pipelined`` (one process,
+  reading ahead and writing behind the pair computing), ``cluster`` (Dask,
+  ``--scheduler``, its scheduler probe); :func:`~d3cli.batch.executors.make_executor`
+  picks one;
 - ``staging``: a pair's folder written aside and renamed into place; file records checked on resume;
 - ``steps``: a pair's steps, so that an internal error names the step;
 - ``warmup``: compiling the numba kernels once before the first pair;

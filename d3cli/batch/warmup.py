@@ -7,9 +7,9 @@ instead of each compiling the same kernels at once (a compile storm).  The time 
 is stored in ``run.json`` as ``compile_s``; per-pair ``wall`` times exclude it.
 
 A first run compiles for a minute or more: on a cold cache it says so before it starts
-(:func:`d3cli.kernels.cachedir.announce`, which the command line calls before its imports)
+(:func:`d3cli.kernels.cache_location.announce`, which the command line calls before its imports)
 and reports progress while it compiles (:class:`CompileProgress`), as log records of level
-:data:`~d3cli.kernels.cachedir.NOTICE`, shown unless ``-q``.
+:data:`~d3cli.kernels.cache_location.NOTICE`, shown unless ``-q``.
 
 Ctrl-C and SIGTERM are answered within a fraction of a second meanwhile: the compile runs
 in a thread of its own while the main thread waits in short steps
@@ -17,7 +17,7 @@ in a thread of its own while the main thread waits in short steps
 running (the command line ends the process without waiting for it,
 :func:`compiling_in_background`), every function it finished is in the cache already (numba
 saves each one as it is compiled, writing a file whole or not at all), and how far it got
-is recorded for the next run's notice (:func:`d3cli.kernels.cachedir.record_interrupted`).
+is recorded for the next run's notice (:func:`d3cli.kernels.cache_location.record_interrupted`).
 """
 
 from __future__ import annotations
@@ -32,14 +32,14 @@ from numba.core import event as numba_event
 
 from ..config import Config
 from ..errors import D3Error
-from ..kernels import cachedir
+from ..kernels import cache_location
 from ..method.pipeline import fallback_settings
 from . import methods
 from .signals import STOP_SIGNALS
 
 log = logging.getLogger(__name__)
 
-NOTICE = cachedir.NOTICE
+NOTICE = cache_location.NOTICE
 #: Seconds between two progress lines while the kernels compile.
 PROGRESS_EVERY_S = 10.0
 #: Seconds the main thread waits for the compile thread at a time (how late a signal is
@@ -212,12 +212,12 @@ def warm_jit(cfg: Config, method: str) -> float:
     """
     if method in _NO_JIT:
         return 0.0
-    compiling = cachedir.announce(method)
-    done = cachedir.resume_point(method) if compiling else None  # what an interrupted compile left
+    compiling = cache_location.announce(method)
+    done = cache_location.resume_point(method) if compiling else None  # what an interrupted compile left
     before = done or {"seconds": 0.0, "kernels": 0}
     expected = None
     if compiling:
-        expected = max(cachedir.compile_estimate(method)["kernels"] - before["kernels"], 0) or None
+        expected = max(cache_location.compile_estimate(method)["kernels"] - before["kernels"], 0) or None
     left, right = warm_pair()
     t0 = time.perf_counter()
     with numba_event.install_listener("numba:compile", CompileProgress(expected)) as progress:
@@ -225,21 +225,21 @@ def warm_jit(cfg: Config, method: str) -> float:
     seconds = time.perf_counter() - t0
     compiled = progress.compiled
     if compiling and not finished:
-        cachedir.record_interrupted(method, before["seconds"] + seconds, before["kernels"] + compiled)
+        cache_location.record_interrupted(method, before["seconds"] + seconds, before["kernels"] + compiled)
         log.log(NOTICE, f"compiled {compiled} kernel functions in {seconds:.0f} s before the interrupt; "
                         "they are kept in the cache, the next run compiles the rest")
     elif compiling:
-        estimate = cachedir.compile_estimate(method)
+        estimate = cache_location.compile_estimate(method)
         if done is None:
-            cachedir.record_compile(method, seconds, compiled)
+            cache_location.record_compile(method, seconds, compiled)
         elif not compiled:  # nothing was left after all: the estimate stands
-            cachedir.record_compile(method, **estimate)
+            cache_location.record_compile(method, **estimate)
         else:
             # The rest of an interrupted compile: the seconds of both runs, and the estimate's
             # count of functions unless this run alone compiled more.  Not the sum of both
             # counts: the functions of numba's own that a kernel's compile compiles with it
             # (not cached by themselves) are compiled again for the kernels of this run.
-            cachedir.record_compile(method, before["seconds"] + seconds, max(estimate["kernels"], compiled))
+            cache_location.record_compile(method, before["seconds"] + seconds, max(estimate["kernels"], compiled))
         log.log(NOTICE, f"compiled {compiled} kernel functions in {seconds:.0f} s")
     log.info("JIT warm-up (%s): %.2f s, %d kernel functions compiled%s", method, seconds, compiled,
              "" if finished else " (interrupted)")

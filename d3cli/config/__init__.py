@@ -14,6 +14,7 @@ and the valid keys.
 - ``sections``: one frozen dataclass per section, :class:`Config`, the method and backend names;
 - ``checks``: types and ranges of every key, :func:`quote`, the error messages;
 - ``yamlfile``: bounded, strict YAML reading (YAML 1.2 numbers), ``--set`` parsing;
+- ``bundled``: the configs shipped in the package, by name (:func:`bundled_configs`);
 - ``load``: :func:`load_config` and :func:`config_from_dict`.
 
 May import: :mod:`d3cli.errors` only (and PyYAML); every other room may import this one.

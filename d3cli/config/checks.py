@@ -14,6 +14,7 @@ from dataclasses import fields, replace
 from typing import Any, Mapping
 
 from ..errors import QUOTE_CHARS, ConfigError, shorten
+from .bundled import bundled_configs
 from .sections import BACKENDS, METHODS, Config
 
 #: Integers in a config are bounded: the kernels take 32-bit scalars.
@@ -107,9 +108,7 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
 
 
 def _bundled_names() -> list[str]:
-    """Names of the bundled configs (imported here: the loader imports this module)."""
-    from .load import bundled_configs
-
+    """Names of the bundled configs."""
     return list(bundled_configs())
 
 

@@ -17,27 +17,9 @@ from typing import Iterator, Mapping
 
 from ..errors import ConfigError
 from .checks import apply_mapping, shorten
+from .bundled import BUNDLED_FOLDER, bundled_configs
 from .sections import Config
 from .yamlfile import parse_override, read_yaml_lines
-
-
-#: Package of the bundled configs, and their folder in it.
-BUNDLED_PACKAGE = "d3cli"
-BUNDLED_FOLDER = "configs"
-
-
-def bundled_configs() -> dict[str, Path]:
-    """The configs that ship in the package, by name.
-
-    Returns
-    -------
-    dict of str to Path
-        ``{"default": .../d3cli/configs/default.yaml, "road": ..., ...}``, sorted by name
-        (a Path when the package is installed as files, as pip installs it).
-    """
-    folder = importlib.resources.files(BUNDLED_PACKAGE) / BUNDLED_FOLDER
-    found = {Path(entry.name).stem: entry for entry in folder.iterdir() if entry.name.endswith(".yaml")}
-    return {name: typing.cast(Path, found[name]) for name in sorted(found)}
 
 
 def _bundled_name(given: Path) -> str | None:

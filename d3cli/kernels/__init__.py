@@ -1,16 +1,24 @@
 """Compute kernels, by pipeline step, and the choice of backend.
 
-Each step package (``cost/``, ``aggregation/``, ``sgm/``, ``decisive/``, ``perspective/``)
-holds the step's per-pixel math (``pixel*.py``: one body compiled for the CPU with
-``numba.njit`` and for CUDA with ``numba.cuda.jit(device=True)``), its CPU driver and its
-CUDA driver side by side; ``finishing/`` and ``pyramid/`` hold host-only kernels that serve
-both backends.  ``cpu.py`` and ``cuda.py`` are the two backends (thin facades over
-the steps), ``backend.py`` their contract; :func:`get_backend` picks one.  Shared pieces:
-``pixel.py`` (per-pixel helpers of several steps), ``volume.py`` (banded volume layout),
-``cache.py`` (numba cache folder, stale-cache drop), ``intrinsics.py`` (LLVM intrinsics),
-``cpu_common.py`` / ``cuda_launch.py`` (each target's compiled ops and launch helpers),
-``pool.py`` (task pool), ``allocator.py`` (malloc settings, applied on import below),
-``cuda_probe.py`` (the CUDA smoke test) and ``cuda_calls.py`` (launch and copy counter).
+Each step package (``cost/``, ``aggregation/``, ``sgm/``, ``decisive/``, ``subpixel/``,
+``perspective/``) holds the step's per-pixel math (``pixel*.py``: one body compiled for
+the CPU with ``numba.njit`` and for CUDA with ``numba.cuda.jit(device=True)``), its CPU
+driver and its CUDA driver side by side; ``finishing/`` and ``pyramid/`` hold host-only
+kernels that serve both backends.  ``cpu.py`` and ``cuda.py`` are the two backends (thin
+facades over the steps, naming exactly the contract), ``backend.py`` their contract;
+:func:`get_backend` picks one.  ``host.py`` is the facade of the host-only kernels
+(volume layout, band indexes, pyramid, finishing, road-fit solvers, the warp of a host
+image): with the backend object, all that :mod:`d3cli.method` and :mod:`d3cli.baselines`
+use.  Shared pieces: ``pixel.py`` (per-pixel constants and the helpers of several steps;
+imports no step), ``ops.py`` (:func:`~d3cli.kernels.ops.build_ops`, composing every
+step's per-pixel functions), ``volume.py`` (banded volume layout), ``compile_cache.py``
+(numba's cache kept valid: its folder, stale and damaged entries dropped),
+``cache_location.py`` (where the cache lives, the first-run compile notice; standard
+library only), ``intrinsics.py`` (LLVM intrinsics), ``cpu_common.py`` / ``cuda_launch.py``
+(each target's compiled ops and launch helpers), ``device_counts.py`` (counts left on the
+device), ``pool.py`` (task pool), ``allocator.py`` (malloc settings, applied on import
+below), ``cuda_probe.py`` (the CUDA smoke test) and ``cuda_calls.py`` (launch and copy
+counter).
 May import: ``errors`` only, numba, numpy and llvmlite (``tests/test_architecture.py``).
 """
 

@@ -3,7 +3,10 @@
 :mod:`d3cli.kernels.cpu` and :mod:`d3cli.kernels.cuda` are modules (``get_backend``
 returns one), each providing every method of :class:`Backend` under the same name, with
 the same arguments, shapes, dtypes and results; their own docstrings say only what is
-specific to their target.  The pipeline (:mod:`d3cli.method`) calls nothing else.
+specific to their target.  The pipeline (:mod:`d3cli.method`, and the baselines that
+use kernels) calls nothing else of a backend: its functions take ``backend: Backend``,
+and the host-only kernels come from the facade :mod:`d3cli.kernels.host`
+(``tests/test_architecture.py`` holds both rules).
 
 Conventions
 -----------

@@ -1,5 +1,5 @@
 """What every CPU driver shares: the per-pixel functions compiled with ``numba.njit``
-(:data:`ops`, built once by :func:`d3cli.kernels.pixel.build_ops`), the volume
+(:data:`ops`, built once by :func:`d3cli.kernels.ops.build_ops`), the volume
 unpack/pack of the drivers' arguments, and two index/image passes used by several steps.
 
 Drivers are deterministic and independent of the thread count: parallel loops only write
@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from . import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
-from .pixel import build_ops
+from . import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
+from .ops import build_ops
 from .volume import Volume, dense_index
 
 
@@ -24,11 +24,9 @@ from .volume import Volume, dense_index
 ops = build_ops(njit(cache=True, error_model="numpy"))
 
 
-_rbf_weight = ops.rbf_weight
-
 
 # ----------------------------------------------------------------------------- volumes
-def _unpack(cost):
+def unpack_volume(cost):
     """``(flat cost, index, n_disp, dense shape or None)`` of a Volume or an (H, W, D) array."""
     if isinstance(cost, Volume):
         return cost.cost, cost.index, int(cost.n_disp), None
@@ -37,7 +35,7 @@ def _unpack(cost):
     return cost.reshape(-1), dense_index(h, w, n_disp), n_disp, cost.shape
 
 
-def _pack(flat, index, n_disp, dense_shape):
+def pack_volume(flat, index, n_disp, dense_shape):
     """The result in the caller's kind: a Volume, or an (H, W, D) array."""
     if dense_shape is not None:
         return flat.reshape(dense_shape)
@@ -45,7 +43,7 @@ def _pack(flat, index, n_disp, dense_shape):
 
 
 @njit(cache=True, error_model="numpy")
-def _on_grid(img, scale, least):
+def on_grid(img, scale, least):
     """Whether every value of ``img`` lies in [least, 255] and is a multiple of 1 / scale.
 
     Row by row, branch-free within a row (vectorised), stopping after the first row that fails.
@@ -62,7 +60,7 @@ def _on_grid(img, scale, least):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _row_layout(index):
+def row_layout(index):
     """``(row_start, max_row)`` of a volume for the filter passes: the first cell of
     every row (int64 (H + 1,), cells packed row after row) and the most cells of a row
     (at least 1).  One parallel pass over the index instead of NumPy passes in the

@@ -1,7 +1,7 @@
 """The CUDA backend: every step's CUDA driver under one name (``get_backend("cuda")``).
 
 A facade: the drivers live with their step (``cost/``, ``aggregation/``, ``sgm/``,
-``decisive/``, ``perspective/``), the functions both backends provide and their contract
+``decisive/``, ``subpixel/``, ``perspective/``), the functions both backends provide and their contract
 in :mod:`d3cli.kernels.backend`.  The per-pixel functions are compiled with
 ``numba.cuda.jit(device=True)`` in :mod:`d3cli.kernels.cuda_launch` and driven by one
 thread per pixel or per (pixel, disparity) cell.
@@ -27,11 +27,13 @@ from numba import cuda  # noqa: F401  (the tests watch its transfers)
 from .aggregation.cuda import bilateral_filter, rbf_filter, rbf_weights
 from .cost.cuda import NCC_SCRATCH_BYTES, cosine_cost_volume, invalidate_out_of_view, ncc_cost_volume
 from .cuda_launch import BLOCK_1D, BLOCK_2D, to_device, to_host
-from .decisive.cuda import count_decided, decisive_seeds, inherit, merge_sparse, min_cost, subpixel
-from .decisive.cuda_diffusion import diffuse
-from .device_counts import counts_to_host
+from .decisive.cuda_diffusion import diffuse, min_cost
+from .decisive.cuda_inheritance import inherit
+from .decisive.cuda_seeds import decisive_seeds, merge_sparse
+from .device_counts import count_decided, counts_to_host
 from .perspective.cuda import pt_restore, pt_warp
 from .sgm.cuda import sgm_smooth
+from .subpixel.cuda import subpixel
 
 __all__ = [
     "BLOCK_1D",

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numba import cuda
 
-from . import cache as _cache  # noqa: F401  (drops stale cached kernels before any is loaded)
-from .pixel import build_ops
+from . import compile_cache as _compile_cache  # noqa: F401  (drops stale cached kernels before any is loaded)
+from .ops import build_ops
 from .volume import Volume, dense_index
 
 
@@ -30,19 +30,19 @@ ops = build_ops(cuda.jit(device=True))
 
 
 # ----------------------------------------------------------------------------- launch helpers
-def _grid_1d(n):
+def grid_1d(n):
     """(blocks, threads) covering ``n`` items with :data:`BLOCK_1D` threads per block."""
     threads = int(BLOCK_1D)
     return (max(1, -(-int(n) // threads)),), (threads,)
 
 
-def _grid_2d(nx, ny):
+def grid_2d(nx, ny):
     """(blocks, threads) covering an ``nx`` (fast, x) by ``ny`` (rows, y) grid."""
     bx, by = (int(b) for b in BLOCK_2D)
     return (max(1, -(-int(nx) // bx)), max(1, -(-int(ny) // by))), (bx, by)
 
 
-def _per_pixel(kernel, shape, dtype, *args):
+def per_pixel(kernel, shape, dtype, *args):
     """Launch ``kernel(*args, out)`` with one thread per pixel of an (H, W) map.
 
     ``out`` is a new (H, W) device array of ``dtype`` (the kernel's last argument), and
@@ -50,29 +50,29 @@ def _per_pixel(kernel, shape, dtype, *args):
     """
     h, w = int(shape[0]), int(shape[1])
     out = cuda.device_array((h, w), dtype)
-    blocks, threads = _grid_2d(w, h)
+    blocks, threads = grid_2d(w, h)
     kernel[blocks, threads](*args, out)
     return out
 
 
-def _f64(x):
+def as_f64(x):
     """A float scalar argument as float64 (the CPU drivers' type, also under the simulator)."""
     return np.float64(x)
 
 
-def _is_device(array) -> bool:
+def is_device(array) -> bool:
     """True for a CUDA device array (real or simulated), False for host arrays."""
     return not isinstance(array, np.ndarray) and hasattr(array, "copy_to_host")
 
 
-def _dev(array):
+def on_device(array):
     """``array`` on the device (uploaded when it is a host array)."""
-    if _is_device(array):
+    if is_device(array):
         return array
     return cuda.to_device(np.ascontiguousarray(array))
 
 
-def _copy(d_array):
+def device_copy(d_array):
     """A device copy of a device array."""
     out = cuda.device_array(d_array.shape, d_array.dtype)
     out.copy_to_device(d_array)
@@ -80,31 +80,31 @@ def _copy(d_array):
 
 
 @cuda.jit(cache=True)
-def _fill_zero(flat):
+def fill_zero(flat):
     i = cuda.grid(1)
     if i < flat.shape[0]:
         flat[i] = 0
 
 
-def _zeros(n, dtype):
+def device_zeros(n, dtype):
     """A zeroed 1-D device array, filled on the device (no host transfer)."""
     out = cuda.device_array(int(n), dtype)
-    blocks, threads = _grid_1d(n)
-    _fill_zero[blocks, threads](out)
+    blocks, threads = grid_1d(n)
+    fill_zero[blocks, threads](out)
     return out
 
 
-def _unpack(cost):
+def unpack_volume(cost):
     """``(flat device cost, device index, n_disp, dense shape or None)`` of a Volume or an
-    (H, W, D) array (host or device), as ``cpu._unpack``."""
+    (H, W, D) array (host or device), as ``cpu.unpack_volume``."""
     if isinstance(cost, Volume):
-        return _dev(cost.cost), _dev(cost.index), int(cost.n_disp), None
-    d_cost = _dev(cost)
+        return on_device(cost.cost), on_device(cost.index), int(cost.n_disp), None
+    d_cost = on_device(cost)
     h, w, n_disp = d_cost.shape
     return d_cost.reshape(h * w * n_disp), cuda.to_device(dense_index(h, w, n_disp)), n_disp, (h, w, n_disp)
 
 
-def _pack(flat, index, n_disp, dense_shape):
+def pack_volume(flat, index, n_disp, dense_shape):
     """The result in the caller's kind: a Volume of device arrays, or an (H, W, D) device array."""
     if dense_shape is not None:
         return flat.reshape(*dense_shape)
@@ -114,11 +114,11 @@ def _pack(flat, index, n_disp, dense_shape):
 # ----------------------------------------------------------------------------- array handling
 def to_device(array):
     """The array on the device: host arrays are uploaded (C-contiguous), device arrays kept."""
-    return _dev(array)
+    return on_device(array)
 
 
 def to_host(array):
     """NumPy array of a device array (one download); host arrays pass through."""
-    if _is_device(array):
+    if is_device(array):
         return array.copy_to_host()
     return np.asarray(array)

@@ -5,7 +5,8 @@ sweeps; on a GPU each count read at once would be a device-to-host copy (a synch
 in the middle of the level.  A kernel writes the count into a slot of a small int64 device
 array instead (:class:`CountPool`) and the driver returns a :class:`DeviceCount`;
 :func:`counts_to_host` resolves any number of them with one copy per pool.  ``int()`` of a
-single count works too (it downloads its pool, once).
+single count works too (it downloads its pool, once).  The CUDA backend's
+:func:`count_decided` lives here: a count of decided pixels left on the device.
 """
 
 from __future__ import annotations
@@ -13,6 +14,9 @@ from __future__ import annotations
 import threading
 
 import numpy as np
+from numba import cuda
+
+from .cuda_launch import grid_2d, is_device
 
 #: Slots of one pool; a pipeline run uses a few per level.
 POOL_SLOTS = 64
@@ -24,8 +28,6 @@ class CountPool:
     """An int64 device array of zeroed slots, handed out one by one, read back once."""
 
     def __init__(self, slots: int = POOL_SLOTS):
-        from numba import cuda
-
         self.array = cuda.to_device(np.zeros(int(slots), np.int64))  # zeroed for the atomic counts
         self.used = 0
         self.values: np.ndarray | None = None
@@ -86,3 +88,25 @@ def counts_to_host(values) -> list[int]:
         if isinstance(value, DeviceCount):
             value.pool.read()
     return [int(v) for v in values]
+
+
+@cuda.jit(cache=True)
+def _count_kernel(disp, counts, slot):
+    u, v = cuda.grid(2)
+    if v < disp.shape[0] and u < disp.shape[1] and disp[v, u] >= 0:
+        cuda.atomic.add(counts, slot, 1)
+
+
+def count_decided(disparity):
+    """Number of decided pixels (>= 0) of an integer disparity map, left on the device.
+
+    Returns a :class:`~d3cli.kernels.device_counts.DeviceCount` (``int()`` of it, or
+    :func:`counts_to_host` of many, downloads); a host map is counted on the host.
+    """
+    if not is_device(disparity):
+        return int(np.count_nonzero(np.asarray(disparity) >= 0))
+    h, w = disparity.shape
+    pool, slot = next_slot()
+    blocks, threads = grid_2d(w, h)
+    _count_kernel[blocks, threads](disparity, pool.array, slot)
+    return DeviceCount(pool, slot)

@@ -11,11 +11,11 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from . import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
+from . import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
 
 
 @intrinsic
-def _store_nt(typingctx, arr, i, val):
+def store_nt(typingctx, arr, i, val):
     """``arr.flat[i] = val`` (a C-contiguous array; val cast to its dtype) as a
     non-temporal store: LLVM's ``!nontemporal`` hint, the line written around the caches
     without being read first."""
@@ -36,8 +36,8 @@ _X86 = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686")
 
 
 @intrinsic
-def _store_fence(typingctx):
-    """Order the non-temporal stores before (:func:`_store_nt`) before every later store:
+def store_fence(typingctx):
+    """Order the non-temporal stores before (:func:`store_nt`) before every later store:
     x86's ``sfence``, where such stores are weakly ordered (nothing elsewhere)."""
 
     def codegen(context, builder, signature, args):
@@ -49,7 +49,7 @@ def _store_fence(typingctx):
     return types.void(), codegen
 
 
-def _splat16(builder, x, ty):
+def splat16(builder, x, ty):
     """LLVM IR: a vector of 16 ``ty`` lanes, each ``x`` (for the vector intrinsics below)."""
     undef = ir.Constant(ir.VectorType(ty, 16), ir.Undefined)
     first = builder.insert_element(undef, x, ir.IntType(32)(0))
@@ -57,24 +57,24 @@ def _splat16(builder, x, ty):
 
 
 @njit(cache=True, error_model="numpy")
-def _prefetch_band(cost, index, v, u):
+def prefetch_band(cost, index, v, u):
     """Prefetch the cells of pixel (u, v)'s band."""
     off = index[v, u, 0]
-    _prefetch_cells(cost, off + index[v, u, 1], off + index[v, u, 2] - 1)
+    prefetch_cells(cost, off + index[v, u, 1], off + index[v, u, 2] - 1)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _prefetch_cells(cost, c0, c1):
+def prefetch_cells(cost, c0, c1):
     """Prefetch the cells ``c0 .. c1`` of ``cost`` (c1 included): one per 64-byte line
     from c0, and c1's."""
     for c in range(c0, c1, 16):  # 16 cells: a 64-byte line
-        _prefetch(cost, c)
-    _prefetch(cost, c1)
+        prefetch_cell(cost, c)
+    prefetch_cell(cost, c1)
 
 
 # ----------------------------------------------------------------------------- diffusion (step 5)
 @intrinsic
-def _prefetch(typingctx, arr, i):
+def prefetch_cell(typingctx, arr, i):
     """Hint that ``arr.flat[i]`` (a C-contiguous array) will be read soon: LLVM's
     prefetch intrinsic, a no-op where the target has none.  A prefetch never faults: i
     may lie past the end."""
@@ -95,9 +95,9 @@ def _prefetch(typingctx, arr, i):
 
 # ----------------------------------------------------------------------------- threads handing work over
 @intrinsic
-def _load_acquire(typingctx, arr, i):
+def load_acquire(typingctx, arr, i):
     """``arr[i]`` of an int64 array as an atomic load with acquire order: what the thread
-    that stored it (:func:`_store_release`) wrote before is visible after, and the load is
+    that stored it (:func:`store_release`) wrote before is visible after, and the load is
     never hoisted out of a waiting loop."""
 
     def codegen(context, builder, signature, args):
@@ -109,9 +109,9 @@ def _load_acquire(typingctx, arr, i):
 
 
 @intrinsic
-def _store_release(typingctx, arr, i, val):
+def store_release(typingctx, arr, i, val):
     """``arr[i] = val`` of an int64 array as an atomic store with release order (every
-    store before it is visible to a thread that loads it with :func:`_load_acquire`)."""
+    store before it is visible to a thread that loads it with :func:`load_acquire`)."""
 
     def codegen(context, builder, signature, args):
         ary = context.make_array(signature.args[0])(context, builder, args[0])
@@ -127,7 +127,7 @@ _POSIX = platform.system() != "Windows"
 
 
 @intrinsic
-def _spin_pause(typingctx, give_up_cpu):
+def spin_pause(typingctx, give_up_cpu):
     """One round of a waiting loop: x86's ``pause`` (a spinning core leaves the pipeline to
     its sibling), and with ``give_up_cpu`` true ``sched_yield`` too, so that on a machine
     with more busy threads than cores the thread being waited for gets the core."""

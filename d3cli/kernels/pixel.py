@@ -1,11 +1,13 @@
-"""Per-pixel math of D3Stereo, written once and compiled for every backend.
+"""Per-pixel math shared by the steps of D3Stereo: the constants and helpers every step's
+per-pixel module uses, written once and compiled for every backend.
 
-This module holds the helpers several steps share (:func:`build_shared`) and
-:func:`build_ops`, which composes them with every step's per-pixel module
-(``cost/pixel.py``, ``aggregation/pixel.py``, ``decisive/pixel_*.py``,
-``perspective/pixel.py``) into one namespace of functions compiled with ``jit``:
-``numba.njit`` for the CPU (``kernels/cpu_common.py``) and ``numba.cuda.jit(device=True)``
-for CUDA (``kernels/cuda_launch.py``).  The same Python source is compiled twice, so the two
+This module holds the constants (:data:`UNDECIDED`, :data:`INF`, :data:`UINT`) and the
+helpers several steps share (:func:`build_shared`); it imports no step.  Every step's
+per-pixel module (``cost/pixel.py``, ``aggregation/pixel.py``, ``decisive/pixel_*.py``,
+``subpixel/pixel.py``, ``perspective/pixel.py``) imports it; :mod:`d3cli.kernels.ops`
+composes them all into one namespace of functions compiled with ``jit``: ``numba.njit``
+for the CPU (``kernels/cpu_common.py``) and ``numba.cuda.jit(device=True)`` for CUDA
+(``kernels/cuda_launch.py``).  The same Python source is compiled twice, so the two
 backends cannot drift apart.  (Calling an ``@njit`` function from a CUDA kernel fails
 in the CUDA simulator, hence the factory rather than shared dispatchers.)
 
@@ -20,7 +22,7 @@ Conventions (docs/design.md, 'Cost volumes')
   disparities ``lo <= d < hi`` (its *band*) at ``cost[off + d]``.  The full-range volume
   is the band ``[0, D)`` everywhere with ``off = (v W + u) D``: exactly the (H, W, D)
   array, disparity innermost (:mod:`d3cli.kernels.volume`).  Fine pyramid levels store
-  only a band around what the coarser level decided (:mod:`d3cli.method.band`).
+  only a band around what the coarser level decided (:mod:`d3cli.kernels.cost.band`).
   Cost is ``(1 - NCC) / 2`` in [0, 1], lower is better.  Cells whose right pixel
   ``u - d`` is outside the image, or whose window is flat, hold 1.0 and never win.
 * Disparity maps are int32 with ``-1`` for undecided pixels (never 0, a legal disparity).
@@ -166,45 +168,3 @@ def build_shared(jit):
         first_at=first_at,
         band_min=band_min,
     )
-
-
-def build_ops(jit):
-    """Compile every per-pixel function with ``jit`` and return them in one namespace.
-
-    Parameters
-    ----------
-    jit : callable
-        A decorator such as ``numba.njit(cache=True)`` or ``numba.cuda.jit(device=True)``.
-
-    Returns
-    -------
-    types.SimpleNamespace
-        The shared helpers of :func:`build_shared` and every step's functions:
-        ``ncc_cost, cosine_cost, box_sum, cost_or_inf, right_cost_or_inf, rbf_weight, seed_at,
-        diffuse_at, inherit_patch, inherit_pixel, inherit_at, inherit_quad, subpixel_at,
-        pt_shift, bilinear_at, pt_restore_at`` and the helpers they use.  The
-        drivers inherit with ``inherit_quad`` (one 2x2 patch, each cell read once); the
-        per-pixel form ``inherit_at`` states eq. 6-8 literally and the tests hold the two
-        to each other.
-
-    Notes
-    -----
-    The protocol of the steps' factories: each step's ``pixel*.py`` has
-    ``build(jit, shared) -> SimpleNamespace`` that defines its per-pixel functions, decorated
-    with ``jit``, inside one closure, where they may call each other and ``shared`` (the
-    namespace of :func:`build_shared`, compiled with the same ``jit``).  One closure scope is
-    what lets the same source compile for the CPU and for CUDA (calling an ``@njit`` function
-    from a CUDA kernel fails in the simulator), which is also why a factory is as long as
-    the functions it holds (over 80 lines by design).
-    """
-    # Imported here: the step modules import this module's constants.
-    from .aggregation import pixel as aggregation
-    from .cost import pixel as cost
-    from .decisive import pixel_diffusion, pixel_inheritance, pixel_seeds, pixel_subpixel
-    from .perspective import pixel as perspective
-
-    shared = build_shared(jit)
-    found = dict(vars(shared))
-    for step in (cost, aggregation, pixel_seeds, pixel_diffusion, pixel_inheritance, pixel_subpixel, perspective):
-        found.update(vars(step.build(jit, shared)))
-    return SimpleNamespace(**found)

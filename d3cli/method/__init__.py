@@ -5,7 +5,6 @@ module             step (section of docs/design.md)
 =================  ==========================================================
 ``pyramid``        1. image pyramid, disparity range per level ('Pyramid and
                    bands')
-``band``           which disparities a finer level searches ('Pyramid and bands')
 ``cost``           2-3. cost volume and its aggregation ('Cost volumes',
                    'Aggregation', 'Semi-global smoothing')
 ``features``       deep-feature cost pyramids ('Cost volumes')
@@ -18,10 +17,14 @@ module             step (section of docs/design.md)
 ``pipeline``       :class:`D3Stereo`: the steps in order, coarsest level first
 =================  ==========================================================
 
-May import: :mod:`d3cli.kernels`, :mod:`d3cli.data` (grey conversion),
+May import: of :mod:`d3cli.kernels` the package (:func:`~d3cli.kernels.get_backend`),
+the contract :mod:`d3cli.kernels.backend` and the host facade :mod:`d3cli.kernels.host`
+only (``tests/test_architecture.py``); :mod:`d3cli.data` (grey conversion),
 :mod:`d3cli.config`, :mod:`d3cli.errors`.  Never batch, baselines, evaluation, road or
-the CLI.  Per-pixel arithmetic lives in :mod:`d3cli.kernels.pixel`, not here: these
-modules turn configuration into scalars and call one kernel per step.
+the CLI.  Per-pixel arithmetic lives in the kernels' step packages, not here: these
+modules turn configuration into scalars and call one kernel per step, on the backend
+object (``backend: Backend``) or on the host facade.  The band of disparities a finer
+level searches ('Pyramid and bands') is built by ``kernels.host.band_indexes``.
 """
 
 from .pipeline import D3Stereo, DisparityResult

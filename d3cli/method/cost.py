@@ -12,11 +12,12 @@ from __future__ import annotations
 import time
 
 from ..config import Config
-from ..kernels.volume import Volume, dense_index
+from ..kernels.host import Volume, dense_index
 from .pyramid import level_max_disparity
+from ..kernels.backend import Backend
 
 
-def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: float, backend, index=None):
+def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: float, backend: Backend, index=None):
     """NCC cost volume ``C(p, d) = (1 - NCC) / 2`` of one level (docs/design.md, 'Cost volumes').
 
     Parameters
@@ -29,7 +30,7 @@ def cost_volume(left, right, *, max_disparity: int, window: int, min_variance: f
         Odd NCC window size.
     min_variance : float
         Variance (grey levels^2) at or below which a window counts as flat (cost 1).
-    backend : module
+    backend : Backend
         Kernel backend from :func:`d3cli.kernels.get_backend`.
     index : int32 (H, W, 3) backend array, optional
         The bands to compute (:mod:`d3cli.kernels.volume`); default the full range.
@@ -51,7 +52,7 @@ def aggregate(
     sigma_space: float,
     sigma_color: float,
     kappa_a: int,
-    backend,
+    backend: Backend,
     overwrite_input: bool = False,
     bf_sigma_space: float | None = None,
 ):
@@ -67,7 +68,7 @@ def aggregate(
         (paper eq. 2).  False: one pass of a (2 kappa_a + 1)^2 bilateral filter.
     t_max, sigma_space, sigma_color, kappa_a
         Filter parameters (sigma_1, sigma_2 of eq. 3 in pixels and grey levels).
-    backend : module
+    backend : Backend
     overwrite_input : bool
         ``cost`` may be clobbered (RBF uses it as a buffer): one volume less at the peak.
     bf_sigma_space : float, optional
@@ -118,7 +119,7 @@ def bilateral_sigma_space(sigma_space: float, kappa_a: int) -> float:
     return float(sigma_space) * max(1, int(kappa_a))
 
 
-def feature_cost_volume(features, *, max_disparity: int, backend, index=None):
+def feature_cost_volume(features, *, max_disparity: int, backend: Backend, index=None):
     """Deep-feature cost volume ``(1 - cos) / 2`` of one level (paper section III-A).
 
     Parameters
@@ -127,7 +128,7 @@ def feature_cost_volume(features, *, max_disparity: int, backend, index=None):
         Normalised feature maps of the level (left and right).
     max_disparity : int
         Largest disparity of the level (the volume has max_disparity + 1 slices).
-    backend : module
+    backend : Backend
     index : int32 (H, W, 3) backend array, optional
         The bands to compute; default the full range.
 
@@ -146,7 +147,7 @@ def aggregation_halo(cfg: Config, level: int) -> int:
     return int(cfg.level_t_max(level)) if agg.rbf else int(agg.kappa_a)
 
 
-def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, backend, features=None,
+def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, backend: Backend, features=None,
                bands=None, step_times: dict | None = None) -> Volume:
     """Aggregated cost volume of one level (steps 2-3).
 
@@ -160,11 +161,11 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
     max_disparity : int
         Largest disparity at full resolution.
     cfg : Config
-    backend : module
+    backend : Backend
     features : LevelFeatures, optional
         The level's deep features (``cost.kind: features``): the cosine cost replaces NCC.
     bands : (store, visible) int32 (H, W, 3) host arrays, optional
-        From :func:`d3cli.method.band.band_indexes`: the cells to compute and aggregate,
+        From :func:`d3cli.kernels.cost.band.band_indexes`: the cells to compute and aggregate,
         and the band each pixel shows afterwards.  Default: the full range.
     step_times : dict, optional
         Gets ``time_sgm``, the seconds of the semi-global smoothing, where it runs (a

@@ -6,13 +6,16 @@
 - step 7, inter-scale decisive inheritance (paper Algorithm 2, eq. 6-8).
 
 Each function turns keyword scalars into one kernel call of the backend
-(:mod:`d3cli.kernels`); the per-pixel rules live in :mod:`d3cli.kernels.pixel`.
+(:mod:`d3cli.kernels`); the per-pixel rules live in the kernels' ``decisive/pixel_*.py``.
 """
 
 from __future__ import annotations
 
+from ..kernels.backend import Backend
 
-def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, exclusion: int, backend, skip=None):
+
+def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, exclusion: int, backend: Backend,
+                   skip=None):
     """Sparse decisive disparity map D_k^S (paper section III-B; docs/design.md, 'Decisive seeds').
 
     Parameters
@@ -27,7 +30,7 @@ def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, 
         costs are the same volume re-indexed.
     exclusion : int
         0: naive PKRN (c2 over every other disparity); r > 0 ignores |d - d*| <= r.
-    backend : module
+    backend : Backend
     skip : int32 (H, W) backend array, optional
         Pixels decided here (>= 0) are not examined and stay -1: below the coarsest
         level fresh seeds only fill what inheritance left undecided.
@@ -41,7 +44,8 @@ def decisive_seeds(cost, *, pkrn_min: float, epsilon: float, lr_tolerance: int, 
                                   skip=skip)
 
 
-def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, adversarial: bool, max_sweeps: int, backend):
+def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, adversarial: bool, max_sweeps: int,
+            backend: Backend):
     """Grow a sparse decisive map over one level with a frontier of changed pixels.
 
     Parameters
@@ -60,7 +64,7 @@ def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, a
         Decided pixels switch to a strictly cheaper accepted candidate (eq. 5).
     max_sweeps : int
         Safeguard; diffusion stops earlier when a sweep changes nothing.
-    backend : module
+    backend : Backend
 
     Returns
     -------
@@ -77,7 +81,7 @@ def diffuse(cost, disparity, *, max_gap: float = -1.0, tau: int, kappa_d: int, a
 CANDIDATE_MODES = {"symmetric": 0, "paper": 1}
 
 
-def inherit(cost, coarse, *, prc: bool, dfm_pkrn_min: float, epsilon: float, backend,
+def inherit(cost, coarse, *, prc: bool, dfm_pkrn_min: float, epsilon: float, backend: Backend,
             candidates: str = "symmetric"):
     """Map decided coarse disparities into 2x2 patches of the finer level.
 
@@ -93,7 +97,7 @@ def inherit(cost, coarse, *, prc: bool, dfm_pkrn_min: float, epsilon: float, bac
         PKRN test in the patch (ablation).
     dfm_pkrn_min, epsilon : float
         PKRN threshold and epsilon of the DFM-style test.
-    backend : module
+    backend : Backend
     candidates : {"symmetric", "paper"}
         Which disparities a patch pixel tests, with d = 2 dc.  ``symmetric``: {d-1, d,
         d+1} in the patch and {d-2, d+2} outside, for every pixel.  ``paper``: eq. 6-7 of

@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from ..kernels import finishing
+from ..kernels import host
 
 log = logging.getLogger(__name__)
 
@@ -198,7 +198,7 @@ def _solve(u, v, d, w=None):
     the solutions agree with it to about 1e-12 relative (tests/method/test_perspective.py),
     not bit for bit.
     """
-    from ..kernels.perspective.road_fit import solve_weighted
+    from ..kernels.host import solve_weighted
 
     u, v, d = (np.ascontiguousarray(x, np.float64) for x in (u, v, d))
     w = np.ones_like(u) if w is None else np.ascontiguousarray(w, np.float64)
@@ -244,7 +244,7 @@ def _ransac(u, v, d, threshold, rng):
         return None
     sols = np.linalg.solve(a[usable], ds[picks[usable]][:, :, None])[:, :, 0]
     # numba loaded here, not at import: the PT-SGM baseline imports this module too
-    from ..kernels.perspective.road_fit import ransac_inlier_counts
+    from ..kernels.host import ransac_inlier_counts
 
     counts = ransac_inlier_counts(np.ascontiguousarray(sols), np.ascontiguousarray(us), np.ascontiguousarray(vs),
                                   np.ascontiguousarray(ds), float(threshold))
@@ -262,7 +262,7 @@ def _irls(u, v, d, sol, threshold, iterations):
     take 2.9 ms of a 720p road pair's 3.9 ms fit; the same rounds, sums in another order
     (the models agree to about 1e-12: tests/method/test_perspective.py holds the two).
     """
-    from ..kernels.perspective.road_fit import irls
+    from ..kernels.host import irls
 
     return irls(np.ascontiguousarray(u, np.float64), np.ascontiguousarray(v, np.float64),
                 np.ascontiguousarray(d, np.float64), np.asarray(sol, np.float64), float(threshold), int(iterations),
@@ -410,7 +410,7 @@ def restored_validity_counts(valid: np.ndarray, narrow: np.ndarray, restored: np
     narrow = np.ascontiguousarray(np.broadcast_to(narrow, restored.shape))
     valid = np.ascontiguousarray(np.broadcast_to(np.asarray(valid, dtype=bool), restored.shape))
     out = np.empty(restored.shape, np.float32) if masked else None
-    kept, counts = finishing.restored_validity(valid, narrow, restored, hi, out)
+    kept, counts = host.restored_validity(valid, narrow, restored, hi, out)
     return kept, counts, out
 
 

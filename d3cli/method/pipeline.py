@@ -16,8 +16,9 @@ from ..config import Config, load_config
 from ..data.formats import to_grey
 from ..data.layouts import normalise_bit_depth
 from ..errors import InputError
-from ..kernels import finishing, get_backend
-from .band import band_indexes
+from ..kernels import get_backend, host
+from ..kernels.backend import Backend
+from ..kernels.host import band_indexes
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
@@ -167,6 +168,7 @@ class D3Stereo:
 
     def __init__(self, cfg: Config | None = None) -> None:
         self.cfg = cfg if cfg is not None else Config()
+        self.backend: Backend
         self.backend, self.backend_name = get_backend(self.cfg.run.backend)
 
     def compute(self, left: np.ndarray, right: np.ndarray, *, max_disparity: int | None = None,
@@ -339,12 +341,10 @@ class D3Stereo:
         Features are extracted again from the warped image (step 6 with deep features):
         warping feature maps instead would blur them across the stride of coarse taps.
         """
-        from ..kernels import cpu  # the same bilinear warp kernel as the grey pyramid's
-
         img = _as_0_255(right)
         pt = self.cfg.pt
         channels = [img] if img.ndim == 2 else [img[:, :, c] for c in range(img.shape[2])]
-        warped = [cpu.pt_warp(np.ascontiguousarray(c, np.float32), road.a0, road.b1, road.b2, float(pt.margin))
+        warped = [host.pt_warp(np.ascontiguousarray(c, np.float32), road.a0, road.b1, road.b2, float(pt.margin))
                   for c in channels]
         return warped[0] if img.ndim == 2 else np.stack(warped, axis=2)
 
@@ -555,7 +555,7 @@ class D3Stereo:
 
         The one download of the result happens here: the integer map and the sub-pixel
         map; the occlusion tests, the filling and the smoothing run on the host
-        (``kernels/finishing.py``).  With a road model (step 6) the disparity is
+        (``kernels/finishing/``).  With a road model (step 6) the disparity is
         restored to the full range first; estimates
         at the ends of the narrow range (the true match probably lies outside it: not
         road) and estimates whose match falls left of the right image become holes.
@@ -602,7 +602,7 @@ class D3Stereo:
         if cfg.refine.smooth_radius > 0:
             # edge-preserving smoothing of the finished map; the range weight compares
             # residuals from the road plane when there is one (a slanted road is no edge)
-            plane = None if road is None else finishing.shift_plane_f32(road.a0, road.b1, road.b2, 0.0, out.shape)
+            plane = None if road is None else host.shift_plane_f32(road.a0, road.b1, road.b2, 0.0, out.shape)
             # averaging residuals to a plane that dips below zero (far road, sky) can end
             # a hair below 0; disparities are >= 0 by contract (non_negative: set to 0 in
             # the smoothing's last pass)

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ..kernels.pyramid import halve_area
+from ..kernels.host import halve_area
 
 
 def downsample(img: np.ndarray) -> np.ndarray:

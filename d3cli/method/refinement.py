@@ -3,7 +3,7 @@
 The occlusion tests, the speckle filter, the filling and the smoothing run on the host for
 every backend, as numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of a
 NumPy/OpenCV formulation bit for bit (that formulation is the reference in
-``tests/kernels/finishing/references.py``).
+``tests/reference/finishing.py``).
 """
 
 from __future__ import annotations
@@ -11,7 +11,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..kernels import finishing
+from ..kernels import host
+from ..kernels.backend import Backend
 
 
 def _as_map(disparity) -> np.ndarray:
@@ -35,7 +36,7 @@ def _check_updatable(valid: np.ndarray, disp: np.ndarray) -> None:
         raise ValueError("valid must be a C-contiguous bool map of the disparity's shape (updated in place)")
 
 
-def refine_subpixel(cost, disparity, *, backend, equiangular: bool = False):
+def refine_subpixel(cost, disparity, *, backend: Backend, equiangular: bool = False):
     """Sub-pixel refinement at full resolution (docs/design.md, 'Finishing', step 8).
 
     Parameters
@@ -43,7 +44,7 @@ def refine_subpixel(cost, disparity, *, backend, equiangular: bool = False):
     cost : ndarray, float32, (H, W, D)
     disparity : ndarray, int32, (H, W)
         Integer disparities, -1 undecided.
-    backend : module
+    backend : Backend
     equiangular : bool, keyword-only
         Fit two lines of equal and opposite slope (equiangular line fitting) instead of the
         paper's parabola: the better model of a V-shaped minimum, as the semi-global
@@ -82,7 +83,7 @@ def occluded_by_uniqueness(disparity: np.ndarray, valid: np.ndarray, *, toleranc
         True where the pixel is judged occluded.
     """
     disp = _as_map(disparity)
-    return finishing.uniqueness_occluded(disp, _like(valid, disp, bool), float(tolerance))
+    return host.uniqueness_occluded(disp, _like(valid, disp, bool), float(tolerance))
 
 
 def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int) -> np.ndarray:
@@ -104,7 +105,7 @@ def out_of_view(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int)
     start = min(int(max_disparity), w - 1)
     if start < 0:  # a slice start, as valid[:, start:] read it
         start = max(start + w, 0)
-    return finishing.out_of_view_mask(disp, _like(valid, disp, bool), start)
+    return host.out_of_view_mask(disp, _like(valid, disp, bool), start)
 
 
 def drop_occluded(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: int, tolerance: float = 1.0,
@@ -141,7 +142,7 @@ def drop_occluded(disparity: np.ndarray, valid: np.ndarray, *, max_disparity: in
         start = max(start + w, 0)
     if out is None:
         out = np.empty(disp.shape, np.float32)
-    occluded, count = finishing.drop_occluded(disp, valid, float(tolerance), start, out)
+    occluded, count = host.drop_occluded(disp, valid, float(tolerance), start, out)
     return occluded, count, out
 
 
@@ -176,7 +177,7 @@ def speckles(disparity: np.ndarray, valid: np.ndarray, *, max_size: int, max_dif
         return np.zeros(disp.shape, bool)
     # 1/16 px fixed point as OpenCV's own disparities; -1 marks the holes, which
     # filterSpeckles leaves out of every region (its newVal)
-    fixed = finishing.fixed_point_16(disp, valid)
+    fixed = host.fixed_point_16(disp, valid)
     cv2.filterSpeckles(fixed, -1, int(max_size), max(1, int(round(float(max_diff) * 16.0))))
     return valid & (fixed == -1)
 
@@ -197,12 +198,12 @@ def drop_speckles(disparity: np.ndarray, valid: np.ndarray, *, max_size: int, ma
     _check_updatable(valid, disp)
     if out is None:
         out = np.empty(disp.shape, np.float32)
-    fixed, n_valid = finishing.fixed_point_16_finite(disp, valid)
+    fixed, n_valid = host.fixed_point_16_finite(disp, valid)
     if max_size <= 0 or n_valid == 0:
         fixed = np.zeros(disp.shape, np.int16)  # no speckle: nothing marked -1
     else:
         cv2.filterSpeckles(fixed, -1, int(max_size), max(1, int(round(float(max_diff) * 16.0))))
-    return finishing.drop_marked(disp, valid, fixed, out), out
+    return host.drop_marked(disp, valid, fixed, out), out
 
 
 def fill_holes(
@@ -228,31 +229,31 @@ def fill_holes(
     """
     disp = _as_map(disparity)
     # the usable pixels, their rows and their count in one pass (instead of four)
-    valid, row_has, n_valid = finishing.usable(disp, _like(valid, disp, bool))
+    valid, row_has, n_valid = host.usable(disp, _like(valid, disp, bool))
     if n_valid == 0:
         return np.full(disp.shape, np.inf, np.float32)
     if n_valid == disp.size:
         return disp.copy()
     if occluded is None:
-        filled, row_has = finishing.fill_rows_smaller_side(disp, valid)
+        filled, row_has = host.fill_rows_smaller_side(disp, valid)
     else:
         # Holes that are not occlusions (undecided: weak texture, rejected matches) lie
         # inside a surface: the median of the nearest valid values in the four directions
         # estimates it better than the background side (the row neighbours are found in
         # the filling pass itself).
-        up, down = finishing.nearest_along_columns(disp, valid)
-        filled = finishing.fill_inside(disp, valid, _like(occluded, disp, bool), up, down)
+        up, down = host.nearest_along_columns(disp, valid)
+        filled = host.fill_inside(disp, valid, _like(occluded, disp, bool), up, down)
     if not row_has.all():
-        finishing.copy_nearest_rows(filled, row_has)
+        host.copy_nearest_rows(filled, row_has)
     if smooth and min(disp.shape) >= 5:
-        finishing.keep_valid(filled, valid, cv2.medianBlur(filled, 5))
+        host.keep_valid(filled, valid, cv2.medianBlur(filled, 5))
     return filled
 
 
 def _unsmoothed(disp: np.ndarray, non_negative: bool) -> np.ndarray:
     """A copy of the map, its negative values 0 with ``non_negative``."""
     out = disp.copy()
-    return finishing.clamp_negative(out) if non_negative else out
+    return host.clamp_negative(out) if non_negative else out
 
 
 # The piecewise-linear bilateral filter needs one pair of box filters per range level;
@@ -327,7 +328,7 @@ def smooth_disparity(
         # passes (see box_smooth_disparity); no plane is a zero plane, still subtracted and
         # added
         base = None if plane is None else _like(plane, disp, np.float32)
-        return finishing.box_smooth_disparity(disp, base, valid, int(radius), float(sigma), non_negative)
+        return host.box_smooth_disparity(disp, base, valid, int(radius), float(sigma), non_negative)
     base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
     if kernel != "gaussian":
         raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
@@ -338,7 +339,7 @@ def _gaussian_smoothing(disp: np.ndarray, valid: np.ndarray | None, base: np.nda
                         non_negative: bool) -> np.ndarray:
     """:func:`smooth_disparity` with the Gaussian range kernel, radius > 0: the residual and
     its range, the levels, their box-filtered groups and the blend of each pixel's shares."""
-    resid, use, row_lo, row_hi, row_use = finishing.residual_and_range(disp, base, valid)
+    resid, use, row_lo, row_hi, row_use = host.residual_and_range(disp, base, valid)
     if not row_use.any():
         return _unsmoothed(disp, non_negative)
     lo, hi = float(row_lo.min()), float(row_hi.max())
@@ -349,10 +350,10 @@ def _gaussian_smoothing(disp: np.ndarray, valid: np.ndarray | None, base: np.nda
     low = np.empty(disp.shape, np.float32)
     up = np.empty(disp.shape, np.float32)
     # NumPy float32 arithmetic with Python floats: the scalars act as float32
-    used, row_lower = finishing.range_levels(resid, np.float32(lo), np.float32(step), n_levels, low, up)
+    used, row_lower = host.range_levels(resid, np.float32(lo), np.float32(step), n_levels, low, up)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
     levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
     values = np.array([lo + int(k) * step for k in levels], np.float64).astype(np.float32)
-    finishing.smooth_groups(resid, use, np.float32(lo), np.float32(step), n_levels, levels, values, row_lower,
+    host.smooth_groups(resid, use, np.float32(lo), np.float32(step), n_levels, levels, values, row_lower,
                             neg_inv2s2, int(radius), low, up)
-    return finishing.combine_shares(low, up, base, disp, non_negative)
+    return host.combine_shares(low, up, base, disp, non_negative)

@@ -23,58 +23,58 @@ import pytest
 
 from d3cli.batch import warmup
 from d3cli.config import Config
-from d3cli.kernels import cachedir
+from d3cli.kernels import cache_location
 
 REPO = Path(__file__).resolve().parents[2]
 #: Seconds a signal may take to end the command, at any moment of the compile included.
 ANSWER_S = 2.0
 #: What a first run expects to compile where no compile was recorded (a fresh cache folder).
-ESTIMATE = cachedir.COLD_ESTIMATE
+ESTIMATE = cache_location.COLD_ESTIMATE
 
 
 @pytest.fixture
 def empty_cache(tmp_path, monkeypatch) -> Path:
     folder = tmp_path / "numba-cache"
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(folder))
-    monkeypatch.setattr(cachedir, "announced", False)
+    monkeypatch.setattr(cache_location, "announced", False)
     return folder
 
 
 # ----------------------------------------------------------------------------- the record
 def test_an_interrupted_compile_is_recorded_and_the_next_notice_says_what_is_left(empty_cache, monkeypatch):
-    cachedir.record_interrupted("d3stereo", 10.0, 46)  # 46 of the estimate's 251 functions in 10 s
-    monkeypatch.setattr(cachedir, "is_cold", lambda *a, **k: False)  # their cache entries are there
-    assert cachedir.resume_point("d3stereo") == {"seconds": 10.0, "kernels": 46}
-    assert cachedir.compile_estimate("d3stereo") == {"seconds": 120.0, "kernels": 251}  # no slower than estimated
-    assert cachedir.compile_notice("d3stereo", cachedir.resume_point("d3stereo")) == (
+    cache_location.record_interrupted("d3stereo", 10.0, 46)  # 46 of the estimate's 251 functions in 10 s
+    monkeypatch.setattr(cache_location, "is_cold", lambda *a, **k: False)  # their cache entries are there
+    assert cache_location.resume_point("d3stereo") == {"seconds": 10.0, "kernels": 46}
+    assert cache_location.compile_estimate("d3stereo") == {"seconds": 120.0, "kernels": 251}  # no slower than estimated
+    assert cache_location.compile_notice("d3stereo", cache_location.resume_point("d3stereo")) == (
         "compiling the rest of the kernels for this machine, once (about 110 s; 46 of about 251 were "
         f"compiled by an interrupted run); cached in {empty_cache}")
-    assert cachedir.resume_point("pt-sgm") is None  # per method
+    assert cache_location.resume_point("pt-sgm") is None  # per method
 
-    cachedir.record_interrupted("d3stereo", 150.0, 60)  # a slow machine: the whole estimate grows
-    assert cachedir.compile_estimate("d3stereo") == {"seconds": 241.3, "kernels": 251}
-    cachedir.record_compile("d3stereo", 230.0, 251)  # the rest compiled: nothing is left
-    assert cachedir.resume_point("d3stereo") is None
+    cache_location.record_interrupted("d3stereo", 150.0, 60)  # a slow machine: the whole estimate grows
+    assert cache_location.compile_estimate("d3stereo") == {"seconds": 241.3, "kernels": 251}
+    cache_location.record_compile("d3stereo", 230.0, 251)  # the rest compiled: nothing is left
+    assert cache_location.resume_point("d3stereo") is None
 
 
 def test_a_cold_cache_again_forgets_the_interrupted_compile(empty_cache):
-    cachedir.record_interrupted("d3stereo", 10.0, 46)
-    assert cachedir.is_cold()  # its entries are gone (emptied, or every module edited)
-    assert cachedir.resume_point("d3stereo") is None
-    assert cachedir.compile_notice("d3stereo") == (
+    cache_location.record_interrupted("d3stereo", 10.0, 46)
+    assert cache_location.is_cold()  # its entries are gone (emptied, or every module edited)
+    assert cache_location.resume_point("d3stereo") is None
+    assert cache_location.compile_notice("d3stereo") == (
         f"compiling the kernels for this machine, once (about 120 s); cached in {empty_cache}")
 
 
 def test_the_next_run_announces_the_rest_and_records_the_whole(empty_cache, monkeypatch, caplog):
-    cachedir.record_interrupted("d3stereo", 10.0, 46)
-    monkeypatch.setattr(cachedir, "is_cold", lambda *a, **k: False)
+    cache_location.record_interrupted("d3stereo", 10.0, 46)
+    monkeypatch.setattr(cache_location, "is_cold", lambda *a, **k: False)
     monkeypatch.setattr(warmup.methods, "compute_pair", lambda *a, **k: None)
     with caplog.at_level(logging.INFO):
         warmup.warm_jit(Config(), "d3stereo")
     assert caplog.records[0].getMessage().startswith("compiling the rest of the kernels for this machine")
     # Nothing compiled (compute_pair is a stand-in): nothing was left, the estimate stands.
-    assert cachedir.resume_point("d3stereo") is None
-    assert cachedir.compile_estimate("d3stereo") == {"seconds": 120.0, "kernels": 251}
+    assert cache_location.resume_point("d3stereo") is None
+    assert cache_location.compile_estimate("d3stereo") == {"seconds": 120.0, "kernels": 251}
 
 
 def test_the_rest_compiled_records_both_runs_seconds(empty_cache, monkeypatch, caplog):
@@ -85,15 +85,15 @@ def test_the_rest_compiled_records_both_runs_seconds(empty_cache, monkeypatch, c
             with numba_event.trigger_event("numba:compile", data={}):
                 pass
 
-    cachedir.record_interrupted("d3stereo", 10.0, 46)
-    monkeypatch.setattr(cachedir, "is_cold", lambda *a, **k: False)
+    cache_location.record_interrupted("d3stereo", 10.0, 46)
+    monkeypatch.setattr(cache_location, "is_cold", lambda *a, **k: False)
     monkeypatch.setattr(warmup.methods, "compute_pair", compute)
     with caplog.at_level(logging.INFO):
         seconds = warmup.warm_jit(Config(), "d3stereo")
     assert [r.getMessage() for r in caplog.records if r.levelname == "NOTE"][1:] == [
         f"compiled 230 kernel functions in {seconds:.0f} s"]
-    assert cachedir.resume_point("d3stereo") is None
-    assert cachedir.compile_estimate("d3stereo") == {"seconds": round(10.0 + seconds, 1), "kernels": 251}
+    assert cache_location.resume_point("d3stereo") is None
+    assert cache_location.compile_estimate("d3stereo") == {"seconds": round(10.0 + seconds, 1), "kernels": 251}
 
 
 # ----------------------------------------------------------------------------- the wait
@@ -218,7 +218,7 @@ def test_ctrl_c_20_s_into_a_cold_compile_returns_within_2_s_and_the_next_run_goe
     assert len(kept) == 1 and kept[0].endswith("; they are kept in the cache, the next run compiles the rest")
     compiled = int(kept[0].split()[2])  # "NOTE: compiled N kernel functions in T s before ..."
     assert compiled > 0
-    record = json.loads((cachedir.cache_folder(cache_dir=str(cache)) / cachedir.COMPILE_RECORD).read_text())
+    record = json.loads((cache_location.cache_folder(cache_dir=str(cache)) / cache_location.COMPILE_RECORD).read_text())
     assert record["d3stereo"]["done"]["kernels"] == compiled
     first_run = _entries(cache)
     assert len(first_run) > 0  # what was compiled is in the cache

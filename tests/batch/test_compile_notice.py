@@ -15,7 +15,7 @@ import pytest
 
 from d3cli.batch import warmup
 from d3cli.config import Config
-from d3cli.kernels import cachedir
+from d3cli.kernels import cache_location
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -24,41 +24,41 @@ REPO = Path(__file__).resolve().parents[2]
 def empty_cache(tmp_path, monkeypatch) -> Path:
     folder = tmp_path / "numba-cache"
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(folder))
-    monkeypatch.setattr(cachedir, "announced", False)
+    monkeypatch.setattr(cache_location, "announced", False)
     return folder
 
 
 def test_cache_folders_are_where_numba_puts_them(tmp_path):
     from numba.core.caching import UserProvidedCacheLocator
 
-    module = cachedir.HERE / "cost" / "cpu.py"
-    assert cachedir.module_cache_folder(module, str(tmp_path)) == (
+    module = cache_location.HERE / "cost" / "cpu.py"
+    assert cache_location.module_cache_folder(module, str(tmp_path)) == (
         tmp_path / UserProvidedCacheLocator.get_suitable_cache_subpath(str(module)))
-    assert cachedir.module_cache_folder(module, "") == cachedir.HERE / "cost" / "__pycache__"
+    assert cache_location.module_cache_folder(module, "") == cache_location.HERE / "cost" / "__pycache__"
 
 
 def test_an_empty_cache_is_cold_and_an_index_newer_than_its_source_warms_it(empty_cache):
-    assert cachedir.is_cold() is True
-    module = cachedir.HERE / "pixel.py"  # its cache folder is the one cache_folder() names
-    index = cachedir.cache_folder() / "pixel.build.locals.box_sum-62.py{}{}.nbi".format(*sys.version_info[:2])
+    assert cache_location.is_cold() is True
+    module = cache_location.HERE / "pixel.py"  # its cache folder is the one cache_folder() names
+    index = cache_location.cache_folder() / "pixel.build.locals.box_sum-62.py{}{}.nbi".format(*sys.version_info[:2])
     index.parent.mkdir(parents=True)
     index.write_bytes(b"")
     os.utime(index, (module.stat().st_mtime - 10,) * 2)  # older than the source: numba drops it
-    assert cachedir.is_cold() is True
+    assert cache_location.is_cold() is True
     os.utime(index, (module.stat().st_mtime + 10,) * 2)
-    assert cachedir.is_cold() is False
+    assert cache_location.is_cold() is False
     other_python = index.with_name("pixel.build.locals.box_sum-62.py29.nbi")  # another Python's index does not count
     index.rename(other_python)
-    assert cachedir.is_cold() is True
+    assert cache_location.is_cold() is True
 
 
 def test_the_notice_names_the_estimate_and_the_folder(empty_cache):
-    assert cachedir.compile_notice("d3stereo") == (
+    assert cache_location.compile_notice("d3stereo") == (
         f"compiling the kernels for this machine, once (about 120 s); cached in {empty_cache}")
-    cachedir.record_compile("d3stereo", 61.34, 88)  # this machine's last cold compile
-    assert cachedir.compile_estimate("d3stereo") == {"seconds": 61.3, "kernels": 88}
-    assert cachedir.compile_estimate("other") == cachedir.COLD_ESTIMATE
-    assert cachedir.compile_notice("d3stereo") == (
+    cache_location.record_compile("d3stereo", 61.34, 88)  # this machine's last cold compile
+    assert cache_location.compile_estimate("d3stereo") == {"seconds": 61.3, "kernels": 88}
+    assert cache_location.compile_estimate("other") == cache_location.COLD_ESTIMATE
+    assert cache_location.compile_notice("d3stereo") == (
         f"compiling the kernels for this machine, once (about 61 s); cached in {empty_cache}")
 
 
@@ -78,19 +78,19 @@ def test_progress_counts_compiles_and_logs_once_per_period(caplog):
 def test_warm_jit_on_a_cold_cache_says_so_first(empty_cache, monkeypatch, caplog):
     seen = []
     monkeypatch.setattr(warmup.methods, "compute_pair", lambda *a, **k: seen.append(a[0]))
-    with caplog.at_level(logging.INFO):  # the root's level: the notice comes from d3cli.kernels.cachedir
+    with caplog.at_level(logging.INFO):  # the root's level: the notice comes from d3cli.kernels.cache_location
         warmup.warm_jit(Config(), "d3stereo")
     assert seen == ["d3stereo"]
     assert caplog.records[0].levelname == "NOTE"
     assert caplog.records[0].getMessage() == (
         f"compiling the kernels for this machine, once (about 120 s); cached in {empty_cache}")
     assert caplog.records[1].getMessage() == "compiled 0 kernel functions in 0 s"
-    assert cachedir.compile_estimate("d3stereo") == {"seconds": 0.0, "kernels": 0}  # recorded for next time
+    assert cache_location.compile_estimate("d3stereo") == {"seconds": 0.0, "kernels": 0}  # recorded for next time
 
 
 def test_warm_jit_on_a_warm_cache_is_silent(monkeypatch, caplog):
-    monkeypatch.setattr(cachedir, "announced", False)
-    monkeypatch.setattr(cachedir, "is_cold", lambda *a, **k: False)
+    monkeypatch.setattr(cache_location, "announced", False)
+    monkeypatch.setattr(cache_location, "is_cold", lambda *a, **k: False)
     monkeypatch.setattr(warmup.methods, "compute_pair", lambda *a, **k: None)
     with caplog.at_level(logging.WARNING):
         warmup.warm_jit(Config(), "d3stereo")

@@ -19,7 +19,7 @@ from types import SimpleNamespace
 import pytest
 from click.testing import CliRunner
 
-import d3cli.batch.pipelined
+import d3cli.batch.executors.pipelined
 import d3cli.batch.runner
 import d3cli.data.formats.images
 import d3cli.data.layouts
@@ -71,7 +71,7 @@ def five_pairs(tmp_path, make_pair_set):
 # ----------------------------------------------------------------------------- same files
 @pytest.mark.parametrize("method, writers", [("sgbm", 1), ("sgbm", 3), ("d3stereo", 2)])
 def test_pipelined_files_are_the_serial_files(tmp_path, five_pairs, monkeypatch, method, writers):
-    monkeypatch.setattr(d3cli.batch.pipelined, "default_writers", lambda: writers)
+    monkeypatch.setattr(d3cli.batch.executors.pipelined, "default_writers", lambda: writers)
     names = PAIRS if method == "sgbm" else PAIRS[:3]  # d3stereo: 3 pairs keep the test under 5 s
     for name in set(PAIRS) - set(names):
         shutil.rmtree(five_pairs / name)
@@ -131,7 +131,7 @@ def test_a_failing_writer_fails_only_its_pair(tmp_path, five_pairs, monkeypatch)
 
 
 def test_a_full_disk_in_the_writer_ends_the_batch_at_that_pair(tmp_path, five_pairs, monkeypatch):
-    monkeypatch.setattr(d3cli.batch.pipelined, "default_writers", lambda: 1)  # with more, c may be written beside b
+    monkeypatch.setattr(d3cli.batch.executors.pipelined, "default_writers", lambda: 1)  # with more, c may be written beside b
     real = d3cli.data.formats.images.write_encoded
 
     def full_disk_on_b(path, image):
@@ -230,7 +230,7 @@ def test_the_next_pair_is_read_while_one_computes_and_written_behind(tmp_path, f
     monkeypatch.setattr(d3cli.data.layouts, "load_pair_images", load)
     monkeypatch.setattr(d3cli.batch.runner, "compute_pair", compute)
     monkeypatch.setattr(d3cli.batch.runner, "write_panel", panel)
-    monkeypatch.setattr(d3cli.batch.pipelined, "default_writers", lambda: 1)  # writes in input order
+    monkeypatch.setattr(d3cli.batch.executors.pipelined, "default_writers", lambda: 1)  # writes in input order
     out = tmp_path / "out"
     assert invoke("run", five_pairs, "-o", out, "--method", "sgbm", "-q", "--prefetch", "1").exit_code == 0
     assert waited == {"read b": True, "compute b": True}

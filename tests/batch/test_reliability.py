@@ -22,7 +22,7 @@ from click.testing import CliRunner
 import d3cli.batch.extras
 import d3cli.batch.runner
 from d3cli.batch import LOCK_FILE, OUTPUT_FILES, parse_workers
-from d3cli.batch.cluster import probe_scheduler
+from d3cli.batch.executors.cluster import probe_scheduler
 from d3cli.batch.executors import PoolExecutor, SerialExecutor, make_executor
 from d3cli.cli import main
 from d3cli.errors import ConfigError

@@ -18,7 +18,7 @@ from d3cli.cli import main
 from d3cli.config import load_config
 from d3cli.data import layouts as datasets
 from d3cli.errors import ConfigError
-from d3cli.kernels import cache
+from d3cli.kernels import compile_cache
 
 ROOT = Path(__file__).resolve().parents[2]
 PAIRS = "abcd"
@@ -327,9 +327,9 @@ os.access = lambda path, mode, **kw: (False if str(path).startswith(kernels) and
                                       else real_access(path, mode, **kw))
 import numpy as np
 import numba
-from d3cli.kernels import cpu
+from d3cli.kernels.cost.cpu import integral_image
 print(numba.config.CACHE_DIR, os.environ.get("NUMBA_CACHE_DIR"))
-print(cpu.integral_image(np.ones((2, 3), np.float32), 1)[-1, -1])
+print(integral_image(np.ones((2, 3), np.float32), 1)[-1, -1])
 """
 
 
@@ -345,4 +345,4 @@ def test_read_only_package_caches_kernels_in_the_user_cache(tmp_path):
     assert where == again == str(expected)
     assert float(total) == 6.0  # sum of a 2x3 block of ones
     assert list(expected.rglob("cpu.integral_image-*.nbi")), list(expected.rglob("*"))
-    assert list(expected.rglob(cache.STAMP))  # the hashes of the kernels modules, beside their caches
+    assert list(expected.rglob(compile_cache.STAMP))  # the hashes of the kernels modules, beside their caches

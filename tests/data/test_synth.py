@@ -123,7 +123,7 @@ def test_pothole_is_farther_than_the_road_plane():
 
 
 def test_rig_is_rectified():
-    rig = synth_rig._sample_rig(np.random.default_rng(5), W, H)
+    rig = synth_rig.sample_rig(np.random.default_rng(5), W, H)
     rot = rig.rotation()
     assert np.allclose(rot @ rot.T, np.eye(3))
     left, right = rig.centres()
@@ -143,7 +143,7 @@ def test_occlusion_check_hides_points_under_the_surface():
     points[..., 0] = np.linspace(-0.05, 0.05, 3)
     points[..., 1] = 0.1
     points[1, :, 2] = -0.01  # 1 cm below the road
-    visible = synth_render._visible_from(np.array([0.0, 0.0, 1.0]), points, flat, lip, 16, -0.5, -0.5, 0.02, 1e-3, 5e-4)
+    visible = synth_render.visible_from(np.array([0.0, 0.0, 1.0]), points, flat, lip, 16, -0.5, -0.5, 0.02, 1e-3, 5e-4)
     assert visible[0].all() and not visible[1].any()
 
 

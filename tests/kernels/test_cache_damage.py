@@ -39,7 +39,7 @@ def _run(cache: Path) -> tuple[dict, list[str]]:
 
 
 def _entry(cache: Path, suffix: str) -> list[Path]:
-    return sorted(cache.rglob(f"halve._halve_task-*{suffix}"))
+    return sorted(cache.rglob(f"halve.halve_task-*{suffix}"))
 
 
 @pytest.fixture(scope="module")

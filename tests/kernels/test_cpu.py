@@ -1,4 +1,4 @@
-"""The Numba CPU kernels against the slow references of tests/reference.py: what no
+"""The Numba CPU kernels against the slow references of tests/reference/steps.py: what no
 single step owns (the pyramid and hole filling the kernels feed, every driver with one
 thread and with all threads).  Each step's own tests live in its room
 (tests/kernels/cost/, aggregation/, sgm/, decisive/, perspective/).
@@ -44,7 +44,7 @@ def test_fill_holes_without_smoothing_matches_reference():
             valid[rng.random(shape[0]) < 0.2] = False  # whole empty rows
             disp[~valid & (rng.random(shape) < 0.5)] = np.inf
             got = fill_holes(disp, valid, smooth=False)
-            np.testing.assert_array_equal(got, ref.ref_fill_holes(disp, valid), err_msg=f"{shape} {share}")
+            np.testing.assert_array_equal(got, ref.ref_fill_holes(disp, valid, smooth=False), err_msg=f"{shape} {share}")
 
 
 def test_fill_holes_known_rows():

@@ -5,7 +5,7 @@ They run
 
 * without a GPU under the CUDA simulator, in a separate process with
   ``NUMBA_ENABLE_CUDASIM=1`` set before numba is imported
-  (``tests/test_cuda_simulator.py`` does that inside the normal ``pytest`` run), and
+  (``tests/kernels/test_cuda_simulator.py`` does that inside the normal ``pytest`` run), and
 * on a real GPU with ``python -m pytest -m cuda tests/kernels``.
 
 Inputs are tiny and odd-sized (the simulator runs every thread as Python) and the
@@ -166,7 +166,7 @@ def test_banded_level_matches_cpu(gpu, rbf):
     """A level with ragged bands: every stored cell after the cost and
     the aggregation, and every decision on the visible bands, as on the CPU."""
     from d3cli import load_config
-    from d3cli.method.band import band_indexes
+    from d3cli.kernels.host import band_indexes
     from d3cli.method.cost import aggregation_halo, level_cost
 
     cfg = load_config(overrides=[f"aggregation.rbf={str(rbf).lower()}", "aggregation.kappa_a=2",

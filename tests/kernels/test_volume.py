@@ -5,7 +5,7 @@ A cell outside a pixel's band "does not exist" (``cost_or_inf`` gives inf), so e
 decision on a banded volume must equal the decision on the full-range volume with those
 cells set to +inf: inf never wins a minimum, never vetoes a local-minimum test, and the
 parabola of the sub-pixel step is skipped next to it.  The full-range drivers are checked
-against the references of tests/reference.py in test_cpu.py.  The drivers on bands: the rooms' test_banded.py.
+against the references of tests/reference/steps.py in test_cpu.py.  The drivers on bands: the rooms' test_banded.py.
 """
 
 from __future__ import annotations

@@ -324,11 +324,6 @@ def _bgr_to_rgb(image: np.ndarray) -> np.ndarray:
     return image[:, :, 2::-1]
 
 
-def _shape_text(shape) -> str:
-    """``(H, W, ...)`` -> ``'HxW'`` as in the error messages."""
-    return f"{shape[0]}x{shape[1]}"
-
-
 def read_image(path: str | os.PathLike) -> np.ndarray:
     """Read an 8- or 16-bit image.
 

@@ -69,10 +69,6 @@ def _image_size(source: dict[str, str]) -> tuple[int, int] | None:
     return (int(match.group(1)), int(match.group(2))) if match else None
 
 
-def _has_view(folder: Path, stem: str) -> bool:
-    return _find_view(_files_by_lower_name(folder), stem) is not None
-
-
 def _max_disparity_from_calib(calib: dict, image_width: int | None) -> int | None:
     ndisp = calib.get("ndisp")
     if not ndisp or ndisp <= 0:

@@ -17,7 +17,7 @@ import numpy as np
 from ...errors import InputError, OutputError, where_what_fix
 from ..formats import atomic_write, write_image, write_pfm
 from .render import _Lighting, _expose, _render_view, _sample_lighting
-from .rig import MATERIALS, VARIANTS, StereoRig, _road_bounds, _sample_rig, _texel_size
+from .rig import MATERIALS, VARIANTS, StereoRig, _road_bounds, sample_rig, _texel_size
 from .terrain import _build_height_field, _HeightField, _pothole_weight, _RoadShape, _sample_road, _sample_road_point
 from .texture import _build_albedo, _build_mipmap, _build_wetness, _MipMap
 from .truth import SynthPair, _describe_hole, _ground_truth, _sink_at, pothole_truth
@@ -271,7 +271,7 @@ def _build_scene(rng, width: int, height: int, variant: str, material: str, poth
 def _build_surface(rng, width: int, height: int, potholes: int | None, flat: bool, shapes: str):
     """The rig, road shape and height field (the first draws of a pair's seed): rig, road,
     texel, grid spacing, bounds, field, h_top."""
-    rig = _sample_rig(rng, width, height)
+    rig = sample_rig(rng, width, height)
     road = _sample_road(rng, rig, potholes, flat, shapes)
     texel = _texel_size(rig)
     spacing = float(np.clip(1.5 * texel, 2e-3, 2e-2))

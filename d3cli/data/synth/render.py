@@ -216,7 +216,7 @@ def _centre_hits(centre, rot, f, cx, cy, width, height, hmap, lip, tile, x0, y0,
 
 
 @njit(cache=True, parallel=True)
-def _visible_from(centre, points, hmap, lip, tile, x0, y0, s, h_top, tol):
+def visible_from(centre, points, hmap, lip, tile, x0, y0, s, h_top, tol):
     """True where the ray from ``centre`` to each point first meets the surface there."""
     height, width = points.shape[0], points.shape[1]
     out = np.zeros((height, width), dtype=np.bool_)

@@ -95,7 +95,7 @@ class StereoRig:
         }
 
 
-def _sample_rig(rng: np.random.Generator, width: int, height: int) -> StereoRig:
+def sample_rig(rng: np.random.Generator, width: int, height: int) -> StereoRig:
     """Random rig: height 1-1.5 m, pitch 40-70 deg, roll +-3 deg, baseline 0.1-0.26 m.
 
     The focal length makes the image centre row span 1.6-2.6 m of road; the baseline

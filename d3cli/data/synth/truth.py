@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .render import _OCCLUSION_TOL_M, _centre_hits, _visible_from
+from .render import _OCCLUSION_TOL_M, _centre_hits, visible_from
 from .rig import StereoRig
 from .potholes import radial_weight
 from .terrain import Pothole, _HeightField, _normalised_radius, _pothole_weight
@@ -245,7 +245,7 @@ def _ground_truth(rig: StereoRig, field_: _HeightField, h_top: float) -> tuple[n
     u_left = np.arange(rig.width, dtype=np.float64)[None, :]
     disparity = u_left - u_right
     valid = np.isfinite(disparity) & (disparity > 0)
-    visible = _visible_from(right_c, points, *hf, _OCCLUSION_TOL_M)
+    visible = visible_from(right_c, points, *hf, _OCCLUSION_TOL_M)
     nocc = valid & visible & (u_right >= 0.0) & (u_right <= rig.width - 1.0)
     return np.where(valid, disparity, np.inf).astype(np.float32), nocc, points
 

@@ -2,6 +2,6 @@
 passes over banded rows, the plain bilateral filter.  ``pixel.py`` the per-pixel kernel,
 ``cpu.py`` (with ``cpu_rows.py`` and ``cpu_vector.py``) and ``cuda.py`` the drivers.
 
-May import: the kernels' shared modules (``pixel``, ``volume``, ``cache``, ``intrinsics``,
+May import: the kernels' shared modules (``pixel``, ``volume``, ``compile_cache``, ``intrinsics``,
 ``cpu_common``, ``cuda_launch``), numba, numpy, llvmlite; no other step package.
 """

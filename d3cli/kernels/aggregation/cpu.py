@@ -9,11 +9,14 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
-from .cpu_rows import _covered_bands, _rbf_forward_row, _rbf_normalise_row
+from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
+from .cpu_rows import _rbf_forward_row, covered_bands, rbf_normalise_row
 from .cpu_vector import RBF_MAX_LANES, _rbf_row, _run_ends
-from ..cpu_common import _on_grid, _pack, _rbf_weight, _row_layout, _unpack
-from ..intrinsics import _store_fence
+from ..cpu_common import on_grid, ops, pack_volume, row_layout, unpack_volume
+from ..intrinsics import store_fence
+
+
+_rbf_weight = ops.rbf_weight
 
 
 # ----------------------------------------------------------------------------- aggregation (step 3)
@@ -23,7 +26,7 @@ GREY_STEPS = 4
 
 
 @njit(cache=True, error_model="numpy")
-def _grey_scale(img):
+def grey_scale(img):
     """``s`` in {1, 4, 16, 64} when every grey level is in [0, 255] and a multiple of
     1 / s (the smallest such s), else 0.
 
@@ -33,7 +36,7 @@ def _grey_scale(img):
     """
     scale = 1
     for k in range(GREY_STEPS):
-        if _on_grid(img, scale, 0):
+        if on_grid(img, scale, 0):
             return scale
         scale *= 4
     return 0
@@ -65,7 +68,7 @@ def rbf_weights(img, sigma_space, sigma_color):
     # same, without an exp per neighbour.  The table is built when it needs fewer exp
     # calls than the image (level 2 of a 720p pair: 2042 instead of 921,600); other
     # images compute the kernel.
-    scale = _grey_scale(img)
+    scale = grey_scale(img)
     n_lut = 255 * scale + 1
     grey8 = scale > 0 and 2 * n_lut < 4 * h * w
     lut = np.empty((2, n_lut if grey8 else 1), np.float64)  # row 0: axis neighbours, row 1: diagonal ones
@@ -88,13 +91,13 @@ def rbf_weights(img, sigma_space, sigma_color):
         for v in range(vb0, vb1):
             cur = ring[v & 1]
             _rbf_forward_row(cur, img, v, 0, 4 if v + 1 < h else 1, lut, scale if grey8 else 0, inv_ss2, inv_sc2)
-            _rbf_normalise_row(weights[v], ring[(v - 1) & 1], cur, centre, v > 0, v + 1 < h, stage)
-        _store_fence()  # the block's streaming stores done before the task ends
+            rbf_normalise_row(weights[v], ring[(v - 1) & 1], cur, centre, v > 0, v + 1 < h, stage)
+        store_fence()  # the block's streaming stores done before the task ends
     return weights
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _rbf_passes(cost, index, covered, weights, row_start, n_tasks, max_row, t_max):
+def rbf_passes(cost, index, covered, weights, row_start, n_tasks, max_row, t_max):
     """``t_max`` 3x3 passes of eq. 2, in place, temporally blocked.
 
     The rows are cut into ``n_tasks`` strips, one task each.  A task runs all passes
@@ -173,20 +176,20 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
 
     ``overwrite_input`` filters ``cost`` itself: one volume at the peak instead of two.
 
-    The passes run in place, row by row and all passes at once (:func:`_rbf_passes`),
+    The passes run in place, row by row and all passes at once (:func:`rbf_passes`),
     so the filter needs one volume and a few row buffers.
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.rbf_filter`.
     """
-    flat, index, n_disp, dense_shape = _unpack(cost)
+    flat, index, n_disp, dense_shape = unpack_volume(cost)
     work = flat if overwrite_input else flat.copy()
     if t_max == 0 or work.size == 0:
-        return _pack(work, index, n_disp, dense_shape)
-    row_start, max_row = _row_layout(index)
-    covered = _covered_bands(index)
+        return pack_volume(work, index, n_disp, dense_shape)
+    row_start, max_row = row_layout(index)
+    covered = covered_bands(index)
     n_tasks = RBF_TASKS_PER_THREAD * numba.get_num_threads()
-    _rbf_passes(work, index, covered, weights, row_start, n_tasks, max_row, int(t_max))
-    return _pack(work, index, n_disp, dense_shape)
+    rbf_passes(work, index, covered, weights, row_start, n_tasks, max_row, int(t_max))
+    return pack_volume(work, index, n_disp, dense_shape)
 
 
 def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
@@ -194,10 +197,10 @@ def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.bilateral_filter`.
     """
-    flat, index, n_disp, dense_shape = _unpack(cost)
+    flat, index, n_disp, dense_shape = unpack_volume(cost)
     max_band = max(1, int((index[:, :, 2] - index[:, :, 1]).max()))
     out = _bilateral(flat, index, img, int(radius), float(sigma_space), float(sigma_color), max_band)
-    return _pack(out, index, n_disp, dense_shape)
+    return pack_volume(out, index, n_disp, dense_shape)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")

@@ -6,10 +6,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import _rbf_weight
-from ..intrinsics import _store_nt
+from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
+from ..cpu_common import ops
+from ..intrinsics import store_nt
 from ..pixel import UINT
+
+
+_rbf_weight = ops.rbf_weight
 
 
 @njit(cache=True, error_model="numpy")
@@ -43,9 +46,9 @@ def _rbf_forward_row(fwd, img, v, j0, j1, lut, scale, inv_ss2, inv_sc2):
 
 
 @njit(cache=True, error_model="numpy")
-def _rbf_pixel(stage, up, cur, centre, has_up, has_down, u):
+def rbf_pixel(stage, up, cur, centre, has_up, has_down, u):
     """``stage[k, u]``, k < 9: pixel u's normalised weights, the exact expressions (for
-    the border pixels and the rare rows that :func:`_rbf_interior` leaves)."""
+    the border pixels and the rare rows that :func:`rbf_interior` leaves)."""
     w = stage.shape[1]
     left = u >= 1
     right = u + 1 < w
@@ -97,7 +100,7 @@ def _rbf_quotient(dst, u, r, rc):
 
 
 @njit(cache=True, error_model="numpy")
-def _rbf_interior(stage, up, cur, centre, w):
+def rbf_interior(stage, up, cur, centre, w):
     """The weights of pixels 1..W-2 of a row with rows above and below, into ``stage``;
     the number of uncertain quotients (:func:`_rbf_quotient`): the row must then be
     redone exactly.  One division per pixel (the reciprocal of the sum) instead of nine:
@@ -143,28 +146,28 @@ def _rbf_interior(stage, up, cur, centre, w):
 
 
 @njit(cache=True, error_model="numpy")
-def _rbf_normalise_row(out, up, cur, centre, has_up, has_down, stage):
+def rbf_normalise_row(out, up, cur, centre, has_up, has_down, stage):
     """Row ``out`` (W, 9) of the normalised weights from the forward kernels of its own
     row (``cur``) and of the row above (``up``; ``has_up`` / ``has_down``: whether the
     rows above / below are in the image), through the slot-major ``stage`` (9, W)."""
     w = out.shape[0]
-    if has_up and has_down and _rbf_interior(stage, up, cur, centre, w) == 0:
-        _rbf_pixel(stage, up, cur, centre, has_up, has_down, 0)
-        _rbf_pixel(stage, up, cur, centre, has_up, has_down, w - 1)
+    if has_up and has_down and rbf_interior(stage, up, cur, centre, w) == 0:
+        rbf_pixel(stage, up, cur, centre, has_up, has_down, 0)
+        rbf_pixel(stage, up, cur, centre, has_up, has_down, w - 1)
     else:
         for u in range(w):
-            _rbf_pixel(stage, up, cur, centre, has_up, has_down, u)
+            rbf_pixel(stage, up, cur, centre, has_up, has_down, u)
     # Streaming stores: the weights (36 bytes a pixel, 33 MB at 720p) are read back by
     # the filter only after the rest of the level's weights, so caching them only
     # evicts the cost volume and costs a read of each line first.
     outf = out.reshape(-1)
     for u in range(w):
         for k in range(9):
-            _store_nt(outf, UINT(9 * u + k), stage[k, u])
+            store_nt(outf, UINT(9 * u + k), stage[k, u])
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _covered_bands(index):
+def covered_bands(index):
     """uint8 (H, W) for the filter passes: 2 where the 3x3 neighbours (clamped at the
     border) all have the pixel's band, 1 where their bands contain it (every cell a pass
     reads exists), 0 elsewhere."""

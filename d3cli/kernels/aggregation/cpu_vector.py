@@ -9,13 +9,13 @@ from numba import njit, types
 from numba.core import cgutils, errors
 from numba.extending import intrinsic
 
-from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
+from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
 from .cpu_rows import _rbf_cells
-from ..intrinsics import _splat16
+from ..intrinsics import splat16
 
 
 #: The widest block of :func:`_rbf_run` (six vectors of 16); the rings of
-#: :func:`_rbf_passes` have this many cells more, so that a block reading past the last
+#: :func:`rbf_passes` have this many cells more, so that a block reading past the last
 #: row stays in its ring.
 RBF_MAX_LANES = 96
 
@@ -50,8 +50,8 @@ def _rbf_cells_vec(typingctx, out, db, ring, offs, sb, band, weights, v, ux, uy,
         starts = [builder.add(context.cast(builder, builder.extract_value(args[3], k), offs_t.types[k], types.int64),
                               sb) for k in range(9)]
         width = as_i64(5)
-        ends = (_splat16(builder, width, i64), _splat16(builder, builder.mul(width, i64(2)), i64))
-        weights = [[_splat16(builder, builder.load(cgutils.get_item_pointer(
+        ends = (splat16(builder, width, i64), splat16(builder, builder.mul(width, i64(2)), i64))
+        weights = [[splat16(builder, builder.load(cgutils.get_item_pointer(
             context, builder, weights_t, weights_ary, [as_i64(7), as_i64(8 + g), i64(k)])), f32) for k in range(9)]
             for g in range(3)]
         for n in range(n_vec):
@@ -102,8 +102,8 @@ def _rbf_cells_borrowing(typingctx, out, d0, ring, own, nbr, weights, v, u, c0, 
                                                ir.FunctionType(ir.VoidType(), [vec, ptr_t, ir.IntType(32), bits]),
                                                "llvm.masked.store.v16f32.p0")
         c0 = as_i64(8)
-        lanes = builder.add(_splat16(builder, c0, i64), ir.Constant(ivec, list(range(16))))
-        inside = builder.icmp_signed("<", lanes, _splat16(builder, as_i64(9), i64))
+        lanes = builder.add(splat16(builder, c0, i64), ir.Constant(ivec, list(range(16))))
+        inside = builder.icmp_signed("<", lanes, splat16(builder, as_i64(9), i64))
         zero = ir.Constant(vec, [0.0] * 16)
         own_cells = builder.call(load, [builder.gep(ring_ary.data, [builder.add(as_i64(3), c0)]), ir.IntType(32)(4),
                                         inside, zero])
@@ -111,13 +111,13 @@ def _rbf_cells_borrowing(typingctx, out, d0, ring, own, nbr, weights, v, u, c0, 
         for k in range(9):
             at, lo_k, hi_k = (builder.load(cgutils.get_item_pointer(context, builder, nbr_t, nbr_ary, [i64(3 * k + j)]))
                               for j in range(3))
-            theirs = builder.and_(builder.icmp_signed(">=", lanes, _splat16(builder, lo_k, i64)),
-                                  builder.icmp_signed("<", lanes, _splat16(builder, hi_k, i64)))
+            theirs = builder.and_(builder.icmp_signed(">=", lanes, splat16(builder, lo_k, i64)),
+                                  builder.icmp_signed("<", lanes, splat16(builder, hi_k, i64)))
             cells = builder.call(load, [builder.gep(ring_ary.data, [builder.add(at, c0)]), ir.IntType(32)(4),
                                         builder.and_(theirs, inside), own_cells])
             wk = builder.load(cgutils.get_item_pointer(context, builder, weights_t, weights_ary,
                                                        [as_i64(6), as_i64(7), i64(k)]))
-            a = builder.fadd(a, builder.fmul(_splat16(builder, wk, f32), cells))
+            a = builder.fadd(a, builder.fmul(splat16(builder, wk, f32), cells))
         builder.call(store, [a, builder.gep(out_ary.data, [builder.add(as_i64(1), c0)]), ir.IntType(32)(4), inside])
         return context.get_dummy_value()
 
@@ -235,7 +235,7 @@ def _rbf_row(out, shift, v, ring, ra, rh, rb, row_start, index, covered, run_end
     run), else for the pixel alone.  Elsewhere, where a
     neighbour's band lacks a disparity of the pixel's band, the pixel's own cell stands
     in (:func:`_rbf_cells_borrowing`, vectors of 16 cells, faster than a scalar loop per
-    slot and part of the band): the bands are built (:mod:`d3cli.method.band`) so that
+    slot and part of the band): the bands are built (:mod:`d3cli.kernels.cost.band`) so that
     this never happens for a cell the later steps read, it only keeps the halo cells
     finite.
     """

@@ -7,7 +7,7 @@ import numba
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import _copy, _dev, _f64, _grid_2d, _pack, _unpack, ops
+from ..cuda_launch import as_f64, device_copy, grid_2d, on_device, ops, pack_volume, unpack_volume
 
 
 _rbf_weight = ops.rbf_weight
@@ -43,13 +43,13 @@ def rbf_weights(img, sigma_space, sigma_color):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.rbf_weights`.
     """
-    d_img = _dev(img)
+    d_img = on_device(img)
     h, w = d_img.shape
     weights = cuda.device_array((h, w, 9), np.float32)
-    blocks, threads = _grid_2d(w, h)
+    blocks, threads = grid_2d(w, h)
     inv_ss2 = 1.0 / (sigma_space * sigma_space)
     inv_sc2 = 1.0 / (sigma_color * sigma_color)
-    _rbf_weights_kernel[blocks, threads](d_img, _f64(inv_ss2), _f64(inv_sc2), weights)
+    _rbf_weights_kernel[blocks, threads](d_img, as_f64(inv_ss2), as_f64(inv_sc2), weights)
     return weights
 
 
@@ -57,7 +57,7 @@ def rbf_weights(img, sigma_space, sigma_color):
 def _rbf_pass(src, dst, index, weights):
     """One pass of eq. 2; one thread per pixel, float32 accumulation in slot order as on
     the CPU; a neighbour whose band lacks the disparity contributes the pixel's own cell
-    (``cpu._rbf_passes``)."""
+    (``cpu.rbf_passes``)."""
     u, v = cuda.grid(2)
     h = index.shape[0]
     w = index.shape[1]
@@ -85,12 +85,12 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.rbf_filter`.
     """
-    flat, index, n_disp, dense_shape = _unpack(cost)
-    d_weights = _dev(weights)
+    flat, index, n_disp, dense_shape = unpack_volume(cost)
+    d_weights = on_device(weights)
     if t_max == 0:
-        return _pack(flat if overwrite_input else _copy(flat), index, n_disp, dense_shape)
+        return pack_volume(flat if overwrite_input else device_copy(flat), index, n_disp, dense_shape)
     h, w = index.shape[0], index.shape[1]
-    blocks, threads = _grid_2d(w, h)
+    blocks, threads = grid_2d(w, h)
     src = cuda.device_array(flat.shape, flat.dtype)
     _rbf_pass[blocks, threads](flat, src, index, d_weights)
     if t_max > 1:
@@ -98,7 +98,7 @@ def rbf_filter(cost, weights, t_max, overwrite_input=False):
         for _ in range(t_max - 1):
             _rbf_pass[blocks, threads](src, dst, index, d_weights)
             src, dst = dst, src
-    return _pack(src, index, n_disp, dense_shape)
+    return pack_volume(src, index, n_disp, dense_shape)
 
 
 @cuda.jit(cache=True)
@@ -138,12 +138,12 @@ def bilateral_filter(cost, img, radius, sigma_space, sigma_color):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.bilateral_filter`.
     """
-    flat, index, n_disp, dense_shape = _unpack(cost)
-    d_img = _dev(img)
+    flat, index, n_disp, dense_shape = unpack_volume(cost)
+    d_img = on_device(img)
     h, w = index.shape[0], index.shape[1]
     out = cuda.device_array(flat.shape, flat.dtype)
     inv_ss2 = 1.0 / (sigma_space * sigma_space)
     inv_sc2 = 1.0 / (sigma_color * sigma_color)
-    blocks, threads = _grid_2d(w, h)
-    _bilateral_kernel[blocks, threads](flat, index, d_img, int(radius), _f64(inv_ss2), _f64(inv_sc2), out)
-    return _pack(out, index, n_disp, dense_shape)
+    blocks, threads = grid_2d(w, h)
+    _bilateral_kernel[blocks, threads](flat, index, d_img, int(radius), as_f64(inv_ss2), as_f64(inv_sc2), out)
+    return pack_volume(out, index, n_disp, dense_shape)

@@ -1,6 +1,6 @@
 """Per-pixel functions of the cost aggregation (pipeline step 3): the bilateral kernel.
 Compiled for every target by :func:`build` (composed by
-:func:`d3cli.kernels.pixel.build_ops`)."""
+:func:`d3cli.kernels.ops.build_ops`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from types import SimpleNamespace
 
 
 def build(jit, shared):
-    """``rbf_weight`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
+    """``rbf_weight`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.ops.build_ops`)."""
 
     @jit
     def rbf_weight(dy, dx, i_p, i_q, inv_sigma_space2, inv_sigma_color2):

@@ -8,8 +8,8 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import _on_grid, _pack, _row_layout, _unpack, ops
+from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
+from ..cpu_common import on_grid, ops, pack_volume, row_layout, unpack_volume
 from ..pixel import UINT
 from ..volume import dense_index
 from .pixel import F32_ONE
@@ -88,12 +88,12 @@ def _integral_pair_into(img, ii, ii2):
 
 
 @njit(cache=True, error_model="numpy")
-def _grid_bits(img):
+def grid_bits(img):
     """The least k in :data:`GRID_BITS` such that every value of ``img`` is a multiple of
     2^-k of magnitude <= 255 (6: the first four pyramid levels of an 8-bit image; 20: a
-    warped one), else 64 (:func:`_on_grid`)."""
+    warped one), else 64 (:func:`on_grid`)."""
     for k in GRID_BITS:
-        if _on_grid(img, 2.0 ** k, -255):
+        if on_grid(img, 2.0 ** k, -255):
             return k
     return 64
 
@@ -109,7 +109,7 @@ def _integral_images(left, right):
     for k in prange(2):
         img = left if k == 0 else right
         _integral_pair_into(img, out[2 * k], out[2 * k + 1])
-        bits[k] = _grid_bits(img)
+        bits[k] = grid_bits(img)
     return out[0], out[1], out[2], out[3], bits[0] + bits[1]
 
 
@@ -126,7 +126,7 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None
         index = dense_index(h, w, n_disp)
     n_cells = int(index[-1, -1, 0]) + int(index[-1, -1, 2])
     flat = _ncc_banded(left, right, index, n_disp, n_cells, int(window), float(min_variance), numba.get_num_threads())
-    return _pack(flat, index, n_disp, (h, w, n_disp) if dense else None)
+    return pack_volume(flat, index, n_disp, (h, w, n_disp) if dense else None)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -134,7 +134,7 @@ def _ncc_banded(left, right, index, n_disp, n_cells, window, min_variance, n_thr
     h, w = left.shape
     r = window // 2
     ii_l, ii_ll, ii_r, ii_rr, bits = _integral_images(left, right)
-    max_row = _row_layout(index)[1]  # the most cells of a row
+    max_row = row_layout(index)[1]  # the most cells of a row
     cost = np.empty(n_cells, np.float32)
     # The rows are cut into blocks, one prange task each; inside a block acc is a running
     # sum along the rows (add the row entering the window, subtract the one leaving it),
@@ -475,7 +475,7 @@ def cosine_cost_volume(fl, fr, nl, nr, max_disparity, index=None):
         index = dense_index(h, w, n_disp)
     n_cells = int(index[-1, -1, 0]) + int(index[-1, -1, 2])
     flat = _cosine_banded(fl, fr, nl, nr, index, n_cells)
-    return _pack(flat, index, n_disp, (h, w, n_disp) if dense else None)
+    return pack_volume(flat, index, n_disp, (h, w, n_disp) if dense else None)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -495,7 +495,7 @@ def invalidate_out_of_view(cost):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.invalidate_out_of_view`.
     """
-    flat, index, n_disp, _ = _unpack(cost)
+    flat, index, n_disp, _ = unpack_volume(cost)
     _invalidate(flat, index, int(n_disp))
     return cost
 

@@ -7,7 +7,7 @@ import numba
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import _dev, _f64, _grid_1d, _grid_2d, _is_device, _pack, _unpack, ops
+from ..cuda_launch import as_f64, grid_1d, grid_2d, is_device, on_device, ops, pack_volume, unpack_volume
 from ..volume import dense_index
 
 
@@ -27,11 +27,11 @@ def _index_and_cells(index, h, w, n_disp):
     read from the host index before the upload (a device index costs one tiny download)."""
     if index is None:
         index = dense_index(h, w, n_disp)
-    if _is_device(index):
+    if is_device(index):
         last = index[index.shape[0] - 1:, index.shape[1] - 1:, :].copy_to_host()
     else:
         last = np.asarray(index)[-1:, -1:, :]
-    return _dev(index), int(last[0, 0, 0]) + int(last[0, 0, 2])
+    return on_device(index), int(last[0, 0, 0]) + int(last[0, 0, 2])
 
 
 # ----------------------------------------------------------------------------- NCC cost (step 2)
@@ -84,9 +84,9 @@ def _integral_images(d_left, d_right):
     h, w = d_left.shape
     rows = cuda.device_array((4, h, w), np.float64)
     ii = cuda.device_array((4, h + 1, w + 1), np.float64)
-    blocks, threads = _grid_1d(4 * h)
+    blocks, threads = grid_1d(4 * h)
     _row_prefixes[blocks, threads](d_left, d_right, rows)
-    blocks, threads = _grid_1d(4 * (w + 1))
+    blocks, threads = grid_1d(4 * (w + 1))
     _column_prefixes[blocks, threads](rows, ii)
     return ii[0], ii[1], ii[2], ii[3]
 
@@ -149,8 +149,8 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.ncc_cost_volume`.
     """
-    d_left = _dev(left)
-    d_right = _dev(right)
+    d_left = on_device(left)
+    d_right = on_device(right)
     h, w = d_left.shape
     n_disp = int(max_disparity) + 1
     dense = index is None
@@ -162,12 +162,12 @@ def ncc_cost_volume(left, right, max_disparity, window, min_variance, index=None
     prefix = cuda.device_array((band, w + 1, n_disp), np.float64)
     for v_start in range(0, h, band):
         n_rows = min(band, h - v_start)
-        blocks, threads = _grid_2d(n_disp, n_rows)
+        blocks, threads = grid_2d(n_disp, n_rows)
         _cross_prefix[blocks, threads](d_left, d_right, r, v_start, n_rows, prefix)
-        blocks, threads = _grid_2d(w, n_rows)
+        blocks, threads = grid_2d(w, n_rows)
         _ncc_band[blocks, threads](ii_l, ii_ll, ii_r, ii_rr, prefix, d_index, r, v_start, n_rows,
-                                   _f64(min_variance), cost)
-    return _pack(cost, d_index, n_disp, (h, w, n_disp) if dense else None)
+                                   as_f64(min_variance), cost)
+    return pack_volume(cost, d_index, n_disp, (h, w, n_disp) if dense else None)
 
 
 @cuda.jit(cache=True)
@@ -186,13 +186,13 @@ def invalidate_out_of_view(cost):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.invalidate_out_of_view`.
     """
-    flat, index, n_disp, dense_shape = _unpack(cost)
+    flat, index, n_disp, dense_shape = unpack_volume(cost)
     h, w = index.shape[0], index.shape[1]
-    blocks, threads = _grid_2d(w, h)
+    blocks, threads = grid_2d(w, h)
     _invalidate[blocks, threads](flat, index)
-    if dense_shape is not None and not _is_device(cost):
+    if dense_shape is not None and not is_device(cost):
         flat.reshape(*dense_shape).copy_to_host(cost)
-    return _pack(flat, index, n_disp, dense_shape)
+    return pack_volume(flat, index, n_disp, dense_shape)
 
 
 # ----------------------------------------------------------------------------- feature cost
@@ -211,12 +211,12 @@ def cosine_cost_volume(fl, fr, nl, nr, max_disparity, index=None):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.cosine_cost_volume`.
     """
-    d_fl, d_fr, d_nl, d_nr = _dev(fl), _dev(fr), _dev(nl), _dev(nr)
+    d_fl, d_fr, d_nl, d_nr = on_device(fl), on_device(fr), on_device(nl), on_device(nr)
     h, w = d_nl.shape
     n_disp = int(max_disparity) + 1
     dense = index is None
     d_index, n_cells = _index_and_cells(index, h, w, n_disp)
     cost = cuda.device_array(n_cells, np.float32)
-    blocks, threads = _grid_2d(w, h)
+    blocks, threads = grid_2d(w, h)
     _cosine_kernel[blocks, threads](d_fl, d_fr, d_nl, d_nr, d_index, cost)
-    return _pack(cost, d_index, n_disp, (h, w, n_disp) if dense else None)
+    return pack_volume(cost, d_index, n_disp, (h, w, n_disp) if dense else None)

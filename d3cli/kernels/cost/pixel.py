@@ -1,6 +1,6 @@
 """Per-pixel functions of the matching cost (pipeline step 2): NCC from window sums,
 the cosine cost of feature vectors.  Compiled for every target by :func:`build`
-(composed by :func:`d3cli.kernels.pixel.build_ops`)."""
+(composed by :func:`d3cli.kernels.ops.build_ops`)."""
 
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ F32_HALF = np.float32(0.5)
 F32_TINY = np.float32(np.finfo(np.float32).tiny)
 
 
-# Over 80 lines by design, as every step's factory (see d3cli.kernels.pixel.build_ops).
+# Over 80 lines by design, as every step's factory (see d3cli.kernels.ops.build_ops).
 def build(jit, shared):
-    """``ncc_cost, ncc_finish, cosine_cost, box_sum, ncc_window_cost`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
+    """``ncc_cost, ncc_finish, cosine_cost, box_sum, ncc_window_cost`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.ops.build_ops`)."""
 
     @jit
     def ncc_finish(num, den):

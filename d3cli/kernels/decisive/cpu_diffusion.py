@@ -1,5 +1,5 @@
 """CPU driver of the decisive diffusion (pipeline step 5): Jacobi sweeps over a
-frontier of pixels near a change.  The contract: :mod:`d3cli.kernels.backend`."""
+frontier of pixels near a change; and the least cost per pixel its gap test reads.  The contract: :mod:`d3cli.kernels.backend`."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import numpy as np
 from numba import njit, prange
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import _unpack, ops
-from ..intrinsics import _prefetch_cells
+from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
+from ..cpu_common import ops, unpack_volume
+from ..intrinsics import prefetch_cells
 from ..pixel import UINT, UNDECIDED
 
 
@@ -17,6 +17,9 @@ _diffuse_at = ops.diffuse_at
 
 
 _holds_own_disparity = ops.holds_own_disparity
+
+
+_band_min = ops.band_min
 
 
 #: :func:`_evaluate_pixels` prefetches the cells of the next this many frontier pixels
@@ -57,7 +60,7 @@ def _prefetch_pixels(cost, flat_index, active, i0, i1):
         k = 3 * active[i]
         off = flat_index[k]
         # to the band's end: the line of the right neighbour's first cells too
-        _prefetch_cells(cost, off + flat_index[k + 1], off + flat_index[k + 2])
+        prefetch_cells(cost, off + flat_index[k + 1], off + flat_index[k + 2])
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -228,7 +231,7 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.diffuse`.
     """
-    flat, index, _, _ = _unpack(cost)
+    flat, index, _, _ = unpack_volume(cost)
     if min_cost is None:
         min_cost = np.empty((0, 0), np.float32)  # empty: diffuse_at finds the least cost itself
     return _diffuse(flat, index, disp0, min_cost, float(max_gap), int(tau), int(kappa_d), bool(adversarial),
@@ -287,3 +290,21 @@ def _diffuse(cost, index, disp0, min_cost, max_gap, tau, kappa_d, adversarial, m
         for i in range(n_changed):
             flat[changed[i]] = new_values[i]
     return disp, sweeps
+
+
+# ----------------------------------------------------------------------------- least costs (the gap test's)
+def min_cost(cost):
+    """Least cost of every pixel over its band; float32 (H, W) (1 for an empty band)."""
+    flat, index, _, _ = unpack_volume(cost)
+    return _min_cost(flat, index)
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _min_cost(cost, index):
+    h, w, _ = index.shape
+    out = np.empty((h, w), np.float32)
+    for v in prange(h):
+        for u in range(w):
+            # pixel.band_min, as the diffusion finds it for itself (CPU) and CUDA's min_cost
+            out[v, u] = _band_min(cost, index, v, u) if index[v, u, 2] > index[v, u, 1] else np.float32(1.0)
+    return out

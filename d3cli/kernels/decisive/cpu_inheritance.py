@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import _unpack, ops
+from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
+from ..cpu_common import ops, unpack_volume
 from ..pixel import UNDECIDED
 
 
@@ -20,7 +20,7 @@ def inherit(cost, coarse, prc, dfm_pkrn_min, epsilon, candidates=0):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.inherit`.
     """
-    flat, index, _, _ = _unpack(cost)
+    flat, index, _, _ = unpack_volume(cost)
     return _inherit(flat, index, coarse, bool(prc), float(dfm_pkrn_min), float(epsilon), int(candidates))
 
 
@@ -35,9 +35,9 @@ def _inherit(cost, index, coarse, prc, dfm_pkrn_min, epsilon, candidates):
         # The test variant as constants in each branch: the compiler specialises the
         # inlined tests (measured faster than one generic call).
         if prc and candidates == 0:
-            _inherit_row_prc(cost, index, coarse, pv, out, 0)
+            inherit_row_prc(cost, index, coarse, pv, out, 0)
         elif prc:
-            _inherit_row_prc(cost, index, coarse, pv, out, 1)
+            inherit_row_prc(cost, index, coarse, pv, out, 1)
         elif candidates == 0:
             _inherit_row(cost, index, coarse, pv, out, False, dfm_pkrn_min, epsilon, 0)
         else:
@@ -96,7 +96,7 @@ def _inherit_pixel_prc(left, left_s, u, d, x0, least_out_l, rd0, rd1, rd2, rd3, 
 
 
 @njit(cache=True, error_model="numpy")
-def _inherit_row_prc(cost, index, coarse, pv, out, candidates):
+def inherit_row_prc(cost, index, coarse, pv, out, candidates):
     """:func:`_inherit_row` with ``prc`` (the configured test): the same decisions, with the
     right-view windows of a patch row shared along it.
 

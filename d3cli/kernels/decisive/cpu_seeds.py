@@ -1,4 +1,5 @@
-"""CPU driver of the decisive seeds (pipeline step 4: PKRN plus left-right check).
+"""CPU driver of the decisive seeds (pipeline step 4: PKRN plus left-right check), and
+the merge of fresh seeds into the inherited map where inheritance left holes.
 The contract: :mod:`d3cli.kernels.backend`."""
 
 from __future__ import annotations
@@ -6,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import _unpack, ops
-from ..intrinsics import _prefetch, _prefetch_band
+from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
+from ..cpu_common import ops, unpack_volume
+from ..intrinsics import prefetch_band, prefetch_cell
 from ..pixel import UNDECIDED
 
 
@@ -24,7 +25,7 @@ def decisive_seeds(cost, pkrn_min, epsilon, lr_tolerance, exclusion, skip=None):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.decisive_seeds`.
     """
-    flat, index, n_disp, _ = _unpack(cost)
+    flat, index, n_disp, _ = unpack_volume(cost)
     has_skip = skip is not None
     if not has_skip:
         skip = np.empty((1, 1), np.int32)
@@ -43,7 +44,7 @@ def _seeds(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip
     pixel's own band) for the row's pixels that ``skip`` leaves, then test (b), the right
     view's WTA at u - d1, for the candidates.  Where the candidates are many, (b) reads
     the row's right-view WTA from a table made in one pass over the row's cells
-    (:func:`_right_wta_row`) instead of scanning ``n_disp`` pixels per candidate; the
+    (:func:`right_wta_row`) instead of scanning ``n_disp`` pixels per candidate; the
     same winners, so the same seeds.
 
     Test (a) runs over a list of the row's examined pixels and prefetches the band of the
@@ -65,9 +66,9 @@ def _seeds(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip
         for i in range(n):
             if sparse:
                 if i + 2 * SEED_PREFETCH < n:
-                    _prefetch(index, 3 * (v * w + todo[i + 2 * SEED_PREFETCH]))
+                    prefetch_cell(index, 3 * (v * w + todo[i + 2 * SEED_PREFETCH]))
                 if i + SEED_PREFETCH < n:
-                    _prefetch_band(cost, index, v, todo[i + SEED_PREFETCH])
+                    prefetch_band(cost, index, v, todo[i + SEED_PREFETCH])
             u = todo[i]
             d1 = _seed_candidate(cost, index, v, u, pkrn_min, epsilon, exclusion)
             row[u] = d1
@@ -77,7 +78,7 @@ def _seeds(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip
         # the row's cells are packed (kernels.volume): its first and last pixel bound them
         n_cells = index[v, w - 1, 0] + index[v, w - 1, 2] - index[v, 0, 0] - index[v, 0, 1]
         if n_cand * n_disp > n_cells:  # the table reads each cell once: cheaper
-            wta = _right_wta_row(cost, index, v)
+            wta = right_wta_row(cost, index, v)
             for u in range(w):
                 d1 = row[u]
                 if d1 != UNDECIDED and abs(wta[u - d1] - d1) > lr_tolerance:
@@ -91,7 +92,7 @@ def _seeds(cost, index, n_disp, pkrn_min, epsilon, lr_tolerance, exclusion, skip
 
 
 @njit(cache=True, error_model="numpy")
-def _right_wta_row(cost, index, v):
+def right_wta_row(cost, index, v):
     """:func:`pixel.right_wta` of every column x of row v: int32 (W,).
 
     One pass over the row's cells: cell (u, d) is a candidate of the right pixel x = u - d.
@@ -121,3 +122,15 @@ def _right_wta_row(cost, index, v):
             best_x[j] = c if better else best_x[j]
             wta_x[j] = lo + i if better else wta_x[j]
     return wta
+
+
+# ----------------------------------------------------------------------------- merging seeds into a map
+@njit(parallel=True, cache=True, error_model="numpy")
+def merge_sparse(primary, fallback):
+    """``primary`` where decided (>= 0), else ``fallback``; int32 (H, W), a new map."""
+    h, w = primary.shape
+    out = np.empty((h, w), np.int32)
+    for v in prange(h):
+        for u in range(w):
+            out[v, u] = primary[v, u] if primary[v, u] >= 0 else fallback[v, u]
+    return out

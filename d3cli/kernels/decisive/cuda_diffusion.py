@@ -1,4 +1,4 @@
-"""CUDA driver of the decisive diffusion: every sweep of a level in one cooperative kernel,
+"""CUDA driver of the decisive diffusion and the least cost per pixel its gap test reads: every sweep of a level in one cooperative kernel,
 the frontier built and the change counter read on the device.  The contract:
 :mod:`d3cli.kernels.backend`."""
 
@@ -6,16 +6,17 @@ from __future__ import annotations
 
 import logging
 
+import numba
 import numpy as np
 from numba import config, cuda
 
 from .. import cuda_launch
-from ..cuda_launch import _copy, _dev, _f64, _is_device, _unpack, ops
+from ..cuda_launch import as_f64, device_copy, is_device, on_device, ops, per_pixel, unpack_volume
 from ..device_counts import DeviceCount, next_slot
 from ..pixel import UNDECIDED
-from .cuda import _least_costs
 
 _diffuse_at = ops.diffuse_at
+_band_min = ops.band_min
 log = logging.getLogger(__name__)
 
 
@@ -214,14 +215,14 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     the device (the fallback: :func:`_host_loop`).  The contract (arguments, shapes,
     results): :meth:`d3cli.kernels.backend.Backend.diffuse`.
     """
-    d_cost, d_index, _, _ = _unpack(cost)
-    disp = _copy(disp0) if _is_device(disp0) else _dev(disp0)  # a new map either way
+    d_cost, d_index, _, _ = unpack_volume(cost)
+    disp = device_copy(disp0) if is_device(disp0) else on_device(disp0)  # a new map either way
     if min_cost is None:
         # the gap test reads every frontier pixel's least cost: one pass over the volume
         # (the CPU driver finds it per pixel instead, pixel.band_min)
         d_min = _least_costs(d_cost, d_index) if max_gap >= 0 else cuda.device_array((1, 1), np.float32)
     else:
-        d_min = _dev(min_cost)
+        d_min = on_device(min_cost)
     h, w = disp.shape
     n_pixels = h * w
     counters = cuda.device_array(_N_COUNTERS, np.int32)
@@ -230,7 +231,7 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
     new_values = cuda.device_array(n_pixels, np.int32)
     stamp = cuda.device_array(n_pixels, np.int32)
     pool, slot = next_slot()
-    args = (d_cost, d_index, disp, d_min, _f64(max_gap), int(tau), int(kappa_d), bool(adversarial),
+    args = (d_cost, d_index, disp, d_min, as_f64(max_gap), int(tau), int(kappa_d), bool(adversarial),
             int(max_sweeps), changed, active, new_values, stamp, counters, pool.array, slot)
     threads = int(cuda_launch.BLOCK_1D)
     wanted = -(-n_pixels // threads)
@@ -246,6 +247,26 @@ def diffuse(cost, disp0, min_cost, max_gap, tau, kappa_d, adversarial, max_sweep
             _cooperative[0] = False
             log.warning("CUDA diffusion: cooperative launch unavailable (%s); one launch per phase instead",
                         str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__)
-    sweeps = _host_loop(disp, d_cost, d_index, d_min, _f64(max_gap), int(tau), int(kappa_d), bool(adversarial),
+    sweeps = _host_loop(disp, d_cost, d_index, d_min, as_f64(max_gap), int(tau), int(kappa_d), bool(adversarial),
                         int(max_sweeps), changed, active, new_values, stamp, counters, (wanted,), (threads,))
     return disp, sweeps
+
+
+# ----------------------------------------------------------------------------- least costs (the gap test's)
+@cuda.jit(cache=True)
+def _min_cost_kernel(cost, index, out):
+    u, v = cuda.grid(2)
+    if v < index.shape[0] and u < index.shape[1]:
+        # pixel.band_min: the least cost the CPU's diffusion finds for itself
+        out[v, u] = _band_min(cost, index, v, u) if index[v, u, 2] > index[v, u, 1] else numba.float32(1.0)
+
+
+def min_cost(cost):
+    """Least cost of every pixel over its band; float32 (H, W) device array (1 if empty)."""
+    flat, index, _, _ = unpack_volume(cost)
+    return _least_costs(flat, index)
+
+
+def _least_costs(flat, index):
+    """:func:`min_cost` of an unpacked volume (device arrays)."""
+    return per_pixel(_min_cost_kernel, index.shape, np.float32, flat, index)

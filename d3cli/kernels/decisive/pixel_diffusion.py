@@ -1,6 +1,6 @@
 """Per-pixel functions of the decisive diffusion (pipeline step 5, paper eq. 4-5).
 Compiled for every target by :func:`build` (composed by
-:func:`d3cli.kernels.pixel.build_ops`)."""
+:func:`d3cli.kernels.ops.build_ops`)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from types import SimpleNamespace
 from ..pixel import INF, UINT, UNDECIDED
 
 
-# Over 80 lines by design, as every step's factory (see d3cli.kernels.pixel.build_ops).
+# Over 80 lines by design, as every step's factory (see d3cli.kernels.ops.build_ops).
 def build(jit, shared):
-    """``accept_state, holds_own_disparity, diffuse_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
+    """``accept_state, holds_own_disparity, diffuse_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.ops.build_ops`)."""
     cost_or_inf = shared.cost_or_inf
     band_min = shared.band_min
 

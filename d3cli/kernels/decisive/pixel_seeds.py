@@ -1,6 +1,6 @@
 """Per-pixel functions of the decisive seeds (pipeline step 4): PKRN and the
 left-right check.  Compiled for every target by :func:`build` (composed by
-:func:`d3cli.kernels.pixel.build_ops`)."""
+:func:`d3cli.kernels.ops.build_ops`)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from types import SimpleNamespace
 from ..pixel import INF, UINT, UNDECIDED
 
 
-# Over 80 lines by design, as every step's factory (see d3cli.kernels.pixel.build_ops).
+# Over 80 lines by design, as every step's factory (see d3cli.kernels.ops.build_ops).
 def build(jit, shared):
-    """``seed_candidate, right_wta, seed_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
+    """``seed_candidate, right_wta, seed_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.ops.build_ops`)."""
     least = shared.least
     least_two = shared.least_two
     first_at = shared.first_at

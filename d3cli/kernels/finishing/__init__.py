@@ -16,24 +16,24 @@ what each step means.  By concern:
 - ``range_box.py``: the box range-kernel smoothing.
 
 Every kernel gives exactly the values of a NumPy/OpenCV formulation of the same step (the
-reference in ``tests/kernels/finishing/references.py``): the same float32/float64
+reference in ``tests/reference/finishing.py``): the same float32/float64
 operations in the same order, bit for bit.  The kernels release the GIL (``nogil``) and run
 as tasks over blocks of rows (or groups of range levels) on :mod:`d3cli.kernels.pool`; tasks
 write disjoint cells, so the results do not depend on the thread count.  This package
 re-exports the public kernels of its modules: ``finishing.fill_inside(...)`` and
 ``finishing.fill.fill_inside(...)`` are the same function.
 
-May import: ``d3cli.kernels.pool``, ``d3cli.kernels.cache`` (the numba cache folder, chosen on
+May import: ``d3cli.kernels.pool``, ``d3cli.kernels.compile_cache`` (the numba cache folder, chosen on
 import), numba, numpy and llvmlite; no other kernel step.
 """
 
 from __future__ import annotations
 
-# cache.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
+# compile_cache.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
 # and drops stale cached functions when it is imported; the decorators of this package's
 # modules read that setting, so it must run first (a package's __init__ runs before any of
 # its modules).
-from .. import cache as _cache  # noqa: F401,E402  (import for its side effect)
+from .. import compile_cache as _compile_cache  # noqa: F401,E402  (import for its side effect)
 from . import exp, fill, occlusion, range_box, smoothing, speckle  # noqa: E402
 from .exp import numpy_exp, numpy_expf  # noqa: E402
 from .fill import (copy_nearest_rows, fill_inside, fill_rows_smaller_side, keep_valid,  # noqa: E402

@@ -4,7 +4,7 @@ The uniqueness test (a right-image column claimed by a larger disparity), the le
 test (out of view), both fused with the masking of the pipeline (:func:`drop_occluded`),
 and the validity after the restore of the perspective transformation
 (:func:`restored_validity`).  Each gives the bytes of its NumPy reference formulation
-(``tests/kernels/finishing/references.py``); see docs/design.md, 'Finishing'.
+(``tests/reference/finishing.py``); see docs/design.md, 'Finishing'.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
+from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
 from ..cpu_common import ops
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import _dev, _f64, _per_pixel, ops
+from ..cuda_launch import as_f64, on_device, ops, per_pixel
 
 
 _pt_shift = ops.pt_shift
@@ -31,8 +31,8 @@ def pt_warp(right, a0, b1, b2, delta):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.pt_warp`.
     """
-    d_right = _dev(right)
-    return _per_pixel(_pt_warp_kernel, d_right.shape, np.float32, d_right, _f64(a0), _f64(b1), _f64(b2), _f64(delta))
+    d_right = on_device(right)
+    return per_pixel(_pt_warp_kernel, d_right.shape, np.float32, d_right, as_f64(a0), as_f64(b1), as_f64(b2), as_f64(delta))
 
 
 @cuda.jit(cache=True)
@@ -49,5 +49,5 @@ def pt_restore(disp, a0, b1, b2, delta):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.pt_restore`.
     """
-    d_disp = _dev(disp)
-    return _per_pixel(_pt_restore_kernel, d_disp.shape, np.float32, d_disp, _f64(a0), _f64(b1), _f64(b2), _f64(delta))
+    d_disp = on_device(disp)
+    return per_pixel(_pt_restore_kernel, d_disp.shape, np.float32, d_disp, as_f64(a0), as_f64(b1), as_f64(b2), as_f64(delta))

@@ -1,6 +1,6 @@
 """Per-pixel functions of the perspective transformation: the shift of the road
 model, the bilinear sample, the restore of a disparity.  Compiled for every target by
-:func:`build` (composed by :func:`d3cli.kernels.pixel.build_ops`)."""
+:func:`build` (composed by :func:`d3cli.kernels.ops.build_ops`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from ..pixel import INF
 
 
 def build(jit, shared):
-    """``pt_shift, bilinear_at, pt_restore_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
+    """``pt_shift, bilinear_at, pt_restore_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.ops.build_ops`)."""
 
     @jit
     def pt_shift(a0, b1, b2, delta, v, u):

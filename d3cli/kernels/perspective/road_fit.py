@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-# cache.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
+# compile_cache.py chooses a writable numba cache folder (NUMBA_CACHE_DIR) for a read-only install
 # when it is imported; the decorator below reads that setting, so it must run first.
-from .. import cache as _cache  # noqa: F401,E402  (import for its side effect)
+from .. import compile_cache as _compile_cache  # noqa: F401,E402  (import for its side effect)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

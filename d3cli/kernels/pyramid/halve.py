@@ -19,7 +19,7 @@ _F32_QUARTER = np.float32(0.25)
 
 
 @njit(cache=True, nogil=True)
-def _halve_task(task, tasks, img, out):
+def halve_task(task, tasks, img, out):
     h, w = out.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
@@ -43,9 +43,9 @@ def halve_area(img: np.ndarray) -> np.ndarray:
     img = np.ascontiguousarray(img, dtype=np.float32)
     out = np.empty((img.shape[0] // 2, img.shape[1] // 2), np.float32)
     if out.size:
-        run_tasks(_halve_task, row_tasks(out.shape[0]), img, out)
+        run_tasks(halve_task, row_tasks(out.shape[0]), img, out)
     return out
 
 
 #: The compiled kernels of this module (nogil, cached on disk), run by :func:`d3cli.kernels.pool.run_tasks`.
-KERNELS = (_halve_task,)
+KERNELS = (halve_task,)

@@ -13,9 +13,9 @@ from numba import njit, types
 from numba.core import cgutils, errors
 from numba.extending import intrinsic
 
-from .. import cache as _cache  # noqa: F401  (chooses the numba cache folder first)
-from ..cpu_common import _pack, _unpack
-from ..intrinsics import _load_acquire, _prefetch_cells, _spin_pause, _store_release
+from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
+from ..cpu_common import pack_volume, unpack_volume
+from ..intrinsics import load_acquire, prefetch_cells, spin_pause, store_release
 from ..pool import run_tasks, threads
 
 
@@ -37,12 +37,12 @@ def sgm_smooth(cost, p1, p2):
     column paths by strips of columns takes about 15 % longer on a KITTI finest volume
     (15.4 M cells, 2 threads; ``scripts/bench_speed.py``).
     """
-    flat, index, n_disp, dense = _unpack(cost)
+    flat, index, n_disp, dense = unpack_volume(cost)
     # not zeroed in a pass of its own: the first sweep writes every cell of a band and
     # zeroes those between the bands (stored, not visible), so every cell is defined
     acc = np.empty_like(flat)
     p1, p2 = np.float32(p1), np.float32(p2)
-    bounds = _segment_bounds(index, SGM_SEGMENTS or threads())
+    bounds = segment_bounds(index, SGM_SEGMENTS or threads())
     n_seg = bounds.shape[0] - 1
     # per boundary and row the path costs (and their least) handed to the next segment
     hand = np.empty((max(n_seg - 1, 1), index.shape[0], n_disp + 2), np.float32)
@@ -50,9 +50,9 @@ def sgm_smooth(cost, p1, p2):
     for backward in (False, True):
         done = np.zeros(n_seg, np.int64)  # per segment the rows finished in this sweep
         abort = np.zeros(1, np.int64)  # set by run_tasks when a thread stops with an error
-        task = _backward_task if backward else _forward_task
+        task = _backward_task if backward else forward_task
         run_tasks(task, n_seg, flat, index, bounds, p1, p2, acc, hand, hand_least, done, abort, abort=abort)
-    return _pack(acc, index, n_disp, dense)
+    return pack_volume(acc, index, n_disp, dense)
 
 
 #: Segments per sweep; None: one per thread (the tests set more, to cross many boundaries
@@ -76,7 +76,7 @@ SGM_PREFETCH_PIXELS = 8
 SGM_SPINS = 64
 
 
-def _segment_bounds(index, n_threads):
+def segment_bounds(index, n_threads):
     """Column bounds of the sweeps' segments (int64, first 0, last W): one per thread (at
     most W / :data:`SGM_MIN_SEGMENT`), cut where the band cells summed over columns reach
     equal shares, so that the segments take equal time."""
@@ -110,7 +110,7 @@ def _column_cells(index):
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _forward_task(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, abort):
+def forward_task(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, abort):
     """Segment i of the first sweep: the left path stores, the down path adds."""
     _sweep_segment(i, n, cost, index, bounds, p1, p2, acc, hand, hand_least, done, abort, 1, 1)
 
@@ -158,11 +158,11 @@ def _sweep_segment(j, n, cost, index, bounds, p1, p2, acc, hand, hand_least, don
         x[:] = np.inf
         if has_up:
             spins = 0
-            while _load_acquire(done, up) <= i:
-                if _load_acquire(abort, 0) != 0:
+            while load_acquire(done, up) <= i:
+                if load_acquire(abort, 0) != 0:
                     return
                 spins += 1
-                _spin_pause(spins % SGM_SPINS == 0)
+                spin_pause(spins % SGM_SPINS == 0)
             x[:] = hand[take, v]
             pm = hand_least[take, v]
         y[:] = np.inf
@@ -183,7 +183,7 @@ def _sweep_segment(j, n, cost, index, bounds, p1, p2, acc, hand, hand_least, don
         if has_down:
             hand[give, v] = x  # x: the path costs of the row's last pixel here
             hand_least[give, v] = pm
-            _store_release(done, j, i + 1)
+            store_release(done, j, i + 1)
 
 
 @njit(cache=True, inline="always")
@@ -217,8 +217,8 @@ def _prefetch_pixel(cost, acc, index, v, u):
     """Prefetch the band of pixel (v, u) in the volume and in the sums."""
     c0 = index[v, u, 0] + index[v, u, 1]
     c1 = index[v, u, 0] + index[v, u, 2] - 1
-    _prefetch_cells(cost, c0, c1)
-    _prefetch_cells(acc, c0, c1)
+    prefetch_cells(cost, c0, c1)
+    prefetch_cells(acc, c0, c1)
 
 
 # ----------------------------------------------------------------------------- a path step as vectors

@@ -7,7 +7,7 @@ import numba
 import numpy as np
 from numba import cuda
 
-from ..cuda_launch import _pack, _unpack, _zeros
+from ..cuda_launch import device_zeros, pack_volume, unpack_volume
 
 #: Threads per line: a warp, the band's disparities spread over them (as libSGM does).
 LANES = 32
@@ -98,9 +98,9 @@ def sgm_smooth(cost, p1, p2):
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.sgm_smooth`.
     """
-    flat, index, n_disp, dense = _unpack(cost)
+    flat, index, n_disp, dense = unpack_volume(cost)
     h, w = int(index.shape[0]), int(index.shape[1])
-    acc = _zeros(flat.shape[0], np.float32)  # cells outside every visible band stay 0
+    acc = device_zeros(flat.shape[0], np.float32)  # cells outside every visible band stay 0
     p1, p2 = np.float32(p1), np.float32(p2)
     size = n_disp + 2
     scratch = cuda.device_array(2 * size * max(h, w), np.float32)  # read only where written
@@ -109,4 +109,4 @@ def sgm_smooth(cost, p1, p2):
     for along_rows, backward, mode in ((True, False, 0), (False, False, 1), (True, True, 1), (False, True, 2)):
         lines = h if along_rows else w
         _sgm_line_kernel[lines, lanes](flat, index, along_rows, backward, p1, p2, scratch, size, acc, mode)
-    return _pack(acc, index, n_disp, dense)
+    return pack_volume(acc, index, n_disp, dense)

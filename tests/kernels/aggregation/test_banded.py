@@ -9,6 +9,9 @@ from tests.kernels.banded import random_bands
 from tests.volumes import banded
 
 from d3cli.kernels import cpu
+from d3cli.kernels.aggregation.cpu import rbf_passes
+from d3cli.kernels.aggregation.cpu_rows import covered_bands
+from d3cli.kernels.cpu_common import row_layout
 from d3cli.kernels.volume import banded_index
 
 
@@ -26,13 +29,13 @@ def test_blocked_rbf_passes_equal_one_pass_at_a_time(shape, t_max, n_tasks):
     flat = vol.cost
     img = rng.uniform(100, 120, shape).astype(np.float32)  # similar grey levels: the passes mix
     weights = cpu.rbf_weights(img, 1.5, 12.0)
-    row_start, max_row = cpu._row_layout(vol.index)
-    covered = cpu._covered_bands(vol.index)
+    row_start, max_row = row_layout(vol.index)
+    covered = covered_bands(vol.index)
     one_by_one = flat.copy()
     for _ in range(t_max):
-        cpu._rbf_passes(one_by_one, vol.index, covered, weights, row_start, 1, max_row, 1)
+        rbf_passes(one_by_one, vol.index, covered, weights, row_start, 1, max_row, 1)
     blocked = flat.copy()
-    cpu._rbf_passes(blocked, vol.index, covered, weights, row_start, n_tasks, max_row, t_max)
+    rbf_passes(blocked, vol.index, covered, weights, row_start, n_tasks, max_row, t_max)
     np.testing.assert_array_equal(blocked, one_by_one)
     assert not np.array_equal(blocked, flat)
 
@@ -60,10 +63,10 @@ def test_covered_bands_match_their_definition(shape):
         # few distinct bands, so that runs of equal bands (the map's 2s) occur
         lo, hi = random_bands(rng, *shape, 3)
         index, _ = banded_index(lo, hi)
-        np.testing.assert_array_equal(cpu._covered_bands(index), _covered_reference(index))
+        np.testing.assert_array_equal(covered_bands(index), _covered_reference(index))
     lo = np.full(shape, 1)
     index, _ = banded_index(lo, lo + 2)
-    assert (cpu._covered_bands(index) == 2).all()
+    assert (covered_bands(index) == 2).all()
 
 
 def _rbf_pass_reference(flat, index, weights):
@@ -103,7 +106,7 @@ def test_rbf_filter_on_bands_is_exact(n_disp):
     r_lo, r_hi = random_bands(rng, h, w, n_disp)
     lo[odd], hi[odd] = r_lo[odd], r_hi[odd]
     vol = banded(rng.uniform(0, 1, (h, w, n_disp)).astype(np.float32), lo, hi)
-    covered = cpu._covered_bands(vol.index)
+    covered = covered_bands(vol.index)
     assert (covered == 0).any() and (covered == 1).any() and (covered == 2).any()
     img = rng.uniform(100, 120, (h, w)).astype(np.float32)
     weights = cpu.rbf_weights(img, 1.5, 12.0)
@@ -118,7 +121,7 @@ def test_row_layout_against_numpy():
     rng = np.random.default_rng(5)
     lo, hi = random_bands(rng, 7, 11, 9)
     vol = banded(rng.uniform(0, 1, (7, 11, 9)).astype(np.float32), lo, hi)
-    row_start, max_row = cpu._row_layout(vol.index)
+    row_start, max_row = row_layout(vol.index)
     sizes = (vol.index[:, :, 2] - vol.index[:, :, 1]).sum(axis=1)
     np.testing.assert_array_equal(row_start, np.concatenate([[0], np.cumsum(sizes)]))
     assert max_row == max(1, int(sizes.max()))

@@ -1,5 +1,5 @@
 """The CPU aggregation (RBF weights and filter, plain bilateral filter) against the slow
-references of tests/reference.py, and the exactness of its fast paths."""
+references of tests/reference/steps.py, and the exactness of its fast paths."""
 
 from __future__ import annotations
 
@@ -10,6 +10,9 @@ from tests import reference as ref
 from tests.volumes import random_volume
 
 from d3cli.kernels import cpu
+from d3cli.kernels.aggregation.cpu import grey_scale
+from d3cli.kernels.aggregation.cpu_rows import rbf_interior, rbf_normalise_row, rbf_pixel
+from d3cli.kernels.intrinsics import store_fence, store_nt
 from d3cli.method.pyramid import build_pyramid
 
 COST_ATOL = 1e-5
@@ -28,14 +31,14 @@ def test_rbf_weights_match_reference(shape):
 
 
 def test_streaming_stores_write_as_assignments():
-    # rbf_weights writes its output with cpu._store_nt (non-temporal stores, then a
+    # rbf_weights writes its output with store_nt (non-temporal stores, then a
     # fence): the same values, cast to the array's dtype, as plain assignments.
     @numba.njit
     def fill(out, vals):
         flat = out.reshape(-1)
         for i in range(vals.size):
-            cpu._store_nt(flat, np.uint64(i), vals[i])
-        cpu._store_fence()
+            store_nt(flat, np.uint64(i), vals[i])
+        store_fence()
 
     vals = np.random.default_rng(5).standard_normal(3 * 13) * 1e3
     for dtype in (np.float32, np.float64):
@@ -53,10 +56,10 @@ def test_rbf_weights_of_coarse_pyramid_levels_equal_the_computed_kernel(scale):
     side = 8 * int(np.sqrt(scale)) + 8  # enough pixels for the table to pay
     img = (rng.integers(0, 255 * scale + 1, (side, side + 3)) / scale).astype(np.float32)
     img[0, 0], img[-1, -1] = 0.0, 255.0
-    assert cpu._grey_scale(img) == scale
+    assert grey_scale(img) == scale
     other = img.copy()
     other[0, 0] = 0.3  # forces the exp path
-    assert cpu._grey_scale(other) == 0
+    assert grey_scale(other) == 0
     got = cpu.rbf_weights(img, 1.5, 12.0)
     computed = cpu.rbf_weights(other, 1.5, 12.0)
     np.testing.assert_array_equal(got[2:], computed[2:])
@@ -68,9 +71,9 @@ def test_grey_scale_of_an_8bit_pyramid():
     from d3cli.method.pyramid import build_pyramid
 
     img = np.random.default_rng(5).integers(0, 256, (64, 80)).astype(np.float32)
-    assert [cpu._grey_scale(level) for level in build_pyramid(img, 5)] == [1, 4, 16, 64, 0]
-    assert cpu._grey_scale(img / 257.0) == 0
-    assert cpu._grey_scale(img + 256.0) == 0  # above 255
+    assert [grey_scale(level) for level in build_pyramid(img, 5)] == [1, 4, 16, 64, 0]
+    assert grey_scale(img / 257.0) == 0
+    assert grey_scale(img + 256.0) == 0  # above 255
 
 
 @pytest.mark.parametrize("shape", SHAPES)
@@ -103,9 +106,9 @@ def test_rbf_weights_reciprocal_quotients_equal_the_division():
     cur[2, ::5] = 0.0
     exact = np.empty((9, w), np.float32)
     for u in range(w):
-        cpu._rbf_pixel(exact, up, cur, 0.4, True, True, u)
+        rbf_pixel(exact, up, cur, 0.4, True, True, u)
     stage = np.empty_like(exact)
-    assert cpu._rbf_interior(stage, up, cur, 0.4, w) == 0
+    assert rbf_interior(stage, up, cur, 0.4, w) == 0
     np.testing.assert_array_equal(stage[:, 1:-1], exact[:, 1:-1])
     # A quotient within a few float64 steps of a float32 rounding boundary (the midpoint
     # 0.5 + 2^-25): uncertain, so the row is redone exactly.
@@ -114,12 +117,12 @@ def test_rbf_weights_reciprocal_quotients_equal_the_division():
     cur[2, 1] = 0.75  # slot 7 of pixel 1
     centre = 0.75 / (0.5 + 2.0**-25) - 0.75
     stage = np.empty((9, 3), np.float32)
-    assert cpu._rbf_interior(stage, up, cur, centre, 3) > 0
+    assert rbf_interior(stage, up, cur, centre, 3) > 0
     exact = np.empty((9, 3), np.float32)
     for u in range(3):
-        cpu._rbf_pixel(exact, up, cur, centre, True, True, u)
+        rbf_pixel(exact, up, cur, centre, True, True, u)
     out = np.empty((3, 9), np.float32)
-    cpu._rbf_normalise_row(out, up, cur, centre, True, True, stage)
+    rbf_normalise_row(out, up, cur, centre, True, True, stage)
     np.testing.assert_array_equal(out, exact.T)
 
 

@@ -1,5 +1,5 @@
 """The CPU matching cost (NCC, integral images, bands) against the slow references of
-tests/reference.py: costs to 1e-5 on small random inputs, known answers by hand."""
+tests/reference/steps.py: costs to 1e-5 on small random inputs, known answers by hand."""
 
 from __future__ import annotations
 
@@ -10,6 +10,8 @@ from tests import reference as ref
 from tests.volumes import random_images
 
 from d3cli.kernels import cpu
+from d3cli.kernels.cost.cpu import NCC_NARROW, grid_bits
+from d3cli.kernels.cpu_common import ops
 from d3cli.kernels.volume import banded_index, to_dense
 
 COST_ATOL = 1e-5
@@ -43,17 +45,17 @@ def test_ncc_cost_volume_running_row_sums_match_reference_across_row_blocks(wind
 
 def test_grid_bits():
     img = np.full((3, 4), 17.0, np.float32)
-    assert cpu._grid_bits(img) == 6
+    assert grid_bits(img) == 6
     img[2, 3] = 255.0 - 2.0**-6
-    assert cpu._grid_bits(img) == 6
+    assert grid_bits(img) == 6
     img[1, 1] = 3.0 + 2.0**-7
-    assert cpu._grid_bits(img) == 20
+    assert grid_bits(img) == 20
     img[0, 0] = -2.0**-20
-    assert cpu._grid_bits(img) == 20
+    assert grid_bits(img) == 20
     for bad in (2.0**-21, 256.0, -256.0, np.nan, np.inf):
         off = img.copy()
         off[2, 0] = bad
-        assert cpu._grid_bits(off) == 64
+        assert grid_bits(off) == 64
 
 
 @pytest.mark.parametrize("window", [5, 25])
@@ -66,7 +68,7 @@ def test_ncc_cost_volume_on_grid_images_does_not_depend_on_row_blocks(window):
     h, w = 300, 40
     left = rng.integers(0, 256, (h, w)).astype(np.float32)
     right = (rng.integers(0, 255 * 2**20, (h, w)) / 2.0**20).astype(np.float32)
-    assert cpu._grid_bits(left) == 6 and cpu._grid_bits(right) == 20
+    assert grid_bits(left) == 6 and grid_bits(right) == 20
     threads = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
@@ -92,8 +94,8 @@ def test_ncc_cost_volume_with_flat_regions_matches_reference():
 
 @pytest.mark.parametrize("window", [3, 9])
 def test_banded_ncc_cost_volume_matches_reference(window):
-    # Bands constant over runs of columns (as the tiles of d3cli.method.band make them),
-    # narrow (<= cpu.NCC_NARROW unclipped cells: the row's one-loop slide) and wide (two
+    # Bands constant over runs of columns (as the tiles of d3cli.kernels.cost.band make them),
+    # narrow (<= NCC_NARROW unclipped cells: the row's one-loop slide) and wide (two
     # loops) in turn along a row, empty ones, and bands clipped at both image borders:
     # every stored cell equals the per-window reference.
     rng = np.random.default_rng(window)
@@ -106,7 +108,7 @@ def test_banded_ncc_cost_volume_matches_reference(window):
         while u < w:
             run = int(rng.integers(1, 12))
             a = int(rng.integers(0, n_disp))
-            width = int(rng.choice([0, 1, 3, cpu.NCC_NARROW, cpu.NCC_NARROW + 1, 20]))
+            width = int(rng.choice([0, 1, 3, NCC_NARROW, NCC_NARROW + 1, 20]))
             lo[v, u:u + run] = a
             hi[v, u:u + run] = min(a + width, n_disp)
             u += run
@@ -179,7 +181,7 @@ def test_ncc_cost_volume_is_the_per_cell_formula_bit_for_bit(window, min_varianc
             for d in range(min(n_disp, u + 1)):
                 c0, c1 = max(u - r, d), min(u + r, w - 1)  # the right window at c - d stays inside
                 wl, wr = lf[rows, c0:c1 + 1], rf[rows, c0 - d:c1 - d + 1]
-                want[v, u, d] = cpu.ops.ncc_cost(wl.size, wl.sum(), (wl * wl).sum(), wr.sum(), (wr * wr).sum(),
+                want[v, u, d] = ops.ncc_cost(wl.size, wl.sum(), (wl * wl).sum(), wr.sum(), (wr * wr).sum(),
                                                  (wl * wr).sum(), min_variance)
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
 
@@ -190,7 +192,7 @@ def test_ncc_finish_is_the_float64_formula_to_float32_rounding():
     rng = np.random.default_rng(11)
     den = rng.uniform(1e-4, 3e8, 20000) ** rng.choice([1.0, 0.5], 20000)
     num = np.sqrt(den) * rng.uniform(-1.2, 1.2, 20000)  # NCC beyond +-1 too (rounding)
-    got = np.array([cpu.ops.ncc_finish(a, b) for a, b in zip(num, den)])
+    got = np.array([ops.ncc_finish(a, b) for a, b in zip(num, den)])
     want = 0.5 * (1.0 - np.clip(num / np.sqrt(den), -1.0, 1.0))
     assert np.array_equal(got.astype(np.float32), got) and (got >= 0).all() and (got <= 1).all()
     np.testing.assert_allclose(got, want, rtol=0, atol=2 * np.finfo(np.float32).eps)
@@ -199,6 +201,6 @@ def test_ncc_finish_is_the_float64_formula_to_float32_rounding():
 def test_ncc_finish_of_a_variance_product_below_float32_is_no_nan():
     # A product of variances this small (min_variance 0) flushes to 0 in float32: without
     # the floor at float32's least normal it was 0 / 0, a NaN cost.
-    assert cpu.ops.ncc_finish(0.0, 1e-300) == 0.5
-    assert cpu.ops.ncc_finish(1.0, 1e-300) == 0.0
-    assert cpu.ops.ncc_finish(-1.0, 1e-300) == 1.0
+    assert ops.ncc_finish(0.0, 1e-300) == 0.5
+    assert ops.ncc_finish(1.0, 1e-300) == 0.0
+    assert ops.ncc_finish(-1.0, 1e-300) == 1.0

@@ -9,6 +9,8 @@ from tests.kernels.banded import case
 from tests.volumes import DIFFUSION_SETTINGS, sparse_map
 
 from d3cli.kernels import cpu
+from d3cli.kernels.cpu_common import ops
+from d3cli.kernels.decisive.cpu_seeds import right_wta_row
 
 
 def test_banded_min_cost_equals_the_full_range_with_inf(case):
@@ -39,8 +41,8 @@ def test_right_view_wta_table_of_a_row_equals_the_scan_of_each_column(case):
     flat = np.round(flat * 4) / 4  # coarse values: many ties
     h, w = vol.shape
     for v in range(h):
-        want = [cpu.ops.right_wta(flat, index, n_disp, v, x) for x in range(w)]
-        np.testing.assert_array_equal(cpu._right_wta_row(flat, index, v), want)
+        want = [ops.right_wta(flat, index, n_disp, v, x) for x in range(w)]
+        np.testing.assert_array_equal(right_wta_row(flat, index, v), want)
 
 
 @pytest.mark.parametrize("share", [0.0, 0.5, 0.95])
@@ -52,7 +54,7 @@ def test_seeds_with_few_or_many_candidates_per_row_equal_the_reference(case, sha
     h, w = vol.shape
     for exclusion in (0, 1):
         want = np.array([[-1 if skip[v, u] >= 0 else
-                          cpu.ops.seed_at(vol.cost, vol.index, vol.n_disp, v, u, 1.05, 1e-3, 1, exclusion)
+                          ops.seed_at(vol.cost, vol.index, vol.n_disp, v, u, 1.05, 1e-3, 1, exclusion)
                           for u in range(w)] for v in range(h)])
         got = cpu.decisive_seeds(vol, 1.05, 1e-3, 1, exclusion, skip=skip)
         np.testing.assert_array_equal(got, want)

@@ -1,5 +1,5 @@
 """The CPU decisive steps (seeds, least costs, diffusion, inheritance, sub-pixel) against
-the slow references of tests/reference.py: integer maps exactly, known answers by hand."""
+the slow references of tests/reference/steps.py: integer maps exactly, known answers by hand."""
 
 from __future__ import annotations
 
@@ -11,6 +11,8 @@ from tests import reference as ref
 from tests.volumes import DIFFUSION_SETTINGS, mark_missing_cells, random_volume, sparse_map, structured_volume
 
 from d3cli.kernels import cpu
+from d3cli.kernels.cpu_common import ops
+from d3cli.kernels.decisive.cpu_diffusion import SERIAL_FRONTIER
 from d3cli.kernels.volume import banded_index
 from d3cli.method.pyramid import downsample
 
@@ -113,7 +115,7 @@ def test_seed_candidate_by_lanes_equals_the_in_order_scan(levels):
             for u in range(w):
                 cells = cost[index[v, u, 0] + lo[v, u]:index[v, u, 0] + hi[v, u]]
                 want = _in_order_candidate(cells, lo[v, u], u, pkrn_min, 1e-3, exclusion)
-                got = cpu.ops.seed_candidate(cost, index, v, u, pkrn_min, 1e-3, exclusion)
+                got = ops.seed_candidate(cost, index, v, u, pkrn_min, 1e-3, exclusion)
                 assert got == want, (v, u, pkrn_min, exclusion)
 
 
@@ -230,7 +232,7 @@ def test_diffusion_max_sweeps_safeguard_matches_truncated_reference():
         np.testing.assert_array_equal(got, want)
 
 
-_diffuse_at = cpu.ops.diffuse_at
+_diffuse_at = ops.diffuse_at
 
 
 @numba.njit(cache=False)
@@ -275,7 +277,7 @@ def test_diffusion_with_large_frontiers_matches_whole_image_jacobi(settings):
     np.testing.assert_array_equal(got, want)
     assert sweeps == want_sweeps > 3
     first, _ = cpu.diffuse(cost, seeds, least, max_sweeps=1, **settings)
-    assert (first != seeds).sum() * 3 > cpu.SERIAL_FRONTIER  # a parallel frontier follows
+    assert (first != seeds).sum() * 3 > SERIAL_FRONTIER  # a parallel frontier follows
 
 
 @numba.njit(cache=False)

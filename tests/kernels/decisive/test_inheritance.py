@@ -3,7 +3,7 @@
 ``paper`` reads eq. 6-7 of the paper literally: a pixel of the 2x2 patch tests the
 disparities of its two co-row partners in the other view's patch, and the PRC compares
 with the two pixels just beside that patch.  The CPU driver is compared with the NumPy
-reference (tests/reference.py) on random volumes; hand-made volumes with one true
+reference (tests/reference/steps.py) on random volumes; hand-made volumes with one true
 disparity pin which disparities each mode can inherit.
 """
 
@@ -15,7 +15,7 @@ from tests import reference as ref
 from tests.volumes import banded, mark_missing_cells, random_volume, structured_volume
 
 from d3cli.kernels import cpu
-from d3cli.kernels.pixel import build_ops
+from d3cli.kernels.ops import build_ops
 
 PAPER = 1
 SYMMETRIC = 0
@@ -50,7 +50,7 @@ def test_candidate_sets_of_every_patch_position():
     assert ref.ref_candidates(x0 + 1, d, True, "paper") == ((d - 1, d), (d - 2, d + 1))
 
 
-def outside_of(ops, x, d, right_view, candidates, n_disp=20):
+def outside_of(literal, x, d, right_view, candidates, n_disp=20):
     """The outside disparities ``outside_cost`` reads, found with one-hot volumes."""
     found = []
     for s in range(n_disp):
@@ -60,7 +60,7 @@ def outside_of(ops, x, d, right_view, candidates, n_disp=20):
         index = np.zeros((1, 40, 3), np.int32)
         index[0, :, 0] = np.arange(40) * n_disp
         index[0, :, 2] = n_disp
-        if ops.outside_cost(flat, index, 0, x, d, right_view, candidates) == np.float32(0.25):
+        if literal.outside_cost(flat, index, 0, x, d, right_view, candidates) == np.float32(0.25):
             found.append(s)
     return found
 
@@ -70,9 +70,9 @@ def outside_of(ops, x, d, right_view, candidates, n_disp=20):
     (PAPER, {(14, False): [4, 7], (15, False): [5, 8], (8, True): [5, 8], (9, True): [4, 7]}),
 ])
 def test_outside_disparities(candidates, want):
-    ops = build_ops(identity)
+    literal = ref.build_literal(identity, build_ops(identity))
     for (x, right_view), disparities in want.items():
-        assert outside_of(ops, x, 6, right_view, candidates) == disparities, (x, right_view)
+        assert outside_of(literal, x, 6, right_view, candidates) == disparities, (x, right_view)
 
 
 @pytest.mark.parametrize("prc", [True, False])
@@ -187,6 +187,7 @@ def test_driver_equals_the_per_pixel_functions_on_banded_volumes(prc, candidates
     """The drivers' per-patch form (``inherit_quad``: each cell read once) decides as the
     per-pixel composition ``inherit_at`` of eq. 6-8 (best_of_three, outside_cost, ...)."""
     ops = build_ops(identity)
+    literal = ref.build_literal(identity, ops)
     rng = np.random.default_rng(50 + 2 * prc + candidates)
     n_decided = 0
     for h, w, n_disp in [(10, 17, 9), (7, 12, 6), (12, 9, 13)]:
@@ -197,7 +198,7 @@ def test_driver_equals_the_per_pixel_functions_on_banded_volumes(prc, candidates
             coarse = coarse.astype(np.int32)
             coarse[rng.random(coarse.shape) < 0.1] = -1
             got = cpu.inherit(vol, coarse, prc, 1.05, 1e-3, candidates)
-            want = np.array([[ops.inherit_at(vol.cost, vol.index, coarse, v, u, prc, 1.05, 1e-3, candidates)
+            want = np.array([[literal.inherit_at(vol.cost, vol.index, coarse, v, u, prc, 1.05, 1e-3, candidates)
                               for u in range(w)] for v in range(h)], np.int32)
             np.testing.assert_array_equal(got, want)
             n_decided += int((want >= 0).sum())
@@ -206,10 +207,11 @@ def test_driver_equals_the_per_pixel_functions_on_banded_volumes(prc, candidates
 
 @pytest.mark.parametrize("candidates", [SYMMETRIC, PAPER])
 def test_prc_driver_shares_right_windows_along_runs_of_one_coarse_disparity(candidates):
-    """The CPU driver with PRC (``cpu._inherit_row_prc``) takes a patch's right windows
+    """The CPU driver with PRC (``cpu_inheritance.inherit_row_prc``) takes a patch's right windows
     x0 - 1, x0 from the patch before it when their coarse disparities are equal: coarse
     maps in runs (no noise), cut by undecided pixels and steps, decide as ``inherit_at``."""
     ops = build_ops(identity)
+    literal = ref.build_literal(identity, ops)
     rng = np.random.default_rng(70 + candidates)
     n_decided = 0
     for h, w, n_disp in [(10, 23, 9), (9, 30, 13)]:
@@ -218,7 +220,7 @@ def test_prc_driver_shares_right_windows_along_runs_of_one_coarse_disparity(cand
             coarse = (true[::2, ::2] // 2).astype(np.int32)
             coarse[rng.random(coarse.shape) < 0.05] = -1
             got = cpu.inherit(vol, coarse, True, 1.05, 1e-3, candidates)
-            want = np.array([[ops.inherit_at(vol.cost, vol.index, coarse, v, u, True, 1.05, 1e-3, candidates)
+            want = np.array([[literal.inherit_at(vol.cost, vol.index, coarse, v, u, True, 1.05, 1e-3, candidates)
                               for u in range(w)] for v in range(h)], np.int32)
             np.testing.assert_array_equal(got, want)
             n_decided += int((want >= 0).sum())

@@ -8,7 +8,7 @@ import pytest
 
 from d3cli.kernels import finishing
 
-from .references import assert_same_bytes, numpy_exp_is_simd
+from tests.reference.finishing import assert_same_bytes, numpy_exp_is_simd
 
 
 @pytest.mark.skipif(not numpy_exp_is_simd(), reason="NumPy's float32 exp is the C library's here")

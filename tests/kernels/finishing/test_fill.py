@@ -11,7 +11,7 @@ import pytest
 from d3cli.kernels import finishing
 from d3cli.method.refinement import fill_holes
 
-from .references import SHAPES, assert_same_bytes, random_map, ref_fill_holes, ref_nearest_along_rows
+from tests.reference.finishing import SHAPES, assert_same_bytes, random_map, ref_fill_holes, ref_nearest_along_rows
 
 
 @pytest.mark.parametrize("shape", SHAPES)

@@ -12,8 +12,8 @@ import pytest
 from d3cli.method.perspective import restored_shares, restored_validity, restored_validity_counts
 from d3cli.method.refinement import drop_occluded, occluded_by_uniqueness, out_of_view
 
-from .references import (SHAPES, assert_same_bytes, random_map, ref_drop_occluded, ref_occluded_by_uniqueness,
-                         ref_out_of_view, ref_restored_validity)
+from tests.reference.finishing import (SHAPES, assert_same_bytes, random_map, ref_drop_occluded,
+                                       ref_occluded_by_uniqueness, ref_out_of_view, ref_restored_validity)
 
 
 @pytest.mark.parametrize("shape", SHAPES)

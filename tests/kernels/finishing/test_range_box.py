@@ -10,7 +10,7 @@ import pytest
 from d3cli.kernels.finishing.range_box import box_range_smooth
 from d3cli.method.refinement import smooth_disparity
 
-from .references import assert_same_bytes, random_map, ref_box_smoothing_glue
+from tests.reference.finishing import assert_same_bytes, random_map, ref_box_smoothing_glue
 
 
 def reference(resid, use, radius, threshold):

@@ -15,7 +15,7 @@ from d3cli.kernels import finishing
 from d3cli.method.perspective import RoadModel, shift_map
 from d3cli.method.refinement import smooth_disparity
 
-from .references import SHAPES, assert_same_bytes, assert_same_smoothing, random_map, ref_smooth_disparity
+from tests.reference.finishing import SHAPES, assert_same_bytes, assert_same_smoothing, random_map, ref_smooth_disparity
 
 
 @pytest.mark.parametrize("shape", SHAPES)

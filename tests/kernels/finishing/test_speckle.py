@@ -11,7 +11,7 @@ import pytest
 from d3cli.kernels import finishing
 from d3cli.method.refinement import drop_speckles
 
-from .references import assert_same_bytes, random_map, ref_drop_speckles
+from tests.reference.finishing import assert_same_bytes, random_map, ref_drop_speckles
 
 
 def test_fixed_point_16_matches_the_numpy_formulation():

@@ -10,7 +10,7 @@ from d3cli.kernels import finishing
 from d3cli.method.refinement import drop_occluded, drop_speckles, fill_holes, occluded_by_uniqueness, out_of_view, \
     smooth_disparity
 
-from .references import assert_same_bytes, random_map
+from tests.reference.finishing import assert_same_bytes, random_map
 
 
 def test_kernels_give_the_same_bytes_with_one_thread_and_with_all():

@@ -1,4 +1,4 @@
-"""The CPU perspective warp and restore against the slow references of tests/reference.py."""
+"""The CPU perspective warp and restore against the slow references of tests/reference/steps.py."""
 
 from __future__ import annotations
 

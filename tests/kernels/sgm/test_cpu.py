@@ -162,7 +162,7 @@ def test_segments_hand_the_row_paths_over_exactly(segments, n_seg):
     cost, lo, hi, _ = random_bands(21, 6, 13, 20, lo_below=6, width_below=15)
     want, _ = reference_paths(cost, lo, hi, 0.05, 0.3)
     segments(n_seg)
-    assert sgm_cpu._segment_bounds(banded(cost, lo, hi).index, n_seg).shape == (n_seg + 1,)
+    assert sgm_cpu.segment_bounds(banded(cost, lo, hi).index, n_seg).shape == (n_seg + 1,)
     got = cpu.sgm_smooth(banded(cost, lo, hi), 0.05, 0.3)
     assert_bands_equal(got.cost, got.index, lo, hi, want)
 
@@ -189,15 +189,15 @@ def test_segments_share_the_band_cells():
     hi = np.where(np.arange(w)[None, :] < 50, 40, 4) + lo
     cost = np.zeros((h, w, 40), F32)
     index = banded(cost, lo, hi).index
-    bounds = sgm_cpu._segment_bounds(index, 2)
+    bounds = sgm_cpu.segment_bounds(index, 2)
     assert bounds[0] == 0 and bounds[-1] == w and bounds.shape == (3,)
     cells = (hi - lo).sum(axis=0)
     left, right = cells[:bounds[1]].sum(), cells[bounds[1]:].sum()
     assert abs(left - right) <= cells.max()
     assert bounds[1] < 50
     # narrow images: no segment narrower than SGM_MIN_SEGMENT columns
-    assert sgm_cpu._segment_bounds(index, 64).shape[0] - 1 == w // sgm_cpu.SGM_MIN_SEGMENT
-    assert sgm_cpu._segment_bounds(index[:, :sgm_cpu.SGM_MIN_SEGMENT + 1], 2).tolist() == [0, sgm_cpu.SGM_MIN_SEGMENT + 1]
+    assert sgm_cpu.segment_bounds(index, 64).shape[0] - 1 == w // sgm_cpu.SGM_MIN_SEGMENT
+    assert sgm_cpu.segment_bounds(index[:, :sgm_cpu.SGM_MIN_SEGMENT + 1], 2).tolist() == [0, sgm_cpu.SGM_MIN_SEGMENT + 1]
 
 
 def test_a_segment_waiting_for_one_that_failed_gives_up_on_abort():
@@ -215,7 +215,7 @@ def test_a_segment_waiting_for_one_that_failed_gives_up_on_abort():
     done = np.zeros(2, np.int64)
     abort = np.ones(1, np.int64)
     args = (1, 2, vol.cost, vol.index, bounds, F32(0.1), F32(0.5), acc, hand, hand_least, done, abort)
-    worker = threading.Thread(target=sgm_cpu._forward_task, args=args, daemon=True)
+    worker = threading.Thread(target=sgm_cpu.forward_task, args=args, daemon=True)
     worker.start()
     worker.join(timeout=120)  # the first call compiles
     assert not worker.is_alive()

@@ -2,8 +2,8 @@
 
 ``np.maximum.at`` for the uniqueness test, cumulative maxima for the row-wise filling,
 ``np.nanmedian`` over four directions, and the piecewise-linear bilateral filter with one
-pair of ``cv2.boxFilter`` calls per range level; with the helpers the tests of this folder
-share (byte comparison, random maps with holes, inf and NaN).
+pair of ``cv2.boxFilter`` calls per range level; with the helpers the finishing tests
+(``tests/kernels/finishing/``) share (byte comparison, random maps with holes, inf and NaN).
 """
 
 from __future__ import annotations

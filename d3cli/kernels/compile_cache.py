@@ -29,7 +29,7 @@ import logging
 import os
 from pathlib import Path
 
-from .cachedir import choose_cache_dir, module_cache_folder
+from .cache_location import choose_cache_dir, module_cache_folder
 
 #: The kernels package folder.
 HERE = Path(__file__).resolve().parent
@@ -37,7 +37,7 @@ HERE = Path(__file__).resolve().parent
 STAMP = "modules.sha256.json"
 #: Modules every kernels module imports that compile nothing (an edit of them must not drop
 #: every cache).
-NO_KERNELS = ("cache.py", "cachedir.py")
+NO_KERNELS = ("compile_cache.py", "cache_location.py")
 
 _prepared = False
 #: Whether this process has warned about a damaged cache entry (once; later ones at DEBUG).

@@ -1,7 +1,7 @@
 """Slow, obviously-correct NumPy/Python references for the D3Stereo kernels.
 
-Written from the specification (the docstrings of ``d3cli/kernels/pixel.py`` and
-``d3cli/kernels/cpu.py``, and docs/design.md, 'Cost volumes'), not from the Numba code: every
+Written from the specification (the docstrings of the steps' ``pixel*.py`` and of
+``d3cli/kernels/backend.py``, and docs/design.md, 'Cost volumes'), not from the Numba code: every
 window, neighbour and candidate set is built explicitly, costs are computed in float64
 and nothing is vectorised cleverly.  Only for tiny inputs (a few thousand cells).
 
@@ -383,35 +383,6 @@ def ref_subpixel(cost, disp, equiangular=False):
             if curvature <= 0.0:
                 continue
             out[v, u] = d + min(0.5, max(-0.5, 0.5 * (c0 - c2) / curvature))
-    return out.astype(np.float32)
-
-
-def ref_fill_holes(disparity, valid):
-    """Row-wise hole filling without smoothing.
-
-    A hole takes the smaller of the nearest valid values to its left and right in its row
-    (the only one when one side has none).  Rows without valid pixels copy the nearest
-    row that has some (the upper one on a tie).  Nothing valid: all inf.
-    """
-    disp = np.asarray(disparity, dtype=np.float64)
-    valid = np.asarray(valid, dtype=bool) & np.isfinite(disp)
-    h, w = disp.shape
-    out = np.full((h, w), np.inf)
-    if not valid.any():
-        return out.astype(np.float32)
-    for v in range(h):
-        for u in range(w):
-            if valid[v, u]:
-                out[v, u] = disp[v, u]
-                continue
-            left = [disp[v, x] for x in range(u - 1, -1, -1) if valid[v, x]][:1]
-            right = [disp[v, x] for x in range(u + 1, w) if valid[v, x]][:1]
-            out[v, u] = min(left + right, default=np.inf)
-    rows_with_data = [v for v in range(h) if valid[v].any()]
-    for v in range(h):
-        if not valid[v].any():
-            nearest = min(rows_with_data, key=lambda r: (abs(r - v), r))
-            out[v] = out[nearest]
     return out.astype(np.float32)
 
 

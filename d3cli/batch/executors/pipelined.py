@@ -41,6 +41,9 @@ import queue
 import threading
 from typing import Callable, Iterator, Sequence
 
+from .. import warmup
+from .base import available_cores
+
 #: Pairs read ahead by default (``--prefetch auto`` on a GPU): one is enough to hide a
 #: read shorter than a compute, the second absorbs one slow read (a cold file cache).
 DEFAULT_PREFETCH = 2
@@ -60,8 +63,6 @@ def default_writers() -> int:
     The compute thread keeps numba's threads for the host steps; PNG encoding and the
     panel release the GIL, so a few writers run in parallel (on 16 cores: 4).
     """
-    from .executors import available_cores  # executors imports this module at its end
-
     return max(1, min(MAX_DEFAULT_WRITERS, available_cores() // 4))
 
 
@@ -117,9 +118,7 @@ class PipelinedExecutor:
 
     def warm(self, cfg, method) -> float:
         """Compile or load the kernels before the first pair, as the serial executor does."""
-        from . import executors  # its warm_jit: one name for every executor of this process
-
-        return executors.warm_jit(cfg, method)
+        return warmup.warm_jit(cfg, method)
 
     def drain(self) -> list:
         """``(pair, result)`` of the pairs the writers finished after an interruption (they

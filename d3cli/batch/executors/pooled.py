@@ -1,34 +1,12 @@
-"""Where the pairs of a batch run: in this process, a local process pool, or a Dask cluster.
+"""``--workers N``: N local processes, each taking whole pairs (largest first).
 
-Every executor runs the same picklable per-pair task (a ``functools.partial`` of
-:func:`d3cli.batch.runner._batch_pair`, which writes one pair's outputs atomically into
-OUT and returns its report row and run.json record), so the per-pair files are the same
-whichever runs them.  The parent (client) keeps the OUT lock, collects the results and
-writes ``run.json`` / the summary.
-
-* :class:`SerialExecutor` - one pair after the other, here (``--workers 1``, the default).
-* :class:`PoolExecutor` - ``--workers N``: N processes, each taking whole pairs (largest
-  first), numba and OpenCV threads set per worker so that workers x threads <= cores.
-  Workers are forked where that is safe, inheriting every imported module (a spawned
-  worker re-imports them: 1.2 s of CPU each on the 2-core test machine, as much as
-  two pairs of 640x360); the first worker compiles or loads the kernels, the others then
-  load the cache it wrote.  At most 2 N pairs are in flight, so a huge manifest never
-  becomes a huge queue.
-* :class:`PipelinedExecutor` (:mod:`d3cli.batch.pipelined`) - ``--prefetch N`` (``auto``:
-  2 on the CUDA backend): one process, the next pairs read by a thread while this one
-  computes, the previous written behind by another; for one GPU.
-* :class:`DaskExecutor` (:mod:`d3cli.batch.cluster`) - ``--scheduler tcp://HOST:PORT``: each pair a task on an existing
-  ``dask.distributed`` cluster, submitted through a window of in-flight futures
-  (``as_completed``), checked up front (scheduler reachable, workers present with the
-  same d3stereo version, OUT writable from every worker).  A worker that dies mid-pair
-  has its task rescheduled elsewhere by the scheduler (``distributed.scheduler.
-  allowed-failures``); a pair failing deterministically returns a ``failed`` record from
-  inside the task, so it is recorded once and never retried.
-
-Ctrl-C: queued pairs are cancelled; pool workers ignore SIGINT and finish the pair they
-hold (whole pairs only, written atomically; counted as done, :meth:`PoolExecutor.drain`), Dask tasks in flight are cancelled (a
-cancelled pair leaves no ``result.json``, so a rerun computes it again); the pipelined
-executor's writer finishes the pairs already computed.
+Numba and OpenCV threads are set per worker so that workers x threads <= cores.  Workers
+are forked where that is safe, inheriting every imported module (a spawned worker
+re-imports them: 1.2 s of CPU each on the 2-core test machine, as much as two pairs of
+640x360); the first worker compiles or loads the kernels, the others then load the cache
+it wrote.  At most 2 N pairs are in flight, so a huge manifest never becomes a huge
+queue.  Ctrl-C: queued pairs are cancelled; the workers ignore SIGINT and finish the pair
+they hold (whole pairs only, written atomically; counted as done, :meth:`PoolExecutor.drain`).
 """
 
 from __future__ import annotations
@@ -40,130 +18,18 @@ import signal
 import sys
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
-from ..data import formats as io
-from ..errors import ConfigError, D3Error
-from .warmup import call_interruptibly, warm_jit
+from ...errors import ConfigError, D3Error
+from .. import warmup
+from ..warmup import call_interruptibly
+from .base import available_cores, largest_first
 
 log = logging.getLogger(__name__)
 
-#: Most ``--workers`` processes accepted (multiprocessing's semaphores overflowed on a
-#: 20-digit count); a pool never has more workers than the batch has pairs.
-MAX_WORKERS = 1024
-
-
-def available_cores() -> int:
-    """CPU cores this process may use (affinity mask where the OS has one)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # macOS, Windows
-        return max(1, os.cpu_count() or 1)
-
-
-#: ``--workers auto`` runs serially on this many cores or fewer (one core: a pool has
-#: nothing to gain); on two quiet cores two forked workers already take about 0.8x the
-#: serial wall time with the same CPU seconds (README "Scaling out", scripts/bench_scaling.py).
-AUTO_SERIAL_CORES = 1
-
-
-def parse_workers(value: str | int) -> int:
-    """``--workers`` value -> number of worker processes (``auto``: one per core, and 1 -
-    serial - on :data:`AUTO_SERIAL_CORES` core).
-
-    Raises
-    ------
-    ConfigError
-        When the value is neither a positive integer nor ``auto``.
-    """
-    if isinstance(value, int):
-        n = value
-    elif str(value).strip().lower() == "auto":
-        cores = available_cores()
-        return 1 if cores <= AUTO_SERIAL_CORES else cores
-    else:
-        try:
-            n = int(value)
-        except ValueError:
-            n = 0
-    if n < 1:
-        raise ConfigError(f"--workers {value}: use a positive number of processes or 'auto'")
-    if n > MAX_WORKERS:
-        raise ConfigError(f"--workers {str(value)[:30]}: at most {MAX_WORKERS} processes; use 'auto' for one "
-                          f"per core ({available_cores()} here)")
-    return n
-
-
-def parse_shard(value: str) -> tuple[int, int]:
-    """``--shard I/N`` -> (I, N) with 1 <= I <= N.
-
-    Raises
-    ------
-    ConfigError
-        When the value is not of the form ``I/N`` with 1 <= I <= N.
-    """
-    try:
-        index, total = (int(part) for part in str(value).split("/"))
-    except ValueError:
-        index, total = 0, 0
-    if not (total >= 1 and 1 <= index <= total):
-        raise ConfigError(f"--shard {value}: use I/N with 1 <= I <= N, e.g. --shard 3/8 for the third of eight")
-    return index, total
-
-
-def select_shard(pairs: Sequence, index: int, total: int) -> list:
-    """Shard ``index`` (1-based) of ``total``: the pairs at positions index-1, index-1+total, ...
-    of the pairs sorted by name.
-
-    Every pair lands in exactly one shard, whatever order discovery returned them in.
-    """
-    ordered = sorted(pairs, key=lambda p: p.name)
-    return [p for i, p in enumerate(ordered) if i % total == index - 1]
-
-
-# ----------------------------------------------------------------------------- serial
-class SerialExecutor:
-    """One pair after the other in this process."""
-
-    mode = "serial"
-
-    def __init__(self):
-        self.current = None  # the pair in progress, for run.json after an interruption
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
-
-    def describe(self) -> dict:
-        return {"mode": self.mode, "workers": 1}
-
-    def warm(self, cfg, method) -> float:
-        return warm_jit(cfg, method)
-
-    def drain(self) -> list:
-        """Pairs finished after an interruption: none here (the pair in progress is dropped)."""
-        return []
-
-    def imap(self, task: Callable, pairs: Sequence) -> Iterator:
-        """Yield ``(pair, task(pair))`` in order."""
-        for pair in pairs:
-            self.current = pair
-            result = task(pair)
-            self.current = None
-            yield pair, result
-
-
-# ----------------------------------------------------------------------------- local pool
 #: Environment variable forcing the pool's start method (``fork``, ``spawn``,
 #: ``forkserver``); for measurements and for platforms where fork misbehaves.
 START_METHOD_ENV = "D3STEREO_POOL_START"
-
-#: Above this many pairs the pool keeps the input order instead of reading every image
-#: header to start the largest pairs first (the idle tail is then a tiny share of the run).
-LARGEST_FIRST_LIMIT = 20_000
 
 _WORKER_WARM_S: float | None = None  # set in each pool worker by its initializer
 
@@ -255,42 +121,12 @@ def _init_pool_worker(threads: int, log_level: int, cfg, method: str | None, jit
         logging.getLogger(library).setLevel(max(log_level, logging.INFO))
     if method is not None:
         with jit_lock:
-            _WORKER_WARM_S = warm_jit(cfg, method)
+            _WORKER_WARM_S = warmup.warm_jit(cfg, method)
 
 
 def _worker_warm_seconds() -> float:
     """Runs in a pool worker: the seconds its initializer spent on the kernels."""
     return _WORKER_WARM_S or 0.0
-
-
-def pair_cost(pair) -> int:
-    """Estimated work of a pair: pixels x disparity range (the cost volume's size).
-
-    From the left image's header (no decoding); 0 when it cannot be read (the pair then
-    fails on its own when it runs).
-    """
-    try:
-        size = io.image_size(pair.left)
-    except Exception:  # noqa: BLE001 - an estimate only: a broken file is reported by its pair
-        size = None
-    if not size:
-        return 0
-    width, height = size
-    return width * height * max(1, pair.max_disparity or width // 4)
-
-
-def largest_first(pairs: Sequence, *, limit: int = LARGEST_FIRST_LIMIT) -> list:
-    """``pairs`` with the most expensive first (:func:`pair_cost`; ties keep their order).
-
-    With whole pairs per worker, a large pair started last runs alone on one worker's
-    threads while the others idle; started first, the small ones fill the end.  Beyond
-    ``limit`` pairs the input order is kept (reading every header would cost more than
-    the tail it saves).
-    """
-    pairs = list(pairs)
-    if len(pairs) > limit:
-        return pairs
-    return sorted(pairs, key=pair_cost, reverse=True)
 
 
 class PoolExecutor:
@@ -421,74 +257,3 @@ class PoolExecutor:
                     if future.done() and not future.cancelled() and future.exception() is None]
         self._pending = {}
         return finished
-
-
-def parse_prefetch(value: str | int | None) -> int | None:
-    """``--prefetch`` value -> pairs read ahead (0: none, serial), or None for ``auto``.
-
-    Raises
-    ------
-    ConfigError
-        When the value is neither a number from 0 to :data:`MAX_PREFETCH` nor ``auto``.
-    """
-    if value is None or str(value).strip().lower() == "auto":
-        return None
-    try:
-        n = int(value)
-    except ValueError:
-        n = -1
-    if not 0 <= n <= MAX_PREFETCH:
-        raise ConfigError(f"--prefetch {str(value)[:30]}: use a number of pairs from 0 (none) to {MAX_PREFETCH}, "
-                          f"or 'auto' ({DEFAULT_PREFETCH} on a GPU, none on the CPU)")
-    return n
-
-
-#: Most pairs ``--prefetch`` reads ahead (each holds its decoded images in memory).
-MAX_PREFETCH = 64
-
-
-def resolve_prefetch(prefetch: int | None, cfg=None, method: str | None = None) -> int:
-    """Pairs read ahead by a batch in this process: ``prefetch``, or for ``auto`` (None)
-    :data:`~d3cli.batch.pipelined.DEFAULT_PREFETCH` when ``method`` runs the kernels
-    (d3stereo, pt-sgm) on the CUDA backend, whose host work would otherwise leave the device
-    idle; else 0 (serial: on the CPU the reading and writing threads take cores from the
-    numba kernels, and sgbm, elas and pandora-sgm never use the device)."""
-    if prefetch is not None:
-        return prefetch
-    from ..kernels import chosen_backend
-    from ..kernels.cachedir import KERNEL_METHODS
-
-    if cfg is None or method not in KERNEL_METHODS:  # sgbm, elas, pandora-sgm never use the device
-        return 0
-
-    return DEFAULT_PREFETCH if chosen_backend(cfg.run.backend) == "cuda" else 0
-
-
-def make_executor(workers: int = 1, scheduler: str | None = None, out: Path | None = None,
-                  n_pairs: int | None = None, *, prefetch: int | None = 0, cfg=None, method: str | None = None):
-    """The executor for ``--workers`` / ``--scheduler`` / ``--prefetch`` (scheduler wins;
-    1 worker is serial, or pipelined with ``prefetch`` >= 1).
-
-    A pool gets at most ``n_pairs`` workers: more would only start, load the kernels one
-    after the other and idle (``--workers 1000`` on two pairs would keep 999 processes
-    alive long after both pairs are done).  ``prefetch`` (None: ``auto``, resolved for ``cfg``
-    and ``method`` by :func:`resolve_prefetch`) applies to a batch in this process only:
-    a pool's or a cluster's workers take whole pairs.
-    """
-    if scheduler:
-        return DaskExecutor(scheduler, Path(out).resolve())
-    if n_pairs is not None and workers > max(1, n_pairs):
-        log.info("--workers %d: %d pair(s) to run, so %d worker process(es)", workers, n_pairs, max(1, n_pairs))
-        workers = max(1, n_pairs)
-    if workers > 1:
-        if prefetch:
-            log.info("--prefetch %d: not used with --workers %d (each worker takes whole pairs)", prefetch, workers)
-        return PoolExecutor(workers)
-    prefetch = resolve_prefetch(prefetch, cfg, method)
-    if prefetch >= 1:
-        return PipelinedExecutor(prefetch)
-    return SerialExecutor()
-
-
-from .cluster import CONNECT_TIMEOUT_S, SCHEDULER_ENV, WORKER_TIMEOUT_S, DaskExecutor  # noqa: E402 - re-exported
-from .pipelined import DEFAULT_PREFETCH, PipelinedExecutor  # noqa: E402 - re-exported

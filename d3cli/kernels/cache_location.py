@@ -2,7 +2,7 @@
 
 A first run compiles the kernels for a minute or more.  The command line asks
 :func:`is_cold` before it imports numba (about a second of imports), so the notice
-(:func:`compile_notice`) comes at once; :mod:`d3cli.kernels.cache` picks the same folder
+(:func:`compile_notice`) comes at once; :mod:`d3cli.kernels.compile_cache` picks the same folder
 with :func:`choose_cache_dir` before anything compiles.  The seconds and kernel count of
 the last cold compile are kept beside the cache (:func:`record_compile`) for the next
 estimate.  A compile cut short by Ctrl-C keeps what it compiled in the cache and records

@@ -21,9 +21,10 @@ import time
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
-from .. import __version__
-from ..errors import ConfigError, D3Error, OutputError, where_what_fix
-from .warmup import warm_jit
+from ... import __version__
+from ...errors import ConfigError, D3Error, OutputError, where_what_fix
+from .. import warmup
+from .base import largest_first
 
 log = logging.getLogger(__name__)
 
@@ -246,7 +247,7 @@ class DaskExecutor:
 
     def warm(self, cfg, method) -> float:
         """Compile (or load the cache) on every worker at once; the slowest worker's seconds."""
-        times = self.client.run(warm_jit, cfg, method)
+        times = self.client.run(warmup.warm_jit, cfg, method)
         return max(times.values(), default=0.0)
 
     def imap(self, task: Callable, pairs: Sequence) -> Iterator:
@@ -256,8 +257,6 @@ class DaskExecutor:
         from distributed import as_completed
         from distributed.client import FutureCancelledError
         from distributed.scheduler import KilledWorker
-
-        from .executors import largest_first
 
         slots = self.gpu_slots or sum(self.client.nthreads().values())
         window = max(2, 2 * slots)

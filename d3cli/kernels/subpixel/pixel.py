@@ -1,7 +1,7 @@
 """Per-pixel function of the sub-pixel refinement: a parabola or two lines of equal slope
 through three costs.
 Compiled for every target by :func:`build` (composed by
-:func:`d3cli.kernels.pixel.build_ops`)."""
+:func:`d3cli.kernels.ops.build_ops`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from ..pixel import INF
 
 
 def build(jit, shared):
-    """``subpixel_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.pixel.build_ops`)."""
+    """``subpixel_at`` compiled with ``jit`` (the protocol: :func:`d3cli.kernels.ops.build_ops`)."""
     cost_or_inf = shared.cost_or_inf
 
     @jit
