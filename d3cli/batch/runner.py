@@ -111,7 +111,7 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
 
     It yields :data:`READ` once the images are read and :data:`COMPUTED` once the map
     is computed, so a pipelined executor can run the three stages in different threads
-    (:mod:`d3cli.batch.pipelined`); run one after the other they are the serial pair.
+    (:mod:`d3cli.batch.executors.pipelined`); run one after the other they are the serial pair.
     ``timings.wall`` counts the stages' own time, not the waits between them.
 
     Everything (maps, error map, panel, cloud and road outputs, result.json) is written
@@ -298,7 +298,7 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
         pid, as long as no running d3stereo holds it (:func:`d3cli.batch.lock.acquire_lock`).
     prefetch : int or None, keyword-only
         With one worker: pairs read ahead while one computes, outputs written behind
-        (:class:`d3cli.batch.pipelined.PipelinedExecutor`); 0 runs serially; None
+        (:class:`d3cli.batch.executors.pipelined.PipelinedExecutor`); 0 runs serially; None
         (``auto``) pipelines on the CUDA backend only.
     on_recorded : callable or None, keyword-only
         Called without arguments right after run.json records the batch complete, with
