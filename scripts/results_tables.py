@@ -12,7 +12,10 @@ Families (``--families``, all by default), each run with the configuration meant
   scored photometrically;
 - ``road-check``: the road inspection check, 21 synthetic pairs for each of the seeds 9101,
   9202 and 9303 with ``-c road --road-report --eval``, scored by ``scripts/bench_road.py``
-  (about 15 minutes on 2 cores).
+  (about 15 minutes on 2 cores), with the confidence flags on these tuning seeds;
+- ``road-confidence``: the confidence check on seeds the road report was not tuned on
+  (4817, 5923, 7039; 21 pairs each), scored as the road check, with the targets of
+  docs/road.md, "The confidence check".
 
 Middlebury and KITTI run d3stereo, OpenCV SGBM, ELAS and pandora census+SGM (``--methods``)
 through ``scripts/benchmark.py``'s evaluation, every method in one process.  A peer whose
@@ -23,7 +26,7 @@ rewrites the blocks between marker comments:
 - docs/results.md: ``<!-- table:NAME:begin -->`` ... ``<!-- table:NAME:end -->`` for NAME
   ``middlebury-kitti`` (family means), ``per-set``, ``wins`` (on how many pairs d3stereo is
   better) and ``peer-better`` (the pairs where a peer is better);
-- docs/road.md: ``road-synth``, ``road-photometric`` and ``road-check``;
+- docs/road.md: ``road-synth``, ``road-photometric``, ``road-check`` and ``road-confidence``;
 - README.md: ``<!-- results-table:begin -->`` ... ``<!-- results-table:end -->`` (a compact
   table of the Middlebury, KITTI and synthetic road families).
 
@@ -71,8 +74,11 @@ README_BLOCK = "results-table"
 ROAD_BLOCK = "road-synth"
 PHOTO_BLOCK = "road-photometric"
 CHECK_BLOCK = "road-check"
+CONFIDENCE_BLOCK = "road-confidence"
 #: The road check of docs/road.md: 21 synthetic 1280x720 pairs per seed, ``-c road --road-report``.
 ROAD_CHECK = {"seeds": (9101, 9202, 9303), "n": 21}
+#: The confidence check of docs/road.md: the same on seeds never used for tuning.
+CONFIDENCE_CHECK = {"seeds": (4817, 5923, 7039), "n": 21}
 #: The synthetic road set of docs/road.md: ``d3stereo synth DIR --n 12 --seed 0`` (1280x720).
 ROAD_SYNTH = {"n": 12, "seed": 0}
 ROAD_METHODS = ("d3stereo+pt", "d3stereo", "sgbm", "pt-sgm")
@@ -154,23 +160,25 @@ def run_road(log=print) -> list[dict]:
     return rows
 
 
-def run_road_check(folder, log=print) -> dict:
-    """Render, run and score the road check in ``folder``; see :func:`score_road_check`."""
+def run_road_check(folder, check=ROAD_CHECK, log=print) -> dict:
+    """Render, run and score a road check (``check``: its seeds and pairs per seed) in
+    ``folder``; see :func:`score_road_check`."""
     folder = Path(folder)
-    for seed in ROAD_CHECK["seeds"]:
+    for seed in check["seeds"]:
         log(f"road check: seed {seed}")
-        subprocess.run([sys.executable, "-m", "d3cli", "synth", str(folder / f"T{seed}"), "--n", str(ROAD_CHECK["n"]),
+        subprocess.run([sys.executable, "-m", "d3cli", "synth", str(folder / f"T{seed}"), "--n", str(check["n"]),
                         "--seed", str(seed), "--width", "1280", "--height", "720", "-q"], check=True)
         subprocess.run([sys.executable, "-m", "d3cli", "run", str(folder / f"T{seed}"), "-c", "road", "--road-report",
                         "--eval", "-o", str(folder / f"O{seed}"), "-q"], check=True)
-    return score_road_check(folder)
+    return score_road_check(folder, check)
 
 
-def score_road_check(folder) -> dict:
+def score_road_check(folder, check=ROAD_CHECK) -> dict:
     """Pool ``folder``'s ``T<seed>`` pairs and ``O<seed>`` outputs and score them.
 
-    ``scripts/bench_road.py`` on folders of links ``s<seed>-<pair>`` (its summary and
-    per-family table) and the mean map accuracy of the runs' ``metrics.csv``.
+    ``scripts/bench_road.py`` on folders of links ``s<seed>-<pair>`` (its summary, per-family
+    table and the confidence check's figures and tables) and the mean map accuracy of the
+    runs' ``metrics.csv``.
     """
     import contextlib
     import csv
@@ -180,7 +188,7 @@ def score_road_check(folder) -> dict:
     folder = Path(folder)
     pooled_t, pooled_o = folder / "T", folder / "O"
     maps = []
-    for seed in ROAD_CHECK["seeds"]:
+    for seed in check["seeds"]:
         for pair in sorted((folder / f"T{seed}").iterdir()):
             for root, base in ((pooled_t, folder / f"T{seed}"), (pooled_o, folder / f"O{seed}")):
                 root.mkdir(exist_ok=True)
@@ -192,7 +200,10 @@ def score_road_check(folder) -> dict:
     with contextlib.redirect_stdout(sys.stderr):
         bench_road.main([str(pooled_t), str(pooled_o), "--json", str(folder / "bench_road.json")])
     scored = json.loads((folder / "bench_road.json").read_text())
-    return {"summary": scored["summary"], "families": scored["families"],
+    rows = scored["pairs"]
+    confidence = {"summary": bench_road.confidence_summary(rows), "family": bench_road.confidence_table(rows, "family"),
+                  "lighting": bench_road.confidence_table(rows, "lighting")}
+    return {"summary": scored["summary"], "families": scored["families"], "confidence": confidence,
             "maps": {k: sum(float(r[k]) for r in maps) / len(maps) for k in METRICS} | {"n": len(maps)}}
 
 
@@ -381,6 +392,42 @@ def render_road_check(check) -> str:
                   f"{m['epe']:.3f} / {m['pep_0.5']:.2f} / "
                   f"{m['pep_1']:.2f} / {m['pep_2']:.2f}."]
     return "\n".join(lines)
+
+
+def _pct(x) -> str:
+    return "–" if x is None or x != x else f"{100 * x:.1f} %"
+
+
+def render_confidence(check, *, targets: bool) -> str:
+    """The confidence figures of a road check: the targets' figures (``targets``: with the
+    targets of docs/road.md beside them) and the tables per lighting and per family."""
+    conf = check.get("confidence")
+    if not conf:
+        return "(no confidence figures in this run)"
+    c = conf["summary"]
+
+    def aim(text):
+        return f" (target {text})" if targets else ""
+    lines = [f"- true potholes deeper than 20 mm found by a defect reported `ok`: {c['found_ok']} of "
+             f"{c['potholes']}, {_pct(c['found_ok_share'])}" + aim("at least 85 %"),
+             f"- `ok` matches off by more than 20 % in depth: {c['ok_over_20']} of {c['ok_matches']} "
+             f"(worst {_pct(c['worst_ok_depth'])})" + aim("none"),
+             f"- false defects reported `ok`: {c['false_ok']}, {c['false_ok_per_pair']:.2f} per pair"
+             + aim("at most 0.05") + f"; duplicates reported `ok`: {c['duplicates_ok']}",
+             f"- medians over all matches: |depth| {_pct(c['depth'])}, area {_pct(c['area'])}, volume "
+             f"{_pct(c['volume'])}" + aim("10 %, 15 %, 15 %") + f"; over the `ok` ones: {_pct(c['ok_depth'])}, "
+             f"{_pct(c['ok_area'])}, {_pct(c['ok_volume'])}", ""]
+    for by, title in (("lighting", "lighting"), ("family", "family")):
+        lines += [f"| {title} | potholes > 20 mm | found | found `ok` | matches flagged | why (a defect can have "
+                  "several) | `ok`: median abs depth err | `ok`: worst abs depth err | `ok`: median abs area err | "
+                  "`ok`: median abs volume err |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for t in conf[by]:
+            why = ", ".join(f"{k} {v}" for k, v in sorted(t["reasons"].items(), key=lambda kv: (-kv[1], kv[0]))) or "–"
+            lines.append(f"| {t['group']} | {t['gt']} | {t['found']} | {t['found_ok']} | {t['flagged']} of "
+                         f"{t['matches']} | {why} | {_pct(t['ok_depth'])} | {_pct(t['ok_worst'])} | "
+                         f"{_pct(t['ok_area'])} | {_pct(t['ok_volume'])} |")
+        lines.append("")
+    return "\n".join(lines).rstrip()
 
 
 def render_readme_road_rows(rows) -> str:
@@ -590,10 +637,24 @@ def build(runs, skipped, previous_block, machine) -> dict:
                                "runs the commands above for the seeds " + seeds
                                + f" ({ROAD_CHECK['n']} pairs each) and "
                                f"scores the pooled pairs.\nMachine: {machine}.")
+        blocks[CHECK_BLOCK] = blocks[CHECK_BLOCK].replace(
+            "\n\nCommand:", "\n\nConfidence on these tuning seeds:\n\n"
+            + render_confidence(runs["road-check"], targets=False) + "\n\nCommand:", 1)
+    if runs.get("road-confidence"):
+        seeds = ", ".join(str(seed) for seed in CONFIDENCE_CHECK["seeds"])
+        check = runs["road-confidence"]
+        s = check["summary"]
+        blocks[CONFIDENCE_BLOCK] = (
+            f"{s['pairs']} pairs, {s['gt_potholes']} potholes deeper than 20 mm, recall {100 * s['recall']:.1f} % "
+            f"({s['found']}/{s['gt_potholes']}), false defects {s['false_defects_per_pair']:.2f} per pair.\n\n"
+            + render_confidence(check, targets=True) + "\n\nCommand: `python scripts/results_tables.py --data DATA` "
+            "(this table: `--families road-confidence`), which runs the commands above for the seeds " + seeds
+            + f" ({CONFIDENCE_CHECK['n']} pairs each) and scores the pooled pairs with "
+            f"`scripts/bench_road.py --confidence`.\nMachine: {machine}.")
     return blocks
 
 
-FAMILY_CHOICES = tuple(f.key for f in FAMILIES) + ("road", "road-photo", "road-check")
+FAMILY_CHOICES = tuple(f.key for f in FAMILIES) + ("road", "road-photo", "road-check", "road-confidence")
 
 
 def main(argv=None) -> int:
@@ -650,6 +711,10 @@ def main(argv=None) -> int:
             print(f"road check: seeds {ROAD_CHECK['seeds']}, -c road --road-report", file=sys.stderr)
             with tempfile.TemporaryDirectory(prefix="d3-road-check-") as folder:
                 runs["road-check"] = run_road_check(folder, log=log)
+        if "road-confidence" in families:
+            print(f"confidence check: seeds {CONFIDENCE_CHECK['seeds']}, -c road --road-report", file=sys.stderr)
+            with tempfile.TemporaryDirectory(prefix="d3-road-confidence-") as folder:
+                runs["road-confidence"] = run_road_check(folder, CONFIDENCE_CHECK, log=log)
         if args.save:
             Path(args.save).write_text(json.dumps({"runs": runs, "skipped": skipped, "machine": machine}, indent=1))
 
@@ -659,7 +724,7 @@ def main(argv=None) -> int:
 
     status = 0
     files = ((results_path, RESULTS_BLOCKS), (Path(args.readme), (README_BLOCK,)),
-             (Path(args.road_page), (ROAD_BLOCK, PHOTO_BLOCK, CHECK_BLOCK)))
+             (Path(args.road_page), (ROAD_BLOCK, PHOTO_BLOCK, CHECK_BLOCK, CONFIDENCE_BLOCK)))
     for path, names in files:
         names = [name for name in names if name in blocks]
         if not names:
