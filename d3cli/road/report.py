@@ -171,7 +171,10 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
             new, got = rematch(left, right, disparity, zone, window=window)
             if got[zone].mean() < MIN_RELIABLE:
                 continue
-            if _highpass_noise(height_map(new, finite, camera, plane), band & got, window) <= NOISE_M:
+            # Heights only in a window around the band that holds the smoothing's support.
+            crop = _around(band, int(np.ceil(4 * window)) + 2)
+            if _highpass_noise(height_map(new[crop], finite[crop], camera, plane, origin=(crop[0].start, crop[1].start)),
+                               (band & got)[crop], window) <= NOISE_M:
                 out[zone] = new[zone]
                 break
         # else: no window matches the defect cleanly (a dark, noisy pair): the stored,
@@ -179,10 +182,22 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     return height_map(out, finite, camera, plane)
 
 
+def _around(mask: np.ndarray, margin: int) -> tuple[slice, slice]:
+    """Slices of ``mask``'s bounding box grown by ``margin`` pixels (cut at the image)."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return slice(0, 0), slice(0, 0)
+    h, w = mask.shape
+    return (slice(max(int(rows[0]) - margin, 0), min(int(rows[-1]) + margin + 1, h)),
+            slice(max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, w)))
+
+
 def _highpass_noise(height: np.ndarray, zone: np.ndarray, window: int) -> float:
     """Robust spread (1.4826 MAD, metres) over ``zone`` (flat road) of the heights minus
     their Gaussian smoothing over a window: the matching noise; inf when nothing is
-    measured."""
+    measured.  The arrays may be a window of the map that holds ``zone`` grown by the
+    smoothing's reach (``4 window`` pixels) or the image's edge: outside ``zone`` the
+    smoothed values are zero, so the result is the same."""
     keep = zone & np.isfinite(height)  # a re-match at d <= 0 has no height
     if keep.sum() < 10:
         return np.inf
