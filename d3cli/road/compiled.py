@@ -133,3 +133,182 @@ def height_grid(disparity, valid, f, baseline, cx, cy, doffs, normal, offset, v0
             zz = np.float32(z)
             out[v, u] = float(x) * normal[0] + float(y) * normal[1] + float(zz) * normal[2] + offset
     return out
+
+
+@njit(cache=True)
+def _reconstruct_by_dilation(seed, mask):  # pragma: no cover - compiled
+    """Grey reconstruction by dilation of ``seed`` under ``mask`` (8-connected; seed <= mask),
+    by the hybrid algorithm (a forward and a backward raster scan, then a FIFO of the pixels
+    that can still propagate, L. Vincent, IEEE TIP 1993).  Only minima and maxima of the
+    inputs: the result is exactly scikit-image's ``reconstruction(seed, mask)``."""
+    h, w = seed.shape
+    rec = seed.copy()
+    for v in range(h):
+        for u in range(w):
+            best = rec[v, u]
+            for dv, du in ((-1, -1), (-1, 0), (-1, 1), (0, -1)):
+                y, x = v + dv, u + du
+                if 0 <= y < h and 0 <= x < w and rec[y, x] > best:
+                    best = rec[y, x]
+            rec[v, u] = min(best, mask[v, u])
+    queue = np.empty(h * w * 8 + 1, np.int64)
+    head = tail = 0
+    for v in range(h - 1, -1, -1):
+        for u in range(w - 1, -1, -1):
+            best = rec[v, u]
+            for dv, du in ((1, 1), (1, 0), (1, -1), (0, 1)):
+                y, x = v + dv, u + du
+                if 0 <= y < h and 0 <= x < w and rec[y, x] > best:
+                    best = rec[y, x]
+            value = min(best, mask[v, u])
+            rec[v, u] = value
+            for dv, du in ((1, 1), (1, 0), (1, -1), (0, 1)):
+                y, x = v + dv, u + du
+                if 0 <= y < h and 0 <= x < w and rec[y, x] < value and rec[y, x] < mask[y, x]:
+                    queue[tail] = v * w + u
+                    tail += 1
+                    break
+    while head < tail:
+        p = queue[head]
+        head += 1
+        v, u = p // w, p % w
+        value = rec[v, u]
+        for dv in (-1, 0, 1):
+            for du in (-1, 0, 1):
+                y, x = v + dv, u + du
+                if (dv == 0 and du == 0) or not (0 <= y < h and 0 <= x < w):
+                    continue
+                if rec[y, x] < value and rec[y, x] != mask[y, x]:
+                    rec[y, x] = min(value, mask[y, x])
+                    if tail == queue.size:  # never in practice: each pixel rises at most once per value
+                        queue = np.concatenate((queue[head:], np.empty(queue.size, np.int64)))
+                        tail -= head
+                        head = 0
+                    queue[tail] = y * w + x
+                    tail += 1
+    return rec
+
+
+def h_maxima(image: np.ndarray, h: float) -> np.ndarray:
+    """``skimage.morphology.h_maxima(image, h)`` of a float image (8-connected), the same
+    uint8 result: the regional maxima of height at least ``h``, found by a compiled grey
+    reconstruction instead of scikit-image's sort of every pixel."""
+    image = np.asarray(image)
+    if h > np.ptp(image):
+        return np.zeros(image.shape, np.uint8)
+    if h == 0:
+        raise ValueError("h = 0 is ambiguous")
+    # scikit-image's steps and types: the seed h (and a rounding allowance) below the image,
+    # both in the mask's float type
+    resolution = 2 * np.finfo(image.dtype).resolution * np.abs(image)
+    shifted = image - h - resolution
+    ftype = np.float32 if image.dtype in (np.float16, np.float32) else np.float64
+    rec = _reconstruct_by_dilation(np.ascontiguousarray(shifted, ftype), np.ascontiguousarray(image, ftype))
+    return ((image - rec) >= h).astype(np.uint8)
+
+
+def symmetric_half_widths(kernel: np.ndarray) -> np.ndarray | None:
+    """Half-width of each row of a structuring element whose rows are runs centred on its
+    centre column (an ellipse, a rectangle, a cross), -1 for an empty row; None for any
+    other kernel (even sides, a row that is not one centred run)."""
+    k = np.asarray(kernel) != 0
+    if k.shape[0] % 2 == 0 or k.shape[1] % 2 == 0:
+        return None
+    centre = k.shape[1] // 2
+    half = np.full(k.shape[0], -1, np.int64)
+    for i, row in enumerate(k):
+        cols = np.flatnonzero(row)
+        if cols.size == 0:
+            continue
+        if cols[-1] - cols[0] + 1 != cols.size or cols[0] + cols[-1] != 2 * centre:
+            return None
+        half[i] = centre - cols[0]
+    return half
+
+
+@njit(cache=True)
+def _row_distance(mask, value):  # pragma: no cover - compiled
+    """Per row, the distance (columns) of each pixel to the nearest pixel equal to ``value``
+    in its row; a large number where the row holds none.  Also whether each row holds one."""
+    h, w = mask.shape
+    big = 1 << 30
+    dist = np.empty((h, w), np.int32)
+    any_row = np.zeros(h, np.bool_)
+    for y in range(h):
+        last = -big
+        for x in range(w):
+            if mask[y, x] == value:
+                last = x
+                any_row[y] = True
+            dist[y, x] = min(x - last, big)
+        last = 2 * big
+        for x in range(w - 1, -1, -1):
+            if mask[y, x] == value:
+                last = x
+            d = last - x
+            if d < dist[y, x]:
+                dist[y, x] = d
+    return dist, any_row
+
+
+@njit(cache=True)
+def dilate_rows(mask, half):  # pragma: no cover - compiled
+    """``cv2.dilate(mask, kernel)`` of a bool mask (default border: nothing outside the
+    image counts) for a kernel of centred row runs of half-widths ``half``
+    (:func:`symmetric_half_widths`): a pixel is set when, for some kernel row, the mask's
+    row it reaches has a set pixel within that half-width (a distance per row answers it).
+    Only the mask's rows with a set pixel are visited."""
+    h, w = mask.shape
+    kh = half.shape[0]
+    ay = kh // 2
+    dist, filled = _row_distance(mask, True)
+    out = np.zeros((h, w), np.bool_)
+    for y in range(h):
+        for i in range(kh):
+            yy = y + i - ay
+            if yy < 0 or yy >= h or not filled[yy] or half[i] < 0:
+                continue
+            reach = half[i]
+            for x in range(w):
+                out[y, x] |= dist[yy, x] <= reach
+    return out
+
+
+@njit(cache=True)
+def erode_rows(mask, half):  # pragma: no cover - compiled
+    """``cv2.erode(mask, kernel)`` of a bool mask (default border: what lies outside the
+    image erodes nothing) for a kernel of centred row runs (:func:`dilate_rows`)."""
+    h, w = mask.shape
+    kh = half.shape[0]
+    ay = kh // 2
+    dist, holed = _row_distance(mask, False)
+    out = mask.copy()
+    for y in range(h):
+        for i in range(kh):
+            yy = y + i - ay
+            if yy < 0 or yy >= h or not holed[yy] or half[i] < 0:
+                continue
+            reach = half[i]
+            for x in range(w):
+                out[y, x] &= dist[yy, x] > reach
+    return out
+
+
+def dilate(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """``cv2.dilate(mask, kernel)`` as bool, compiled for kernels of centred row runs."""
+    half = symmetric_half_widths(kernel)
+    if half is None:
+        import cv2
+
+        return cv2.dilate(np.asarray(mask, np.uint8), kernel).astype(bool)
+    return dilate_rows(np.ascontiguousarray(mask, np.bool_), half)
+
+
+def opening(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """``cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)`` as bool (erosion, then dilation)."""
+    half = symmetric_half_widths(kernel)
+    if half is None:
+        import cv2
+
+        return cv2.morphologyEx(np.asarray(mask, np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
+    return dilate_rows(erode_rows(np.ascontiguousarray(mask, np.bool_), half), half)

@@ -36,12 +36,11 @@ from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from ..config import RoadConfig
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
-from .morphology import dilate_near
+from .morphology import dilate_near, fill_holes
 from .splitting import split_parts
 
 log = logging.getLogger(__name__)
@@ -231,10 +230,11 @@ def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, 
     kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
     kernel_local = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * local_noise_px + 1, 2 * local_noise_px + 1))
     map_decided = float(decided[finite].mean()) if finite.any() else 0.0
-    sigma_d = disparity_noise(smooth, camera, plane)
+    depth = _depth_grid(smooth, camera, plane)  # Z of every pixel, once for both below
+    sigma_d = disparity_noise(smooth, camera, plane, depth=depth)
     # Saddle depth that splits a region: half the threshold, but not less than the height
     # noise at the median distance (noisy floors would otherwise split into pieces).
-    z_med = float(np.median(_points(smooth, *np.nonzero(finite)[::-1], camera, plane)[:, 2])) if finite.any() else 0.0
+    z_med = float(np.median(depth[finite])) if finite.any() else 0.0
     split_noise = tuning.noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
     return _Scene(height=height, decided=decided, camera=camera, plane=plane, road=road, tuning=tuning,
                   finite=finite, smooth=smooth, footprint=footprint, v_all=v_all, u_all=u_all,
@@ -340,7 +340,7 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     if fails(sigma_h) or fails(_local_sigma_h(s, comp, sigma_h)):
         return None
     # Pixels without any estimate that the region encloses are unmeasured parts of it.
-    enclosed = ndimage.binary_fill_holes(region)
+    enclosed = fill_holes(region)
     share = float((s.decided & finite)[enclosed].mean())
     if share < road.min_region_decided_share and s.map_decided >= road.min_decided_share:
         return None  # measured on filled pixels: the hole filling's extrapolation, no depth
@@ -436,18 +436,18 @@ def _local_sigma_h(s: _Scene, comp: np.ndarray, sigma_h: float) -> float:
     return sigma_h
 
 
-def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane) -> float:
+def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane, *, depth: np.ndarray | None = None) -> float:
     """Robust disparity noise (pixels) of a (median-filtered) height map.
 
     A disparity error dd moves a road point by ``dh = c Z / (f B) dd`` along the normal,
     so ``h f B / (c Z)`` is the residual in disparity pixels; its 1.4826 MAD over the map
     (potholes are a minority) is the noise.  Real road relief counts in as noise.
+    ``depth``: the depth Z of every pixel of ``height`` when already computed.
     """
     finite = np.isfinite(height)
     if finite.sum() < 10:
         return 0.0
-    v, u = np.nonzero(finite)
-    z = _points(height, u, v, camera, plane)[:, 2]
+    z = (_depth_grid(height, camera, plane) if depth is None else depth)[finite]
     resid = height[finite] * camera.f * camera.baseline / (plane.offset * np.maximum(z, 1e-6))
     return float(1.4826 * np.median(np.abs(resid - np.median(resid))))
 
@@ -470,6 +470,17 @@ def outline(mask: np.ndarray, *, tolerance_px: float = 1.0, offset: tuple = (0, 
         c = cv2.approxPolyDP(c, tolerance_px, True)
         polys.append(tuple((int(p[0][0]), int(p[0][1])) for p in c))
     return tuple(polys)
+
+
+def _depth_grid(height: np.ndarray, camera: Camera, plane: RoadPlane) -> np.ndarray:
+    """Depth Z (float64 (H, W)) of every pixel's point from its height, as :func:`_points`
+    gives it, computed on the pixel grid (no index arrays); inf and nan where ``height``
+    is not finite."""
+    h, w = height.shape
+    n = np.asarray(plane.normal)
+    nr = n[0] * ((np.arange(w) - camera.cx) / camera.f)[None, :] + n[1] * ((np.arange(h) - camera.cy) / camera.f)[:, None] + n[2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (height.astype(np.float64) - plane.offset) / nr
 
 
 def _points(height, us, vs, camera: Camera, plane: RoadPlane) -> np.ndarray:

@@ -80,3 +80,52 @@ def test_height_grid_is_the_height_of_the_back_projected_points():
     win = compiled.height_grid(disp[10:30, 20:50], valid[10:30, 20:50], cam.f, cam.baseline, cam.cx, cam.cy,
                                cam.doffs, normal, offset, 10, 20)
     np.testing.assert_array_equal(win, got[10:30, 20:50])
+
+
+def _smooth_noise(rng, shape, sigma):
+    import cv2
+
+    img = cv2.GaussianBlur(rng.normal(0, 1, shape).astype(np.float32), (0, 0), sigma)
+    img[rng.random(shape) < 0.2] = 0
+    return img
+
+
+@pytest.mark.parametrize("plateaus", [False, True])
+def test_h_maxima_is_scikit_images(plateaus):
+    from skimage.morphology import h_maxima
+
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        img = _smooth_noise(rng, tuple(rng.integers(3, 70, 2)), rng.uniform(0.5, 4))
+        if plateaus:
+            img = np.round(img * 4) / 4
+        for h in (0.05, np.float64(0.1), 0.3, 100.0):  # a numpy h: float64 arithmetic, as in the neck cue
+            expected, got = h_maxima(img, h), compiled.h_maxima(img, h)
+            assert got.dtype == expected.dtype
+            np.testing.assert_array_equal(got, expected)
+        logs = np.log1p(np.abs(img))
+        np.testing.assert_array_equal(compiled.h_maxima(logs, -np.log(0.9)), h_maxima(logs, -np.log(0.9)))
+
+
+@pytest.mark.parametrize("shape", ["ellipse", "rect", "cross"])
+def test_dilation_and_opening_are_opencvs(shape):
+    import cv2
+
+    kind = {"ellipse": cv2.MORPH_ELLIPSE, "rect": cv2.MORPH_RECT, "cross": cv2.MORPH_CROSS}[shape]
+    rng = np.random.default_rng(7)
+    for _ in range(60):
+        mask = rng.random(tuple(rng.integers(1, 120, 2))) < rng.uniform(0.001, 0.6)
+        r = int(rng.integers(0, 50))
+        kernel = cv2.getStructuringElement(kind, (2 * r + 1, 2 * r + 1))
+        np.testing.assert_array_equal(compiled.dilate(mask, kernel), cv2.dilate(mask.astype(np.uint8), kernel) > 0)
+        np.testing.assert_array_equal(compiled.opening(mask, kernel),
+                                      cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel) > 0)
+
+
+def test_other_kernels_go_to_opencv():
+    import cv2
+
+    kernel = np.array([[1, 0, 1], [0, 1, 0], [1, 1, 0]], np.uint8)  # rows that are not centred runs
+    assert compiled.symmetric_half_widths(kernel) is None
+    mask = np.random.default_rng(2).random((20, 30)) < 0.1
+    np.testing.assert_array_equal(compiled.dilate(mask, kernel), cv2.dilate(mask.astype(np.uint8), kernel) > 0)
