@@ -26,6 +26,9 @@ from .load import bundled_configs, config_from_dict, load_config, resolve_config
 from .sections import (
     BACKENDS,
     METHODS,
+    OUTPUT_CHOICES,
+    OUTPUT_GROUPS,
+    output_groups,
     AggregationConfig,
     CameraConfig,
     Config,
@@ -55,6 +58,9 @@ from .yamlfile import (
 
 __all__ = [
     "BACKENDS",
+    "OUTPUT_CHOICES",
+    "OUTPUT_GROUPS",
+    "output_groups",
     "METHODS",
     "MAX_CONFIG_INT",
     "MAX_YAML_BYTES",

@@ -72,8 +72,8 @@ def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
 
 
 def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided: np.ndarray,
-                camera: Camera | None, info: dict, road_cfg, *, right: np.ndarray | None = None
-                ) -> tuple[list[dict], list[str]]:
+                camera: Camera | None, info: dict, road_cfg, *, right: np.ndarray | None = None,
+                groups: frozenset | None = None) -> tuple[list[dict], list[str]]:
     """Write the road outputs of one pair into ``pair_dir``.
 
     Parameters
@@ -97,6 +97,11 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         The right image.  Given, the disparity inside each defect (grown by its ring) is
         matched again with a small window (:mod:`d3cli.road.rematch`) and the defects are
         measured on that; disp.pfm is not changed.
+    groups : frozenset, optional, keyword-only
+        The optional files of ``run.outputs`` (:data:`d3cli.config.OUTPUT_GROUPS`):
+        height.pfm with ``height``, height_color.png and defects.png with ``pictures``;
+        None: all.  defects.json is always written; a road file not asked for is removed
+        (it would describe an earlier report).
 
     Returns
     -------
@@ -136,8 +141,11 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
             defects = [d.__class__(**{**d.__dict__, "low_confidence": True}) for d in defects]
     # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
-    write_pfm(pair_dir / HEIGHT_FILE, height)
-    write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
+    groups = frozenset(("height", "pictures")) if groups is None else groups
+    if "height" in groups:
+        write_pfm(pair_dir / HEIGHT_FILE, height)
+    if "pictures" in groups:
+        write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
     items = [{**d.to_dict(), **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})}
              for d in defects]
     _write_json(pair_dir / DEFECTS_JSON, {
@@ -146,7 +154,11 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
                        "area of the road plane covered by the region; volume_l: fill volume up to the "
                        "surrounding surface; severity: ASTM D6433 pothole level from max depth and the "
                        "equivalent-circle diameter_mm of the area", "defects": items, "warnings": warnings + notes})
-    write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, regions))
+    if "pictures" in groups:
+        write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, regions))
+    for name, group in ((HEIGHT_FILE, "height"), (HEIGHT_COLOR_FILE, "pictures"), (DEFECTS_PNG, "pictures")):
+        if group not in groups:
+            (pair_dir / name).unlink(missing_ok=True)
     if fallback:
         log.info("%s: no road surface, no defects measured", pair_dir.name)
     else:
