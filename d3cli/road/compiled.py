@@ -19,48 +19,47 @@ def weighted_scatter(points, normal, offset, tolerance, limit):  # pragma: no co
     residuals ``r = (n . P + c) / tolerance`` (0 beyond ``limit``), their weighted centre and
     the weighted scatter matrix ``sum w (P - centre)(P - centre)^T``.
 
-    ``points`` (N, 3) float32; ``tolerance`` (N,) float64.  Returns (sum of weights, centre
-    (3,), scatter (3, 3)); the centre and scatter are zeros when no weight is positive.
+    One pass: the moments are summed about the point on the plane nearest the origin
+    (``-c n``, a point of the road), which keeps them as exact as a second pass about the
+    centre would.  ``points`` (N, 3) float32 or float64; ``tolerance`` (N,) float64.
+    Returns (sum of weights, centre (3,), scatter (3, 3)); the centre and scatter are zeros
+    when no weight is positive.
     """
     n = points.shape[0]
-    w = np.empty(n)
+    ox, oy, oz = -offset * normal[0], -offset * normal[1], -offset * normal[2]
     total = 0.0
-    cx = cy = cz = 0.0
+    sx = sy = sz = 0.0
+    sxx = sxy = sxz = syy = syz = szz = 0.0
     for i in range(n):
         x, y, z = float(points[i, 0]), float(points[i, 1]), float(points[i, 2])
         r = (x * normal[0] + y * normal[1] + z * normal[2] + offset) / tolerance[i]
-        if abs(r) < limit:
-            q = 1.0 - (r / limit) ** 2
-            wi = q * q
-        else:
-            wi = 0.0
-        w[i] = wi
-        total += wi
-        cx += wi * x
-        cy += wi * y
-        cz += wi * z
-    centre = np.zeros(3)
-    scatter = np.zeros((3, 3))
-    if total <= 0.0:
-        return total, centre, scatter
-    centre[0], centre[1], centre[2] = cx / total, cy / total, cz / total
-    sxx = sxy = sxz = syy = syz = szz = 0.0
-    for i in range(n):
-        wi = w[i]
-        if wi == 0.0:
+        if abs(r) >= limit:
             continue
-        dx = float(points[i, 0]) - centre[0]
-        dy = float(points[i, 1]) - centre[1]
-        dz = float(points[i, 2]) - centre[2]
+        q = 1.0 - (r / limit) ** 2
+        wi = q * q
+        dx, dy, dz = x - ox, y - oy, z - oz
+        total += wi
+        sx += wi * dx
+        sy += wi * dy
+        sz += wi * dz
         sxx += wi * dx * dx
         sxy += wi * dx * dy
         sxz += wi * dx * dz
         syy += wi * dy * dy
         syz += wi * dy * dz
         szz += wi * dz * dz
-    scatter[0, 0], scatter[0, 1], scatter[0, 2] = sxx, sxy, sxz
-    scatter[1, 0], scatter[1, 1], scatter[1, 2] = sxy, syy, syz
-    scatter[2, 0], scatter[2, 1], scatter[2, 2] = sxz, syz, szz
+    centre = np.zeros(3)
+    scatter = np.zeros((3, 3))
+    if total <= 0.0:
+        return total, centre, scatter
+    mx, my, mz = sx / total, sy / total, sz / total
+    centre[0], centre[1], centre[2] = mx + ox, my + oy, mz + oz
+    scatter[0, 0] = sxx - total * mx * mx
+    scatter[0, 1] = scatter[1, 0] = sxy - total * mx * my
+    scatter[0, 2] = scatter[2, 0] = sxz - total * mx * mz
+    scatter[1, 1] = syy - total * my * my
+    scatter[1, 2] = scatter[2, 1] = syz - total * my * mz
+    scatter[2, 2] = szz - total * mz * mz
     return total, centre, scatter
 
 

@@ -175,12 +175,15 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     that cleanly keeps the stored map."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
     out = disparity.copy()
+    grey = {}  # the grey images, made once for every region
     for region in regions:
         inner = dilate_near(region, ring)
         zone = dilate_near(inner, ring) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
+        shared = {"pad_window": max(WINDOWS), **grey}  # the warps, made once for the zone
         for window in WINDOWS:
-            new, got = rematch(left, right, disparity, zone, window=window)
+            new, got = rematch(left, right, disparity, zone, window=window, shared=shared)
+            grey = {"grey": shared["grey"]} if "grey" in shared else grey
             if got[zone].mean() < MIN_RELIABLE:
                 continue
             # Heights only in a window around the band that holds the smoothing's support.
