@@ -14,14 +14,15 @@ from numba import njit
 
 
 @njit(cache=True)
-def weighted_scatter(points, normal, offset, tolerance, limit):  # pragma: no cover - compiled
+def weighted_scatter(points, normal, offset, min_tolerance, depth_factor, limit):  # pragma: no cover - compiled
     """Tukey-biweight IRLS round of the plane fit: weights ``(1 - (r / limit)^2)^2`` of the
-    residuals ``r = (n . P + c) / tolerance`` (0 beyond ``limit``), their weighted centre and
+    residuals ``r = (n . P + c) / t`` (0 beyond ``limit``), with the tolerance
+    ``t = max(min_tolerance, depth_factor Z^2)`` of each point, their weighted centre and
     the weighted scatter matrix ``sum w (P - centre)(P - centre)^T``.
 
     One pass: the moments are summed about the point on the plane nearest the origin
     (``-c n``, a point of the road), which keeps them as exact as a second pass about the
-    centre would.  ``points`` (N, 3) float32 or float64; ``tolerance`` (N,) float64.
+    centre would.  ``points`` (N, 3) float32 or float64.
     Returns (sum of weights, centre (3,), scatter (3, 3)); the centre and scatter are zeros
     when no weight is positive.
     """
@@ -32,7 +33,7 @@ def weighted_scatter(points, normal, offset, tolerance, limit):  # pragma: no co
     sxx = sxy = sxz = syy = syz = szz = 0.0
     for i in range(n):
         x, y, z = float(points[i, 0]), float(points[i, 1]), float(points[i, 2])
-        r = (x * normal[0] + y * normal[1] + z * normal[2] + offset) / tolerance[i]
+        r = (x * normal[0] + y * normal[1] + z * normal[2] + offset) / max(min_tolerance, z ** 2 * depth_factor)
         if abs(r) >= limit:
             continue
         q = 1.0 - (r / limit) ** 2
@@ -64,12 +65,13 @@ def weighted_scatter(points, normal, offset, tolerance, limit):  # pragma: no co
 
 
 @njit(cache=True)
-def inlier_count(points, normal, offset, tolerance):  # pragma: no cover - compiled
-    """Number of (N, 3) ``points`` with ``|n . P + c| < tolerance`` (per point)."""
+def inlier_count(points, normal, offset, min_tolerance, depth_factor):  # pragma: no cover - compiled
+    """Number of (N, 3) ``points`` with ``|n . P + c| < max(min_tolerance, depth_factor Z^2)``."""
     count = 0
     for i in range(points.shape[0]):
-        r = float(points[i, 0]) * normal[0] + float(points[i, 1]) * normal[1] + float(points[i, 2]) * normal[2]
-        if abs(r + offset) < tolerance[i]:
+        z = float(points[i, 2])
+        r = float(points[i, 0]) * normal[0] + float(points[i, 1]) * normal[1] + z * normal[2]
+        if abs(r + offset) < max(min_tolerance, z ** 2 * depth_factor):
             count += 1
     return count
 
