@@ -313,3 +313,30 @@ def opening(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
 
         return cv2.morphologyEx(np.asarray(mask, np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
     return dilate_rows(erode_rows(np.ascontiguousarray(mask, np.bool_), half), half)
+
+
+@njit(cache=True)
+def back_project(disparity, valid, f, baseline, cx, cy, doffs):  # pragma: no cover - compiled
+    """float32 (N, 3) points of the pixels where ``valid`` holds, the disparity is finite and
+    ``d + doffs > 0``, in image order: what :func:`d3cli.road.pointcloud.disparity_to_points`
+    returns (float64 arithmetic, rounded to float32), without its index arrays."""
+    h, w = disparity.shape
+    n = 0
+    for v in range(h):
+        for u in range(w):
+            d = float(disparity[v, u]) + doffs
+            if valid[v, u] and d > 0.0 and np.isfinite(d):
+                n += 1
+    out = np.empty((n, 3), np.float32)
+    fb = f * baseline
+    i = 0
+    for v in range(h):
+        for u in range(w):
+            d = float(disparity[v, u]) + doffs
+            if valid[v, u] and d > 0.0 and np.isfinite(d):
+                z = fb / d
+                out[i, 0] = (u - cx) * z / f
+                out[i, 1] = (v - cy) * z / f
+                out[i, 2] = z
+                i += 1
+    return out

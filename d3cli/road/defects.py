@@ -41,7 +41,7 @@ from ..config import RoadConfig
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
 from .morphology import dilate_near, fill_holes
-from .splitting import split_parts
+from .splitting import smoothed_depth, split_parts
 
 log = logging.getLogger(__name__)
 
@@ -205,8 +205,15 @@ def find_defects(
     road = RoadConfig() if road is None else road
     scene = _scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning)
     found: list = []
+    blurred: list = []  # the split cue's smoothed height, made once for both kinds (it is odd in the height)
+
+    def smoothed_height():
+        if not blurred:
+            blurred.append(smoothed_depth(scene.smooth, scene.tuning.split_smooth_px))
+        return blurred[0]
+
     for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
-        found += _find_kind(scene, kind, sign, thr_mm)
+        found += _find_kind(scene, kind, sign, thr_mm, smoothed_height)
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
     defects = [Defect(id=i + 1, kind=kind, **d,
                       low_confidence=d["decided_share"] < road.min_decided_share or d["at_border"])
@@ -224,7 +231,9 @@ def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, 
     height = np.where(footprint > 0, height, np.inf).astype(np.float32)
     finite = np.isfinite(height)
     smooth = _median_filled(height, tuning.median_px)
-    v_all, u_all = np.mgrid[0:shape[0], 0:shape[1]]
+    # row and column of every pixel, as read-only views (no two full index arrays per map)
+    v_all = np.broadcast_to(np.arange(shape[0])[:, None], shape)
+    u_all = np.broadcast_to(np.arange(shape[1])[None, :], shape)
     ring_px, local_noise_px = road.ring_px, tuning.local_noise_px
     kernel_ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
     kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
@@ -242,8 +251,10 @@ def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, 
                   map_decided=map_decided, sigma_d=sigma_d, split_noise=split_noise, full_shape=shape)
 
 
-def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
-    """(kind, region mask, measurements) of every pothole (``sign`` -1) or bump (+1)."""
+def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, smoothed_height=None) -> list:
+    """(kind, region mask, measurements) of every pothole (``sign`` -1) or bump (+1);
+    ``smoothed_height``: a function returning :func:`d3cli.road.splitting.smoothed_depth` of
+    the smoothed height (made once for both kinds)."""
     road, tuning = s.road, s.tuning
     with np.errstate(invalid="ignore"):
         cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
@@ -257,7 +268,8 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
                                   smooth_px=tuning.split_smooth_px, neck=road.split_neck,
                                   min_part_m2=road.split_min_area_m2,
                                   step=max(thr_mm * 1e-3, s.split_noise) if tuning.split_terrace else np.inf,
-                                  boxes=True):
+                                  boxes=True, smoothed=None if smoothed_height is None
+                                  else (lambda: sign * smoothed_height())):
         # Measured in a window around the part that holds everything its measurement
         # reads (its walls, rings and noise annulus): the same pixels, the same results,
         # at the cost of the window instead of the map (a noisy 720p map has hundreds of
@@ -395,10 +407,13 @@ def _with_walls(s: _Scene, comp: np.ndarray, sign: float, other: np.ndarray, *, 
     with np.errstate(invalid="ignore"):
         depth = sign * s.smooth[box][use]
     medians = np.full(-(-reach // step_px) + 1, np.nan)
-    for b in np.unique(band):
-        values = depth[band == b]
-        if values.size >= 10:
-            medians[b] = np.median(values)
+    # the bands' values side by side (one sort), instead of a pass over all of them per band
+    order = np.argsort(band, kind="stable")
+    band, depth = band[order], depth[order]
+    starts = np.flatnonzero(np.r_[True, band[1:] != band[:-1]]) if band.size else np.zeros(0, np.int64)
+    for start, stop in zip(starts, np.r_[starts[1:], band.size].astype(np.int64)):
+        if stop - start >= 10:
+            medians[band[start]] = np.median(depth[start:stop])
     out = np.zeros_like(comp)
     out[box] = inside
     if np.isfinite(medians).any():

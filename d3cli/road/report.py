@@ -25,7 +25,8 @@ from .defects import find_defects
 from .morphology import dilate_near
 from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
-from .pointcloud import Camera, disparity_to_points
+from .compiled import back_project
+from .pointcloud import Camera
 from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, rematch
 from .severity import pothole_severity, survey_summary
 
@@ -117,7 +118,8 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     # Only pixels the right camera sees too are measurements (the left-border strip is
     # extrapolated by the hole filling): they are "no estimate" in every road output.
     finite = seen_by_both(disparity)
-    points, _ = disparity_to_points(disparity, finite, camera)
+    points = back_project(np.asarray(disparity, np.float32), finite, float(camera.f), float(camera.baseline),
+                          float(camera.cx), float(camera.cy), float(camera.doffs))  # disparity_to_points' points
     plane = fit_road_plane(points, camera, sigma_disparity=road_cfg.sigma_disparity)
     if plane is None:
         return [], ["no road report: too few points for a road plane"]

@@ -19,12 +19,14 @@ log = logging.getLogger(__name__)
 
 def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.ndarray, *, level: float,
            prominence: float, smooth_px: float, neck: float, min_part_m2: float, step: float = np.inf,
-           boxes: bool = False):
+           boxes: bool = False, smoothed=None):
     """Masks of the components of ``labels``, each cut into separate potholes.
 
     ``boxes``: yield ``(mask, box)`` instead, the mask cut to its component's bounding box
     ``box`` (a pair of slices): a full-size mask per part costs a pass over the image,
-    and a noisy map has hundreds of components.
+    and a noisy map has hundreds of components.  ``smoothed``: a function returning the
+    smoothed depth (the Gaussian of ``depth``, 0 where it is not finite), when the caller
+    has it; called only when a component is large enough to be cut.
 
     Three cues, because overlapping potholes join in three ways (applied in the order 1, 3, 2; a part cut by 3 is not cut by 2):
 
@@ -56,7 +58,7 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
     """
     from scipy import ndimage
 
-    smoothed = None  # the smoothed depth, made when a component is large enough to be cut
+    made = None  # the smoothed depth, made when a component is large enough to be cut
     kernel_open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
     # each component's bounding box in one pass over the labels (a mask and a scan of the
     # whole image per component cost more than the splitting itself on a noisy map)
@@ -67,10 +69,9 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
         if footprint[box][sub_comp].sum() < 2 * min_part_m2:  # too small to hold two parts
             yield _full(sub_comp, box, labels.shape, boxes)
             continue
-        if smoothed is None:
-            smoothed = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
-            smoothed = cv2.GaussianBlur(smoothed, (0, 0), smooth_px) if smooth_px > 0 else smoothed
-        sub_depth = np.where(sub_comp, smoothed[box], 0.0)
+        if made is None:
+            made = smoothed() if smoothed is not None else smoothed_depth(depth, smooth_px)
+        sub_depth = np.where(sub_comp, made[box], 0.0)
         parts = _watershed_parts(-sub_depth, h_maxima(sub_depth, prominence) & sub_comp, sub_comp)
         pieces = []
         for part in parts:
@@ -90,6 +91,14 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
             pieces += _watershed_parts(-dt, lobes, part)
         for piece in _merge_nested(_merge_small(pieces, footprint[box], min_part_m2), ~sub_comp):
             yield _full(piece, box, labels.shape, boxes)
+
+
+def smoothed_depth(depth: np.ndarray, smooth_px: float) -> np.ndarray:
+    """The depth of :func:`split_parts`' saddles: float32, 0 where not finite, Gaussian-
+    smoothed with ``smooth_px`` (none when 0).  Odd in the depth: the map of ``-depth`` is
+    exactly minus this one."""
+    finite_depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
+    return cv2.GaussianBlur(finite_depth, (0, 0), smooth_px) if smooth_px > 0 else finite_depth
 
 
 def _full(piece: np.ndarray, box: tuple, shape: tuple, boxes: bool):

@@ -131,3 +131,16 @@ def test_other_kernels_go_to_opencv():
     assert compiled.symmetric_half_widths(kernel) is None
     mask = np.random.default_rng(2).random((20, 30)) < 0.1
     np.testing.assert_array_equal(compiled.dilate(mask, kernel), cv2.dilate(mask.astype(np.uint8), kernel) > 0)
+
+
+def test_back_project_is_disparity_to_points():
+    rng = np.random.default_rng(8)
+    disp = rng.uniform(-2, 60, (40, 70)).astype(np.float32)
+    disp[rng.random(disp.shape) < 0.1] = np.inf
+    disp[0, :3] = np.nan
+    valid = rng.random(disp.shape) < 0.8
+    cam = Camera(f=700.0, baseline=0.2, cx=35.0, cy=19.5, doffs=1.5)
+    points, _ = disparity_to_points(disp, valid, cam)
+    got = compiled.back_project(disp, valid, cam.f, cam.baseline, cam.cx, cam.cy, cam.doffs)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, points)
