@@ -488,7 +488,7 @@ def outline(mask: np.ndarray, *, tolerance_px: float = 1.0, offset: tuple = (0, 
 
 
 def _depth_grid(height: np.ndarray, camera: Camera, plane: RoadPlane) -> np.ndarray:
-    """Depth Z (float64 (H, W)) of every pixel's point from its height, as :func:`_points`
+    """Depth Z (float64 (H, W)) of every pixel's point from its height, as :func:`_points_at`
     gives it, computed on the pixel grid (no index arrays); inf and nan where ``height``
     is not finite."""
     h, w = height.shape
@@ -498,13 +498,9 @@ def _depth_grid(height: np.ndarray, camera: Camera, plane: RoadPlane) -> np.ndar
         return (height.astype(np.float64) - plane.offset) / nr
 
 
-def _points(height, us, vs, camera: Camera, plane: RoadPlane) -> np.ndarray:
-    """3-D points of pixels from their height: the ray meets ``n . P + c = h``."""
-    return _points_at(height[vs, us], us, vs, camera, plane)
-
-
 def _points_at(heights, us, vs, camera: Camera, plane: RoadPlane) -> np.ndarray:
-    """:func:`_points` of pixels (us, vs) whose heights are ``heights``."""
+    """3-D points of pixels (us, vs) from their heights ``heights``: the ray meets
+    ``n . P + c = h``."""
     n = np.asarray(plane.normal)
     r = np.stack([(us - camera.cx) / camera.f, (vs - camera.cy) / camera.f, np.ones(len(us))], axis=1)
     z = (heights.astype(np.float64) - plane.offset) / (r @ n)
