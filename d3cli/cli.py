@@ -20,8 +20,9 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .config import BACKENDS, MAX_CONFIG_INT, METHODS, Config, bundled_configs, load_config, resolve_config
-from .errors import D3Error, interrupt_behind, plural, raise_hung_up, raise_terminated
+from .config import (BACKENDS, MAX_CONFIG_INT, METHODS, OUTPUT_CHOICES, Config, bundled_configs, load_config, output_groups,
+                     quote, resolve_config)
+from .errors import D3Error, InputError, interrupt_behind, plural, raise_hung_up, raise_terminated, where_what_fix
 
 log = logging.getLogger("d3cli")
 #: --break-lock of run and eval: the one writer of OUT at a time (batch/lock.py).
@@ -294,10 +295,14 @@ def main():
 @click.option("--road-report", is_flag=True,
               help="Also write the road inspection outputs (height.pfm, height_color.png, defects.json, "
                    "defects.png per pair, OUT/defects.csv); same as road.report: true.")
+@click.option("--outputs", default=None, metavar="SET",
+              help="Per-pair files to write [default: run.outputs, all]: all, or survey (disp.pfm, valid.png, "
+                   "result.json; defects.json with --road-report) plus any of kitti (disp.png), pictures (the PNG "
+                   "pictures), height (height.pfm), comma-separated, e.g. survey,pictures.")
 @_verbosity
 def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
-        break_lock, no_fill, pointcloud, workers, prefetch, scheduler, shard, color_range, road_report, verbose,
-        quiet):
+        break_lock, no_fill, pointcloud, workers, prefetch, scheduler, shard, color_range, road_report, outputs,
+        verbose, quiet):
     """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
 
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
@@ -313,6 +318,12 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
         cfg = replace(cfg, run=replace(cfg.run, color_range=_color_range(color_range)))
     if road_report:
         cfg = replace(cfg, road=replace(cfg.road, report=True))
+    if outputs is not None:
+        if output_groups(outputs) is None:
+            raise InputError(where_what_fix(f"--outputs {quote(outputs)}", "not a set of per-pair files",
+                                            "give a comma-separated list of " + ", ".join(OUTPUT_CHOICES)
+                                            + " (e.g. survey,pictures)"))
+        cfg = replace(cfg, run=replace(cfg.run, outputs=outputs))
     method = cfg.run.method
     from .kernels.cache_location import announce
 

@@ -11,6 +11,7 @@ import dataclasses
 import logging
 from pathlib import Path
 
+from ..config import output_groups
 from ..data import formats as io, layouts as datasets
 from ..road.pointcloud import camera_from, save_pair_cloud
 from ..road.report import road_report
@@ -75,6 +76,6 @@ def write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -
     if cfg.road.report:  # all the logic in d3cli.road.report
         with step("road report"):
             warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road,
-                                    right=right)[1]
+                                    right=right, groups=output_groups(cfg.run.outputs))[1]
     # Rewritten after the road outputs too: result.json records the files' sizes and hashes.
     return _with_warnings(pair, pair_dir, stored, warnings, changed=want_cloud or cfg.road.report)

@@ -46,8 +46,11 @@ from ..road.report import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_F
 
 log = logging.getLogger(__name__)
 
-#: The per-pair files of a complete result, besides result.json.
+#: The per-pair files of a complete result with every output (``run.outputs: all``), besides result.json.
 OUTPUT_FILES = ("disp.pfm", "disp.png", "disp_color.png", "valid.png")
+#: The per-pair files every run writes, whatever ``run.outputs`` leaves out: what a rerun
+#: (road report, clouds, evaluation, more outputs), ``d3stereo eval`` and ``export`` read.
+REQUIRED_FILES = ("disp.pfm", "valid.png")
 RESULT_FILE = "result.json"
 ERROR_MAP = "error.png"
 PANEL_FILE = "panel.png"
@@ -61,6 +64,10 @@ SUMMARY_FILES = ("metrics.csv", "summary.json", "summary.md")
 #: Road inspection outputs of a pair (--road-report), made from its disparity map: stale
 #: once the map is computed again.
 ROAD_FILES = (HEIGHT_FILE, HEIGHT_COLOR_FILE, DEFECTS_JSON, DEFECTS_PNG)
+#: The files of each optional group of ``run.outputs`` (:data:`d3cli.config.OUTPUT_GROUPS`).
+GROUP_FILES = {"kitti": ("disp.png",),
+               "pictures": ("disp_color.png", OVERLAY_FILE, ERROR_MAP, PANEL_FILE, HEIGHT_COLOR_FILE, DEFECTS_PNG),
+               "height": (HEIGHT_FILE,)}
 #: Every file d3stereo writes into a pair's folder (anything else there is the user's).
 PAIR_FILES = (RESULT_FILE, *OUTPUT_FILES, ERROR_MAP, CLOUD_FILE, PANEL_FILE, OVERLAY_FILE, *ROAD_FILES)
 #: Files of a whole batch (or eval report) in OUT, beside the pairs' folders.
@@ -191,7 +198,7 @@ def write_result(folder: Path, stored: dict) -> dict:
 def read_result(pair_dir: Path) -> dict | None:
     """The stored result of a complete pair folder, or None when incomplete."""
     result_path = pair_dir / RESULT_FILE
-    if not result_path.is_file() or not all((pair_dir / f).is_file() for f in OUTPUT_FILES):
+    if not result_path.is_file() or not all((pair_dir / f).is_file() for f in REQUIRED_FILES):
         return None
     try:
         return json.loads(result_path.read_text(encoding="utf-8"))
@@ -230,6 +237,7 @@ def write_disparity_outputs(
     vmax: float | None = None,
     left: np.ndarray | None = None,
     color_range: tuple[float, float] | None = None,
+    groups: frozenset | None = None,
 ) -> dict:
     """Write the standard per-pair outputs, each atomically.
 
@@ -248,6 +256,10 @@ def write_disparity_outputs(
     color_range : (float, float), optional
         Fixed ``(vmin, vmax)`` of ``disp_color.png`` (``--color-range``); default the
         1st-99th percentile of the finite estimate (:func:`pictures.robust_range`).
+    groups : frozenset, optional
+        The optional groups of ``run.outputs`` to write (:data:`GROUP_FILES`): without
+        ``kitti`` no disp.png, without ``pictures`` no disp_color.png or
+        valid_overlay.png; None: all.  disp.pfm and valid.png are always written.
 
     Returns
     -------
@@ -278,13 +290,15 @@ def write_disparity_outputs(
     else:
         vmin, vmax_ = (float(v) for v in color_range)
         how = "fixed range"
-    written = {
-        "disp.pfm": write_pfm(folder / "disp.pfm", disp),
-        "disp.png": write_kitti_png(folder / "disp.png", disp),
-        "disp_color.png": write_image(folder / "disp_color.png", pictures.disparity_picture(disp, vmin, vmax_, how=how)),
-        "valid.png": write_image(folder / "valid.png", valid.astype(np.uint8) * 255),
-    }
-    if left is not None:
+    groups = frozenset(GROUP_FILES) if groups is None else groups
+    written = {"disp.pfm": write_pfm(folder / "disp.pfm", disp)}
+    if "kitti" in groups:
+        written["disp.png"] = write_kitti_png(folder / "disp.png", disp)
+    if "pictures" in groups:
+        written["disp_color.png"] = write_image(folder / "disp_color.png",
+                                                pictures.disparity_picture(disp, vmin, vmax_, how=how))
+    written["valid.png"] = write_image(folder / "valid.png", valid.astype(np.uint8) * 255)
+    if left is not None and "pictures" in groups:
         written[OVERLAY_FILE] = write_image(folder / OVERLAY_FILE, pictures.validity_overlay(left, valid, disp))
     written["color_range"] = {"min": vmin, "max": vmax_, "how": how}
     written["png_clipped"] = kitti_clipped(disp)
@@ -377,3 +391,32 @@ def write_panel(folder: str | os.PathLike, name: str, left: np.ndarray, scores: 
     tiles.append(("validity (red filled, blue none)", read_image(overlay) if overlay.is_file()
                   else read_image(folder / "valid.png")))
     return write_image(folder / PANEL_FILE, pictures.panel(panel_title(name, scores), tiles))
+
+
+def add_missing_outputs(pair_dir: Path, name: str, stored: dict, groups: frozenset, *, left: np.ndarray,
+                        disparity: np.ndarray, valid: np.ndarray) -> list[str]:
+    """Write the map files of ``groups`` that a complete pair folder lacks (it was written
+    with fewer outputs): disp.png, disp_color.png (with the stored colour range),
+    valid_overlay.png and panel.png, from its disp.pfm and valid.png; returns their names.
+    The error map is the evaluation's (:func:`d3cli.batch.evaluate.evaluate_pair`)."""
+    folder = Path(pair_dir)
+    made = []
+    if "kitti" in groups and not (folder / "disp.png").is_file():
+        write_kitti_png(folder / "disp.png", disparity)
+        made.append("disp.png")
+    if "pictures" in groups:
+        if not (folder / "disp_color.png").is_file():
+            colours = stored.get("color_range") or {}
+            vmin, vmax = colours.get("min"), colours.get("max")
+            if vmin is None or vmax is None:
+                vmin, vmax = pictures.robust_range(disparity)
+            how = colours.get("how") or "%g-%gth percentile" % pictures.ROBUST_PERCENTILES
+            write_image(folder / "disp_color.png", pictures.disparity_picture(disparity, vmin, vmax, how=how))
+            made.append("disp_color.png")
+        if not (folder / OVERLAY_FILE).is_file():
+            write_image(folder / OVERLAY_FILE, pictures.validity_overlay(left, valid, disparity))
+            made.append(OVERLAY_FILE)
+        if made or not (folder / PANEL_FILE).is_file():
+            write_panel(folder, name, left, stored.get("metrics"))
+            made.append(PANEL_FILE)
+    return made

@@ -39,7 +39,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Sequence
 
-from ..config import Config
+from ..config import Config, output_groups
 from ..data import formats as io, layouts as datasets
 from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind, plural
 from ..evaluation import diagnostics, report
@@ -59,8 +59,11 @@ from .staging import changed_files, clean_leftovers, discard, named_as_target, n
 from .steps import internal_message, step
 from .outputs import (
     ERROR_MAP,
+    OVERLAY_FILE,
     PAIR_FILES,
+    PANEL_FILE,
     RUN_FILE,
+    add_missing_outputs,
     check_output_folder,
     check_pair_name,
     clipped_warning,
@@ -135,15 +138,19 @@ def _run_pair(pair, pair_dir: Path, *, cfg, method, evaluate, max_disparity, set
     result.warnings.extend(diagnostics.suspicious_result(result, dmax, left=left))
     waited += yield from _pause(COMPUTED)
     staging = new_staging(pair_dir)
+    groups = output_groups(cfg.run.outputs)  # the optional files asked for (run.outputs)
     try:
         with step("writing the outputs"):
             written = write_disparity_outputs(staging, result.disparity, result.valid, left=left,
-                                              color_range=tuple(cfg.run.color_range) or None)
-        if written["png_clipped"]:  # said once per pair, kept in result.json
+                                              color_range=tuple(cfg.run.color_range) or None, groups=groups)
+        if written["png_clipped"] and "kitti" in groups:  # said once per pair, kept in result.json
             result.warnings.append(clipped_warning(written["png_clipped"]))
         scores, eval_error = _score(pair, left, right, result.disparity, staging) if evaluate else (None, None)
-        with step("the panel"):
-            write_panel(staging, pair.name, left, scores)  # panel.png: the pair at a glance
+        if "pictures" in groups:
+            with step("the panel"):
+                write_panel(staging, pair.name, left, scores)  # panel.png: the pair at a glance
+        else:
+            (staging / ERROR_MAP).unlink(missing_ok=True)  # a picture: written only with them
         for text in result.warnings:
             log.warning("%s: %s", pair.name, text)
         stored = _stored_result(pair, method, settings, fingerprint, result, (height, width), dmax, written, scores,
@@ -237,19 +244,46 @@ def _reuse_pair(pair, pair_dir: Path, stored: dict, *, cfg, evaluate, pointcloud
     """A complete earlier result: scored now from disp.pfm if it was stored unscored, and
     given the extras asked for.  An extra that fails leaves the pair incomplete (its files
     removed), so a rerun computes it again rather than skipping it as complete."""
-    if evaluate and not stored.get("metrics"):
+    groups = output_groups(cfg.run.outputs)
+    pictures = "pictures" in groups
+    scored = False
+    if evaluate and (not stored.get("metrics") or (pictures and pair.gt is not None
+                                                   and not (pair_dir / ERROR_MAP).is_file())):
+        # unscored, or scored by a run without pictures: the error map is made now
         left, right = datasets.load_pair_images(pair)
         disparity = io.read_pfm(pair_dir / "disp.pfm")
         scores, eval_error = _score(pair, left, right, disparity, pair_dir)
         stored = {**stored, "metrics": scores, "evaluation_error": eval_error}
-        with step("the panel"):
-            write_panel(pair_dir, pair.name, left, stored["metrics"])  # the panel, now with the error tile
+        if not pictures:
+            (pair_dir / ERROR_MAP).unlink(missing_ok=True)
+        scored = True
+    made = []
+    if pictures and scored or _lacks(pair_dir, groups):
+        # A run with fewer outputs wrote this pair: the files asked for now are made from its
+        # maps, and the panel again when the pair was scored now (its error tile and title).
+        with step("writing the outputs"):
+            left = datasets.load_pair_images(pair)[0] if pictures else None
+            if pictures and scored:
+                (pair_dir / PANEL_FILE).unlink(missing_ok=True)
+            made = add_missing_outputs(pair_dir, pair.name, stored, groups, left=left,
+                                       disparity=io.read_pfm(pair_dir / "disp.pfm"),
+                                       valid=io.read_mask(pair_dir / "valid.png"))
+        if made:
+            log.info("%s: added %s", pair.name, ", ".join(made))
+    if made or scored:
         stored = write_result(pair_dir, stored)
     try:
         return write_extras(pair, pair_dir, stored, cfg, pointcloud=pointcloud)
     except Exception:
         remove_pair_files(pair_dir)
         raise
+
+
+def _lacks(pair_dir: Path, groups: frozenset) -> bool:
+    """Whether a complete pair folder lacks a map file of ``groups`` (the error map aside)."""
+    want = (["disp.png"] if "kitti" in groups else []) + (
+        ["disp_color.png", OVERLAY_FILE, PANEL_FILE] if "pictures" in groups else [])
+    return any(not (pair_dir / name).is_file() for name in want)
 
 
 def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, method: str, evaluate: bool = False,

@@ -27,6 +27,9 @@ from .load import bundled_configs, config_from_dict, load_config, resolve_config
 from .sections import (
     BACKENDS,
     METHODS,
+    OUTPUT_CHOICES,
+    OUTPUT_GROUPS,
+    output_groups,
     AggregationConfig,
     CameraConfig,
     Config,
@@ -56,6 +59,9 @@ from .yamlfile import (
 
 __all__ = [
     "BACKENDS",
+    "OUTPUT_CHOICES",
+    "OUTPUT_GROUPS",
+    "output_groups",
     "METHODS",
     "MAX_CONFIG_INT",
     "MAX_YAML_BYTES",

@@ -15,7 +15,7 @@ from typing import Any, Mapping
 
 from ..errors import QUOTE_CHARS, ConfigError, shorten
 from .bundled import bundled_configs
-from .sections import BACKENDS, METHODS, Config
+from .sections import BACKENDS, METHODS, OUTPUT_CHOICES, Config, output_groups
 
 #: Integers in a config are bounded: the kernels take 32-bit scalars.
 MAX_CONFIG_INT = 2**31 - 1
@@ -31,6 +31,8 @@ _RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
     "run.max_memory_gb": (lambda v: v is None or v > 0, "a positive number (GB) or null"),
     "run.color_range": (lambda v: len(v) == 0 or (len(v) == 2 and 0 <= v[0] < v[1]),
                         "[] or [min, max] with 0 <= min < max (pixels)"),
+    "run.outputs": (lambda v: output_groups(v) is not None,
+                    "a comma-separated list of " + ", ".join(OUTPUT_CHOICES) + " (e.g. survey,pictures)"),
     "pyramid.levels": (lambda v: 1 <= v <= 8, "an integer in [1, 8]"),
     "pyramid.band_margin": (lambda v: 2 <= v <= 64, "an integer in [2, 64]"),
     "pyramid.band_tile": (lambda v: 4 <= v <= 256, "an integer in [4, 256]"),

@@ -11,6 +11,21 @@ from dataclasses import dataclass, field, fields
 
 METHODS = ("d3stereo", "sgbm", "pt-sgm", "elas", "pandora-sgm")
 BACKENDS = ("auto", "cpu", "cuda")
+#: What ``run.outputs`` (``--outputs``) may name, comma-separated: ``all`` (every file), ``survey``
+#: (only the files every run writes: disp.pfm, valid.png, result.json, and defects.json with
+#: the road report) and the groups added to it: ``kitti`` (disp.png), ``pictures`` (every
+#: PNG picture of the pair) and ``height`` (height.pfm of the road report).
+OUTPUT_GROUPS = ("kitti", "pictures", "height")
+OUTPUT_CHOICES = ("all", "survey", *OUTPUT_GROUPS)
+
+
+def output_groups(text: str) -> frozenset[str] | None:
+    """The optional file groups (:data:`OUTPUT_GROUPS`) that ``run.outputs`` asks for, or
+    None when ``text`` is not a comma-separated list of :data:`OUTPUT_CHOICES`."""
+    words = [word.strip() for word in str(text).split(",")]
+    if not words or any(word not in OUTPUT_CHOICES for word in words):
+        return None
+    return frozenset(OUTPUT_GROUPS) if "all" in words else frozenset(w for w in words if w in OUTPUT_GROUPS)
 
 
 @dataclass(frozen=True)
@@ -22,6 +37,7 @@ class RunConfig:
     max_disparity: int | None = None  # None: from the dataset layout, else width // 4
     max_memory_gb: float | None = None  # refuse pairs whose estimated peak exceeds this; None: 75 % of RAM
     color_range: tuple[float, ...] = ()  # [min, max] px of disp_color.png for a whole batch; []: per-pair percentiles
+    outputs: str = "all"  # per-pair files written: all | survey[,kitti][,pictures][,height] (OUTPUT_CHOICES)
 
 
 @dataclass(frozen=True)

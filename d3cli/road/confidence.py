@@ -39,7 +39,7 @@ The thresholds were chosen on synthetic pairs with exact ground truth (docs/road
 confidence check"), where every flag marks measurements that are off by more than 20 %
 far more often than the defects left ``ok``.
 
-May import numpy and OpenCV only.
+May import numpy, OpenCV and :mod:`d3cli.road.compiled`.
 """
 
 from __future__ import annotations
@@ -48,6 +48,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+from .compiled import h_maxima
 
 #: Reason code -> the words a report prints for it.
 REASONS = {
@@ -191,8 +193,6 @@ def depressions(depth: np.ndarray, region: np.ndarray, *, prominence: float, smo
     The smoothed depth varies over ``smooth_px``, so it is counted on a grid of
     ``smooth_px / 3`` pixels: the same maxima at a fraction of the cost.
     """
-    from skimage.morphology import h_maxima
-
     if not region.any():
         return 0
     v, u = np.nonzero(region)

@@ -38,14 +38,13 @@ from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from ..config import RoadConfig
 from .confidence import ConfidenceRules, deep_at_border, depressions, flags_of, spikiness
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
-from .morphology import dilate_near
-from .splitting import split_parts
+from .morphology import dilate_near, fill_holes
+from .splitting import smoothed_depth, split_parts
 
 log = logging.getLogger(__name__)
 
@@ -220,8 +219,15 @@ def find_defects(
     scene = replace(_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
                     rules=rules)
     found: list = []
+    blurred: list = []  # the split cue's smoothed height, made once for both kinds (it is odd in the height)
+
+    def smoothed_height():
+        if not blurred:
+            blurred.append(smoothed_depth(scene.smooth, scene.tuning.split_smooth_px))
+        return blurred[0]
+
     for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
-        found += _find_kind(scene, kind, sign, thr_mm)
+        found += _find_kind(scene, kind, sign, thr_mm, smoothed_height)
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
     defects = [with_flags(Defect(id=i + 1, kind=kind, **d, low_confidence=False), road, rules)
                for i, (kind, _, d) in enumerate(found)]
@@ -247,16 +253,19 @@ def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, 
     height = np.where(footprint > 0, height, np.inf).astype(np.float32)
     finite = np.isfinite(height)
     smooth = _median_filled(height, tuning.median_px)
-    v_all, u_all = np.mgrid[0:shape[0], 0:shape[1]]
+    # row and column of every pixel, as read-only views (no two full index arrays per map)
+    v_all = np.broadcast_to(np.arange(shape[0])[:, None], shape)
+    u_all = np.broadcast_to(np.arange(shape[1])[None, :], shape)
     ring_px, local_noise_px = road.ring_px, tuning.local_noise_px
     kernel_ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
     kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
     kernel_local = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * local_noise_px + 1, 2 * local_noise_px + 1))
     map_decided = float(decided[finite].mean()) if finite.any() else 0.0
-    sigma_d = disparity_noise(smooth, camera, plane)
+    depth = _depth_grid(smooth, camera, plane)  # Z of every pixel, once for both below
+    sigma_d = disparity_noise(smooth, camera, plane, depth=depth)
     # Saddle depth that splits a region: half the threshold, but not less than the height
     # noise at the median distance (noisy floors would otherwise split into pieces).
-    z_med = float(np.median(_points(smooth, *np.nonzero(finite)[::-1], camera, plane)[:, 2])) if finite.any() else 0.0
+    z_med = float(np.median(depth[finite])) if finite.any() else 0.0
     split_noise = tuning.noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
     return _Scene(height=height, decided=decided, camera=camera, plane=plane, road=road, tuning=tuning,
                   finite=finite, smooth=smooth, footprint=footprint, v_all=v_all, u_all=u_all,
@@ -264,8 +273,10 @@ def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, 
                   map_decided=map_decided, sigma_d=sigma_d, split_noise=split_noise, full_shape=shape)
 
 
-def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
-    """(kind, region mask, measurements) of every pothole (``sign`` -1) or bump (+1)."""
+def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, smoothed_height=None) -> list:
+    """(kind, region mask, measurements) of every pothole (``sign`` -1) or bump (+1);
+    ``smoothed_height``: a function returning :func:`d3cli.road.splitting.smoothed_depth` of
+    the smoothed height (made once for both kinds)."""
     road, tuning = s.road, s.tuning
     with np.errstate(invalid="ignore"):
         cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
@@ -279,7 +290,8 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
                                   smooth_px=tuning.split_smooth_px, neck=road.split_neck,
                                   min_part_m2=road.split_min_area_m2,
                                   step=max(thr_mm * 1e-3, s.split_noise) if tuning.split_terrace else np.inf,
-                                  boxes=True):
+                                  boxes=True, smoothed=None if smoothed_height is None
+                                  else (lambda: sign * smoothed_height())):
         # Measured in a window around the part that holds everything its measurement
         # reads (its walls, rings and noise annulus): the same pixels, the same results,
         # at the cost of the window instead of the map (a noisy 720p map has hundreds of
@@ -365,7 +377,7 @@ def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm
     if fails(sigma_local):
         return None
     # Pixels without any estimate that the region encloses are unmeasured parts of it.
-    enclosed = ndimage.binary_fill_holes(region)
+    enclosed = fill_holes(region)
     share = float((s.decided & finite)[enclosed].mean())
     if share < road.min_region_decided_share and s.map_decided >= road.min_decided_share:
         return None  # measured on filled pixels: the hole filling's extrapolation, no depth
@@ -431,10 +443,13 @@ def _with_walls(s: _Scene, comp: np.ndarray, sign: float, other: np.ndarray, *, 
     with np.errstate(invalid="ignore"):
         depth = sign * s.smooth[box][use]
     medians = np.full(-(-reach // step_px) + 1, np.nan)
-    for b in np.unique(band):
-        values = depth[band == b]
-        if values.size >= 10:
-            medians[b] = np.median(values)
+    # the bands' values side by side (one sort), instead of a pass over all of them per band
+    order = np.argsort(band, kind="stable")
+    band, depth = band[order], depth[order]
+    starts = np.flatnonzero(np.r_[True, band[1:] != band[:-1]]) if band.size else np.zeros(0, np.int64)
+    for start, stop in zip(starts, np.r_[starts[1:], band.size].astype(np.int64)):
+        if stop - start >= 10:
+            medians[band[start]] = np.median(depth[start:stop])
     out = np.zeros_like(comp)
     out[box] = inside
     if np.isfinite(medians).any():
@@ -472,18 +487,18 @@ def _local_sigma_h(s: _Scene, comp: np.ndarray, sigma_h: float) -> float:
     return sigma_h
 
 
-def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane) -> float:
+def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane, *, depth: np.ndarray | None = None) -> float:
     """Robust disparity noise (pixels) of a (median-filtered) height map.
 
     A disparity error dd moves a road point by ``dh = c Z / (f B) dd`` along the normal,
     so ``h f B / (c Z)`` is the residual in disparity pixels; its 1.4826 MAD over the map
     (potholes are a minority) is the noise.  Real road relief counts in as noise.
+    ``depth``: the depth Z of every pixel of ``height`` when already computed.
     """
     finite = np.isfinite(height)
     if finite.sum() < 10:
         return 0.0
-    v, u = np.nonzero(finite)
-    z = _points(height, u, v, camera, plane)[:, 2]
+    z = (_depth_grid(height, camera, plane) if depth is None else depth)[finite]
     resid = height[finite] * camera.f * camera.baseline / (plane.offset * np.maximum(z, 1e-6))
     return float(1.4826 * np.median(np.abs(resid - np.median(resid))))
 
@@ -508,13 +523,20 @@ def outline(mask: np.ndarray, *, tolerance_px: float = 1.0, offset: tuple = (0, 
     return tuple(polys)
 
 
-def _points(height, us, vs, camera: Camera, plane: RoadPlane) -> np.ndarray:
-    """3-D points of pixels from their height: the ray meets ``n . P + c = h``."""
-    return _points_at(height[vs, us], us, vs, camera, plane)
+def _depth_grid(height: np.ndarray, camera: Camera, plane: RoadPlane) -> np.ndarray:
+    """Depth Z (float64 (H, W)) of every pixel's point from its height, as :func:`_points_at`
+    gives it, computed on the pixel grid (no index arrays); inf and nan where ``height``
+    is not finite."""
+    h, w = height.shape
+    n = np.asarray(plane.normal)
+    nr = n[0] * ((np.arange(w) - camera.cx) / camera.f)[None, :] + n[1] * ((np.arange(h) - camera.cy) / camera.f)[:, None] + n[2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (height.astype(np.float64) - plane.offset) / nr
 
 
 def _points_at(heights, us, vs, camera: Camera, plane: RoadPlane) -> np.ndarray:
-    """:func:`_points` of pixels (us, vs) whose heights are ``heights``."""
+    """3-D points of pixels (us, vs) from their heights ``heights``: the ray meets
+    ``n . P + c = h``."""
     n = np.asarray(plane.normal)
     r = np.stack([(us - camera.cx) / camera.f, (vs - camera.cy) / camera.f, np.ones(len(us))], axis=1)
     z = (heights.astype(np.float64) - plane.offset) / (r @ n)

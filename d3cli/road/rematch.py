@@ -40,7 +40,7 @@ def _grey(image: np.ndarray) -> np.ndarray:
 
 def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np.ndarray, *,
             window: int = WINDOW, reach: float = REACH, step: float = STEP,
-            min_score: float = MIN_SCORE) -> tuple[np.ndarray, np.ndarray]:
+            min_score: float = MIN_SCORE, shared: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Disparity re-measured at the pixels of ``mask`` by zero-mean NCC.
 
     Parameters
@@ -57,6 +57,13 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     min_score : float, keyword-only
         A pixel whose best score is lower, or whose best offset is an end of the search
         (the true disparity may lie beyond it), keeps its stored disparity.
+    shared : dict, optional, keyword-only
+        What calls for one ``mask`` with several windows share (the caller passes the same
+        empty dict to each, largest window first or ``{"pad_window": largest}``): the
+        grey images and the right image warped by every offset, computed once on the box
+        of the largest window; each call reads its own box out of it, so the results are
+        those of separate calls.  Used only where the box's disparities are all finite
+        (else a pixel without one is searched around the box's own median).
 
     Returns
     -------
@@ -71,24 +78,52 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     todo = mask & np.isfinite(out)
     if not todo.any():
         return out, done
-    lg, rg = _grey(left), _grey(right)
+    shared = {} if shared is None else shared
+    if "grey" not in shared:
+        shared["grey"] = (_grey(left), _grey(right))
+    lg, rg = shared["grey"]
     v, u = np.nonzero(todo)
+
+    def box_of(pad):
+        return (max(int(v.min()) - pad, 0), min(int(v.max()) + pad + 1, lg.shape[0]),
+                max(int(u.min()) - pad, 0), min(int(u.max()) + pad + 1, lg.shape[1]))
+
     pad = window + int(np.ceil(reach)) + 1
-    v0, v1 = max(int(v.min()) - pad, 0), min(int(v.max()) + pad + 1, lg.shape[0])
-    u0, u1 = max(int(u.min()) - pad, 0), min(int(u.max()) + pad + 1, lg.shape[1])
+    v0, v1, u0, u1 = box_of(pad)
     sub = out[v0:v1, u0:u1]
     finite = np.isfinite(sub)
     # Pixels of the box without an estimate are searched around the median, never kept.
     centre = np.where(finite, sub, float(np.median(sub[finite]))).astype(np.float32)
-    vv, uu = np.mgrid[v0:v1, u0:u1].astype(np.float32)
     box = (window, window)
     lsub = lg[v0:v1, u0:u1]
     l_mean = cv2.blur(lsub, box)
     l_std = np.sqrt(np.maximum(cv2.blur(lsub * lsub, box) - l_mean * l_mean, 1e-6))
     offsets = np.arange(-reach, reach + 1e-9, step, dtype=np.float32)
+    warps = None
+    if finite.all():  # the warps of the largest box, made once: a remap is per pixel
+        key = (float(reach), float(step))
+        if shared.get("warps_key") != key:
+            big = max(pad, int(shared.get("pad_window", window)) + int(np.ceil(reach)) + 1)
+            b0, b1, c0, c1 = box_of(big)
+            disp_big = np.asarray(disparity[b0:b1, c0:c1], np.float32)
+            stored = None
+            if np.isfinite(disp_big).all():
+                bv, bu = np.mgrid[b0:b1, c0:c1].astype(np.float32)
+                stored = ((b0, c0), np.stack([cv2.remap(rg, bu - (disp_big + o), bv, cv2.INTER_CUBIC,
+                                                        borderMode=cv2.BORDER_REFLECT) for o in offsets]))
+            shared["warps_key"], shared["warps"] = key, stored
+        if shared["warps"] is not None:
+            (b0, c0), stack = shared["warps"]
+            if v0 >= b0 and u0 >= c0 and v1 - b0 <= stack.shape[1] and u1 - c0 <= stack.shape[2]:
+                warps = stack[:, v0 - b0:v1 - b0, u0 - c0:u1 - c0]
+    if warps is None:
+        vv, uu = np.mgrid[v0:v1, u0:u1].astype(np.float32)
     scores = np.empty((len(offsets), *lsub.shape), np.float32)
     for k, offset in enumerate(offsets):
-        warped = cv2.remap(rg, uu - (centre + offset), vv, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+        if warps is not None:
+            warped = np.ascontiguousarray(warps[k])
+        else:
+            warped = cv2.remap(rg, uu - (centre + offset), vv, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
         r_mean = cv2.blur(warped, box)
         r_std = np.sqrt(np.maximum(cv2.blur(warped * warped, box) - r_mean * r_mean, 1e-6))
         scores[k] = (cv2.blur(lsub * warped, box) - l_mean * r_mean) / (l_std * r_std)

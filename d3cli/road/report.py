@@ -26,7 +26,8 @@ from .defects import find_defects, with_flags
 from .morphology import dilate_near
 from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
-from .pointcloud import Camera, disparity_to_points
+from .compiled import back_project
+from .pointcloud import Camera
 from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, rematch
 from .severity import pothole_severity, survey_summary
 
@@ -73,8 +74,8 @@ def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
 
 
 def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided: np.ndarray,
-                camera: Camera | None, info: dict, road_cfg, *, right: np.ndarray | None = None
-                ) -> tuple[list[dict], list[str]]:
+                camera: Camera | None, info: dict, road_cfg, *, right: np.ndarray | None = None,
+                groups: frozenset | None = None) -> tuple[list[dict], list[str]]:
     """Write the road outputs of one pair into ``pair_dir``.
 
     Parameters
@@ -98,6 +99,11 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         The right image.  Given, the disparity inside each defect (grown by its ring) is
         matched again with a small window (:mod:`d3cli.road.rematch`) and the defects are
         measured on that; disp.pfm is not changed.
+    groups : frozenset, optional, keyword-only
+        The optional files of ``run.outputs`` (:data:`d3cli.config.OUTPUT_GROUPS`):
+        height.pfm with ``height``, height_color.png and defects.png with ``pictures``;
+        None: all.  defects.json is always written; a road file not asked for is removed
+        (it would describe an earlier report).
 
     Returns
     -------
@@ -113,7 +119,8 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     # Only pixels the right camera sees too are measurements (the left-border strip is
     # extrapolated by the hole filling): they are "no estimate" in every road output.
     finite = seen_by_both(disparity)
-    points, _ = disparity_to_points(disparity, finite, camera)
+    points = back_project(np.asarray(disparity, np.float32), finite, float(camera.f), float(camera.baseline),
+                          float(camera.cx), float(camera.cy), float(camera.doffs))  # disparity_to_points' points
     plane = fit_road_plane(points, camera, sigma_disparity=road_cfg.sigma_disparity)
     if plane is None:
         return [], ["no road report: too few points for a road plane"]
@@ -140,8 +147,11 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
             defects = [with_flags(d, road_cfg, map_decided_share=round(decided_share, 3)) for d in defects]
     # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
-    write_pfm(pair_dir / HEIGHT_FILE, height)
-    write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
+    groups = frozenset(("height", "pictures")) if groups is None else groups
+    if "height" in groups:
+        write_pfm(pair_dir / HEIGHT_FILE, height)
+    if "pictures" in groups:
+        write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
     items = [{**d.to_dict(), "reasons": describe(d.flags) if d.flags else "",
               **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})} for d in defects]
     _write_json(pair_dir / DEFECTS_JSON, {
@@ -152,7 +162,11 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
                        "equivalent-circle diameter_mm of the area; confidence: ok, or low with the reason "
                        "codes in flags (in words in reasons) and the numbers they were decided from in "
                        "evidence", "defects": items, "warnings": warnings + notes})
-    write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, regions))
+    if "pictures" in groups:
+        write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, regions))
+    for name, group in ((HEIGHT_FILE, "height"), (HEIGHT_COLOR_FILE, "pictures"), (DEFECTS_PNG, "pictures")):
+        if group not in groups:
+            (pair_dir / name).unlink(missing_ok=True)
     if fallback:
         log.info("%s: no road surface, no defects measured", pair_dir.name)
     else:
@@ -184,15 +198,21 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     that cleanly keeps the stored map."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
     out = disparity.copy()
+    grey = {}  # the grey images, made once for every region
     for region in regions:
         inner = dilate_near(region, ring)
         zone = dilate_near(inner, ring) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
+        shared = {"pad_window": max(WINDOWS), **grey}  # the warps, made once for the zone
         for window in WINDOWS:
-            new, got = rematch(left, right, disparity, zone, window=window)
+            new, got = rematch(left, right, disparity, zone, window=window, shared=shared)
+            grey = {"grey": shared["grey"]} if "grey" in shared else grey
             if got[zone].mean() < MIN_RELIABLE:
                 continue
-            if _highpass_noise(height_map(new, finite, camera, plane), band & got, window) <= NOISE_M:
+            # Heights only in a window around the band that holds the smoothing's support.
+            crop = _around(band, int(np.ceil(4 * window)) + 2)
+            if _highpass_noise(height_map(new[crop], finite[crop], camera, plane, origin=(crop[0].start, crop[1].start)),
+                               (band & got)[crop], window) <= NOISE_M:
                 out[zone] = new[zone]
                 break
         # else: no window matches the defect cleanly (a dark, noisy pair): the stored,
@@ -200,10 +220,22 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     return height_map(out, finite, camera, plane)
 
 
+def _around(mask: np.ndarray, margin: int) -> tuple[slice, slice]:
+    """Slices of ``mask``'s bounding box grown by ``margin`` pixels (cut at the image)."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return slice(0, 0), slice(0, 0)
+    h, w = mask.shape
+    return (slice(max(int(rows[0]) - margin, 0), min(int(rows[-1]) + margin + 1, h)),
+            slice(max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, w)))
+
+
 def _highpass_noise(height: np.ndarray, zone: np.ndarray, window: int) -> float:
     """Robust spread (1.4826 MAD, metres) over ``zone`` (flat road) of the heights minus
     their Gaussian smoothing over a window: the matching noise; inf when nothing is
-    measured."""
+    measured.  The arrays may be a window of the map that holds ``zone`` grown by the
+    smoothing's reach (``4 window`` pixels) or the image's edge: outside ``zone`` the
+    smoothed values are zero, so the result is the same."""
     keep = zone & np.isfinite(height)  # a re-match at d <= 0 has no height
     if keep.sum() < 10:
         return np.inf

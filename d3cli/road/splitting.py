@@ -2,7 +2,7 @@
 (a shelf around a deeper core) or a neck of the outline.
 
 Used by :func:`d3cli.road.defects.find_defects`.  May import numpy, SciPy's ``ndimage``,
-scikit-image, OpenCV and the standard library only.
+scikit-image, OpenCV, :mod:`d3cli.road.compiled` and the standard library only.
 """
 
 from __future__ import annotations
@@ -12,17 +12,21 @@ import logging
 import cv2
 import numpy as np
 
+from .compiled import dilate, h_maxima, opening
+
 log = logging.getLogger(__name__)
 
 
 def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.ndarray, *, level: float,
            prominence: float, smooth_px: float, neck: float, min_part_m2: float, step: float = np.inf,
-           boxes: bool = False):
+           boxes: bool = False, smoothed=None):
     """Masks of the components of ``labels``, each cut into separate potholes.
 
     ``boxes``: yield ``(mask, box)`` instead, the mask cut to its component's bounding box
     ``box`` (a pair of slices): a full-size mask per part costs a pass over the image,
-    and a noisy map has hundreds of components.
+    and a noisy map has hundreds of components.  ``smoothed``: a function returning the
+    smoothed depth (the Gaussian of ``depth``, 0 where it is not finite), when the caller
+    has it; called only when a component is large enough to be cut.
 
     Three cues, because overlapping potholes join in three ways (applied in the order 1, 3, 2; a part cut by 3 is not cut by 2):
 
@@ -53,10 +57,8 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
     centre lies inside the other's opening are merged (:func:`_merge_nested`).
     """
     from scipy import ndimage
-    from skimage.morphology import h_maxima
 
-    finite_depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
-    smoothed = cv2.GaussianBlur(finite_depth, (0, 0), smooth_px) if smooth_px > 0 else finite_depth
+    made = None  # the smoothed depth, made when a component is large enough to be cut
     kernel_open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
     # each component's bounding box in one pass over the labels (a mask and a scan of the
     # whole image per component cost more than the splitting itself on a noisy map)
@@ -67,7 +69,9 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
         if footprint[box][sub_comp].sum() < 2 * min_part_m2:  # too small to hold two parts
             yield _full(sub_comp, box, labels.shape, boxes)
             continue
-        sub_depth = np.where(sub_comp, smoothed[box], 0.0)
+        if made is None:
+            made = smoothed() if smoothed is not None else smoothed_depth(depth, smooth_px)
+        sub_depth = np.where(sub_comp, made[box], 0.0)
         parts = _watershed_parts(-sub_depth, h_maxima(sub_depth, prominence) & sub_comp, sub_comp)
         pieces = []
         for part in parts:
@@ -81,12 +85,20 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
                 continue
             # The outline of the smoothed depth: the noisy map's own outline is ragged at
             # the noise-cell scale and shows necks that are not there.
-            opened = cv2.morphologyEx((part & (sub_depth > level)).astype(np.uint8), cv2.MORPH_OPEN, kernel_open)
+            opened = opening(part & (sub_depth > level), kernel_open).astype(np.uint8)
             dt = cv2.distanceTransform(np.pad(opened, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
             lobes = h_maxima(np.log1p(dt), -np.log(neck)) & opened.astype(bool) if neck < 1 else np.zeros_like(part)
             pieces += _watershed_parts(-dt, lobes, part)
         for piece in _merge_nested(_merge_small(pieces, footprint[box], min_part_m2), ~sub_comp):
             yield _full(piece, box, labels.shape, boxes)
+
+
+def smoothed_depth(depth: np.ndarray, smooth_px: float) -> np.ndarray:
+    """The depth of :func:`split_parts`' saddles: float32, 0 where not finite, Gaussian-
+    smoothed with ``smooth_px`` (none when 0).  Odd in the depth: the map of ``-depth`` is
+    exactly minus this one."""
+    finite_depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
+    return cv2.GaussianBlur(finite_depth, (0, 0), smooth_px) if smooth_px > 0 else finite_depth
 
 
 def _full(piece: np.ndarray, box: tuple, shape: tuple, boxes: bool):
@@ -162,11 +174,11 @@ def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarr
         if np.median(depth[core]) < t + step:
             continue  # the rest is a floor with relief (up to ~1 cm on broken floors), not a pit below a shelf
         lost = (part & (depth > t) & ~core).astype(np.uint8)
-        shelf = cv2.morphologyEx(lost, cv2.MORPH_OPEN, disc).astype(bool)
+        shelf = opening(lost, disc)
         if footprint[shelf].sum() < min_part_m2:
             continue
         # One marker per connected piece of the lost band: the opening can cut one shelf in two.
-        labels, k = _label(lost.astype(bool) & cv2.dilate(shelf.astype(np.uint8), disc).astype(bool))
+        labels, k = _label(lost.astype(bool) & dilate(shelf, disc))
         blobs = []
         for i in range(1, k + 1):
             blob = (labels == i) & shelf

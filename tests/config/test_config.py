@@ -72,7 +72,7 @@ def test_unknown_key(tmp_path):
     path = write(tmp_path, "run:\n  metod: sgbm\n")
     with pytest.raises(ConfigError) as exc:
         load_config(path)
-    assert str(exc.value) == f"{path}:2: unknown key 'run.metod'; valid keys of run: method, backend, max_disparity, max_memory_gb, color_range"
+    assert str(exc.value) == f"{path}:2: unknown key 'run.metod'; valid keys of run: method, backend, max_disparity, max_memory_gb, color_range, outputs"
 
 
 def test_wrong_type(tmp_path):
@@ -145,7 +145,7 @@ def test_bad_override_forms():
     "args, message",
     [
         (["--set", "run.foo=1"], "Error: --set run.foo=1: unknown key 'run.foo'; valid keys of run: "
-                                 "method, backend, max_disparity, max_memory_gb, color_range"),
+                                 "method, backend, max_disparity, max_memory_gb, color_range, outputs"),
         (["--set", "diffusion.tau=abc"], "Error: --set diffusion.tau=abc: diffusion.tau must be an integer, "
                                          "got 'abc'; fix the value of diffusion.tau (see d3cli/configs/default.yaml)"),
     ],

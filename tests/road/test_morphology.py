@@ -40,3 +40,17 @@ def test_dilate_near_equals_the_whole_image_dilation(k):
 def test_dilate_near_refuses_a_kernel_with_an_even_side():
     with pytest.raises(ValueError, match="odd sides"):
         dilate_near(np.ones((4, 4), bool), np.ones((4, 3), np.uint8))
+
+
+def test_fill_holes_is_scipys():
+    from scipy import ndimage
+
+    from d3cli.road.morphology import fill_holes
+
+    rng = np.random.default_rng(0)
+    for i in range(200):
+        mask = rng.random(tuple(rng.integers(1, 50, 2))) < rng.uniform(0.2, 0.9)
+        if i % 3 == 0:
+            mask = ndimage.binary_dilation(mask)
+        np.testing.assert_array_equal(fill_holes(mask), ndimage.binary_fill_holes(mask))
+    assert not fill_holes(np.zeros((4, 4), bool)).any()

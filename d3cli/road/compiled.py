@@ -1,0 +1,342 @@
+"""Compiled loops of the road report (numba, cached beside this file like the kernels').
+
+Each function computes what a NumPy expression of :mod:`d3cli.road.plane`,
+:mod:`d3cli.road.defects` or :mod:`d3cli.road.morphology` computes, in one pass over the
+pixels or points instead of a chain of whole-array temporaries: on a 1280x720 map the
+NumPy versions took most of the road report's time (tests/road/test_compiled.py holds each
+against its NumPy reference).  May import numpy, numba and the standard library only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def weighted_scatter(points, normal, offset, min_tolerance, depth_factor, limit):  # pragma: no cover - compiled
+    """Tukey-biweight IRLS round of the plane fit: weights ``(1 - (r / limit)^2)^2`` of the
+    residuals ``r = (n . P + c) / t`` (0 beyond ``limit``), with the tolerance
+    ``t = max(min_tolerance, depth_factor Z^2)`` of each point, their weighted centre and
+    the weighted scatter matrix ``sum w (P - centre)(P - centre)^T``.
+
+    One pass: the moments are summed about the point on the plane nearest the origin
+    (``-c n``, a point of the road), which keeps them as exact as a second pass about the
+    centre would.  ``points`` (N, 3) float32 or float64.
+    Returns (sum of weights, centre (3,), scatter (3, 3)); the centre and scatter are zeros
+    when no weight is positive.
+    """
+    n = points.shape[0]
+    ox, oy, oz = -offset * normal[0], -offset * normal[1], -offset * normal[2]
+    total = 0.0
+    sx = sy = sz = 0.0
+    sxx = sxy = sxz = syy = syz = szz = 0.0
+    for i in range(n):
+        x, y, z = float(points[i, 0]), float(points[i, 1]), float(points[i, 2])
+        r = (x * normal[0] + y * normal[1] + z * normal[2] + offset) / max(min_tolerance, z ** 2 * depth_factor)
+        if abs(r) >= limit:
+            continue
+        q = 1.0 - (r / limit) ** 2
+        wi = q * q
+        dx, dy, dz = x - ox, y - oy, z - oz
+        total += wi
+        sx += wi * dx
+        sy += wi * dy
+        sz += wi * dz
+        sxx += wi * dx * dx
+        sxy += wi * dx * dy
+        sxz += wi * dx * dz
+        syy += wi * dy * dy
+        syz += wi * dy * dz
+        szz += wi * dz * dz
+    centre = np.zeros(3)
+    scatter = np.zeros((3, 3))
+    if total <= 0.0:
+        return total, centre, scatter
+    mx, my, mz = sx / total, sy / total, sz / total
+    centre[0], centre[1], centre[2] = mx + ox, my + oy, mz + oz
+    scatter[0, 0] = sxx - total * mx * mx
+    scatter[0, 1] = scatter[1, 0] = sxy - total * mx * my
+    scatter[0, 2] = scatter[2, 0] = sxz - total * mx * mz
+    scatter[1, 1] = syy - total * my * my
+    scatter[1, 2] = scatter[2, 1] = syz - total * my * mz
+    scatter[2, 2] = szz - total * mz * mz
+    return total, centre, scatter
+
+
+@njit(cache=True)
+def inlier_count(points, normal, offset, min_tolerance, depth_factor):  # pragma: no cover - compiled
+    """Number of (N, 3) ``points`` with ``|n . P + c| < max(min_tolerance, depth_factor Z^2)``."""
+    count = 0
+    for i in range(points.shape[0]):
+        z = float(points[i, 2])
+        r = float(points[i, 0]) * normal[0] + float(points[i, 1]) * normal[1] + z * normal[2]
+        if abs(r + offset) < max(min_tolerance, z ** 2 * depth_factor):
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def ransac_scores(points, triples, tolerance):  # pragma: no cover - compiled
+    """Inliers of the plane through each row of ``triples`` (K, 3) (indices into ``points``):
+    ``|n . P + c| < tolerance`` counted over ``points`` (N, 3) float64; -1 for a degenerate
+    triple (normal shorter than 1e-12).  Returns (scores (K,), normals (K, 3), offsets (K,))."""
+    k = triples.shape[0]
+    scores = np.full(k, -1.0)
+    normals = np.zeros((k, 3))
+    offsets = np.zeros(k)
+    for j in range(k):
+        a = points[triples[j, 0]]
+        b = points[triples[j, 1]]
+        c = points[triples[j, 2]]
+        ux, uy, uz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        vx, vy, vz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+        nx = uy * vz - uz * vy
+        ny = uz * vx - ux * vz
+        nz = ux * vy - uy * vx
+        norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if norm < 1e-12:
+            continue
+        nx, ny, nz = nx / norm, ny / norm, nz / norm
+        off = -(nx * a[0] + ny * a[1] + nz * a[2])
+        count = 0
+        for i in range(points.shape[0]):
+            if abs(points[i, 0] * nx + points[i, 1] * ny + points[i, 2] * nz + off) < tolerance[i]:
+                count += 1
+        scores[j] = count
+        normals[j, 0], normals[j, 1], normals[j, 2] = nx, ny, nz
+        offsets[j] = off
+    return scores, normals, offsets
+
+
+@njit(cache=True)
+def height_grid(disparity, valid, f, baseline, cx, cy, doffs, normal, offset, v0=0, u0=0):  # pragma: no cover - compiled
+    """Signed height above the plane ``n . P + c = 0`` of every pixel, float32 (H, W), inf
+    where ``valid`` is false, the disparity is not finite or ``d + doffs <= 0``.  The arrays
+    may be a window of the image whose first pixel is (``v0``, ``u0``).
+
+    The same numbers as back-projecting with :func:`d3cli.road.pointcloud.disparity_to_points`
+    (float64 arithmetic, points rounded to float32) and taking ``n . P + c`` in float64.
+    """
+    h, w = disparity.shape
+    out = np.full((h, w), np.inf, np.float32)
+    fb = f * baseline
+    for v in range(h):
+        for u in range(w):
+            if not valid[v, u]:
+                continue
+            d = float(disparity[v, u]) + doffs
+            if not (d > 0.0) or not np.isfinite(d):
+                continue
+            z = fb / d
+            x = np.float32((u + u0 - cx) * z / f)
+            y = np.float32((v + v0 - cy) * z / f)
+            zz = np.float32(z)
+            out[v, u] = float(x) * normal[0] + float(y) * normal[1] + float(zz) * normal[2] + offset
+    return out
+
+
+@njit(cache=True)
+def _reconstruct_by_dilation(seed, mask):  # pragma: no cover - compiled
+    """Grey reconstruction by dilation of ``seed`` under ``mask`` (8-connected; seed <= mask),
+    by the hybrid algorithm (a forward and a backward raster scan, then a FIFO of the pixels
+    that can still propagate, L. Vincent, IEEE TIP 1993).  Only minima and maxima of the
+    inputs: the result is exactly scikit-image's ``reconstruction(seed, mask)``."""
+    h, w = seed.shape
+    rec = seed.copy()
+    for v in range(h):
+        for u in range(w):
+            best = rec[v, u]
+            for dv, du in ((-1, -1), (-1, 0), (-1, 1), (0, -1)):
+                y, x = v + dv, u + du
+                if 0 <= y < h and 0 <= x < w and rec[y, x] > best:
+                    best = rec[y, x]
+            rec[v, u] = min(best, mask[v, u])
+    queue = np.empty(h * w * 8 + 1, np.int64)
+    head = tail = 0
+    for v in range(h - 1, -1, -1):
+        for u in range(w - 1, -1, -1):
+            best = rec[v, u]
+            for dv, du in ((1, 1), (1, 0), (1, -1), (0, 1)):
+                y, x = v + dv, u + du
+                if 0 <= y < h and 0 <= x < w and rec[y, x] > best:
+                    best = rec[y, x]
+            value = min(best, mask[v, u])
+            rec[v, u] = value
+            for dv, du in ((1, 1), (1, 0), (1, -1), (0, 1)):
+                y, x = v + dv, u + du
+                if 0 <= y < h and 0 <= x < w and rec[y, x] < value and rec[y, x] < mask[y, x]:
+                    queue[tail] = v * w + u
+                    tail += 1
+                    break
+    while head < tail:
+        p = queue[head]
+        head += 1
+        v, u = p // w, p % w
+        value = rec[v, u]
+        for dv in (-1, 0, 1):
+            for du in (-1, 0, 1):
+                y, x = v + dv, u + du
+                if (dv == 0 and du == 0) or not (0 <= y < h and 0 <= x < w):
+                    continue
+                if rec[y, x] < value and rec[y, x] != mask[y, x]:
+                    rec[y, x] = min(value, mask[y, x])
+                    if tail == queue.size:  # never in practice: each pixel rises at most once per value
+                        queue = np.concatenate((queue[head:], np.empty(queue.size, np.int64)))
+                        tail -= head
+                        head = 0
+                    queue[tail] = y * w + x
+                    tail += 1
+    return rec
+
+
+def h_maxima(image: np.ndarray, h: float) -> np.ndarray:
+    """``skimage.morphology.h_maxima(image, h)`` of a float image (8-connected), the same
+    uint8 result: the regional maxima of height at least ``h``, found by a compiled grey
+    reconstruction instead of scikit-image's sort of every pixel."""
+    image = np.asarray(image)
+    if h > np.ptp(image):
+        return np.zeros(image.shape, np.uint8)
+    if h == 0:
+        raise ValueError("h = 0 is ambiguous")
+    # scikit-image's steps and types: the seed h (and a rounding allowance) below the image,
+    # both in the mask's float type
+    resolution = 2 * np.finfo(image.dtype).resolution * np.abs(image)
+    shifted = image - h - resolution
+    ftype = np.float32 if image.dtype in (np.float16, np.float32) else np.float64
+    rec = _reconstruct_by_dilation(np.ascontiguousarray(shifted, ftype), np.ascontiguousarray(image, ftype))
+    return ((image - rec) >= h).astype(np.uint8)
+
+
+def symmetric_half_widths(kernel: np.ndarray) -> np.ndarray | None:
+    """Half-width of each row of a structuring element whose rows are runs centred on its
+    centre column (an ellipse, a rectangle, a cross), -1 for an empty row; None for any
+    other kernel (even sides, a row that is not one centred run)."""
+    k = np.asarray(kernel) != 0
+    if k.shape[0] % 2 == 0 or k.shape[1] % 2 == 0:
+        return None
+    centre = k.shape[1] // 2
+    half = np.full(k.shape[0], -1, np.int64)
+    for i, row in enumerate(k):
+        cols = np.flatnonzero(row)
+        if cols.size == 0:
+            continue
+        if cols[-1] - cols[0] + 1 != cols.size or cols[0] + cols[-1] != 2 * centre:
+            return None
+        half[i] = centre - cols[0]
+    return half
+
+
+@njit(cache=True)
+def _row_distance(mask, value):  # pragma: no cover - compiled
+    """Per row, the distance (columns) of each pixel to the nearest pixel equal to ``value``
+    in its row; a large number where the row holds none.  Also whether each row holds one."""
+    h, w = mask.shape
+    big = 1 << 30
+    dist = np.empty((h, w), np.int32)
+    any_row = np.zeros(h, np.bool_)
+    for y in range(h):
+        last = -big
+        for x in range(w):
+            if mask[y, x] == value:
+                last = x
+                any_row[y] = True
+            dist[y, x] = min(x - last, big)
+        last = 2 * big
+        for x in range(w - 1, -1, -1):
+            if mask[y, x] == value:
+                last = x
+            d = last - x
+            if d < dist[y, x]:
+                dist[y, x] = d
+    return dist, any_row
+
+
+@njit(cache=True)
+def dilate_rows(mask, half):  # pragma: no cover - compiled
+    """``cv2.dilate(mask, kernel)`` of a bool mask (default border: nothing outside the
+    image counts) for a kernel of centred row runs of half-widths ``half``
+    (:func:`symmetric_half_widths`): a pixel is set when, for some kernel row, the mask's
+    row it reaches has a set pixel within that half-width (a distance per row answers it).
+    Only the mask's rows with a set pixel are visited."""
+    h, w = mask.shape
+    kh = half.shape[0]
+    ay = kh // 2
+    dist, filled = _row_distance(mask, True)
+    out = np.zeros((h, w), np.bool_)
+    for y in range(h):
+        for i in range(kh):
+            yy = y + i - ay
+            if yy < 0 or yy >= h or not filled[yy] or half[i] < 0:
+                continue
+            reach = half[i]
+            for x in range(w):
+                out[y, x] |= dist[yy, x] <= reach
+    return out
+
+
+@njit(cache=True)
+def erode_rows(mask, half):  # pragma: no cover - compiled
+    """``cv2.erode(mask, kernel)`` of a bool mask (default border: what lies outside the
+    image erodes nothing) for a kernel of centred row runs (:func:`dilate_rows`)."""
+    h, w = mask.shape
+    kh = half.shape[0]
+    ay = kh // 2
+    dist, holed = _row_distance(mask, False)
+    out = mask.copy()
+    for y in range(h):
+        for i in range(kh):
+            yy = y + i - ay
+            if yy < 0 or yy >= h or not holed[yy] or half[i] < 0:
+                continue
+            reach = half[i]
+            for x in range(w):
+                out[y, x] &= dist[yy, x] > reach
+    return out
+
+
+def dilate(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """``cv2.dilate(mask, kernel)`` as bool, compiled for kernels of centred row runs."""
+    half = symmetric_half_widths(kernel)
+    if half is None:
+        import cv2
+
+        return cv2.dilate(np.asarray(mask, np.uint8), kernel).astype(bool)
+    return dilate_rows(np.ascontiguousarray(mask, np.bool_), half)
+
+
+def opening(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """``cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)`` as bool (erosion, then dilation)."""
+    half = symmetric_half_widths(kernel)
+    if half is None:
+        import cv2
+
+        return cv2.morphologyEx(np.asarray(mask, np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
+    return dilate_rows(erode_rows(np.ascontiguousarray(mask, np.bool_), half), half)
+
+
+@njit(cache=True)
+def back_project(disparity, valid, f, baseline, cx, cy, doffs):  # pragma: no cover - compiled
+    """float32 (N, 3) points of the pixels where ``valid`` holds, the disparity is finite and
+    ``d + doffs > 0``, in image order: what :func:`d3cli.road.pointcloud.disparity_to_points`
+    returns (float64 arithmetic, rounded to float32), without its index arrays."""
+    h, w = disparity.shape
+    n = 0
+    for v in range(h):
+        for u in range(w):
+            d = float(disparity[v, u]) + doffs
+            if valid[v, u] and d > 0.0 and np.isfinite(d):
+                n += 1
+    out = np.empty((n, 3), np.float32)
+    fb = f * baseline
+    i = 0
+    for v in range(h):
+        for u in range(w):
+            d = float(disparity[v, u]) + doffs
+            if valid[v, u] and d > 0.0 and np.isfinite(d):
+                z = fb / d
+                out[i, 0] = (u - cx) * z / f
+                out[i, 1] = (v - cy) * z / f
+                out[i, 2] = z
+                i += 1
+    return out

@@ -1,0 +1,131 @@
+"""The road report's time against the stereo time of the same 720p road pairs, in one process.
+
+For each synthetic 1280x720 road pair (``d3stereo synth``: calibration and potholes; rendered
+once into a cache folder per seed), one process warms up (kernels loaded or compiled), then
+``--reps`` times, pair after pair, *alternately*:
+
+* the stereo compute, ``compute_pair("d3stereo", road config)``, as ``d3stereo run -c road``
+  matches a pair;
+* the road report of that map (:func:`d3cli.road.report.road_report`, the re-match with the
+  right image included), writing the default files (``run.outputs: all``: height.pfm,
+  height_color.png, defects.json, defects.png);
+* the road report writing the ``survey`` set (defects.json only).
+
+It prints, per pair and over all pairs, the medians and the ratio road report / stereo (the
+median of the per-pair ratios of medians): alternating in one process keeps the ratio
+meaningful on a shared, noisy machine, where absolute seconds drift between runs.  Then one
+``run_batch`` per output set on the first pair gives the bytes a pair's folder holds with
+``--road-report`` and ``--outputs all`` / ``survey`` / ``survey,height``.
+
+Usage::
+
+    PYTHONPATH=. python scripts/bench_road_report.py            # 4 pairs of seed 0, 3 reps
+    PYTHONPATH=. python scripts/bench_road_report.py --pairs 12 --reps 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+OUTPUT_SETS = ("all", "survey", "survey,height")
+
+
+def _pairs(seed: int, n: int):
+    """The first ``n`` pairs of ``d3stereo synth --seed SEED`` (rendered once, then cached)."""
+    from d3cli.data import layouts as datasets
+    from d3cli.data.synth import generate_dataset
+
+    cache = Path(tempfile.gettempdir()) / f"d3stereo-bench-road-report-{seed}-{n}"
+    if not (cache / "synth.json").is_file():
+        generate_dataset(cache, n=n, seed=seed, width=1280, height=720)
+    return datasets.discover([str(cache)])[:n]
+
+
+def _folder_bytes(folder: Path) -> int:
+    return sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--pairs", type=int, default=4, help="synthetic 720p road pairs (default 4)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the synthetic pairs (default 0)")
+    parser.add_argument("--reps", type=int, default=3, help="alternating repetitions after the warm-up")
+    parser.add_argument("--no-bytes", action="store_true", help="skip the bytes per output set")
+    args = parser.parse_args(argv)
+
+    from d3cli import load_config
+    from d3cli.batch import compute_pair, run_batch
+    from d3cli.config import output_groups
+    from d3cli.data import formats as io, layouts as datasets
+    from d3cli.road.pointcloud import camera_from
+    from d3cli.road.report import road_report
+
+    cfg = load_config("road", ["run.backend=cpu", "road.report=true"])
+    pairs = _pairs(args.seed, args.pairs)
+    loaded = []
+    for pair in pairs:
+        left, right = datasets.load_pair_images(pair)
+        camera = camera_from(io.read_calib(pair.calib), cfg, left.shape[:2])
+        dmax = datasets.resolve_max_disparity(pair, left.shape[1])
+        loaded.append((pair.name, left, right, camera, dmax))
+    work = Path(tempfile.mkdtemp(prefix="d3stereo-bench-road-report-"))
+    groups = {"all": output_groups("all"), "survey": output_groups("survey")}
+
+    def report(name, left, right, camera, result, which):
+        folder = work / which / name
+        folder.mkdir(parents=True, exist_ok=True)
+        road_report(folder, left, result.disparity, result.valid, camera, result.info, cfg.road, right=right,
+                    groups=groups[which])
+
+    t0 = time.perf_counter()
+    for name, left, right, camera, dmax in loaded[:1]:  # warm-up: kernels loaded or compiled
+        result = compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
+        report(name, left, right, camera, result, "all")
+    print(f"warm-up {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    times = {name: {"stereo": [], "all": [], "survey": []} for name, *_ in loaded}
+    for rep in range(args.reps):
+        for name, left, right, camera, dmax in loaded:
+            t0 = time.perf_counter()
+            result = compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
+            times[name]["stereo"].append(time.perf_counter() - t0)
+            for which in ("all", "survey"):
+                t0 = time.perf_counter()
+                report(name, left, right, camera, result, which)
+                times[name][which].append(time.perf_counter() - t0)
+        print(f"rep {rep + 1}/{args.reps} done", file=sys.stderr, flush=True)
+
+    print(f"{len(loaded)} synthetic 1280x720 road pairs (seed {args.seed}), -c road, CPU, {os.cpu_count()} CPUs, "
+          f"{args.reps} alternating reps after a warm-up; medians in ms")
+    print(f"{'pair':<26} {'stereo':>8} {'report':>8} {'survey':>8} {'ratio':>6} {'survey':>7}")
+    ratios, survey_ratios = [], []
+    for name, t in times.items():
+        stereo, full, survey = (statistics.median(t[k]) for k in ("stereo", "all", "survey"))
+        ratios.append(full / stereo)
+        survey_ratios.append(survey / stereo)
+        print(f"{name:<26} {stereo * 1e3:8.0f} {full * 1e3:8.0f} {survey * 1e3:8.0f} {full / stereo:6.2f} "
+              f"{survey / stereo:7.2f}")
+    print(f"road report / stereo (median over pairs): {statistics.median(ratios):.2f} with the default files, "
+          f"{statistics.median(survey_ratios):.2f} with --outputs survey; most {max(ratios):.2f} / "
+          f"{max(survey_ratios):.2f}")
+
+    if not args.no_bytes:
+        print("\nbytes per pair folder with --road-report (first pair):")
+        for outputs in OUTPUT_SETS:
+            out = work / f"run-{outputs.replace(',', '-')}"
+            run_batch(pairs[:1], out, cfg=replace(cfg, run=replace(cfg.run, outputs=outputs)), method="d3stereo",
+                      progress=False)
+            folder = out / pairs[0].name
+            names = sorted(p.name for p in folder.iterdir() if p.is_file())
+            print(f"  {outputs:<14} {_folder_bytes(folder) / 1e6:6.2f} MB  ({', '.join(names)})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,146 @@
+"""The compiled loops of the road report against the NumPy expressions they replace."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from d3cli.road import compiled
+from d3cli.road.pointcloud import Camera, disparity_to_points
+
+
+def _points(n=5000, seed=1):
+    rng = np.random.default_rng(seed)
+    x, z = rng.uniform(-3, 3, n), rng.uniform(4, 30, n)
+    y = 1.5 - 0.02 * z + rng.normal(0, 0.01, n)
+    y[: n // 20] -= 0.08  # a pothole: outliers
+    return np.stack([x, y, z], axis=1).astype(np.float32)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_weighted_scatter_is_the_tukey_round(dtype):
+    pts = _points().astype(dtype)
+    normal, offset = np.array([0.0, -0.9998, -0.02]), 1.5
+    normal /= np.linalg.norm(normal)
+    tol = np.maximum(0.01, pts[:, 2].astype(np.float64) ** 2 / 500.0)
+    total, centre, scatter = compiled.weighted_scatter(pts, normal, offset, 0.01, 1 / 500.0, 2.0)
+    p = pts.astype(np.float64)
+    r = (p @ normal + offset) / tol
+    w = np.where(np.abs(r) < 2.0, (1 - (r / 2.0) ** 2) ** 2, 0.0)
+    ref_centre = (p * w[:, None]).sum(0) / w.sum()
+    d = (p - ref_centre) * np.sqrt(w)[:, None]
+    # the tolerance is z^2 * (1 / 500) there: weights to rounding
+    assert total == pytest.approx(w.sum(), rel=1e-9)
+    np.testing.assert_allclose(centre, ref_centre, rtol=1e-9)
+    np.testing.assert_allclose(scatter, d.T @ d, rtol=1e-8, atol=1e-10)
+    assert 0 < (w == 0).sum() < len(w)  # both kinds of point were exercised
+
+
+def test_weighted_scatter_without_weight_is_zero():
+    pts = _points(100)
+    total, centre, scatter = compiled.weighted_scatter(pts, np.array([0.0, 1.0, 0.0]), 100.0, 0.01, 0.0, 2.0)
+    assert total == 0.0 and not centre.any() and not scatter.any()
+
+
+def test_inlier_count_and_ransac_scores_match_numpy():
+    pts = _points().astype(np.float64)
+    tol = np.maximum(0.01, pts[:, 2] ** 2 / 500.0)
+    rng = np.random.default_rng(0)
+    triples = np.array([rng.choice(len(pts), 3, replace=False) for _ in range(40)] + [[3, 3, 7]], np.int64)
+    scores, normals, offsets = compiled.ransac_scores(pts, triples, tol)
+    for (i, j, k), score, n, c in zip(triples, scores, normals, offsets):
+        a, b, c3 = pts[i], pts[j], pts[k]
+        ref = np.cross(b - a, c3 - a)
+        if np.linalg.norm(ref) < 1e-12:
+            assert score == -1
+            continue
+        ref /= np.linalg.norm(ref)
+        np.testing.assert_allclose(n, ref, rtol=1e-12, atol=1e-15)
+        assert c == pytest.approx(-float(ref @ a), rel=1e-12, abs=1e-15)
+        assert score == (np.abs(pts @ ref - float(ref @ a)) < tol).sum()
+        p32 = pts.astype(np.float32)
+        tol32 = np.maximum(0.01, p32[:, 2].astype(np.float64) ** 2 / 500.0)
+        assert compiled.inlier_count(p32, n, c, 0.01, 1 / 500.0) == (np.abs(p32.astype(np.float64) @ n + c) < tol32).sum()
+    assert scores[-1] == -1
+
+
+def test_height_grid_is_the_height_of_the_back_projected_points():
+    rng = np.random.default_rng(3)
+    disp = rng.uniform(-1, 60, (48, 64)).astype(np.float32)
+    disp[rng.random(disp.shape) < 0.1] = np.inf
+    valid = rng.random(disp.shape) < 0.9
+    cam = Camera(f=500.0, baseline=0.3, cx=31.5, cy=20.0, doffs=0.5)
+    normal, offset = np.array([0.01, -0.999, -0.03]), 1.6
+    normal /= np.linalg.norm(normal)
+    points, index = disparity_to_points(disp, valid, cam)
+    ref = np.full(disp.shape, np.inf, np.float32)
+    ref[index[:, 0], index[:, 1]] = points.astype(np.float64) @ normal + offset
+    got = compiled.height_grid(disp, valid, cam.f, cam.baseline, cam.cx, cam.cy, cam.doffs, normal, offset)
+    np.testing.assert_array_equal(np.isfinite(got), np.isfinite(ref))
+    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-7)
+    # a window of the map, given its origin, is the same window of the heights
+    win = compiled.height_grid(disp[10:30, 20:50], valid[10:30, 20:50], cam.f, cam.baseline, cam.cx, cam.cy,
+                               cam.doffs, normal, offset, 10, 20)
+    np.testing.assert_array_equal(win, got[10:30, 20:50])
+
+
+def _smooth_noise(rng, shape, sigma):
+    import cv2
+
+    img = cv2.GaussianBlur(rng.normal(0, 1, shape).astype(np.float32), (0, 0), sigma)
+    img[rng.random(shape) < 0.2] = 0
+    return img
+
+
+@pytest.mark.parametrize("plateaus", [False, True])
+def test_h_maxima_is_scikit_images(plateaus):
+    from skimage.morphology import h_maxima
+
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        img = _smooth_noise(rng, tuple(rng.integers(3, 70, 2)), rng.uniform(0.5, 4))
+        if plateaus:
+            img = np.round(img * 4) / 4
+        for h in (0.05, np.float64(0.1), 0.3, 100.0):  # a numpy h: float64 arithmetic, as in the neck cue
+            expected, got = h_maxima(img, h), compiled.h_maxima(img, h)
+            assert got.dtype == expected.dtype
+            np.testing.assert_array_equal(got, expected)
+        logs = np.log1p(np.abs(img))
+        np.testing.assert_array_equal(compiled.h_maxima(logs, -np.log(0.9)), h_maxima(logs, -np.log(0.9)))
+
+
+@pytest.mark.parametrize("shape", ["ellipse", "rect", "cross"])
+def test_dilation_and_opening_are_opencvs(shape):
+    import cv2
+
+    kind = {"ellipse": cv2.MORPH_ELLIPSE, "rect": cv2.MORPH_RECT, "cross": cv2.MORPH_CROSS}[shape]
+    rng = np.random.default_rng(7)
+    for _ in range(60):
+        mask = rng.random(tuple(rng.integers(1, 120, 2))) < rng.uniform(0.001, 0.6)
+        r = int(rng.integers(0, 50))
+        kernel = cv2.getStructuringElement(kind, (2 * r + 1, 2 * r + 1))
+        np.testing.assert_array_equal(compiled.dilate(mask, kernel), cv2.dilate(mask.astype(np.uint8), kernel) > 0)
+        np.testing.assert_array_equal(compiled.opening(mask, kernel),
+                                      cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel) > 0)
+
+
+def test_other_kernels_go_to_opencv():
+    import cv2
+
+    kernel = np.array([[1, 0, 1], [0, 1, 0], [1, 1, 0]], np.uint8)  # rows that are not centred runs
+    assert compiled.symmetric_half_widths(kernel) is None
+    mask = np.random.default_rng(2).random((20, 30)) < 0.1
+    np.testing.assert_array_equal(compiled.dilate(mask, kernel), cv2.dilate(mask.astype(np.uint8), kernel) > 0)
+
+
+def test_back_project_is_disparity_to_points():
+    rng = np.random.default_rng(8)
+    disp = rng.uniform(-2, 60, (40, 70)).astype(np.float32)
+    disp[rng.random(disp.shape) < 0.1] = np.inf
+    disp[0, :3] = np.nan
+    valid = rng.random(disp.shape) < 0.8
+    cam = Camera(f=700.0, baseline=0.2, cx=35.0, cy=19.5, doffs=1.5)
+    points, _ = disparity_to_points(disp, valid, cam)
+    got = compiled.back_project(disp, valid, cam.f, cam.baseline, cam.cx, cam.cy, cam.doffs)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, points)
