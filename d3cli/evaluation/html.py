@@ -511,7 +511,7 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping], *, min_depth_mm: 
              "specular surface, dark or noisy, few decided pixels, at the image border, possibly merged "
              "with a neighbour, re-match unreliable; defects.json lists the numbers behind each).</p>",
              '<table><thead><tr><th>pairs with a road report</th><th>with defects</th><th>potholes</th>'
-             "<th>bumps</th><th>low confidence</th><th>pothole area [m²]</th><th>pothole volume [l]</th>"
+             "<th>bumps</th><th>flagged (low confidence)</th><th>pothole area [m²]</th><th>pothole volume [l]</th>"
              "<th>deepest pothole</th></tr></thead><tbody>",
              _road_totals_row(done, len(reports))]
     if (out_dir / "defects.csv").is_file():
