@@ -9,7 +9,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field, fields
 
-METHODS = ("d3stereo", "sgbm", "pt-sgm", "elas", "pandora-sgm")
+from .methods import METHODS
+
 BACKENDS = ("auto", "cpu", "cuda")
 #: What ``run.outputs`` (``--outputs``) may name, comma-separated: ``all`` (every file), ``survey``
 #: (only the files every run writes: disp.pfm, valid.png, result.json, and defects.json with
