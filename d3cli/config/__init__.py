@@ -13,8 +13,10 @@ and the valid keys.
 
 - ``methods``: the stereo methods, one :class:`MethodSpec` each (name, entry point, the
   configuration it is handed and its fingerprint covers): :data:`METHOD_SPECS`, :data:`METHODS`;
-- ``sections``: one frozen dataclass per section, :class:`Config`, the backend names;
-- ``checks``: types and ranges of every key, :func:`quote`, the error messages;
+- ``sections``: one frozen dataclass per section, each key a ``setting`` (default, one-line
+  meaning, range check), :class:`Config`, the backend names;
+- ``checks``: the type of every key and the range checks declared with it (``setting``),
+  :func:`quote`, the error messages;
 - ``yamlfile``: bounded, strict YAML reading (YAML 1.2 numbers), ``--set`` parsing;
 - ``bundled``: the configs shipped in the package, by name (:func:`bundled_configs`);
 - ``load``: :func:`load_config` and :func:`config_from_dict`.
