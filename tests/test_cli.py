@@ -192,7 +192,7 @@ def test_warnings_are_logged_and_stored(tmp_path, make_pair_folder, monkeypatch)
         res.warnings.append("few seeds")
         return res
 
-    monkeypatch.setattr(d3cli.batch.methods, "sgbm_disparity", with_warning)
+    monkeypatch.setattr(d3cli.baselines.sgbm, "sgbm_disparity", with_warning)  # the entry point of --method sgbm
     out = tmp_path / "out"
     result = invoke("run", root, "-o", out, "--method", "sgbm")
     assert result.exit_code == 0

@@ -4,7 +4,8 @@
 - ``records``: :class:`BatchResult` and ``run.json``;
 - ``signals``: Ctrl-C and SIGTERM held, deferred or turned into an interrupt during a batch;
 - ``extras``: ``cloud.ply`` and the road outputs of a complete pair, from its files;
-- ``methods``: method name -> code (:func:`compute_pair`);
+- ``methods``: runs a method by its name (:func:`compute_pair`), from its declaration in
+  :data:`d3cli.config.methods.METHOD_SPECS`;
 - ``evaluate``: scoring a pair or folders of predictions (``d3stereo eval``);
 - ``outputs``: the per-pair files, written atomically, read back, removed;
 - ``fingerprint``: what a stored result depends on (resume decisions), versions;

@@ -30,8 +30,10 @@ Config keys left out, and why:
 * ``run.max_memory_gb``: only decides whether a pair is refused before it is computed;
 * ``camera``: read only for clouds and road outputs (:func:`cloud_fingerprint`);
 * ``road``: road outputs are written again on every run with ``--road-report``;
-* for ``sgbm``, ``elas`` and ``pandora-sgm`` everything but their own section: they
-  are handed only that section (:func:`d3cli.batch.methods.compute_pair`).
+* ``run``, ``camera`` and ``road`` for every method (:data:`d3cli.config.NOT_READ_BY_MAP`),
+  and for a method handed only its own section (``sgbm``, ``elas``, ``pandora-sgm``:
+  :attr:`d3cli.config.MethodSpec.section`) everything but that section
+  (:meth:`d3cli.config.MethodSpec.fingerprinted`).
 """
 
 from __future__ import annotations
@@ -45,14 +47,8 @@ import stat
 from pathlib import Path
 
 from .. import __version__
-from ..config import Config
+from ..config import Config, MethodSpec, method_spec
 from ..method.features import npz_path
-
-#: Config sections that are all a baseline receives (d3cli.batch.methods.compute_pair).
-_BASELINE_SECTIONS = {"sgbm": ("sgbm",), "elas": ("peers",), "pandora-sgm": ("peers",)}
-
-#: Sections d3stereo and pt-sgm (handed the whole config) never read for the map.
-_NOT_READ_BY_MAP = ("run", "camera", "road")
 
 #: Pair fields that are file paths (their identity is hashed, not their spelling).
 _FILE_FIELDS = ("left", "right", "gt", "nocc", "calib")
@@ -81,10 +77,9 @@ def settings_fingerprint(cfg: Config, method: str, max_disparity: int | None) ->
         16 hex digits.  See the module docstring for the keys left out.
     """
     sections = cfg.to_dict()
-    if method in _BASELINE_SECTIONS:
-        sections = {name: sections[name] for name in _BASELINE_SECTIONS[method]}
-    else:
-        sections = {name: value for name, value in sections.items() if name not in _NOT_READ_BY_MAP}
+    spec = method_spec(method) or MethodSpec(method, "", "")  # an unknown name: as the whole config
+    covered = spec.fingerprinted(sections)
+    sections = {name: sections[name] for name in covered}
     key = [method, sections, max_disparity, package_versions()]
     if cfg.run.color_range:  # a run setting that changes an output (disp_color.png)
         key.append(list(cfg.run.color_range))
@@ -158,9 +153,11 @@ def feature_files(cfg: Config, method: str, pair) -> list:
     """The feature files d3stereo reads for ``pair`` (``cost.kind: features``), as paths.
 
     ``features.npz`` wins over ``features.model`` (as in the pipeline); a relative npz is
-    the pair's own, in the folder of its left image.  Empty for NCC and other methods.
+    the pair's own, in the folder of its left image.  Empty for NCC and for a method not
+    handed the pair's folder (:attr:`d3cli.config.MethodSpec.pair_dir`).
     """
-    if method != "d3stereo" or cfg.cost.kind != "features":
+    spec = method_spec(method)
+    if spec is None or not spec.pair_dir or cfg.cost.kind != "features":
         return []
     if cfg.features.npz:
         return [Path(npz_path(cfg.features.npz, Path(pair.left).parent))]

@@ -1,20 +1,40 @@
-"""The one place that maps a method name (``--method``) to code.
+"""The one place that runs a method by its name (``--method``).
 
-- ``d3stereo``: :class:`d3cli.method.D3Stereo` (the paper's method),
-- ``sgbm``: OpenCV's semi-global block matching (:func:`d3cli.baselines.sgbm_disparity`),
-- ``pt-sgm``: SGBM after the same perspective transformation as PT-D3Stereo
-  (:func:`d3cli.baselines.pt_sgm_disparity`),
-- ``elas``, ``pandora-sgm``: optional peers (:mod:`d3cli.baselines.peers`, extra ``peers``).
+Each method is declared once, in :data:`d3cli.config.methods.METHOD_SPECS`: its name,
+its entry point in :mod:`d3cli.method` or :mod:`d3cli.baselines` and the configuration
+it is handed.  :func:`compute_pair` looks the name up there, imports the entry point
+and calls it; nothing here names a method.
 """
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 
-from ..baselines import elas_disparity, pandora_sgm_disparity, pt_sgm_disparity, sgbm_disparity
-from ..config import METHODS, Config
+from ..config import METHODS, Config, MethodSpec, method_spec
 from ..errors import ConfigError
-from ..method import D3Stereo, DisparityResult
+from ..method import DisparityResult
+
+
+def spec_of(method: str) -> MethodSpec:
+    """The :class:`~d3cli.config.MethodSpec` of ``method``.
+
+    Raises
+    ------
+    ConfigError
+        No method of that name.
+    """
+    spec = method_spec(method)
+    if spec is None:
+        raise ConfigError(f"--method {method}: unknown method; use one of {', '.join(METHODS)}")
+    return spec
+
+
+def entry_point(spec: MethodSpec):
+    """The function ``spec.compute`` names (``"module:function"``), imported."""
+    module, _, name = spec.compute.partition(":")
+    return getattr(importlib.import_module(module), name)
 
 
 def compute_pair(
@@ -30,29 +50,29 @@ def compute_pair(
 
     Parameters
     ----------
-    method : {"d3stereo", "sgbm", "pt-sgm", "elas", "pandora-sgm"}
+    method : str
+        One of :data:`d3cli.config.METHODS`.
     cfg : Config
-        Full configuration; each method reads its own sections.
+        Full configuration; the method is handed its own section
+        (:attr:`~d3cli.config.MethodSpec.section`) or the whole of it.
     left, right : ndarray, (H, W) or (H, W, 3)
         Raw images of equal shape (any dtype).
     max_disparity : int
         Largest disparity searched, pixels.
     pair_dir : path-like, optional
-        Folder of the pair's input images: where d3stereo looks up a relative
-        ``features.npz`` (precomputed feature maps).
+        Folder of the pair's input images, handed to a method that reads per-pair files
+        there (d3stereo: a relative ``features.npz``).
 
     Returns
     -------
     DisparityResult
+
+    Raises
+    ------
+    ConfigError
+        No method of that name.
     """
-    if method == "sgbm":
-        return sgbm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.sgbm)
-    if method == "d3stereo":
-        return D3Stereo(cfg).compute(left, right, max_disparity=max_disparity, pair_dir=pair_dir)
-    if method == "pt-sgm":
-        return pt_sgm_disparity(left, right, max_disparity=max_disparity, cfg=cfg)
-    if method == "elas":
-        return elas_disparity(left, right, max_disparity=max_disparity, cfg=cfg.peers)
-    if method == "pandora-sgm":
-        return pandora_sgm_disparity(left, right, max_disparity=max_disparity, cfg=cfg.peers)
-    raise ConfigError(f"--method {method}: unknown method; use one of {', '.join(METHODS)}")
+    spec = spec_of(method)
+    handed = cfg if spec.section is None else getattr(cfg, spec.section)
+    extra = {"pair_dir": pair_dir} if spec.pair_dir else {}
+    return entry_point(spec)(left, right, max_disparity=max_disparity, cfg=handed, **extra)

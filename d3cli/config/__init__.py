@@ -11,8 +11,12 @@ Unknown sections or keys, wrong types and out-of-range values raise
 :class:`~d3cli.errors.ConfigError` naming the file, the dotted key, what was expected
 and the valid keys.
 
-- ``sections``: one frozen dataclass per section, :class:`Config`, the method and backend names;
-- ``checks``: types and ranges of every key, :func:`quote`, the error messages;
+- ``methods``: the stereo methods, one :class:`MethodSpec` each (name, entry point, the
+  configuration it is handed and its fingerprint covers): :data:`METHOD_SPECS`, :data:`METHODS`;
+- ``sections``: one frozen dataclass per section, each key a ``setting`` (default, one-line
+  meaning, range check), :class:`Config`, the backend names;
+- ``checks``: the type of every key and the range checks declared with it (``setting``),
+  :func:`quote`, the error messages;
 - ``yamlfile``: bounded, strict YAML reading (YAML 1.2 numbers), ``--set`` parsing;
 - ``bundled``: the configs shipped in the package, by name (:func:`bundled_configs`);
 - ``load``: :func:`load_config` and :func:`config_from_dict`.
@@ -24,9 +28,9 @@ May import: :mod:`d3cli.errors` only (and PyYAML); every other room may import t
 from ..errors import ConfigError
 from .checks import MAX_CONFIG_INT, QUOTE_CHARS, quote, shorten
 from .load import bundled_configs, config_from_dict, load_config, resolve_config
+from .methods import METHOD_SPECS, METHODS, NOT_READ_BY_MAP, MethodSpec, method_spec
 from .sections import (
     BACKENDS,
-    METHODS,
     OUTPUT_CHOICES,
     OUTPUT_GROUPS,
     output_groups,
@@ -63,6 +67,10 @@ __all__ = [
     "OUTPUT_GROUPS",
     "output_groups",
     "METHODS",
+    "METHOD_SPECS",
+    "MethodSpec",
+    "NOT_READ_BY_MAP",
+    "method_spec",
     "MAX_CONFIG_INT",
     "MAX_YAML_BYTES",
     "MAX_YAML_DEPTH",

@@ -14,104 +14,23 @@ from dataclasses import fields, replace
 from typing import Any, Mapping
 
 from ..errors import QUOTE_CHARS, ConfigError, shorten
-from .bundled import bundled_configs
-from .sections import BACKENDS, METHODS, OUTPUT_CHOICES, Config, output_groups
+from .sections import Config
 
 #: Integers in a config are bounded: the kernels take 32-bit scalars.
 MAX_CONFIG_INT = 2**31 - 1
 
 
 # ----------------------------------------------------------------------------- checks
-# Range checks: (predicate, text of what is expected).  Keys absent here take any
-# value of the right type.
-_RANGES: dict[str, tuple[typing.Callable[[Any], bool], str]] = {
-    "run.method": (lambda v: v in METHODS, "one of " + ", ".join(METHODS)),
-    "run.backend": (lambda v: v in BACKENDS, "one of " + ", ".join(BACKENDS)),
-    "run.max_disparity": (lambda v: v is None or v > 0, "a positive integer or null"),
-    "run.max_memory_gb": (lambda v: v is None or v > 0, "a positive number (GB) or null"),
-    "run.color_range": (lambda v: len(v) == 0 or (len(v) == 2 and 0 <= v[0] < v[1]),
-                        "[] or [min, max] with 0 <= min < max (pixels)"),
-    "run.outputs": (lambda v: output_groups(v) is not None,
-                    "a comma-separated list of " + ", ".join(OUTPUT_CHOICES) + " (e.g. survey,pictures)"),
-    "pyramid.levels": (lambda v: 1 <= v <= 8, "an integer in [1, 8]"),
-    "pyramid.band_margin": (lambda v: 2 <= v <= 64, "an integer in [2, 64]"),
-    "pyramid.band_tile": (lambda v: 4 <= v <= 256, "an integer in [4, 256]"),
-    "pyramid.finest_band_tile": (lambda v: v is None or 4 <= v <= 256, "an integer in [4, 256] or null"),
-    "cost.window": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
-    "cost.level_windows": (
-        lambda v: all(w >= 1 and w % 2 == 1 and w <= 31 for w in v),
-        "a list of odd integers in [1, 31]",
-    ),
-    "cost.min_variance": (lambda v: v >= 0, "a number >= 0"),
-    "cost.kind": (lambda v: v in ("ncc", "features"), "one of ncc, features"),
-    "features.channel_order": (lambda v: v in ("rgb", "bgr"), "one of rgb, bgr"),
-    "features.scale": (lambda v: v > 0, "a number > 0"),
-    "features.mean": (lambda v: len(v) in (1, 3), "a list of 1 or 3 numbers"),
-    "features.std": (lambda v: len(v) in (1, 3) and all(s > 0 for s in v), "a list of 1 or 3 numbers > 0"),
-    "aggregation.t_max": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
-    "aggregation.finest_t_max": (lambda v: v is None or 0 <= v <= 64, "an integer in [0, 64] or null"),
-    "aggregation.level_t_max": (lambda v: all(0 <= t <= 64 for t in v), "a list of integers in [0, 64]"),
-    "aggregation.sigma_space": (lambda v: v > 0, "a number > 0"),
-    "aggregation.sigma_color": (lambda v: v > 0, "a number > 0"),
-    "aggregation.kappa_a": (lambda v: 0 <= v <= 32, "an integer in [0, 32]"),
-    "aggregation.bf_sigma_space": (lambda v: v is None or v > 0, "a number > 0 (pixels) or null"),
-    "aggregation.sgm_p1": (lambda v: v >= 0, "a number >= 0"),
-    "aggregation.sgm_p2": (lambda v: v >= 0, "a number >= 0 (0: off)"),
-    "seeds.pkrn_min": (lambda v: v >= 1.0, "a number >= 1"),
-    "seeds.epsilon": (lambda v: v >= 0, "a number >= 0"),
-    "seeds.lr_tolerance": (lambda v: v >= 0, "an integer >= 0"),
-    "seeds.pkrn_exclusion": (lambda v: v >= 0, "an integer >= 0"),
-    "diffusion.tau": (lambda v: 0 <= v <= 16, "an integer in [0, 16]"),
-    "diffusion.kappa_d": (lambda v: 1 <= v <= 8, "an integer in [1, 8]"),
-    "diffusion.max_sweeps": (lambda v: v >= 1, "an integer >= 1"),
-    "diffusion.max_gap": (lambda v: v >= 0 or v == -1, "a number >= 0, or -1 for off"),
-    "inheritance.dfm_pkrn_min": (lambda v: v >= 1.0, "a number >= 1"),
-    "inheritance.candidates": (lambda v: v in ("symmetric", "paper"), "one of symmetric, paper"),
-    "pt.margin": (lambda v: 1 <= v <= 256, "an integer in [1, 256]"),
-    "pt.slack": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
-    "pt.min_inlier_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
-    "pt.inlier_threshold": (lambda v: v > 0, "a number > 0"),
-    "pt.iterations": (lambda v: 1 <= v <= 100, "an integer in [1, 100]"),
-    "pt.max_band_end_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
-    "pt.fallback_config": (lambda v: v == "" or v in _bundled_names(), "\"\" or the name of a bundled config"),
-    "refine.smooth_kernel": (lambda v: v in ("gaussian", "box"), "one of gaussian, box"),
-    "refine.subpixel_fit": (lambda v: v in ("auto", "parabola", "equiangular"), "one of auto, parabola, equiangular"),
-    "refine.speckle_size": (lambda v: 0 <= v <= 100000, "an integer in [0, 100000]"),
-    "refine.speckle_range": (lambda v: 0 < v <= 64, "a number in (0, 64]"),
-    "refine.smooth_radius": (lambda v: 0 <= v <= 64, "an integer in [0, 64]"),
-    "refine.smooth_sigma": (lambda v: v > 0, "a number > 0 (pixels)"),
-    "camera.f": (lambda v: v is None or v > 0, "a positive number (pixels) or null"),
-    "camera.baseline": (lambda v: v is None or v > 0, "a positive number (metres) or null"),
-    "camera.min_depth_m": (lambda v: v >= 0, "a number >= 0 (metres)"),
-    "camera.max_depth_m": (lambda v: v > 0, "a number > 0 (metres)"),
-    "peers.elas_preset": (lambda v: v in ("middlebury", "robotics"), "one of middlebury, robotics"),
-    "peers.pandora_p1": (lambda v: v >= 0, "a number >= 0"),
-    "peers.pandora_p2": (lambda v: v >= 0, "a number >= 0"),
-    "road.min_depth_mm": (lambda v: v > 0, "a number > 0 (mm)"),
-    "road.min_height_mm": (lambda v: v > 0, "a number > 0 (mm)"),
-    "road.min_area_m2": (lambda v: v >= 0, "a number >= 0 (m^2)"),
-    "road.sigma_disparity": (lambda v: v > 0, "a number > 0 (pixels)"),
-    "road.ring_px": (lambda v: 2 <= v <= 100, "an integer in [2, 100]"),
-    "road.min_decided_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
-    "road.colour_range_mm": (lambda v: v > 0, "a number > 0 (mm)"),
-    "road.split_prominence_mm": (lambda v: v > 0, "a number > 0 (mm)"),
-    "road.split_neck": (lambda v: 0 < v <= 1, "a number in (0, 1] (1: no split at necks)"),
-    "road.split_min_area_m2": (lambda v: v >= 0, "a number >= 0 (m^2)"),
-    "road.min_region_decided_share": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
-    "road.frame_spacing_m": (lambda v: v >= 0, "a number >= 0 (metres; 0: unknown)"),
-    "sgbm.block_size": (lambda v: v >= 1 and v % 2 == 1 and v <= 31, "an odd integer in [1, 31]"),
-    "sgbm.mode": (lambda v: v in ("sgbm", "hh", "3way", "hh4"), "one of sgbm, hh, 3way, hh4"),
-    # 100 kills the process: OpenCV's 3-way SGBM divides by (100 - uniquenessRatio) (SIGFPE).
-    "sgbm.uniqueness_ratio": (lambda v: 0 <= v <= 99, "an integer in [0, 99]"),
-    "sgbm.speckle_window": (lambda v: v >= 0, "an integer >= 0"),
-    "sgbm.speckle_range": (lambda v: v >= 0, "an integer >= 0"),
-    "sgbm.disp12_max_diff": (lambda v: v >= -1, "an integer >= -1"),
-}
+def range_checks() -> dict[str, tuple[typing.Callable[[Any], bool], str]]:
+    """``{"section.key": (predicate, text of what is expected)}`` of every key declared
+    with a ``check`` (:func:`d3cli.config.sections.setting`); a key absent here takes any
+    value of the right type."""
+    return {f"{sec.name}.{f.name}": (f.metadata["check"], f.metadata["expected"])
+            for sec in fields(Config) for f in fields(sec.default_factory)
+            if f.metadata.get("check") is not None}
 
 
-def _bundled_names() -> list[str]:
-    """Names of the bundled configs."""
-    return list(bundled_configs())
+_RANGES = range_checks()
 
 
 def _type_name(tp) -> str:

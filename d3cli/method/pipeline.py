@@ -152,6 +152,29 @@ def fallback_settings(cfg: Config) -> Config | None:
     return dataclasses.replace(other, run=cfg.run, pt=dataclasses.replace(other.pt, enabled=False))
 
 
+def d3stereo_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int, cfg: Config,
+                       pair_dir: str | os.PathLike | None = None) -> DisparityResult:
+    """The entry point of ``--method d3stereo`` (:data:`d3cli.config.methods.METHOD_SPECS`):
+    :meth:`D3Stereo.compute` with ``cfg``.
+
+    Parameters
+    ----------
+    left, right : ndarray, (H, W) or (H, W, C)
+        Rectified images (see :meth:`D3Stereo.compute`).
+    max_disparity : int, keyword-only
+        Largest disparity searched at full resolution.
+    cfg : Config, keyword-only
+        Resolved configuration.
+    pair_dir : path-like, optional, keyword-only
+        The pair's folder: a relative ``features.npz`` is looked up there.
+
+    Returns
+    -------
+    DisparityResult
+    """
+    return D3Stereo(cfg).compute(left, right, max_disparity=max_disparity, pair_dir=pair_dir)
+
+
 class D3Stereo:
     """The D3Stereo stereo matcher (NCC + RBF + decisive diffusion/inheritance).
 

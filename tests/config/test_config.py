@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
+import yaml
 from click.testing import CliRunner
 
 from d3cli.cli import main
@@ -242,3 +244,29 @@ def test_bundled_configs_fit_the_subpixel_as_their_cost_asks():
 def test_unknown_subpixel_fit_is_refused():
     with pytest.raises(ConfigError, match="refine.subpixel_fit.*one of auto, parabola, equiangular"):
         load_config(None, ["refine.subpixel_fit=cubic"])
+
+
+def _default_yaml_lines() -> dict[tuple[str, str], tuple[str, str]]:
+    """``{(section, key): (value text, comment)}`` of configs/default.yaml's key lines."""
+    found, section = {}, None
+    for line in DEFAULT_YAML.read_text(encoding="utf-8").splitlines():
+        if line and not line.startswith((" ", "#")):
+            section = line.split(":", 1)[0]
+        elif line.startswith("  ") and not line.lstrip().startswith("#"):
+            key, _, rest = line.strip().partition(":")
+            value, _, comment = rest.partition(" #")
+            found[(section, key)] = (value.strip(), comment.strip())
+    return found
+
+
+def test_default_yaml_comments_each_key_with_its_doc_and_value():
+    """Each key's line in default.yaml carries its default and, as its comment, the one
+    line of meaning declared beside the default (``setting(default, doc, ...)``)."""
+    lines = _default_yaml_lines()
+    for section in dataclasses.fields(Config):
+        for f in dataclasses.fields(section.default_factory):
+            value, comment = lines[(section.name, f.name)]
+            assert f.metadata["doc"], f"{section.name}.{f.name} has no doc"
+            assert comment == f.metadata["doc"], f"{section.name}.{f.name}"
+            assert yaml.safe_load(value) == Config().to_dict()[section.name][f.name], f"{section.name}.{f.name}"
+
