@@ -119,7 +119,8 @@ def test_kernels_never_import_config_data_or_click():
 
 #: The kernels' step packages and the kernels' shared modules they may import.
 KERNEL_STEPS = ("cost", "aggregation", "sgm", "decisive", "subpixel", "perspective", "finishing", "pyramid")
-KERNEL_SHARED = {"pixel", "volume", "compile_cache", "intrinsics", "cpu_common", "cuda_launch", "device_counts", "pool"}
+KERNEL_SHARED = {"pixel", "road_model", "volume", "compile_cache", "intrinsics", "cpu_common", "cuda_launch",
+                 "device_counts", "pool"}
 #: Outside d3cli, what a step module may import.
 KERNEL_STEP_LIBRARIES = {"__future__", "logging", "math", "platform", "types", "typing", "numba", "numpy", "llvmlite"}
 

@@ -8,7 +8,9 @@ for every backend, and are reached through this facade only:
 - the layout of a banded cost volume (:class:`Volume`, :func:`dense_index`,
   :data:`MAX_CELLS`) and the band indexes of a finer level (:func:`band_indexes`);
 - the pyramid's halving (:func:`halve_area`);
-- the finishing (occlusion tests, speckles, hole filling, smoothing: ``finishing/``);
+- the finishing (occlusion tests, speckles, hole filling, smoothing: ``finishing/``),
+  with the road model's rules over a map (:func:`shift_plane_f32`, :func:`restored_validity`,
+  :func:`right_image_mask`; the rules themselves: :mod:`d3cli.kernels.road_model`);
 - the road fit's solvers (:func:`solve_weighted`, :func:`ransac_inlier_counts`,
   :func:`irls`);
 - the perspective warp and restore of a host image (:func:`pt_warp`, :func:`pt_restore`:
@@ -23,7 +25,8 @@ from .cost.band import band_indexes
 from .finishing import (box_smooth_disparity, clamp_negative, combine_shares, copy_nearest_rows, drop_marked,
                         drop_occluded, fill_inside, fill_rows_smaller_side, fixed_point_16, fixed_point_16_finite,
                         keep_valid, nearest_along_columns, out_of_view_mask, range_levels, residual_and_range,
-                        restored_validity, shift_plane_f32, smooth_groups, uniqueness_occluded, usable)
+                        restored_validity, right_image_mask, shift_plane_f32, smooth_groups,
+                        uniqueness_occluded, usable)
 from .perspective.cpu import pt_restore, pt_warp
 from .perspective.road_fit import irls, ransac_inlier_counts, solve_weighted
 from .pyramid import halve_area
@@ -34,5 +37,6 @@ __all__ = [
     "copy_nearest_rows", "dense_index", "drop_marked", "drop_occluded", "fill_inside", "fill_rows_smaller_side",
     "fixed_point_16", "fixed_point_16_finite", "halve_area", "irls", "keep_valid", "nearest_along_columns",
     "out_of_view_mask", "pt_restore", "pt_warp", "range_levels", "ransac_inlier_counts", "residual_and_range",
-    "restored_validity", "shift_plane_f32", "smooth_groups", "solve_weighted", "uniqueness_occluded", "usable",
+    "restored_validity", "right_image_mask", "shift_plane_f32", "smooth_groups", "solve_weighted",
+    "uniqueness_occluded", "usable",
 ]

@@ -16,8 +16,12 @@ the narrow range [0, 2 delta + slack], and the disparity is restored exactly wit
 :meth:`RoadModel.off_band` rejects the model after the narrow-range match when too many
 pixels lie off the band (:func:`band_end_share`): the scene is not a road.
 
-:func:`shift_map` gives the shift on the host (the road plane of the smoothing in
-step 8); :func:`match_in_right_image` is the validity test after restoring.
+The road model's rules are written once, per pixel, in :mod:`d3cli.kernels.road_model`
+(the shift, the restore, the right-image rule, the validity after the restore), compiled
+into the warp and restore of both backends and into the host kernels this module reaches
+through :mod:`d3cli.kernels.host`: :func:`restored_validity` (PT-D3Stereo and PT-SGM),
+:func:`match_in_right_image` (the road report too) and ``host.shift_plane_f32`` (the
+road plane of the smoothing in step 8).
 """
 
 from __future__ import annotations
@@ -329,23 +333,19 @@ def fit_road_model(
     return RoadModel(a0, b1, b2, a1, theta, share, n, not reason, reason)
 
 
-def shift_map(model: RoadModel, shape: tuple[int, int], *, margin: float) -> np.ndarray:
-    """Per-pixel shift ``s(u, v) = a0 + b1 v + b2 u - margin``; float64 (H, W)."""
-    h, w = shape
-    return model.a0 + model.b1 * np.arange(h, dtype=np.float64)[:, None] + model.b2 * np.arange(w)[None, :] - margin
-
-
 def restored_validity(valid: np.ndarray, narrow: np.ndarray, restored: np.ndarray, *,
                       narrow_range: float) -> tuple[np.ndarray, dict]:
     """Which estimates survive the restore of step 6 (PT-D3Stereo and PT-SGM alike).
 
-    Dropped (holes for the filling):
+    The road model's validity rule (:mod:`d3cli.kernels.road_model`, ``restore_drops``),
+    computed by :func:`restored_validity_counts`.  Dropped (holes for the filling):
 
     * estimates at either end of the narrow range (``narrow <= 0`` or ``>= narrow_range``):
       the true disparity most likely lies outside the band (obstacle, kerb, deep
       pothole); a clipped value would be wrong (measured: EPE 0.317 vs 0.340 kept, see
       configs/road.yaml);
-    * restored disparities whose match ``u - d`` falls left of the right image;
+    * restored disparities whose match ``u - d`` is not in the right image
+      (:func:`match_in_right_image`);
     * negative restored disparities: disparities are >= 0 by contract, and a negative one
       comes from a wrong narrow match where the shift ``s(u, v)`` is below zero (far road,
       sky).
@@ -356,7 +356,8 @@ def restored_validity(valid: np.ndarray, narrow: np.ndarray, restored: np.ndarra
     narrow : ndarray, (H, W)
         Narrow-range disparities d' (integer or float).
     restored : ndarray, float32, (H, W)
-        Full-range disparities ``d' (1 - b2) + s(u, v)``.
+        Full-range disparities ``d' (1 - b2) + s(u, v)``, as the restore gives them
+        (another dtype is rounded to float32 first).
     narrow_range : float, keyword-only
         Largest narrow-range disparity ``2 margin + slack``.
 
@@ -366,32 +367,22 @@ def restored_validity(valid: np.ndarray, narrow: np.ndarray, restored: np.ndarra
     shares : dict
         ``range_end_share``, ``outside_share``, ``negative_share`` of all pixels.
     """
-    restored = np.asarray(restored)
-    if (restored.dtype == np.float32 and restored.ndim == 2 and restored.size
-            and np.shape(valid) == restored.shape and np.shape(narrow) == restored.shape):
-        valid, counts, _ = restored_validity_counts(valid, narrow, restored, narrow_range=narrow_range)
-        return valid, restored_shares(counts, valid.size)
-    with np.errstate(invalid="ignore"):  # other inputs: the NumPy formulation the kernel gives
-        ends = valid & ((narrow <= 0) | (narrow >= narrow_range))
-        negative = valid & ~(restored >= 0)
-    outside = valid & ~match_in_right_image(restored)
-    shares = {"range_end_share": float(ends.mean()), "outside_share": float(outside.mean()),
-              "negative_share": float((negative & ~ends & ~outside).mean())}
-    return valid & ~ends & ~outside & ~negative, shares
+    valid, counts, _ = restored_validity_counts(valid, narrow, restored, narrow_range=narrow_range)
+    return valid, restored_shares(counts, valid.size)
 
 
 def restored_validity_counts(valid: np.ndarray, narrow: np.ndarray, restored: np.ndarray, *,
                              narrow_range: float, masked: bool = False):
     """:func:`restored_validity` in one pass over the map, with counts instead of shares.
 
-    The kernel :func:`d3cli.kernels.finishing.restored_validity`: one compiled pass
-    instead of several NumPy passes, the pipeline's masking of the map included.
+    The kernel :func:`d3cli.kernels.finishing.restored_validity` (the road model's rule at
+    every pixel), the pipeline's masking of the map included.
 
     Parameters
     ----------
     valid, narrow : ndarray, (H, W)
         As :func:`restored_validity`.
-    restored : ndarray, float32, (H, W), H W > 0
+    restored : ndarray, float32, (H, W)
     narrow_range : float, keyword-only
     masked : bool, keyword-only
         Also return ``np.where(kept, restored, inf)`` (float32), from the same pass.
@@ -416,18 +407,28 @@ def restored_validity_counts(valid: np.ndarray, narrow: np.ndarray, restored: np
 
 def restored_shares(counts, size: int) -> dict:
     """The shares of :func:`restored_validity` from :func:`restored_validity_counts`'s counts
-    (``bool.mean()`` bit for bit: an exact float64 sum divided by the size)."""
+    (``bool.mean()`` bit for bit: an exact float64 sum divided by the size; 0 for an empty map)."""
+    size = max(int(size), 1)
     return {"range_end_share": float(counts[0]) / size, "outside_share": float(counts[1]) / size,
             "negative_share": float(counts[2]) / size}
 
 
-def match_in_right_image(disparity: np.ndarray) -> np.ndarray:
-    """True where the match ``u - d`` of a restored disparity lies in the right image.
+def match_in_right_image(disparity: np.ndarray, *, finite: bool = False) -> np.ndarray:
+    """True where the match ``u - d`` of a disparity lies in the right image, bool (H, W).
 
-    Half a pixel of slack; non-finite disparities give False.  After the transformation
-    a narrow-range estimate can restore to a match left of the right image: no true
-    match, so a hole.
+    The road model's rule (:mod:`d3cli.kernels.road_model`, ``in_right_image``: half a
+    pixel of slack, the area of the first pixel) over a map.  NaN and +inf give False; with
+    ``finite`` -inf too.  After the transformation a narrow-range estimate can restore to
+    a match left of the right image (:func:`restored_validity`); the road report treats a
+    disparity whose match the right camera does not see as no estimate
+    (:func:`d3cli.road.plane.seen_by_both`).
+
+    Parameters
+    ----------
+    disparity : ndarray, (H, W)
+        Float32 or float64 (another dtype is converted to float64).
+    finite : bool, keyword-only
     """
-    cols = np.arange(disparity.shape[1], dtype=np.float32)[None, :]
-    with np.errstate(invalid="ignore"):
-        return cols - disparity >= -0.5
+    d = np.asarray(disparity)
+    d = np.ascontiguousarray(d if d.dtype in (np.float32, np.float64) else d.astype(np.float64))
+    return host.right_image_mask(d, bool(finite))

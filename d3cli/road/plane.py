@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..method.perspective import match_in_right_image
 from .compiled import height_grid, inlier_count, ransac_scores, weighted_scatter
 from .pointcloud import Camera
 
@@ -142,7 +143,9 @@ def fit_road_plane(
 
 
 def seen_by_both(disparity: np.ndarray) -> np.ndarray:
-    """Pixels whose match ``u - d`` lies inside the right image, bool (H, W).
+    """Pixels with a finite disparity whose match ``u - d`` lies inside the right image,
+    bool (H, W): the road model's right-image rule
+    (:func:`d3cli.method.perspective.match_in_right_image`, half a pixel of slack).
 
     Left of that (the left-border strip, ``u < d``) the right camera does not see the
     point: a disparity there is no measurement but the row-wise hole filling's
@@ -151,10 +154,7 @@ def seen_by_both(disparity: np.ndarray) -> np.ndarray:
     without this rule it holds a third of the false defects (seed 7: 8 of 25 candidate
     regions).
     """
-    d = np.asarray(disparity)
-    u = np.arange(d.shape[1], dtype=np.float64)[None, :]
-    with np.errstate(invalid="ignore"):
-        return np.isfinite(d) & (u - d >= 0.0)
+    return match_in_right_image(disparity, finite=True)
 
 
 def height_map(disparity: np.ndarray, valid: np.ndarray, camera: Camera, plane: RoadPlane, *,

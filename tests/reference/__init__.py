@@ -18,7 +18,7 @@ from .band import ref_band_indexes
 from .finishing import (SHAPES, assert_same_bytes, assert_same_smoothing, numpy_exp_is_simd, random_map,
                         ref_box_smoothing_glue, ref_drop_occluded, ref_drop_speckles, ref_fill_holes,
                         ref_nearest_along_rows, ref_occluded_by_uniqueness, ref_out_of_view, ref_restored_validity,
-                        ref_smooth_disparity)
+                        ref_right_image, ref_shift_plane, ref_smooth_disparity)
 from .inheritance import build_literal
 from .steps import (INF, UNDECIDED, argmin_smallest, cell, kernel_weight, ref_accepts, ref_bilateral_filter,
                     ref_candidates, ref_decisive_seeds, ref_diffuse, ref_diffuse_pixel, ref_downsample, ref_inherit,

@@ -14,8 +14,6 @@ import cv2
 import numpy as np
 import pytest
 
-from d3cli.method.perspective import match_in_right_image
-
 
 def ref_occluded_by_uniqueness(disparity, valid, *, tolerance=1.0):
     h, w = disparity.shape
@@ -138,12 +136,27 @@ def ref_drop_speckles(disparity, valid, *, max_size, max_diff):
     return valid, np.where(valid, disparity, np.inf).astype(np.float32), float(speck.mean())
 
 
+def ref_right_image(disparity):
+    """The road model's right-image rule over a map, as NumPy writes it: ``u - d >= -0.5``
+    (columns in float32: float32 arithmetic on a float32 map)."""
+    cols = np.arange(disparity.shape[1], dtype=np.float32)[None, :]
+    with np.errstate(invalid="ignore"):
+        return cols - disparity >= -0.5
+
+
+def ref_shift_plane(a0, b1, b2, margin, shape):
+    """The road model's shift ``s(u, v) = a0 + b1 v + b2 u - margin`` as NumPy writes it,
+    float64 (H, W)."""
+    h, w = shape
+    return a0 + b1 * np.arange(h, dtype=np.float64)[:, None] + b2 * np.arange(w)[None, :] - margin
+
+
 def ref_restored_validity(valid, narrow, restored, *, narrow_range):
     """``restored_validity`` before its kernel, and the pipeline's masking."""
     with np.errstate(invalid="ignore"):
         ends = valid & ((narrow <= 0) | (narrow >= narrow_range))
         negative = valid & ~(restored >= 0)
-    outside = valid & ~match_in_right_image(restored)
+    outside = valid & ~ref_right_image(restored)
     shares = {"range_end_share": float(ends.mean()), "outside_share": float(outside.mean()),
               "negative_share": float((negative & ~ends & ~outside).mean())}
     kept = valid & ~ends & ~outside & ~negative

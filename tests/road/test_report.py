@@ -144,3 +144,5 @@ def test_left_border_strip_is_no_estimate_and_holds_no_defects(tmp_path):
     assert d["bbox_px"][0] > strip.sum(axis=1).max()
     assert d["max_depth_mm"] == pytest.approx(80, rel=0.03)
     assert seen_by_both(np.array([[5.0, 0.5, np.inf, 2.0]], np.float32)).tolist() == [[False, True, False, True]]
+    # the road model's right-image rule: half a pixel of slack (the first right pixel's area), finite only
+    assert seen_by_both(np.array([[0.5, 1.75, -np.inf, np.nan]], np.float32)).tolist() == [[True, False, False, False]]

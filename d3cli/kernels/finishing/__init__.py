@@ -6,13 +6,14 @@ and the CUDA pipeline alike.  ``d3cli.method.refinement`` calls them; its docstr
 what each step means.  By concern:
 
 - ``occlusion.py``: the uniqueness and left-border tests, fused with the masking, and the
-  validity after the restore of the perspective transformation;
+  road model's rules over a map (:mod:`d3cli.kernels.road_model`): the validity after the
+  restore of the perspective transformation and the right-image mask;
 - ``speckle.py``: OpenCV's 1/16 px fixed point around ``cv2.filterSpeckles``, and the
   dropping of the pixels it marked;
 - ``fill.py``: the hole filling (row-wise, median of four directions, empty rows);
 - ``exp.py``: NumPy's float32 ``exp``, bit for bit, for the range weights;
 - ``smoothing.py``: the Gaussian range smoothing (piecewise-linear bilateral filter), the
-  road plane map and the clamp of negative values;
+  road plane map (the road model's shift) and the clamp of negative values;
 - ``range_box.py``: the box range-kernel smoothing.
 
 Every kernel gives exactly the values of a NumPy/OpenCV formulation of the same step (the
@@ -23,8 +24,9 @@ write disjoint cells, so the results do not depend on the thread count.  This pa
 re-exports the public kernels of its modules: ``finishing.fill_inside(...)`` and
 ``finishing.fill.fill_inside(...)`` are the same function.
 
-May import: ``d3cli.kernels.pool``, ``d3cli.kernels.compile_cache`` (the numba cache folder, chosen on
-import), numba, numpy and llvmlite; no other kernel step.
+May import: ``d3cli.kernels.pool``, ``d3cli.kernels.road_model`` (the road model's per-pixel
+rules), ``d3cli.kernels.compile_cache`` (the numba cache folder, chosen on import), numba,
+numpy and llvmlite; no other kernel step.
 """
 
 from __future__ import annotations
@@ -38,7 +40,8 @@ from . import exp, fill, occlusion, range_box, smoothing, speckle  # noqa: E402
 from .exp import numpy_exp, numpy_expf  # noqa: E402
 from .fill import (copy_nearest_rows, fill_inside, fill_rows_smaller_side, keep_valid,  # noqa: E402
                    nearest_along_columns, usable)
-from .occlusion import drop_occluded, out_of_view_mask, restored_validity, uniqueness_occluded  # noqa: E402
+from .occlusion import (drop_occluded, out_of_view_mask, restored_validity, right_image_mask,  # noqa: E402
+                        uniqueness_occluded)
 from .range_box import box_range_smooth, box_smooth_disparity  # noqa: E402
 from .smoothing import (at_least_zero, clamp_negative, combine_shares, range_levels,  # noqa: E402
                         residual_and_range, shift_plane_f32, smooth_groups)
@@ -53,5 +56,5 @@ __all__ = [
     "copy_nearest_rows", "drop_marked", "drop_occluded", "exp", "fill", "fill_inside", "fill_rows_smaller_side",
     "fixed_point_16", "fixed_point_16_finite", "keep_valid", "nearest_along_columns", "numpy_exp", "numpy_expf",
     "occlusion", "out_of_view_mask", "range_box", "range_levels", "residual_and_range", "restored_validity",
-    "shift_plane_f32", "smooth_groups", "smoothing", "speckle", "uniqueness_occluded", "usable",
+    "right_image_mask", "shift_plane_f32", "smooth_groups", "smoothing", "speckle", "uniqueness_occluded", "usable",
 ]

@@ -2,9 +2,10 @@
 
 The uniqueness test (a right-image column claimed by a larger disparity), the left-border
 test (out of view), both fused with the masking of the pipeline (:func:`drop_occluded`),
-and the validity after the restore of the perspective transformation
-(:func:`restored_validity`).  Each gives the bytes of its NumPy reference formulation
-(``tests/reference/finishing.py``); see docs/design.md, 'Finishing'.
+and the road model's rules over a map (:mod:`d3cli.kernels.road_model`): the validity after
+the restore of the perspective transformation (:func:`restored_validity`) and the
+right-image mask (:func:`right_image_mask`).  Each gives the bytes of its NumPy reference
+formulation (``tests/reference/finishing.py``); see docs/design.md, 'Finishing'.
 """
 
 from __future__ import annotations
@@ -13,12 +14,16 @@ import numpy as np
 from numba import njit
 
 from ..pool import row_tasks, run_tasks
+from ..road_model import host as _road_model
 
 _F32_ONE = np.float32(1.0)
 _F32_INF = np.float32(np.inf)
 # NumPy's float -> int64 cast of a value outside the int64 range (and of NaN) gives
 # INT64_MIN on x86, which the reference's clip then maps to column 0
 _INT64_LIMIT = 9.223372036854775807e18
+# the road model's rules (kernels/road_model.py), as globals numba can type
+_restore_drops = _road_model.restore_drops
+_in_right_image = _road_model.in_right_image
 
 
 # ----------------------------------------------------------------------------- restore after PT
@@ -32,16 +37,12 @@ def _restored_task(task, tasks, valid, narrow, restored, hi, masked, keep_out, c
     for y in range(y0, y1):
         for u in range(w):
             r = restored[y, u]
-            q = narrow[y, u]
-            # bitwise & and | of bools: selects, no branches
-            valid_yu = valid[y, u]
-            ends = valid_yu & ((q <= 0) | (q >= hi))
-            outside = valid_yu & (not (np.float32(u) - r >= -0.5))
-            negative = valid_yu & (not (r >= 0))
+            # float32 u - r: the same verdict as float64 (road_model.in_right_image), vectorised
+            ends, outside, negative = _restore_drops(valid[y, u], narrow[y, u], r, np.float32(u), hi)
             n_ends += ends
             n_outside += outside
             n_negative += negative & (not ends) & (not outside)
-            keep = valid_yu & (not (ends | outside | negative))
+            keep = valid[y, u] & (not (ends | outside | negative))
             keep_out[y, u] = keep
             if masked.shape[0] == h:
                 masked[y, u] = r if keep else _F32_INF
@@ -52,7 +53,8 @@ def _restored_task(task, tasks, valid, narrow, restored, hi, masked, keep_out, c
 
 def restored_validity(valid, narrow, restored, hi, masked=None):
     """The estimates that survive the restore of the perspective transformation, in one pass
-    (counts, validity and masked map together, instead of a pass each).
+    (counts, validity and masked map together, instead of a pass each): the road model's
+    rule (:func:`d3cli.kernels.road_model.build`, ``restore_drops``) at every pixel.
 
     Parameters
     ----------
@@ -70,7 +72,7 @@ def restored_validity(valid, narrow, restored, hi, masked=None):
     -------
     kept : ndarray, bool, (H, W)
         ``valid & ~ends & ~outside & ~negative`` with ``ends = (narrow <= 0) | (narrow >=
-        hi)``, ``outside = ~(float32(u) - restored >= -0.5)``, ``negative = ~(restored >= 0)``.
+        hi)``, ``outside = ~(u - restored >= -0.5)``, ``negative = ~(restored >= 0)``.
     counts : ndarray, int64, (3,)
         Valid pixels at the range ends, outside, and negative but neither of the others.
     """
@@ -82,6 +84,38 @@ def restored_validity(valid, narrow, restored, hi, masked=None):
         masked = np.empty((0, 0), np.float32)
     run_tasks(_restored_task, tasks, valid, narrow, restored, hi, masked, kept, counts)
     return kept, counts.sum(axis=0)
+
+
+@njit(cache=True, nogil=True)
+def _right_image_task(task, tasks, disparity, finite, out):
+    h, w = disparity.shape
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            d = disparity[y, u]
+            seen = _in_right_image(np.float64(u), np.float64(d))
+            out[y, u] = seen & (not finite or np.isfinite(d))
+
+
+def right_image_mask(disparity, finite=False):
+    """Where the match ``u - d`` of a disparity map lies in the right image: the road
+    model's rule (:func:`d3cli.kernels.road_model.build`, ``in_right_image``) at every
+    pixel, in float64.
+
+    Parameters
+    ----------
+    disparity : ndarray, float32 or float64, (H, W), C-contiguous
+    finite : bool
+        Also require a finite disparity (``-inf`` otherwise passes the rule).
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+    """
+    h, w = disparity.shape
+    out = np.empty((h, w), np.bool_)
+    run_tasks(_right_image_task, row_tasks(h), disparity, bool(finite), out)
+    return out
 
 
 # ----------------------------------------------------------------------------- occlusion tests
@@ -287,4 +321,4 @@ def drop_occluded(disparity, valid, tolerance, start, out):
 
 
 #: The compiled kernels of this module (nogil, cached on disk), run by :func:`d3cli.kernels.pool.run_tasks`.
-KERNELS = (_restored_task, _uniqueness_task, _out_of_view_task, _drop_occluded_task)
+KERNELS = (_restored_task, _right_image_task, _uniqueness_task, _out_of_view_task, _drop_occluded_task)

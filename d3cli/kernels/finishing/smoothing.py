@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from ..pool import row_tasks, run_tasks, threads
+from ..road_model import host as _road_model
 from .exp import numpy_expf
 
 _F32_ONE = np.float32(1.0)
@@ -512,19 +513,21 @@ def combine_shares(low, up, base, disp, non_negative=False):
     return low
 
 
+_pt_shift = _road_model.pt_shift  # the road model's shift (kernels/road_model.py), a global numba can type
+
+
 @njit(cache=True, nogil=True)
 def _plane_task(task, tasks, a0, b1, b2, margin, out):
     h, w = out.shape
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        row = a0 + b1 * np.float64(y)
         for u in range(w):
-            out[y, u] = np.float32((row + b2 * np.float64(u)) - margin)
+            out[y, u] = np.float32(_pt_shift(a0, b1, b2, margin, np.float64(y), np.float64(u)))
 
 
 def shift_plane_f32(a0, b1, b2, margin, shape):
-    """``shift_map(...).astype(np.float32)`` in one pass: ``((a0 + b1 v) + b2 u) - margin``
-    in float64, rounded once to float32."""
+    """The road model's shift ``s(u, v)`` of every pixel (:mod:`d3cli.kernels.road_model`):
+    ``((a0 + b1 v) + b2 u) - margin`` in float64, rounded once to float32; (H, W)."""
     h, w = shape
     out = np.empty((h, w), np.float32)
     run_tasks(_plane_task, row_tasks(h), float(a0), float(b1), float(b2), float(margin), out)

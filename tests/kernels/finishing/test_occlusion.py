@@ -9,11 +9,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from d3cli.method.perspective import restored_shares, restored_validity, restored_validity_counts
+from d3cli.kernels import road_model
+from d3cli.method.perspective import match_in_right_image, restored_shares, restored_validity, restored_validity_counts
 from d3cli.method.refinement import drop_occluded, occluded_by_uniqueness, out_of_view
 
 from tests.reference.finishing import (SHAPES, assert_same_bytes, random_map, ref_drop_occluded,
-                                       ref_occluded_by_uniqueness, ref_out_of_view, ref_restored_validity)
+                                       ref_occluded_by_uniqueness, ref_out_of_view, ref_restored_validity,
+                                       ref_right_image)
 
 
 @pytest.mark.parametrize("shape", SHAPES)
@@ -112,10 +114,33 @@ def test_restored_validity_kernel_matches_the_numpy_formulation(narrow_dtype, na
     np.testing.assert_array_equal(kept, want_valid)
     assert restored_shares(counts, kept.size) == want_shares
     assert_same_bytes(masked, want_masked)
-    # other dtypes of the restored map keep the NumPy formulation
+    # a float64 map of the same values: the same verdicts (u - d is exact near the bound)
     restored64 = restored.astype(np.float64)
     got64, shares64 = restored_validity(valid, narrow, restored64, narrow_range=narrow_range)
     want64, want_shares64, _ = ref_restored_validity(valid, narrow, restored64, narrow_range=narrow_range)
     np.testing.assert_array_equal(got64, want64)
     assert shares64 == want_shares64
 
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_right_image_mask_is_the_road_models_rule(dtype):
+    """One rule for PT's validity and the road report: the match ``u - d`` at or right of
+    -0.5 (the area of the first right pixel), computed in float64 over a map; NaN and +inf
+    are not in the image, -inf only without ``finite``."""
+    rng = np.random.default_rng(5)
+    h, w = 23, 41
+    disp = (rng.random((h, w)) * 60 - 5).astype(dtype)
+    cols = np.arange(w, dtype=dtype)
+    disp[:, 7] = cols[7] + dtype(0.5)  # exactly half a pixel left of the image: in
+    disp[:, 8] = np.nextafter(cols[8] + dtype(0.5), dtype(np.inf))  # just beyond: out
+    disp[1, :] = np.inf
+    disp[2, :] = -np.inf
+    disp[3, :] = np.nan
+    want = ref_right_image(disp)
+    np.testing.assert_array_equal(match_in_right_image(disp), want)
+    np.testing.assert_array_equal(match_in_right_image(disp, finite=True), want & np.isfinite(disp))
+    assert want[4:, 7].all() and not want[4:, 8].any() and want[2].all() and not want[[1, 3]].any()
+    assert road_model.RIGHT_IMAGE_SLACK == 0.5
+    rule = road_model.build(lambda f: f)  # the per-pixel form, plain Python
+    assert rule.in_right_image(3, 3.5) and not rule.in_right_image(3, 3.75) and not rule.in_right_image(0, np.nan)

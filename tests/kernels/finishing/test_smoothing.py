@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from d3cli.kernels import finishing
-from d3cli.method.perspective import RoadModel, shift_map
 from d3cli.method.refinement import smooth_disparity
 
-from tests.reference.finishing import SHAPES, assert_same_bytes, assert_same_smoothing, random_map, ref_smooth_disparity
+from tests.reference.finishing import (SHAPES, assert_same_bytes, assert_same_smoothing, random_map, ref_shift_plane,
+                                       ref_smooth_disparity)
 
 
 @pytest.mark.parametrize("shape", SHAPES)
@@ -178,9 +178,8 @@ def test_smoothing_non_negative_is_the_clamp_after_it(kernel):
 
 def test_shift_plane_and_clamp_match_the_numpy_formulation():
     for a0, b1, b2 in ((3.25, 0.0137, -0.00211), (-40.1, 0.1, 0.3), (0.0, 1e-7, -1e-9)):
-        model = RoadModel(a0=a0, b1=b1, b2=b2, a1=0.0, theta=0.0, inlier_share=1.0, n_points=0)
         for margin in (0.0, 8.0):
-            want = shift_map(model, (31, 47), margin=margin).astype(np.float32)
+            want = ref_shift_plane(a0, b1, b2, margin, (31, 47)).astype(np.float32)
             assert_same_bytes(finishing.shift_plane_f32(a0, b1, b2, margin, (31, 47)), want)
     a = np.array([[-1.0, -0.0, 0.0, np.nan, -np.inf, np.inf, 2.5, -1e-30]], np.float32)
     with np.errstate(invalid="ignore"):
