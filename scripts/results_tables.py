@@ -189,11 +189,11 @@ def score_road_check(folder, check=ROAD_CHECK) -> dict:
     pooled_t, pooled_o = folder / "T", folder / "O"
     maps = []
     for seed in check["seeds"]:
-        for pair in sorted((folder / f"T{seed}").iterdir()):
+        for pair in sorted(p for p in (folder / f"T{seed}").iterdir() if p.is_dir()):
             for root, base in ((pooled_t, folder / f"T{seed}"), (pooled_o, folder / f"O{seed}")):
                 root.mkdir(exist_ok=True)
                 link = root / f"s{seed}-{pair.name}"
-                if not link.exists():
+                if not link.is_symlink():
                     link.symlink_to(base / pair.name)
         with open(folder / f"O{seed}" / "metrics.csv", newline="") as f:
             maps += [row for row in csv.DictReader(f) if row["status"] == "ok"]
