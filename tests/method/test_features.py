@@ -20,6 +20,7 @@ from d3cli.kernels import cpu  # noqa: E402
 from d3cli.method.features import feature_pyramid, level_of, normalise  # noqa: E402
 from d3cli.method.pyramid import build_pyramid  # noqa: E402
 from tests.helpers import textured_pair  # noqa: E402
+from tests.reference.features import ref_cosine_cost
 
 WINDOW = 5
 
@@ -69,19 +70,6 @@ def feature_config(path, outputs, **extra):
     return load_config(overrides=sets)
 
 
-def reference_cosine(fl, fr, max_disparity):
-    h, w, _ = fl.shape
-    cost = np.ones((h, w, max_disparity + 1), np.float64)
-    nl = np.linalg.norm(fl, axis=2)
-    nr = np.linalg.norm(fr, axis=2)
-    for d in range(max_disparity + 1):
-        for u in range(d, w):
-            ok = (nl[:, u] > 0) & (nr[:, u - d] > 0)
-            dot = np.sum(fl[:, u].astype(np.float64) * fr[:, u - d], axis=1)
-            cost[ok, u, d] = 0.5 * (1 - np.clip(dot[ok], -1, 1))
-    return cost
-
-
 def test_cosine_cost_volume_matches_the_numpy_reference():
     rng = np.random.default_rng(1)
     fl, nl = normalise(rng.normal(size=(7, 13, 6)).astype(np.float32))
@@ -89,7 +77,7 @@ def test_cosine_cost_volume_matches_the_numpy_reference():
     fl[2, 3] = 0.0
     nl[2, 3] = 0.0  # a zero vector: cost 1 like a flat NCC window
     got = cpu.cosine_cost_volume(fl, fr, nl, nr, 5)
-    np.testing.assert_allclose(got, reference_cosine(fl, fr, 5), atol=1e-6)
+    np.testing.assert_allclose(got, ref_cosine_cost(fl, fr, 5), atol=1e-6)
     assert (got[2, 3] == 1).all() and (got[:, 0, 1:] == 1).all()
 
 

@@ -7,7 +7,6 @@ rule, and the pipeline switch (the filter applied to the unfilled map is exactly
 
 from __future__ import annotations
 
-from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -15,36 +14,9 @@ import pytest
 
 from d3cli import ConfigError, D3Stereo, load_config
 from d3cli.method.refinement import fill_holes, speckles
+from tests.reference.finishing import ref_speckles
 
 CONFIGS = Path(__file__).resolve().parents[2] / "d3cli" / "configs"
-
-
-def reference_speckles(disp, valid, max_size, max_diff):
-    """Regions of 4-connected valid pixels whose neighbours differ by <= max_diff; True on
-    the pixels of regions of at most max_size pixels (plain breadth-first search)."""
-    h, w = disp.shape
-    label = np.full((h, w), -1, np.int64)
-    out = np.zeros((h, w), bool)
-    for v0 in range(h):
-        for u0 in range(w):
-            if not valid[v0, u0] or label[v0, u0] >= 0:
-                continue
-            label[v0, u0] = 1
-            members = [(v0, u0)]
-            queue = deque(members)
-            while queue:
-                v, u = queue.popleft()
-                for dv, du in ((0, 1), (0, -1), (1, 0), (-1, 0)):
-                    y, x = v + dv, u + du
-                    if 0 <= y < h and 0 <= x < w and valid[y, x] and label[y, x] < 0 \
-                            and abs(float(disp[y, x]) - float(disp[v, u])) <= max_diff:
-                        label[y, x] = 1
-                        members.append((y, x))
-                        queue.append((y, x))
-            if len(members) <= max_size:
-                for v, u in members:
-                    out[v, u] = True
-    return out
 
 
 def ramp(h=40, w=60):
@@ -100,7 +72,7 @@ def test_speckles_match_the_breadth_first_reference(seed, max_size, max_diff):
     disp += np.round(rng.normal(0.0, 0.4, disp.shape) * 16) / 16
     disp = np.maximum(disp, 0).astype(np.float32)
     valid = rng.random(disp.shape) > 0.1
-    expected = reference_speckles(disp, valid, max_size, max_diff)
+    expected = ref_speckles(disp, valid, max_size, max_diff)
     assert expected.any() and (valid & ~expected).any()  # both kinds occur
     np.testing.assert_array_equal(speckles(disp, valid, max_size=max_size, max_diff=max_diff), expected)
 

@@ -7,7 +7,9 @@ and the pipeline are held to, in one place.
   speckles, hole filling, smoothing) with the byte-comparison helpers its tests share;
 - ``inheritance.py``: the literal per-pixel form of inheritance (eq. 6-8), compiled with
   the kernels' ``jit`` against their namespace of per-pixel functions;
-- ``band.py``: the band rule of the finer levels' cost volumes.
+- ``band.py``: the band rule of the finer levels' cost volumes;
+- ``features.py``: the cosine cost of deep features; ``sgm.py``: the semi-global paths;
+- ``road.py``: the road report's confidence evidence (spikiness by a full median filter).
 
 ``from tests import reference as ref`` gives every reference by name (``ref.ref_ncc_cost_volume``).
 """

@@ -9,6 +9,7 @@ pair of ``cv2.boxFilter`` calls per range level; with the helpers the finishing 
 from __future__ import annotations
 
 import warnings
+from collections import deque
 
 import cv2
 import numpy as np
@@ -219,3 +220,50 @@ def assert_same_smoothing(got, want, what=""):
     else:
         np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6, err_msg=what)
 
+
+def ref_speckles(disp, valid, max_size, max_diff):
+    """Regions of 4-connected valid pixels whose neighbours differ by <= max_diff; True on
+    the pixels of regions of at most max_size pixels (plain breadth-first search)."""
+    h, w = disp.shape
+    label = np.full((h, w), -1, np.int64)
+    out = np.zeros((h, w), bool)
+    for v0 in range(h):
+        for u0 in range(w):
+            if not valid[v0, u0] or label[v0, u0] >= 0:
+                continue
+            label[v0, u0] = 1
+            members = [(v0, u0)]
+            queue = deque(members)
+            while queue:
+                v, u = queue.popleft()
+                for dv, du in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+                    y, x = v + dv, u + du
+                    if 0 <= y < h and 0 <= x < w and valid[y, x] and label[y, x] < 0 \
+                            and abs(float(disp[y, x]) - float(disp[v, u])) <= max_diff:
+                        label[y, x] = 1
+                        members.append((y, x))
+                        queue.append((y, x))
+            if len(members) <= max_size:
+                for v, u in members:
+                    out[v, u] = True
+    return out
+
+
+def ref_range_box_float32(resid, use, radius, threshold):
+    """The kernel's own arithmetic in NumPy: every pixel adds its float32 terms row after
+    row, offset after offset (left to right), from +0 (adding +0 for an offset outside the
+    map changes no sum: none is -0)."""
+    h, w = resid.shape
+    masked = np.full((h + 2 * radius, w + 2 * radius), np.nan, np.float32)
+    masked[radius:radius + h, radius:radius + w] = np.where(use, resid, np.float32(np.nan))
+    total = np.zeros((h, w), np.float32)
+    count = np.zeros((h, w), np.float32)
+    thr = np.float32(threshold)
+    with np.errstate(invalid="ignore"):
+        for dy in range(2 * radius + 1):
+            for dx in range(2 * radius + 1):
+                q = masked[dy:dy + h, dx:dx + w]
+                inside = np.abs(q - resid) <= thr
+                total += np.where(inside, q, np.float32(0))
+                count += inside.astype(np.float32)
+        return np.where(~np.isfinite(resid) | (count == 0), resid, total / count).astype(np.float32)

@@ -3,7 +3,6 @@ and the flags of whole defects measured on analytic scenes."""
 
 import numpy as np
 import pytest
-from scipy import ndimage
 
 from d3cli.config import RoadConfig
 from d3cli.road.confidence import (REASONS, ConfidenceRules, deep_at_border, depressions, describe, flags_of,
@@ -13,6 +12,7 @@ from d3cli.road.plane import fit_road_plane, height_map
 from d3cli.road.pointcloud import disparity_to_points
 
 from .scene import pothole_scene
+from tests.reference.road import ref_spikiness
 
 
 def bowl(shape=(120, 160), centre=(60, 80), radius=40.0, depth=0.05):
@@ -21,18 +21,11 @@ def bowl(shape=(120, 160), centre=(60, 80), radius=40.0, depth=0.05):
     return (depth * np.clip(1 - r2, 0, None)).astype(np.float32)
 
 
-def naive_spikiness(depth, inside, peak_px, spike_px):
-    """The definition: peak of depth over inside / peak of its spike_px median filter over inside."""
-    filt = ndimage.median_filter(depth.astype(np.float64), size=spike_px, mode="nearest")
-    top = np.sort(depth[inside])[-peak_px:].mean()
-    return top / np.sort(filt[inside])[-peak_px:].mean()
-
-
 def test_spikiness_of_a_smooth_bowl_is_one_and_of_a_spiky_floor_more():
     d = bowl()
     inside = d > 0.01
     smooth = spikiness(d, inside, peak_px=9, spike_px=15)
-    assert smooth == pytest.approx(naive_spikiness(d, inside, 9, 15), rel=1e-6)
+    assert smooth == pytest.approx(ref_spikiness(d, inside, 9, 15), rel=1e-6)
     assert 1.0 <= smooth < 1.05  # a paraboloid's bottom loses 2 % in the filter
     # Reflections on a wet floor: isolated 2x2 spikes 30 mm deeper than the floor.
     spiky = d.copy()
@@ -40,7 +33,7 @@ def test_spikiness_of_a_smooth_bowl_is_one_and_of_a_spiky_floor_more():
     for v, u in zip(rng.integers(40, 80, 12), rng.integers(60, 100, 12)):
         spiky[v:v + 2, u:u + 2] += 0.03
     value = spikiness(spiky, inside, peak_px=9, spike_px=15)
-    assert value == pytest.approx(naive_spikiness(spiky, inside, 9, 15), rel=1e-6)
+    assert value == pytest.approx(ref_spikiness(spiky, inside, 9, 15), rel=1e-6)
     assert value > 1.4
     # A narrow but real deepest part (a cone's tip) stays below the flag's threshold.
     v, u = np.mgrid[:120, :160]

@@ -11,6 +11,7 @@ from d3cli.kernels.finishing.range_box import box_range_smooth
 from d3cli.method.refinement import smooth_disparity
 
 from tests.reference.finishing import assert_same_bytes, random_map, ref_box_smoothing_glue
+from tests.reference.finishing import ref_range_box_float32
 
 
 def reference(resid, use, radius, threshold):
@@ -81,26 +82,6 @@ def test_box_smoothing_with_a_plane_and_invalid_pixels():
         smooth_disparity(disp, valid, radius=2, sigma=1.0, kernel="median")
 
 
-def reference_float32(resid, use, radius, threshold):
-    """The kernel's own arithmetic in NumPy: every pixel adds its float32 terms row after
-    row, offset after offset (left to right), from +0 (adding +0 for an offset outside the
-    map changes no sum: none is -0)."""
-    h, w = resid.shape
-    masked = np.full((h + 2 * radius, w + 2 * radius), np.nan, np.float32)
-    masked[radius:radius + h, radius:radius + w] = np.where(use, resid, np.float32(np.nan))
-    total = np.zeros((h, w), np.float32)
-    count = np.zeros((h, w), np.float32)
-    thr = np.float32(threshold)
-    with np.errstate(invalid="ignore"):
-        for dy in range(2 * radius + 1):
-            for dx in range(2 * radius + 1):
-                q = masked[dy:dy + h, dx:dx + w]
-                inside = np.abs(q - resid) <= thr
-                total += np.where(inside, q, np.float32(0))
-                count += inside.astype(np.float32)
-        return np.where(~np.isfinite(resid) | (count == 0), resid, total / count).astype(np.float32)
-
-
 @pytest.mark.parametrize("shape", [(1, 1), (3, 5), (9, 8), (30, 36), (17, 61)])
 @pytest.mark.parametrize("radius", [1, 2, 3, 4, 5])
 def test_box_range_smooth_sums_in_the_fixed_order_bit_for_bit(shape, radius):
@@ -113,7 +94,7 @@ def test_box_range_smooth_sums_in_the_fixed_order_bit_for_bit(shape, radius):
     resid[rng.random(shape) < 0.05] = -0.0
     use = np.isfinite(resid) & (rng.random(shape) > 0.2)
     got = box_range_smooth(resid, use, radius, 1.5)
-    want = reference_float32(resid, use, radius, 1.5)
+    want = ref_range_box_float32(resid, use, radius, 1.5)
     assert got.tobytes() == want.tobytes()
 
 

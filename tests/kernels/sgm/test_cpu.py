@@ -13,44 +13,9 @@ from tests.volumes import banded
 from d3cli.kernels import cpu
 from d3cli.kernels.sgm import cpu as sgm_cpu
 from d3cli.kernels.volume import Volume
+from tests.reference.sgm import ref_sgm_paths
 
 F32 = np.float32
-
-
-def reference_paths(cost, lo, hi, p1, p2):
-    """(L_left + L_down + L_right + L_up) / 4 of a dense (H, W, D) cost whose cells
-    outside [lo, hi) of each pixel do not exist (inf in the path costs, 0 in the result)."""
-    h, w, n = cost.shape
-    p1, p2 = F32(p1), F32(p2)
-    acc = np.zeros((h, w, n), F32)
-    inside = (np.arange(n)[None, None, :] >= lo[:, :, None]) & (np.arange(n)[None, None, :] < hi[:, :, None])
-
-    def walk(pixels):
-        prev = np.full(n, np.inf, F32)
-        for v, u in pixels:
-            cur = np.full(n, np.inf, F32)
-            pm = prev.min()
-            for d in np.nonzero(inside[v, u])[0]:
-                c = cost[v, u, d]
-                if pm == np.inf:
-                    el = c
-                else:
-                    b = min(prev[d], prev[d - 1] + p1 if d > 0 else np.inf, prev[d + 1] + p1 if d + 1 < n else np.inf,
-                            pm + p2)
-                    el = F32(c + F32(F32(b) - pm))
-                cur[d] = el
-                acc[v, u, d] = F32(acc[v, u, d] + el)
-            prev = cur
-
-    for v in range(h):
-        walk([(v, u) for u in range(w)])
-    for u in range(w):
-        walk([(v, u) for v in range(h)])
-    for v in range(h):
-        walk([(v, u) for u in range(w - 1, -1, -1)])
-    for u in range(w):
-        walk([(v, u) for v in range(h - 1, -1, -1)])
-    return acc * F32(0.25), inside
 
 
 def random_bands(seed, h, w, n, *, lo_below, width_below):
@@ -74,7 +39,7 @@ def assert_bands_equal(flat, index, lo, hi, want):
 def test_dense_volume_equals_the_reference(p1, p2):
     rng = np.random.default_rng(3)
     cost = rng.uniform(0, 1, (7, 9, 6)).astype(F32)
-    want, _ = reference_paths(cost, np.zeros((7, 9), int), np.full((7, 9), 6), p1, p2)
+    want, _ = ref_sgm_paths(cost, np.zeros((7, 9), int), np.full((7, 9), 6), p1, p2)
     got = cpu.sgm_smooth(cost, p1, p2)
     assert got.shape == cost.shape and got.dtype == F32
     np.testing.assert_array_equal(got, want)
@@ -85,17 +50,17 @@ def test_wide_bands_equal_the_reference():
     # overlaps the one before, and short bands alone
     h, w, n = 5, 8, 24
     cost, lo, hi, _ = random_bands(7, h, w, n, lo_below=3, width_below=22)
-    want, inside = reference_paths(cost, lo, hi, 0.05, 0.3)
+    want, inside = ref_sgm_paths(cost, lo, hi, 0.05, 0.3)
     got = cpu.sgm_smooth(banded(cost, lo, hi), 0.05, 0.3)
     assert_bands_equal(got.cost, got.index, lo, hi, want)
     dense = cost[:, :, :19]
     np.testing.assert_array_equal(cpu.sgm_smooth(dense, 0.05, 0.3),
-                                  reference_paths(dense, np.zeros((h, w), int), np.full((h, w), 19), 0.05, 0.3)[0])
+                                  ref_sgm_paths(dense, np.zeros((h, w), int), np.full((h, w), 19), 0.05, 0.3)[0])
 
 
 def test_banded_volume_equals_the_reference():
     cost, lo, hi, _ = random_bands(5, 6, 11, 9, lo_below=5, width_below=6)
-    want, inside = reference_paths(cost, lo, hi, 0.1, 0.5)
+    want, inside = ref_sgm_paths(cost, lo, hi, 0.1, 0.5)
     got = cpu.sgm_smooth(banded(cost, lo, hi), 0.1, 0.5)
     assert isinstance(got, Volume) and np.array_equal(got.index, banded(cost, lo, hi).index)
     assert_bands_equal(got.cost, got.index, lo, hi, want)
@@ -135,7 +100,7 @@ def test_cells_in_no_visible_band_come_out_zero():
     for v in range(h):
         for u in range(w):
             flat[index[v, u, 0] + lo[v, u]:index[v, u, 0] + hi[v, u]] = cost[v, u, lo[v, u]:hi[v, u]]
-    want, inside = reference_paths(cost, lo, hi, 0.1, 0.5)
+    want, inside = ref_sgm_paths(cost, lo, hi, 0.1, 0.5)
     got = cpu.sgm_smooth(Volume(flat, index, n), 0.1, 0.5).cost
     assert_bands_equal(got, index, lo, hi, want)
     visible = np.zeros(flat.shape, bool)
@@ -160,7 +125,7 @@ def test_segments_hand_the_row_paths_over_exactly(segments, n_seg):
     # the row paths cross 1 to 12 segment boundaries (13: a column per segment, each pixel
     # handed over), on bands that move: the result does not depend on the cut
     cost, lo, hi, _ = random_bands(21, 6, 13, 20, lo_below=6, width_below=15)
-    want, _ = reference_paths(cost, lo, hi, 0.05, 0.3)
+    want, _ = ref_sgm_paths(cost, lo, hi, 0.05, 0.3)
     segments(n_seg)
     assert sgm_cpu.segment_bounds(banded(cost, lo, hi).index, n_seg).shape == (n_seg + 1,)
     got = cpu.sgm_smooth(banded(cost, lo, hi), 0.05, 0.3)
@@ -171,7 +136,7 @@ def test_segments_on_one_thread_run_in_sweep_order(segments):
     # one thread takes the tasks in turn: each segment finds the one before it done
     import numba
     cost = np.random.default_rng(22).uniform(0, 1, (5, 11, 7)).astype(F32)
-    want, _ = reference_paths(cost, np.zeros((5, 11), int), np.full((5, 11), 7), 0.1, 0.4)
+    want, _ = ref_sgm_paths(cost, np.zeros((5, 11), int), np.full((5, 11), 7), 0.1, 0.4)
     segments(4)
     before = numba.get_num_threads()
     numba.set_num_threads(1)
