@@ -20,8 +20,8 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .config import (BACKENDS, MAX_CONFIG_INT, METHODS, OUTPUT_CHOICES, Config, bundled_configs, load_config, output_groups,
-                     quote, resolve_config)
+from .config import (BACKENDS, MAX_CONFIG_INT, METHODS, OUTPUT_CHOICES, Config, bundled_configs, load_config,
+                     method_spec, output_groups, quote, resolve_config)
 from .errors import D3Error, InputError, interrupt_behind, plural, raise_hung_up, raise_terminated, where_what_fix
 
 log = logging.getLogger("d3cli")
@@ -325,16 +325,18 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
                                             + " (e.g. survey,pictures)"))
         cfg = replace(cfg, run=replace(cfg.run, outputs=outputs))
     method = cfg.run.method
-    from .kernels.cache_location import announce
+    spec = method_spec(method)
+    if spec is not None and spec.kernels:
+        from .kernels.cache_location import announce
 
-    announce(method)  # a cold cache: say so before the imports below (numba: a second or more)
+        announce(method)  # a cold cache: say so before the imports below (numba: a second or more)
     from . import batch
     from .data import layouts as datasets
     from .evaluation import report
 
     if method == "sgbm" and cfg.run.backend == "cuda":
         log.warning("--backend cuda: sgbm runs on OpenCV's CPU implementation")
-    if method in ("elas", "pandora-sgm"):
+    if spec is not None and spec.extra:
         from .baselines.peers import require
 
         require(method)  # an Error now, not one failed pair after another

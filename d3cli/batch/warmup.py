@@ -30,7 +30,7 @@ import time
 import numpy as np
 from numba.core import event as numba_event
 
-from ..config import Config
+from ..config import Config, method_spec
 from ..errors import D3Error
 from ..kernels import cache_location
 from ..method.pipeline import fallback_settings
@@ -50,9 +50,6 @@ WAIT_STEP_S = 0.1
 
 #: Compile threads a signal left running (daemon threads: they never hold up an exit).
 _left_running: list[threading.Thread] = []
-
-#: Methods without numba kernels: nothing to compile.
-_NO_JIT = ("sgbm",)
 
 #: Size of the warm-up pair (H, W) and its disparity range, pixels: small enough to cost
 #: nothing once compiled, large enough for every window and pyramid level of the defaults.
@@ -210,7 +207,8 @@ def warm_jit(cfg: Config, method: str) -> float:
     the interrupt or holds it back until the caller's block ends (the batch's deferral);
     in the latter case this returns the seconds spent.
     """
-    if method in _NO_JIT:
+    spec = method_spec(method)
+    if spec is None or not spec.kernels:  # no numba kernels: nothing to compile
         return 0.0
     compiling = cache_location.announce(method)
     done = cache_location.resume_point(method) if compiling else None  # what an interrupted compile left

@@ -47,6 +47,12 @@ class MethodSpec:
         Whether the entry point is handed the pair's folder (``pair_dir=``), where it
         reads per-pair files (``features.npz``); their identity is then part of the
         fingerprint (:func:`d3cli.batch.fingerprint.feature_files`).
+    kernels : bool
+        Whether it runs d3stereo's numba kernels: they are compiled (and warmed up) before
+        its first pair, and with ``--backend cuda`` it runs on the GPU.
+    extra : str or None
+        The pip extra whose packages it needs (``pip install "d3stereo[EXTRA]"``); checked
+        before a batch starts.
     """
 
     name: str
@@ -54,6 +60,8 @@ class MethodSpec:
     doc: str
     section: str | None = None
     pair_dir: bool = False
+    kernels: bool = False
+    extra: str | None = None
 
     def fingerprinted(self, sections) -> tuple[str, ...]:
         """The config sections, of ``sections`` (every section's name), that a stored
@@ -66,15 +74,15 @@ class MethodSpec:
 
 #: Every method, in the order ``--method`` lists them.
 METHOD_SPECS = (
-    MethodSpec("d3stereo", "d3cli.method.pipeline:d3stereo_disparity", pair_dir=True,
+    MethodSpec("d3stereo", "d3cli.method.pipeline:d3stereo_disparity", pair_dir=True, kernels=True,
                doc="decisive disparity diffusion, the paper's method (d3cli.method)"),
     MethodSpec("sgbm", "d3cli.baselines.sgbm:sgbm_disparity", section="sgbm",
                doc="OpenCV's semi-global block matching"),
-    MethodSpec("pt-sgm", "d3cli.baselines.pt_sgm:pt_sgm_disparity",
+    MethodSpec("pt-sgm", "d3cli.baselines.pt_sgm:pt_sgm_disparity", kernels=True,
                doc="SGBM after PT-D3Stereo's perspective transformation"),
-    MethodSpec("elas", "d3cli.baselines.peers:elas_disparity", section="peers",
+    MethodSpec("elas", "d3cli.baselines.peers:elas_disparity", section="peers", extra="peers",
                doc="ELAS through pyelas (extra \"peers\")"),
-    MethodSpec("pandora-sgm", "d3cli.baselines.peers:pandora_sgm_disparity", section="peers",
+    MethodSpec("pandora-sgm", "d3cli.baselines.peers:pandora_sgm_disparity", section="peers", extra="peers",
                doc="pandora census + SGM (extra \"peers\")"),
 )
 

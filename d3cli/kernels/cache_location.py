@@ -33,8 +33,6 @@ COMPILE_RECORD = "compile.json"
 #: bundled samples with the default config and with road.yaml (numba 0.68: 251 functions,
 #: 120-140 s in a fresh virtual environment; a loaded machine takes two or three times as long).
 COLD_ESTIMATE = {"seconds": 120.0, "kernels": 251}
-#: The methods that run the numba kernels (the others compile nothing of ours).
-KERNEL_METHODS = ("d3stereo", "pt-sgm")
 #: Level of the compile notice and progress lines: above WARNING, so a default logging
 #: setup (the CLI without -v, a script's last-resort handler) shows them; -q hides them.
 NOTICE = logging.WARNING + 1
@@ -220,8 +218,6 @@ def announce(method: str) -> bool:
         now or earlier).
     """
     global announced
-    if method not in KERNEL_METHODS:
-        return False
     if announced:
         return True
     cold = is_cold()

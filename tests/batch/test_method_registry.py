@@ -63,3 +63,17 @@ def test_the_fingerprint_covers_what_the_method_is_handed(spec):
             (value + "x" if isinstance(value, str) else value + (1,)))
         other = dataclasses.replace(cfg, **{name: dataclasses.replace(getattr(cfg, name), **{first.name: changed})})
         assert (settings_fingerprint(other, spec.name, None) != base) == (name in covered), name
+
+
+def test_only_the_kernel_methods_compile_warm_up_and_prefetch_and_the_peers_name_their_extra():
+    from d3cli.batch.executors import resolve_prefetch
+    from d3cli.batch.warmup import warm_jit
+
+    assert {s.name for s in METHOD_SPECS if s.kernels} == {"d3stereo", "pt-sgm"}
+    assert {s.name: s.extra for s in METHOD_SPECS if s.extra} == {"elas": "peers", "pandora-sgm": "peers"}
+    cfg = dataclasses.replace(Config(), run=dataclasses.replace(Config().run, backend="cuda"))
+    for spec in METHOD_SPECS:
+        if not spec.kernels:
+            # Nothing of ours to compile, and nothing that uses the device to keep busy.
+            assert warm_jit(cfg, spec.name) == 0.0
+            assert resolve_prefetch(None, cfg, spec.name) == 0

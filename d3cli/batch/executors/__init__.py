@@ -83,10 +83,11 @@ def resolve_prefetch(prefetch: int | None, cfg=None, method: str | None = None) 
     numba kernels, and sgbm, elas and pandora-sgm never use the device)."""
     if prefetch is not None:
         return prefetch
+    from ...config import method_spec
     from ...kernels import chosen_backend
-    from ...kernels.cache_location import KERNEL_METHODS
 
-    if cfg is None or method not in KERNEL_METHODS:  # sgbm, elas, pandora-sgm never use the device
+    spec = method_spec(method)
+    if cfg is None or spec is None or not spec.kernels:  # sgbm, elas, pandora-sgm never use the device
         return 0
 
     return DEFAULT_PREFETCH if chosen_backend(cfg.run.backend) == "cuda" else 0
