@@ -16,7 +16,8 @@ Reasons (defects.json ``flags``, in this order):
     than the filter (a cone's tip loses a few percent).
 ``noisy``
     Dark or noisy: the depth is less than :attr:`ConfidenceRules.min_snr` times the height
-    noise around the defect (1.4826 MAD of the heights in an annulus around it,
+    noise the defect's significance was tested against (the larger of the map's noise at
+    its distance and 1.4826 MAD of the heights in an annulus around it,
     :func:`d3cli.road.defects.find_defects`).  The deepest pixels of a noisy map read deep
     by a few noise levels.
 ``few_decided``
