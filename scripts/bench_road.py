@@ -151,8 +151,7 @@ def gt_depth_mm(gt_dir: Path, shape) -> np.ndarray:
     from d3cli.data.formats import read_pfm
     from d3cli.data.synth import pothole_depth_image
 
-    source = gt_dir / "SOURCE.txt"
-    fields = dict(ln.split(": ", 1) for ln in source.read_text().splitlines() if ": " in ln) if source.is_file() else {}
+    fields = source_fields(gt_dir)
     if "pair_seed" not in fields or not (gt_dir / "disp_gt.pfm").is_file():
         return np.full(shape, np.nan)
     width, height = (int(x) for x in fields["image_size"].split("x"))
@@ -235,14 +234,17 @@ def is_ok(defect: dict) -> bool:
     return not defect.get("low_confidence", False)
 
 
+def source_fields(gt_dir: Path) -> dict:
+    """The ``key: value`` lines of the pair's SOURCE.txt ({} without one)."""
+    source = gt_dir / "SOURCE.txt"
+    if not source.is_file():
+        return {}
+    return dict(ln.split(": ", 1) for ln in source.read_text().splitlines() if ": " in ln)
+
+
 def lighting(gt_dir: Path) -> str:
     """The pair's lighting (SOURCE.txt ``variant``: sun, dusk, wet), "unknown" without it."""
-    source = gt_dir / "SOURCE.txt"
-    if source.is_file():
-        for line in source.read_text().splitlines():
-            if line.startswith("variant:"):
-                return line.split(":", 1)[1].strip() or "unknown"
-    return "unknown"
+    return source_fields(gt_dir).get("variant", "").strip() or "unknown"
 
 
 def confidence_summary(rows: list) -> dict:
@@ -393,29 +395,44 @@ def main(argv=None) -> int:
     return 0
 
 
-def _pct(x: float) -> str:
-    return "-" if x != x else f"{100 * x:.1f} %"
+def _pct(x) -> str:
+    return "–" if x is None or x != x else f"{100 * x:.1f} %"
+
+
+def confidence_markdown(c: dict, tables: dict, *, targets: bool) -> list[str]:
+    """Markdown lines of the confidence check: the figures of its targets (``c``:
+    :func:`confidence_summary`; ``targets``: with the targets of docs/road.md beside them),
+    then one table per lighting and per family (``tables["lighting"]``, ``tables["family"]``:
+    :func:`confidence_table`)."""
+    def aim(text):
+        return f" (target {text})" if targets else ""
+    lines = [f"- true potholes deeper than 20 mm found by a defect reported `ok`: {c['found_ok']} of "
+             f"{c['potholes']}, {_pct(c['found_ok_share'])}" + aim("at least 85 %"),
+             f"- `ok` matches off by more than 20 % in depth: {c['ok_over_20']} of {c['ok_matches']} "
+             f"(worst {_pct(c['worst_ok_depth'])})" + aim("none"),
+             f"- false defects reported `ok`: {c['false_ok']}, {c['false_ok_per_pair']:.2f} per pair"
+             + aim("at most 0.05") + f"; duplicates reported `ok`: {c['duplicates_ok']}",
+             f"- medians over all matches: |depth| {_pct(c['depth'])}, area {_pct(c['area'])}, volume "
+             f"{_pct(c['volume'])}" + aim("10 %, 15 %, 15 %") + f"; over the `ok` ones: {_pct(c['ok_depth'])}, "
+             f"{_pct(c['ok_area'])}, {_pct(c['ok_volume'])}", ""]
+    for by in ("lighting", "family"):
+        lines += [f"| {by} | potholes > 20 mm | found | found `ok` | matches flagged | why (a defect can have "
+                  "several) | `ok`: median abs depth err | `ok`: worst abs depth err | `ok`: median abs area err | "
+                  "`ok`: median abs volume err |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for t in tables[by]:
+            why = ", ".join(f"{k} {v}" for k, v in sorted(t["reasons"].items(), key=lambda kv: (-kv[1], kv[0]))) or "–"
+            lines.append(f"| {t['group']} | {t['gt']} | {t['found']} | {t['found_ok']} | {t['flagged']} of "
+                         f"{t['matches']} | {why} | {_pct(t['ok_depth'])} | {_pct(t['ok_worst'])} | "
+                         f"{_pct(t['ok_area'])} | {_pct(t['ok_volume'])} |")
+        lines.append("")
+    return lines
 
 
 def print_confidence(rows: list) -> None:
-    """The confidence check as printed by ``--confidence``: the targets, then one table per
-    pothole family and per lighting."""
-    c = confidence_summary(rows)
-    print(f"confidence: {c['found_ok']}/{c['potholes']} true potholes found ok ({_pct(c['found_ok_share'])}, "
-          f"target >= 85 %); {c['ok_matches']} ok matches, {c['ok_over_20']} of them off by more than 20 % "
-          f"(worst {_pct(c['worst_ok_depth'])}, target none); false ok defects/pair {c['false_ok_per_pair']:.3f} "
-          f"({c['false_ok']}, target <= 0.05); ok duplicates {c['duplicates_ok']}")
-    print(f"medians, all matches: depth {_pct(c['depth'])}, area {_pct(c['area'])}, volume {_pct(c['volume'])}; "
-          f"ok matches: depth {_pct(c['ok_depth'])}, area {_pct(c['ok_area'])}, volume {_pct(c['ok_volume'])}")
-    for by in ("family", "lighting"):
-        print(f"| {by} | potholes > 20 mm | found | found ok | matches flagged | why | ok: median abs depth err "
-              "| ok: worst abs depth err | ok: median abs area err | ok: median abs volume err |")
-        print("|---|---|---|---|---|---|---|---|---|---|")
-        for t in confidence_table(rows, by):
-            why = ", ".join(f"{k} {v}" for k, v in sorted(t["reasons"].items(), key=lambda kv: -kv[1])) or "-"
-            print(f"| {t['group']} | {t['gt']} | {t['found']} | {t['found_ok']} | {t['flagged']}/{t['matches']} | {why} "
-                  f"| {_pct(t['ok_depth'])} | {_pct(t['ok_worst'])} | {_pct(t['ok_area'])} | {_pct(t['ok_volume'])} |")
-
+    """The confidence check as printed by ``--confidence`` (:func:`confidence_markdown` of
+    the scored ``rows``, with the targets)."""
+    tables = {by: confidence_table(rows, by) for by in ("lighting", "family")}
+    print("\n".join(confidence_markdown(confidence_summary(rows), tables, targets=True)).rstrip())
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -394,40 +394,16 @@ def render_road_check(check) -> str:
     return "\n".join(lines)
 
 
-def _pct(x) -> str:
-    return "–" if x is None or x != x else f"{100 * x:.1f} %"
-
-
 def render_confidence(check, *, targets: bool) -> str:
-    """The confidence figures of a road check: the targets' figures (``targets``: with the
-    targets of docs/road.md beside them) and the tables per lighting and per family."""
+    """The confidence figures of a road check (:func:`bench_road.confidence_markdown`: the
+    targets' figures, with the targets of docs/road.md beside them when ``targets``, and
+    the tables per lighting and per family)."""
+    import bench_road
+
     conf = check.get("confidence")
     if not conf:
         return "(no confidence figures in this run)"
-    c = conf["summary"]
-
-    def aim(text):
-        return f" (target {text})" if targets else ""
-    lines = [f"- true potholes deeper than 20 mm found by a defect reported `ok`: {c['found_ok']} of "
-             f"{c['potholes']}, {_pct(c['found_ok_share'])}" + aim("at least 85 %"),
-             f"- `ok` matches off by more than 20 % in depth: {c['ok_over_20']} of {c['ok_matches']} "
-             f"(worst {_pct(c['worst_ok_depth'])})" + aim("none"),
-             f"- false defects reported `ok`: {c['false_ok']}, {c['false_ok_per_pair']:.2f} per pair"
-             + aim("at most 0.05") + f"; duplicates reported `ok`: {c['duplicates_ok']}",
-             f"- medians over all matches: |depth| {_pct(c['depth'])}, area {_pct(c['area'])}, volume "
-             f"{_pct(c['volume'])}" + aim("10 %, 15 %, 15 %") + f"; over the `ok` ones: {_pct(c['ok_depth'])}, "
-             f"{_pct(c['ok_area'])}, {_pct(c['ok_volume'])}", ""]
-    for by, title in (("lighting", "lighting"), ("family", "family")):
-        lines += [f"| {title} | potholes > 20 mm | found | found `ok` | matches flagged | why (a defect can have "
-                  "several) | `ok`: median abs depth err | `ok`: worst abs depth err | `ok`: median abs area err | "
-                  "`ok`: median abs volume err |", "|---|---|---|---|---|---|---|---|---|---|"]
-        for t in conf[by]:
-            why = ", ".join(f"{k} {v}" for k, v in sorted(t["reasons"].items(), key=lambda kv: (-kv[1], kv[0]))) or "–"
-            lines.append(f"| {t['group']} | {t['gt']} | {t['found']} | {t['found_ok']} | {t['flagged']} of "
-                         f"{t['matches']} | {why} | {_pct(t['ok_depth'])} | {_pct(t['ok_worst'])} | "
-                         f"{_pct(t['ok_area'])} | {_pct(t['ok_volume'])} |")
-        lines.append("")
-    return "\n".join(lines).rstrip()
+    return "\n".join(bench_road.confidence_markdown(conf["summary"], conf, targets=targets)).rstrip()
 
 
 def render_readme_road_rows(rows) -> str:
