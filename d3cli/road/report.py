@@ -179,11 +179,15 @@ def _rematch_change(defect, region: np.ndarray, stored: list) -> float:
     stored map (``stored``: (defect, region) pairs) that overlaps ``region`` most, of the
     same kind; 0 when none overlaps (nothing to compare)."""
     best, overlap = None, 0
+    u0, v0, u1, v1 = defect.bbox_px
     for other, other_region in stored:
-        if other.kind == defect.kind:
-            n = int(np.count_nonzero(other_region & region))
-            if n > overlap:
-                best, overlap = other, n
+        a0, b0, a1, b1 = other.bbox_px
+        if other.kind != defect.kind or a0 > u1 or a1 < u0 or b0 > v1 or b1 < v0:
+            continue  # no pixel in common: the masks need not be compared
+        box = (slice(max(v0, b0), min(v1, b1) + 1), slice(max(u0, a0), min(u1, a1) + 1))
+        n = int(np.count_nonzero(other_region[box] & region[box]))
+        if n > overlap:
+            best, overlap = other, n
     if best is None or best.max_depth_mm <= 0:
         return 0.0
     return round(defect.max_depth_mm / best.max_depth_mm - 1.0, 3)
