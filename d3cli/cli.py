@@ -334,12 +334,10 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     from .data import layouts as datasets
     from .evaluation import report
 
-    if method == "sgbm" and cfg.run.backend == "cuda":
-        log.warning("--backend cuda: sgbm runs on OpenCV's CPU implementation")
-    if spec is not None and spec.extra:
-        from .baselines.peers import require
-
-        require(method)  # an Error now, not one failed pair after another
+    if spec is not None and not spec.kernels and cfg.run.backend == "cuda":
+        log.warning(f"--backend cuda: {method} does not run d3stereo's kernels; it runs on the CPU")
+    if spec is not None:
+        spec.require()  # an Error now, not one failed pair after another
     n_workers = batch.parse_workers(workers)
     n_ahead = batch.parse_prefetch(prefetch)
     shard_of = batch.parse_shard(shard) if shard else None

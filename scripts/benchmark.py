@@ -48,7 +48,7 @@ import numpy as np
 
 from d3cli import D3Stereo, load_config
 from d3cli.baselines import elas_disparity, pandora_sgm_disparity, pt_sgm_disparity, sgbm_disparity
-from d3cli.baselines.peers import require
+from d3cli.config import method_spec
 from d3cli.data.layouts import discover, load_ground_truth, load_pair_images, resolve_max_disparity
 from d3cli.data.formats import to_grey
 from d3cli.evaluation.metrics import disparity_errors, photometric_scores
@@ -82,7 +82,7 @@ def make_runners(cfg, methods):
         elif name == "sgbm":
             runners[name] = lambda left, right, dmax: sgbm_disparity(left, right, max_disparity=dmax, cfg=cfg.sgbm)
         elif name in ("elas", "pandora-sgm"):
-            require(name)
+            method_spec(name).require()
             peer = elas_disparity if name == "elas" else pandora_sgm_disparity
             runners[name] = lambda left, right, dmax, run=peer: run(left, right, max_disparity=dmax, cfg=cfg.peers)
         else:

@@ -114,13 +114,13 @@ def method_label(family: Family, method: str) -> str:
 
 def installed_methods(methods) -> tuple[list[str], dict[str, str]]:
     """(methods that can run, {method: why not} for the others)."""
-    from d3cli.baselines.peers import require
+    from d3cli.config import method_spec
     from d3cli.errors import BackendUnavailable
 
     ok, skipped = [], {}
     for name in methods:
         try:
-            require(name)
+            method_spec(name).require()
         except BackendUnavailable as exc:
             skipped[name] = str(exc)
         else:

@@ -485,6 +485,24 @@ def test_cuda_backend_unavailable_fails_up_front(tmp_path, pairs_root):
     assert not (out / "a").exists()
 
 
+@pytest.mark.parametrize("method", ["sgbm", "elas"])
+def test_a_method_without_kernels_says_once_that_it_runs_on_the_cpu(tmp_path, pairs_root, method, monkeypatch):
+    """--backend cuda with a method that does not run d3stereo's kernels: one warning, no
+    CUDA check (the method never touches the device), the pairs computed."""
+    import dataclasses
+
+    from d3cli.config import methods as declarations
+
+    spec = declarations.method_spec(method)
+    monkeypatch.setattr(declarations, "METHOD_SPECS", tuple(
+        dataclasses.replace(s, requires=(), compute=declarations.method_spec("sgbm").compute, section="sgbm")
+        if s.name == method else s for s in declarations.METHOD_SPECS))
+    result = invoke("run", pairs_root, "-o", tmp_path / "out", "--method", method, "--backend", "cuda")
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.output.splitlines() if line.startswith("WARNING:")]
+    assert warnings == [f"WARNING: --backend cuda: {spec.name} does not run d3stereo's kernels; it runs on the CPU"]
+
+
 def test_bundled_samples_are_reproducible(tmp_path):
     """scripts/make_samples.py regenerates the bundled pairs (same pixels, same ground truth)."""
     import runpy

@@ -26,15 +26,15 @@ import time
 import cv2
 import numpy as np
 
-from ..config import PeersConfig
+from ..config import INSTALL_ELAS, INSTALL_PANDORA, PeersConfig
 from ..data.formats import to_grey
 from ..errors import BackendUnavailable, InputError
 from ..method import DisparityResult
-from .sgbm import _to_uint8, fill_holes_rowwise
+from .sgbm import SGBM_BYTES_PER_PIXEL, _to_uint8, fill_holes_rowwise
 
-INSTALL_ELAS = ("CFLAGS=-I$(python -c 'import numpy;print(numpy.get_include())') "
-                "pip install --no-build-isolation pyelas")
-INSTALL_PANDORA = 'pip install "pandora[sgm]"'
+#: Bytes per pixel around libelas: 8-bit images, two 16-byte descriptor images, two float
+#: disparity maps, the support grid and the filled copy (a generous bound).
+ELAS_BYTES_PER_PIXEL = 2 + 2 * 16 + 2 * 4 + 16 + SGBM_BYTES_PER_PIXEL
 
 #: pandora pipeline of the comparison (census 5, SGM 8/32, WTA, vfit, median, cross-check).
 PANDORA_CENSUS_WINDOW = 5
@@ -42,22 +42,18 @@ PANDORA_CROSS_CHECK = 1.0
 PANDORA_MEDIAN = 3
 
 
-def require(method: str) -> None:
-    """Raise :class:`BackendUnavailable` now when the peer ``method`` cannot run.
+def elas_peak_bytes(shape, max_disparity: int, cfg) -> int:
+    """Estimated peak memory of one ELAS pair: :data:`ELAS_BYTES_PER_PIXEL` per pixel."""
+    return int(ELAS_BYTES_PER_PIXEL * max(int(shape[0]), 0) * max(int(shape[1]), 0))
 
-    A batch checks this once up front instead of failing every pair the same way.
-    """
-    import importlib.util
 
-    needs = {"elas": (("elas",), INSTALL_ELAS),
-             "pandora-sgm": (("pandora", "pandora_plugin_libsgm"), INSTALL_PANDORA)}
-    if method not in needs:
-        return
-    modules, command = needs[method]
-    missing = [name for name in modules if importlib.util.find_spec(name) is None]
-    if missing:
-        raise BackendUnavailable(f"--method {method} needs the package(s) {', '.join(missing)}, "
-                                 f"which are not installed; install them with {command}")
+def pandora_sgm_peak_bytes(shape, max_disparity: int, cfg) -> int:
+    """Estimated peak memory of one pandora census + SGM pair: the float32 cost volume,
+    SGM's aggregated volume and the right view's for the cross-check, plus an xarray copy
+    of each (a generous four volumes), and SGBM's per-pixel maps around them."""
+    pixels = max(int(shape[0]), 0) * max(int(shape[1]), 0)
+    n_disp = max(int(max_disparity), 0) + 1
+    return int(4 * pixels * n_disp * 4 + SGBM_BYTES_PER_PIXEL * pixels)
 
 
 def _checked_pair(left, right, max_disparity: int) -> tuple[np.ndarray, np.ndarray]:

@@ -17,9 +17,17 @@ from ..errors import InputError
 from ..method import DisparityResult
 from ..method.perspective import fit_road_model, restored_validity
 from ..method.pyramid import build_pyramid, level_max_disparity, usable_levels
-from .sgbm import _num_disparities, _sgbm_raw, _to_uint8, fill_holes_rowwise, sgbm_disparity
+from .sgbm import _num_disparities, _sgbm_raw, _to_uint8, fill_holes_rowwise, sgbm_disparity, sgbm_peak_bytes
 
 log = logging.getLogger(__name__)
+
+
+def pt_sgm_peak_bytes(shape, max_disparity: int, cfg: Config) -> int:
+    """Estimated peak memory of one PT-SGM pair: SGBM's (:func:`~d3cli.baselines.sgbm.sgbm_peak_bytes`
+    over the full range, the worst case of a fallback) plus the warped right image and
+    the shift map, float32 each."""
+    pixels = max(int(shape[0]), 0) * max(int(shape[1]), 0)
+    return sgbm_peak_bytes(shape, max_disparity, cfg) + 2 * 4 * pixels
 
 
 def pt_sgm_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int, cfg: Config) -> DisparityResult:

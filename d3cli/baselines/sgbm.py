@@ -21,6 +21,12 @@ from ..method import DisparityResult
 
 log = logging.getLogger(__name__)
 
+#: Bytes per pixel around OpenCV SGBM: raw images, grey float32 and uint8, int16
+#: disparity, float32 disparity and filled copy, valid mask, index maps of the filling.
+SGBM_BYTES_PER_PIXEL = 12 + 2 * (4 + 1) + 2 + 2 * 4 + 1 + 4 * 8
+#: Rows of SGBM path buffers kept by the one-pass modes (a generous bound).
+SGBM_BUFFER_ROWS = 16
+
 _SGBM_MODES = {
     "sgbm": cv2.STEREO_SGBM_MODE_SGBM,
     "hh": cv2.STEREO_SGBM_MODE_HH,
@@ -70,6 +76,35 @@ def fill_holes_rowwise(disp: np.ndarray, valid: np.ndarray) -> np.ndarray:
 def _num_disparities(max_disparity: int) -> int:
     """OpenCV needs a multiple of 16 covering 0..max_disparity."""
     return int(np.ceil((max_disparity + 1) / 16.0)) * 16
+
+
+def sgbm_peak_bytes(shape, max_disparity: int, cfg) -> int:
+    """Estimated peak memory of one SGBM pair (the memory model of ``--method sgbm``).
+
+    OpenCV's int16 path buffers: for the full-DP modes (``hh``, ``hh4``) a cost and a sum
+    volume ``(H, W, D16)`` each, for ``sgbm``/``3way`` :data:`SGBM_BUFFER_ROWS` rows of
+    them; plus :data:`SGBM_BYTES_PER_PIXEL` of per-pixel maps.
+
+    Parameters
+    ----------
+    shape : sequence of int
+        ``(H, W)`` (or ``(H, W, C)``) of the images, pixels.
+    max_disparity : int
+        Largest disparity searched, pixels.
+    cfg : Config
+        Full configuration (its ``sgbm.mode``).
+
+    Returns
+    -------
+    int
+        Bytes, an upper estimate.
+    """
+    height, width = int(shape[0]), int(shape[1])
+    pixels = max(height, 0) * max(width, 0)
+    d16 = _num_disparities(max(int(max_disparity), 1))
+    rows = height if cfg.sgbm.mode in ("hh", "hh4") else min(height, SGBM_BUFFER_ROWS)
+    path_buffers = 2 * rows * width * d16 * 2  # int16 cost + sum buffers
+    return int(path_buffers + SGBM_BYTES_PER_PIXEL * pixels)
 
 
 def sgbm_disparity(

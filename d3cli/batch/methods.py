@@ -8,8 +8,6 @@ and calls it; nothing here names a method.
 
 from __future__ import annotations
 
-import importlib
-
 import numpy as np
 
 from ..config import METHODS, Config, MethodSpec, method_spec
@@ -29,12 +27,6 @@ def spec_of(method: str) -> MethodSpec:
     if spec is None:
         raise ConfigError(f"--method {method}: unknown method; use one of {', '.join(METHODS)}")
     return spec
-
-
-def entry_point(spec: MethodSpec):
-    """The function ``spec.compute`` names (``"module:function"``), imported."""
-    module, _, name = spec.compute.partition(":")
-    return getattr(importlib.import_module(module), name)
 
 
 def compute_pair(
@@ -75,4 +67,4 @@ def compute_pair(
     spec = spec_of(method)
     handed = cfg if spec.section is None else getattr(cfg, spec.section)
     extra = {"pair_dir": pair_dir} if spec.pair_dir else {}
-    return entry_point(spec)(left, right, max_disparity=max_disparity, cfg=handed, **extra)
+    return spec.entry_point()(left, right, max_disparity=max_disparity, cfg=handed, **extra)

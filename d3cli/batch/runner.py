@@ -39,7 +39,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Sequence
 
-from ..config import Config, output_groups
+from ..config import Config, method_spec, output_groups
 from ..data import formats as io, layouts as datasets
 from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind, plural
 from ..evaluation import diagnostics, report
@@ -301,7 +301,8 @@ def run_batch(pairs: Sequence, out_dir: str | os.PathLike, *, cfg: Config, metho
         Output folder; created when missing.
     cfg : Config, keyword-only
         Resolved configuration (stored in run.json).
-    method : {"d3stereo", "sgbm", "pt-sgm"}, keyword-only
+    method : str, keyword-only
+        One of :data:`d3cli.config.METHODS`.
     evaluate : bool, keyword-only
         Score each result: against ground truth where the pair has it (EPE, PEP,
         density, ``error.png``), photometric scores always; writes the summary files.
@@ -413,7 +414,8 @@ def _prepare(pairs: Sequence, out_dir, *, cfg: Config, method: str, scheduler: s
     the shard selected, paths made absolute for a Dask cluster."""
     check_output_folder(Path(out_dir), pairs)  # before anything is written or removed
     out = ensure_writable(out_dir)
-    if method != "sgbm" and cfg.run.backend == "cuda":
+    spec = method_spec(method)
+    if spec is not None and spec.kernels and cfg.run.backend == "cuda":
         from ..kernels import get_backend
 
         get_backend("cuda")  # BackendUnavailable now, not once per pair

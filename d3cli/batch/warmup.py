@@ -185,7 +185,7 @@ def _warm_pair(method: str, cfg: Config, left: np.ndarray, right: np.ndarray) ->
     that is not a road is matched with them, and their kernels (the semi-global smoothing
     of the defaults, say) must not be compiled inside that pair's time.
     """
-    fallback = fallback_settings(cfg) if method == "d3stereo" else None
+    fallback = fallback_settings(cfg) if methods.spec_of(method).falls_back else None
     for settings in [cfg] if fallback is None else [cfg, fallback]:
         try:
             methods.compute_pair(method, settings, left, right, max_disparity=_WARM_DMAX)

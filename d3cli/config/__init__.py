@@ -11,8 +11,9 @@ Unknown sections or keys, wrong types and out-of-range values raise
 :class:`~d3cli.errors.ConfigError` naming the file, the dotted key, what was expected
 and the valid keys.
 
-- ``methods``: the stereo methods, one :class:`MethodSpec` each (name, entry point, the
-  configuration it is handed and its fingerprint covers): :data:`METHOD_SPECS`, :data:`METHODS`;
+- ``methods``: the stereo methods, one :class:`MethodSpec` each (name, entry point, memory
+  model, the configuration it is handed and its fingerprint covers, kernels, packages):
+  :data:`METHOD_SPECS`, :data:`METHODS`;
 - ``sections``: one frozen dataclass per section, each key a ``setting`` (default, one-line
   meaning, range check), :class:`Config`, the backend names;
 - ``checks``: the type of every key and the range checks declared with it (``setting``),
@@ -28,7 +29,7 @@ May import: :mod:`d3cli.errors` only (and PyYAML); every other room may import t
 from ..errors import ConfigError
 from .checks import MAX_CONFIG_INT, QUOTE_CHARS, quote, shorten
 from .load import bundled_configs, config_from_dict, load_config, resolve_config
-from .methods import METHOD_SPECS, METHODS, NOT_READ_BY_MAP, MethodSpec, method_spec
+from .methods import INSTALL_ELAS, INSTALL_PANDORA, METHOD_SPECS, METHODS, NOT_READ_BY_MAP, MethodSpec, method_spec
 from .sections import (
     BACKENDS,
     OUTPUT_CHOICES,
@@ -63,6 +64,8 @@ from .yamlfile import (
 
 __all__ = [
     "BACKENDS",
+    "INSTALL_ELAS",
+    "INSTALL_PANDORA",
     "OUTPUT_CHOICES",
     "OUTPUT_GROUPS",
     "output_groups",

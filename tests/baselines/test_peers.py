@@ -12,7 +12,8 @@ import pytest
 from click.testing import CliRunner
 
 from d3cli.baselines import elas_disparity, pandora_sgm_disparity
-from d3cli.baselines.peers import INSTALL_ELAS, INSTALL_PANDORA, pandora_config, require
+from d3cli.baselines.peers import pandora_config
+from d3cli.config import INSTALL_ELAS, INSTALL_PANDORA, method_spec
 from d3cli.cli import main
 from d3cli.config import PeersConfig
 from d3cli.errors import BackendUnavailable
@@ -32,7 +33,7 @@ def test_missing_peer_is_one_error_line_naming_the_install_command(tmp_path, mak
                                                                    method, module, command):
     _hide(monkeypatch, module)
     with pytest.raises(BackendUnavailable, match="install"):
-        require(method)
+        method_spec(method).require()
     make_pair_folder(tmp_path / "pairs", "a")
     result = CliRunner().invoke(main, ["run", str(tmp_path / "pairs"), "-o", str(tmp_path / "out"),
                                        "--method", method])

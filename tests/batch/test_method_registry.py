@@ -24,7 +24,7 @@ def test_the_names_are_the_declarations_and_unique():
 def test_each_entry_point_exists_in_method_or_baselines_and_takes_the_call(spec):
     module = spec.compute.partition(":")[0]
     assert module.split(".")[:2] in (["d3cli", "method"], ["d3cli", "baselines"]), spec.compute
-    function = methods.entry_point(spec)
+    function = spec.entry_point()
     parameters = inspect.signature(function).parameters
     assert {"max_disparity", "cfg"} <= set(parameters)
     assert ("pair_dir" in parameters) == spec.pair_dir
@@ -77,3 +77,67 @@ def test_only_the_kernel_methods_compile_warm_up_and_prefetch_and_the_peers_name
             # Nothing of ours to compile, and nothing that uses the device to keep busy.
             assert warm_jit(cfg, spec.name) == 0.0
             assert resolve_prefetch(None, cfg, spec.name) == 0
+
+
+@pytest.mark.parametrize("spec", METHOD_SPECS, ids=lambda s: s.name)
+def test_each_memory_model_is_declared_and_grows_with_the_pair(spec):
+    cfg = Config()
+    small = spec.estimate_peak_bytes((48, 96), 32, cfg)
+    assert small > 48 * 96  # at least a byte per pixel
+    assert spec.estimate_peak_bytes((96, 96), 32, cfg) > small
+    assert spec.estimate_peak_bytes((48, 96, 3), 32, cfg) == small  # colour images: the same (H, W)
+
+
+def test_a_missing_package_is_named_with_its_install_command(monkeypatch):
+    from d3cli.errors import BackendUnavailable
+
+    spec = dataclasses.replace(METHOD_SPECS[0], name="toy", requires=("d3stereo_no_such_module",), install="pip install toy")
+    with pytest.raises(BackendUnavailable) as caught:
+        spec.require()
+    assert str(caught.value) == ("--method toy needs the package(s) d3stereo_no_such_module, which are not "
+                                 "installed; install them with pip install toy")
+    METHOD_SPECS[0].require()  # nothing beyond d3stereo's dependencies: no error
+
+
+TOY_METHOD = '''
+import numpy as np
+from d3cli.method import DisparityResult
+
+CALLS = []
+
+
+def toy_disparity(left, right, *, max_disparity, cfg):
+    """A constant disparity of 3 px everywhere: enough to see the batch run it."""
+    CALLS.append(cfg.outputs)
+    shape = np.asarray(left).shape[:2]
+    return DisparityResult(np.full(shape, 3.0, np.float32), np.ones(shape, bool), info={"method": "toy"})
+
+
+def toy_peak_bytes(shape, max_disparity, cfg):
+    return 100 * int(shape[0]) * int(shape[1])
+'''
+
+
+def test_a_method_declared_once_runs_a_batch(tmp_path, monkeypatch, pairs_root):
+    """Adding a method is its module and its declaration: the dispatch, the memory check,
+    the warm-up, the fingerprint and the outputs need no change (docs/design.md, 'Extending')."""
+    import json
+    import sys
+
+    from d3cli.batch import run_batch
+    from d3cli.config import methods as declarations
+    from d3cli.data.layouts import discover
+
+    (tmp_path / "toy_method.py").write_text(TOY_METHOD, encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "toy_method", raising=False)
+    toy = declarations.MethodSpec("toy", "toy_method:toy_disparity", doc="a constant disparity",
+                                  peak_bytes="toy_method:toy_peak_bytes", section="run")
+    monkeypatch.setattr(declarations, "METHOD_SPECS", declarations.METHOD_SPECS + (toy,))
+    result = run_batch(discover([pairs_root]), tmp_path / "out", cfg=Config(), method="toy", progress=False)
+    assert (result.n_computed, result.n_failed) == (3, 0)
+    import toy_method
+
+    assert toy_method.CALLS == [Config().run.outputs] * 3  # handed its declared section
+    record = json.loads((tmp_path / "out" / "a" / "result.json").read_text())
+    assert record["method"] == "toy"

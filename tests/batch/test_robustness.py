@@ -32,7 +32,8 @@ from d3cli.config import Config, load_config
 from d3cli.evaluation.diagnostics import suspicious_result
 from d3cli.errors import InputError, OutputError
 from d3cli.method.pipeline import D3Stereo
-from d3cli.batch.resources import D3_BYTES_PER_PIXEL, check_memory, estimate_peak_bytes
+from d3cli.batch.resources import check_memory, estimate_peak_bytes
+from d3cli.method.memory import D3_BYTES_PER_PIXEL
 
 PER_PAIR = (*OUTPUT_FILES, RESULT_FILE)
 
