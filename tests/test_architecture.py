@@ -287,9 +287,9 @@ def _private_uses(path: Path, modules, own_package: str | None, allowed=frozense
     return bad
 
 
-#: Modules whose tests still read their private helpers: the road model's defect
-#: measurement and the plane fit of the perspective transformation.
-PRIVATE_READS_ALLOWED = {"d3cli.road.defects", "d3cli.method.perspective"}
+#: Modules whose private helpers tests may read: none (a step a test checks on its own is
+#: public where it lives).
+PRIVATE_READS_ALLOWED: set = set()
 
 
 def test_no_module_reads_a_private_name_of_a_module_of_another_package():

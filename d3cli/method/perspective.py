@@ -40,7 +40,7 @@ log = logging.getLogger(__name__)
 MIN_POINTS = 50
 _RANSAC_HYPOTHESES = 200
 _RANSAC_SAMPLE = 5000  # points scored per hypothesis (a seeded subsample)
-_TUKEY_C = 4.685  # Tukey biweight constant (95 % efficiency for Gaussian residuals)
+TUKEY_C = 4.685  # Tukey biweight constant (95 % efficiency for Gaussian residuals)
 
 
 @dataclass(frozen=True)
@@ -184,12 +184,12 @@ def coarse_points(disparity: np.ndarray, *, scale: float) -> tuple[np.ndarray, n
     return u, v, disp[vc, uc].astype(np.float64) * scale
 
 
-#: Relative size below which the centred normal matrix of :func:`_solve` counts as singular
+#: Relative size below which the centred normal matrix of :func:`solve_road_model` counts as singular
 #: (collinear points: its determinant is 0 up to rounding).
-_SINGULAR = 1e-12
+SINGULAR = 1e-12
 
 
-def _solve(u, v, d, w=None):
+def solve_road_model(u, v, d, w=None):
     """Weighted least squares of d = a0 + b1 v + b2 u; None when singular.
 
     Solved by the normal equations in coordinates centred on the weighted means: there the
@@ -206,11 +206,11 @@ def _solve(u, v, d, w=None):
 
     u, v, d = (np.ascontiguousarray(x, np.float64) for x in (u, v, d))
     w = np.ones_like(u) if w is None else np.ascontiguousarray(w, np.float64)
-    ok, a0, b1, b2 = solve_weighted(u, v, d, w, _SINGULAR)
+    ok, a0, b1, b2 = solve_weighted(u, v, d, w, SINGULAR)
     return np.array([a0, b1, b2]) if ok else None
 
 
-def _draw_triples(rng, n, count):
+def draw_triples(rng, n, count):
     """``count`` rows of three distinct indices below ``n`` (>= 3), each row uniform over
     the ordered triples: integer triples drawn at once, the rows that repeat an index
     drawn again.
@@ -232,7 +232,7 @@ def _draw_triples(rng, n, count):
 def _ransac(u, v, d, threshold, rng):
     """Best 3-point hypothesis by inlier count on a subsample; None if all degenerate.
 
-    The hypotheses are drawn at once (:func:`_draw_triples`), then solved and scored all
+    The hypotheses are drawn at once (:func:`draw_triples`), then solved and scored all
     at once: NumPy's stacked ``det``/``solve`` run the same LAPACK routine per matrix and
     the scores are the same element-wise float64 expressions, so the result is bit for
     bit that of a loop over the hypotheses (the first of the best counts wins), without
@@ -241,7 +241,7 @@ def _ransac(u, v, d, threshold, rng):
     n = u.size
     idx = rng.choice(n, size=min(n, _RANSAC_SAMPLE), replace=False)
     us, vs, ds = u[idx], v[idx], d[idx]
-    picks = _draw_triples(rng, us.size, _RANSAC_HYPOTHESES)
+    picks = draw_triples(rng, us.size, _RANSAC_HYPOTHESES)
     a = np.stack([np.ones(picks.shape, np.float64), vs[picks], us[picks]], axis=2)  # (hypotheses, 3, 3)
     usable = np.abs(np.linalg.det(a)) >= 1e-6  # not a collinear sample
     if not usable.any():
@@ -255,11 +255,11 @@ def _ransac(u, v, d, threshold, rng):
     best = sols[int(np.argmax(counts))]
     # Refit on the hypothesis' inliers: a 3-point model is noisy.
     inl = np.abs(d - (best[0] + best[1] * v + best[2] * u)) <= threshold
-    refit = _solve(u[inl], v[inl], d[inl]) if inl.sum() >= 3 else None
+    refit = solve_road_model(u[inl], v[inl], d[inl]) if inl.sum() >= 3 else None
     return refit if refit is not None else best
 
 
-def _irls(u, v, d, sol, threshold, iterations):
+def reweighted_refit(u, v, d, sol, threshold, iterations):
     """Tukey-biweight IRLS from ``sol``; the scale never drops below the threshold.
 
     Compiled (:func:`d3cli.kernels.perspective.road_fit.irls`): as a NumPy loop the rounds
@@ -270,7 +270,7 @@ def _irls(u, v, d, sol, threshold, iterations):
 
     return irls(np.ascontiguousarray(u, np.float64), np.ascontiguousarray(v, np.float64),
                 np.ascontiguousarray(d, np.float64), np.asarray(sol, np.float64), float(threshold), int(iterations),
-                _TUKEY_C, _SINGULAR)
+                TUKEY_C, SINGULAR)
 
 
 def fit_road_model(
@@ -320,7 +320,7 @@ def fit_road_model(
     sol = _ransac(u, v, d, threshold, rng)
     if sol is None:
         return RoadModel(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, n, False, "all decided coarse pixels are collinear")
-    sol = _irls(u, v, d, sol, threshold, int(iterations))
+    sol = reweighted_refit(u, v, d, sol, threshold, int(iterations))
     a0, b1, b2 = (float(x) for x in sol)
     share = float(np.mean(np.abs(d - (a0 + b1 * v + b2 * u)) <= threshold))
     theta = math.atan(-b2 / b1) if b1 != 0.0 else math.copysign(math.pi / 2, -b2)

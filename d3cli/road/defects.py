@@ -216,7 +216,7 @@ def find_defects(
     """
     road = RoadConfig() if road is None else road
     rules = ConfidenceRules() if rules is None else rules
-    scene = replace(_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
+    scene = replace(prepare_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
                     rules=rules)
     found: list = []
     blurred: list = []  # the split cue's smoothed height, made once for both kinds (it is odd in the height)
@@ -243,7 +243,7 @@ def with_flags(defect: Defect, road: RoadConfig, rules: ConfidenceRules | None =
                    low_confidence=bool(flags))
 
 
-def _scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, tuning: DefectTuning) -> _Scene:
+def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadConfig, tuning: DefectTuning) -> _Scene:
     """The per-map quantities of :func:`find_defects`: filtered heights, footprints, noise."""
     shape = height.shape
     footprint = plane_footprint(shape, camera, plane)
@@ -300,7 +300,7 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, smoothed_height
         local = _crop(s, window)
         comp = np.zeros(local.height.shape, bool)
         comp[tuple(slice(b.start - w.start, b.stop - w.start) for b, w in zip(box, window))] = piece
-        measured = _measure(local, comp, other[window], sign, thr_mm)
+        measured = measure_region(local, comp, other[window], sign, thr_mm)
         if measured is not None:
             region = np.zeros(s.height.shape, bool)
             region[window] = measured[0]
@@ -310,7 +310,7 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, smoothed_height
 
 def _window(s: _Scene, box: tuple, n_px: int) -> tuple:
     """Slices of the map around a part's bounding box ``box`` (of ``n_px`` pixels) that hold
-    every pixel :func:`_measure` reads for it: the walls (:func:`_with_walls`, out to
+    every pixel :func:`measure_region` reads for it: the walls (:func:`_with_walls`, out to
     ``max(4 ring_px, sqrt(n_px / pi))``), the reference ring beyond them (``ring_px``) and
     the noise annulus (``local_noise_px``), with a pixel to spare, so that no mask the
     measurement makes touches the window's edge unless that is the map's edge."""
@@ -329,7 +329,7 @@ def _crop(s: _Scene, window: tuple) -> _Scene:
                    u_all=s.u_all[window], origin=(window[0].start, window[1].start))
 
 
-def _measure(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm: float):
+def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm: float):
     """(region, measurements) of one split component, or None when it is no defect."""
     road, tuning, finite, footprint = s.road, s.tuning, s.finite, s.footprint
     if footprint[comp].sum() < 0.25 * road.min_area_m2:

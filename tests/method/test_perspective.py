@@ -71,7 +71,7 @@ def loop_ransac(u, v, d, threshold, seed, hypotheses=200, sample=5000):
     idx = rng.choice(u.size, size=min(u.size, sample), replace=False)
     us, vs, ds = u[idx], v[idx], d[idx]
     best, best_count = None, -1
-    for pick in perspective._draw_triples(rng, us.size, hypotheses):
+    for pick in perspective.draw_triples(rng, us.size, hypotheses):
         a = np.stack([np.ones(3), vs[pick], us[pick]], axis=1)
         if abs(np.linalg.det(a)) < 1e-6:
             continue
@@ -82,8 +82,8 @@ def loop_ransac(u, v, d, threshold, seed, hypotheses=200, sample=5000):
     if best is None:
         return None
     inl = np.abs(d - (best[0] + best[1] * v + best[2] * u)) <= threshold
-    # the refit is _solve's (checked against np.linalg.lstsq on its own below)
-    sol = perspective._solve(u[inl], v[inl], d[inl])
+    # the refit is solve_road_model's (checked against np.linalg.lstsq on its own below)
+    sol = perspective.solve_road_model(u[inl], v[inl], d[inl])
     return sol if sol is not None else best
 
 
@@ -105,7 +105,7 @@ def test_ransac_triples_are_distinct_and_uniform(n):
     from d3cli.method import perspective
 
     rng = np.random.default_rng(n)
-    picks = perspective._draw_triples(rng, n, 20000)
+    picks = perspective.draw_triples(rng, n, 20000)
     assert picks.shape == (20000, 3) and picks.min() >= 0 and picks.max() < n
     assert np.all((picks[:, 0] != picks[:, 1]) & (picks[:, 0] != picks[:, 2]) & (picks[:, 1] != picks[:, 2]))
     # every position uniform over the n indices (n = 3, 4: each of the 6 or 24 ordered
@@ -279,7 +279,7 @@ def test_road_config_finds_the_road_on_a_dark_steeply_pitched_pair():
 
 
 def test_solve_gives_the_weighted_least_squares_of_lstsq():
-    # _solve takes the centred normal equations instead of LAPACK's SVD least squares: the
+    # solve_road_model takes the centred normal equations instead of LAPACK's SVD least squares: the
     # same solution to rounding, on 720p-sized coordinates and with Tukey-like weights
     from d3cli.method import perspective
 
@@ -293,7 +293,7 @@ def test_solve_gives_the_weighted_least_squares_of_lstsq():
         if weights is not None:
             a, b = a * np.sqrt(weights)[:, None], d * np.sqrt(weights)
         plain = np.linalg.lstsq(a, b, rcond=None)[0]
-        np.testing.assert_allclose(perspective._solve(u, v, d, weights), plain, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(perspective.solve_road_model(u, v, d, weights), plain, rtol=1e-10, atol=1e-12)
 
 
 def test_solve_refuses_collinear_points_and_zero_weights():
@@ -301,17 +301,17 @@ def test_solve_refuses_collinear_points_and_zero_weights():
 
     t = np.linspace(0.0, 1000.0, 50)
     u, v = t, 2.0 * t + 5.0  # on one line: the plane is not determined
-    assert perspective._solve(u, v, 3.0 + 0.1 * v) is None
-    assert perspective._solve(u, t[::-1] ** 1.5, 3.0 + u, np.zeros_like(u)) is None
+    assert perspective.solve_road_model(u, v, 3.0 + 0.1 * v) is None
+    assert perspective.solve_road_model(u, t[::-1] ** 1.5, 3.0 + u, np.zeros_like(u)) is None
     # three points that are not collinear fix the plane exactly
     u3, v3 = np.array([0.0, 1280.0, 0.0]), np.array([0.0, 0.0, 720.0])
-    np.testing.assert_allclose(perspective._solve(u3, v3, 2.0 + 0.5 * v3 - 0.25 * u3), [2.0, 0.5, -0.25],
+    np.testing.assert_allclose(perspective.solve_road_model(u3, v3, 2.0 + 0.5 * v3 - 0.25 * u3), [2.0, 0.5, -0.25],
                                rtol=0, atol=1e-12)
 
 
 def numpy_solve(u, v, d, w):
     """The centred normal equations in NumPy (pairwise sums; the code before the compiled
-    solver), None where singular as perspective._solve."""
+    solver), None where singular as perspective.solve_road_model."""
     from d3cli.method import perspective
 
     sw = w.sum()
@@ -321,7 +321,7 @@ def numpy_solve(u, v, d, w):
     du, dv = u - uc, v - vc
     svv, suu, svu = (w * dv * dv).sum(), (w * du * du).sum(), (w * dv * du).sum()
     det = svv * suu - svu * svu
-    if not det > perspective._SINGULAR * svv * suu:
+    if not det > perspective.SINGULAR * svv * suu:
         return None
     svd, sud = (w * dv * d).sum(), (w * du * d).sum()
     b1, b2 = (suu * svd - svu * sud) / det, (svv * sud - svu * svd) / det
@@ -335,7 +335,7 @@ def numpy_irls(u, v, d, sol, threshold, iterations):
     for _ in range(iterations):
         r = d - (sol[0] + sol[1] * v + sol[2] * u)
         sigma = 1.4826 * np.median(np.abs(r))
-        c = perspective._TUKEY_C * max(sigma, threshold / 2.5)
+        c = perspective.TUKEY_C * max(sigma, threshold / 2.5)
         z = r / c
         w = np.where(np.abs(z) < 1.0, (1.0 - z * z) ** 2, 0.0)
         if np.count_nonzero(w) < 3:
@@ -359,7 +359,7 @@ def test_compiled_irls_equals_the_numpy_loop(seed, outliers, start):
     u, v, d = coarse_points(road_coarse_map(rng, (90, 160), outliers=outliers), scale=SCALE)
     for iterations in (0, 1, 3, 10):
         want = numpy_irls(u, v, d, np.array(start), 1.0 * SCALE, iterations)
-        got = perspective._irls(u, v, d, np.array(start), 1.0 * SCALE, iterations)
+        got = perspective.reweighted_refit(u, v, d, np.array(start), 1.0 * SCALE, iterations)
         np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
 
 
@@ -370,21 +370,21 @@ def test_compiled_irls_stops_where_the_numpy_loop_stops():
     # two points: fewer than 3 keep a weight, no round is taken (the start comes back)
     start = np.array([1.0, 0.0, 0.0])
     u2, v2, d2 = np.array([0.0, 100.0]), np.array([0.0, 50.0]), np.array([1.0, 3.0])
-    np.testing.assert_array_equal(perspective._irls(u2, v2, d2, start, 1.0, 10), start)
+    np.testing.assert_array_equal(perspective.reweighted_refit(u2, v2, d2, start, 1.0, 10), start)
     np.testing.assert_array_equal(numpy_irls(u2, v2, d2, start, 1.0, 10), start)
     u = np.array([0.0, 100.0, 0.0, 50.0, 70.0])
     v = np.array([0.0, 0.0, 100.0, 60.0, 30.0])
     d = np.array([1.0, 1.0, 500.0, 900.0, 700.0])
-    np.testing.assert_allclose(perspective._irls(u, v, d, start, 1.0, 10), numpy_irls(u, v, d, start, 1.0, 10),
+    np.testing.assert_allclose(perspective.reweighted_refit(u, v, d, start, 1.0, 10), numpy_irls(u, v, d, start, 1.0, 10),
                                rtol=1e-10, atol=1e-12)
     # collinear points: the weighted system is singular in both
     t = np.linspace(0.0, 1000.0, 50)
-    assert solve_weighted(t, 2.0 * t + 5.0, 3.0 + t, np.ones(50), perspective._SINGULAR)[0] is False
-    assert perspective._solve(t, 2.0 * t + 5.0, 3.0 + t) is None
-    np.testing.assert_array_equal(perspective._irls(t, 2.0 * t + 5.0, 3.0 + t, start, 1.0, 10),
+    assert solve_weighted(t, 2.0 * t + 5.0, 3.0 + t, np.ones(50), perspective.SINGULAR)[0] is False
+    assert perspective.solve_road_model(t, 2.0 * t + 5.0, 3.0 + t) is None
+    np.testing.assert_array_equal(perspective.reweighted_refit(t, 2.0 * t + 5.0, 3.0 + t, start, 1.0, 10),
                                   numpy_irls(t, 2.0 * t + 5.0, 3.0 + t, start, 1.0, 10))
     # zero weights
-    assert solve_weighted(u, v, d, np.zeros(5), perspective._SINGULAR)[0] is False
+    assert solve_weighted(u, v, d, np.zeros(5), perspective.SINGULAR)[0] is False
 
 
 def test_solve_weighted_equals_the_numpy_normal_equations():
@@ -396,7 +396,7 @@ def test_solve_weighted_equals_the_numpy_normal_equations():
     u, v = rng.uniform(0, 1280, 5000), rng.uniform(0, 720, 5000)
     d = 3.0 + 0.1 * v - 0.02 * u + rng.normal(0, 0.5, 5000)
     w = rng.uniform(0, 1, 5000)
-    ok, a0, b1, b2 = solve_weighted(u, v, d, w, perspective._SINGULAR)
+    ok, a0, b1, b2 = solve_weighted(u, v, d, w, perspective.SINGULAR)
     assert ok
     np.testing.assert_allclose([a0, b1, b2], numpy_solve(u, v, d, w), rtol=1e-12, atol=1e-13)
-    np.testing.assert_array_equal(perspective._solve(u, v, d, w), [a0, b1, b2])  # one solver
+    np.testing.assert_array_equal(perspective.solve_road_model(u, v, d, w), [a0, b1, b2])  # one solver

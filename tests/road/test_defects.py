@@ -312,7 +312,7 @@ def test_each_part_measured_in_its_window_equals_it_measured_on_the_whole_map(se
     road, tuning = RoadConfig(), DefectTuning(mean_noise_k=0.0)  # many parts get measured in full
     got, got_regions = find_defects(h, decided, cam, plane, road, tuning, return_regions=True)
 
-    s = road_defects._scene(h, decided, cam, plane, road, tuning)
+    s = road_defects.prepare_scene(h, decided, cam, plane, road, tuning)
     want = []
     for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
         with np.errstate(invalid="ignore"):
@@ -324,7 +324,7 @@ def test_each_part_measured_in_its_window_equals_it_measured_on_the_whole_map(se
                                 prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
                                 smooth_px=tuning.split_smooth_px, neck=road.split_neck,
                                 min_part_m2=road.split_min_area_m2, step=level):
-            measured = road_defects._measure(s, comp, other, sign, thr_mm)
+            measured = road_defects.measure_region(s, comp, other, sign, thr_mm)
             if measured is not None:
                 want.append((kind, *measured))
     want.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))

@@ -48,7 +48,7 @@ def ransac_inlier_counts(sols, us, vs, ds, threshold):
 def solve_weighted(u, v, d, w, singular):
     """Weighted least squares of d = a0 + b1 v + b2 u by the centred normal equations
     (the road fit's one solver: the RANSAC refit through
-    :func:`d3cli.method.perspective._solve`, and every IRLS round), one compiled pass per
+    :func:`d3cli.method.perspective.solve_road_model`, and every IRLS round), one compiled pass per
     sum, in index order.  Returns ``(ok, a0, b1, b2)``; ``ok`` False with no weight or
     collinear points (the centred 2x2 determinant below ``singular`` times its diagonal's
     product)."""
@@ -92,7 +92,7 @@ def solve_weighted(u, v, d, w, singular):
 @njit(cache=True, nogil=True, error_model="numpy")
 def irls(u, v, d, sol, threshold, iterations, tukey_c, singular):
     """Tukey-biweight IRLS of the road model from ``sol`` (a0, b1, b2): the loop of
-    :func:`d3cli.method.perspective._irls` compiled (a round there makes about 25 NumPy
+    :func:`d3cli.method.perspective.reweighted_refit` compiled (a round there makes about 25 NumPy
     calls over the 14,000 coarse points of a 720p road pair: 2.9 ms a fit in all, here
     a few passes).  Each round: residuals, their median absolute value as the scale
     (never below ``threshold / 2.5``), the biweights, and :func:`solve_weighted`; it
