@@ -146,7 +146,7 @@ def test_huge_numbers_in_a_config(tmp_path, text, what):
     path.write_text(text)
     key = what.split()[0]
     _check(tmp_path, ["run", tmp_path / "in" / "pairs", "-c", path, "-o", tmp_path / "out", "--method", "sgbm"],
-           code=1, error=f"Error: {path}:2: {what}; fix the value of {key} (see d3cli/configs/default.yaml)")
+           code=1, error=f"Error: {path}:2: {what}; fix the value of {key} (see d3cli/presets/default.yaml)")
 
 
 # ----------------------------------------------------------------------------- odd images

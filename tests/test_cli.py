@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from tests.helpers import write_png
 
 from d3cli import __version__
-import d3cli.batch.methods
+import d3cli.batch.dispatch
 import d3cli.batch.outputs
 import d3cli.batch.runner
 import d3cli.data.formats

@@ -79,7 +79,7 @@ def test_ctrl_c_inside_a_kernel_during_the_jit_warm_up_is_an_interrupt(tmp_path,
     make_pair_folder(tmp_path / "pairs", "a")
     code = """
         import sys
-        import d3cli.batch.methods as methods
+        import d3cli.batch.dispatch as methods
 
         def compute_pair(*args, **kwargs):  # what numba raises when SIGINT lands in a kernel
             try:

@@ -32,19 +32,19 @@ def test_the_configs_ship_inside_the_package_from_the_top_level_folder():
     configs = bundled_configs()
     assert list(configs) == NAMES
     # One copy: configs/ at the top of the repository, which users copy and edit; the
-    # package's d3cli/configs is a link to it, so the wheel carries the same files.
+    # package's d3cli/presets is a link to it, so the wheel carries the same files.
     assert sorted(p.stem for p in (REPO / "configs").glob("*.yaml")) == NAMES
     assert not (REPO / "configs").is_symlink()
-    assert (PACKAGE / "configs").is_symlink()
+    assert (PACKAGE / "presets").is_symlink()
     assert {Path(p).resolve() for p in configs.values()} == {REPO / "configs" / f"{n}.yaml" for n in NAMES}
 
 
 def test_load_config_by_name_from_any_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # no configs/ folder here: only the package's copy can answer
     road = load_config("road")
-    assert road == load_config(PACKAGE / "configs" / "road.yaml")
+    assert road == load_config(PACKAGE / "presets" / "road.yaml")
     assert road != Config()
-    assert road.pyramid.levels == load_config(PACKAGE / "configs" / "road.yaml").pyramid.levels
+    assert road.pyramid.levels == load_config(PACKAGE / "presets" / "road.yaml").pyramid.levels
     assert load_config("road.yaml") == road
     assert load_config("configs/road.yaml") == road  # the path in a checkout, from anywhere
     assert load_config("kitti").aggregation.sgm_p2 == 1.2
@@ -94,7 +94,7 @@ def test_configs_command_lists_each_name_and_where_it_resolves(tmp_path, monkeyp
 
 def test_package_data_py_typed_and_license_in_the_project():
     project = tomllib.loads((REPO / "pyproject.toml").read_text())
-    assert project["tool"]["setuptools"]["package-data"]["d3cli"] == ["py.typed", "configs/*.yaml"]
+    assert project["tool"]["setuptools"]["package-data"]["d3cli"] == ["py.typed", "presets/*.yaml"]
     assert (PACKAGE / "py.typed").is_file()
     assert project["project"]["license"] == "MIT" and project["project"]["license-files"] == ["LICENSE"]
     license_text = (REPO / "LICENSE").read_text()

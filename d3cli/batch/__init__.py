@@ -4,9 +4,9 @@
 - ``records``: :class:`BatchResult` and ``run.json``;
 - ``signals``: Ctrl-C and SIGTERM held, deferred or turned into an interrupt during a batch;
 - ``extras``: ``cloud.ply`` and the road outputs of a complete pair, from its files;
-- ``methods``: runs a method by its name (:func:`compute_pair`), from its declaration in
+- ``dispatch``: runs a method by its name (:func:`compute_pair`), from its declaration in
   :data:`d3cli.config.methods.METHOD_SPECS`;
-- ``evaluate``: scoring a pair or folders of predictions (``d3stereo eval``);
+- ``scoring``: scoring a pair or folders of predictions (``d3stereo eval``);
 - ``outputs``: the per-pair files, written atomically, read back, removed;
 - ``fingerprint``: what a stored result depends on (resume decisions), versions;
 - ``lock``: one writer per output folder (a run or an eval), or the shards of one batch together;
@@ -26,10 +26,10 @@ config, errors.  Only :mod:`d3cli.cli` imports this package.
 """
 
 from .executors import SCHEDULER_ENV, parse_prefetch, parse_shard, parse_workers, select_shard
-from .evaluate import evaluate_folders, evaluate_predictions
+from .scoring import evaluate_folders, evaluate_predictions
 from .fingerprint import package_versions, settings_fingerprint
 from .lock import LOCK_FILE, acquire_lock, ensure_writable, release_lock
-from .methods import compute_pair
+from .dispatch import compute_pair
 from .outputs import OUTPUT_FILES, RESULT_FILE, RUN_FILE
 from .runner import BatchInterrupted, BatchResult, run_batch
 from .signals import terminate_after_batch

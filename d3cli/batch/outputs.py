@@ -398,7 +398,7 @@ def add_missing_outputs(pair_dir: Path, name: str, stored: dict, groups: frozens
     """Write the map files of ``groups`` that a complete pair folder lacks (it was written
     with fewer outputs): disp.png, disp_color.png (with the stored colour range),
     valid_overlay.png and panel.png, from its disp.pfm and valid.png; returns their names.
-    The error map is the evaluation's (:func:`d3cli.batch.evaluate.evaluate_pair`)."""
+    The error map is the evaluation's (:func:`d3cli.batch.scoring.evaluate_pair`)."""
     folder = Path(pair_dir)
     made = []
     if "kitti" in groups and not (folder / "disp.png").is_file():

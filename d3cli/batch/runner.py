@@ -45,12 +45,12 @@ from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_beh
 from ..evaluation import diagnostics, report
 from ..road.report import DEFECTS_CSV, write_defects_csv
 from . import resources
-from .evaluate import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
+from .scoring import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .executors import make_executor, select_shard
 from .extras import write_extras
 from .fingerprint import feature_files, package_versions, pair_fingerprint, settings_fingerprint
 from .lock import acquire_lock, ensure_writable, release_lock
-from .methods import compute_pair
+from .dispatch import compute_pair
 from ..evaluation.html import write_report_html
 from .records import BatchResult, record_complete, write_run_json
 from .signals import (exit_status, interrupts_unwrapped, mark_terminated, restore_handlers, signal_name,

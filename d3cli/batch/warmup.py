@@ -34,7 +34,7 @@ from ..config import Config, method_spec
 from ..errors import D3Error
 from ..kernels import cache_location
 from ..method.pipeline import fallback_settings
-from . import methods
+from . import dispatch
 from .signals import STOP_SIGNALS
 
 log = logging.getLogger(__name__)
@@ -185,10 +185,10 @@ def _warm_pair(method: str, cfg: Config, left: np.ndarray, right: np.ndarray) ->
     that is not a road is matched with them, and their kernels (the semi-global smoothing
     of the defaults, say) must not be compiled inside that pair's time.
     """
-    fallback = fallback_settings(cfg) if methods.spec_of(method).falls_back else None
+    fallback = fallback_settings(cfg) if dispatch.spec_of(method).falls_back else None
     for settings in [cfg] if fallback is None else [cfg, fallback]:
         try:
-            methods.compute_pair(method, settings, left, right, max_disparity=_WARM_DMAX)
+            dispatch.compute_pair(method, settings, left, right, max_disparity=_WARM_DMAX)
         except D3Error as exc:
             log.debug("JIT warm-up pair failed (ignored): %s", exc)
 

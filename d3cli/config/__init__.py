@@ -19,7 +19,8 @@ and the valid keys.
 - ``checks``: the type of every key and the range checks declared with it (``setting``),
   :func:`quote`, the error messages;
 - ``yamlfile``: bounded, strict YAML reading (YAML 1.2 numbers), ``--set`` parsing;
-- ``bundled``: the configs shipped in the package, by name (:func:`bundled_configs`);
+- ``bundled``: the presets, the configs shipped in the package as ``d3cli/presets`` (a link
+  to the checkout's ``configs/``), by name (:func:`bundled_configs`);
 - ``load``: :func:`load_config` and :func:`config_from_dict`.
 
 May import: :mod:`d3cli.errors` only (and PyYAML); every other room may import this one.

@@ -83,7 +83,7 @@ def _coerce(value: Any, tp, where: str, key: str):
         if abs(value) > MAX_CONFIG_INT:
             raise ConfigError(
                 f"{where}: {key} must be an integer of at most {MAX_CONFIG_INT} in size, got {quote(value)}; "
-                f"fix the value of {key} (see d3cli/configs/default.yaml)"
+                f"fix the value of {key} (see d3cli/presets/default.yaml)"
             )
         return value
     if tp is float:
@@ -102,7 +102,7 @@ def _coerce(value: Any, tp, where: str, key: str):
 def _bad_type(value, tp, where, key):
     raise ConfigError(
         f"{where}: {key} must be {_type_name(tp)}, got {quote(value)}; "
-        f"fix the value of {key} (see d3cli/configs/default.yaml)"
+        f"fix the value of {key} (see d3cli/presets/default.yaml)"
     )
 
 

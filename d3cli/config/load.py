@@ -1,7 +1,7 @@
 """Building a configuration: defaults, then a YAML file, then ``--set`` overrides.
 
 A config is a YAML file or the name of one of the configs bundled in the package
-(``configs/NAME.yaml`` of the checkout, shipped in the wheel as ``d3cli/configs``:
+(``configs/NAME.yaml`` of the checkout, shipped in the wheel as ``d3cli/presets``:
 ``road``, ``kitti``, ...), so ``-c road`` and ``load_config("road")`` work from an
 installed wheel as from a checkout.
 """
@@ -17,7 +17,7 @@ from typing import Iterator, Mapping
 
 from ..errors import ConfigError
 from .checks import apply_mapping, shorten
-from .bundled import BUNDLED_FOLDER, bundled_configs
+from .bundled import CHECKOUT_FOLDER, bundled_configs
 from .sections import Config
 from .yamlfile import parse_override, read_yaml_lines
 
@@ -25,9 +25,9 @@ from .yamlfile import parse_override, read_yaml_lines
 def _bundled_name(given: Path) -> str | None:
     """The bundled config a value may name: ``road``, ``road.yaml`` or ``configs/road.yaml``
     (its path in a source checkout, whose top-level ``configs/`` folder the package's
-    ``d3cli/configs`` links to), so the checkout's path works from any folder."""
+    ``d3cli/presets`` links to), so the checkout's path works from any folder."""
     parts = given.parts
-    if len(parts) == 2 and parts[0] == BUNDLED_FOLDER and given.suffix == ".yaml":
+    if len(parts) == 2 and parts[0] == CHECKOUT_FOLDER and given.suffix == ".yaml":
         return given.stem
     if len(parts) == 1 and given.suffix in ("", ".yaml"):
         return given.stem

@@ -13,7 +13,7 @@ check and the resume fingerprint (:mod:`d3cli.batch.fingerprint`) all read
 The declarations live here, on the configuration's floor, because ``run.method`` is
 checked when a config is loaded, and loading a config imports neither numba nor OpenCV
 (``d3cli.config`` may import :mod:`d3cli.errors` only): the code is named by its import
-path, and :mod:`d3cli.batch.methods` imports it when a pair is computed.
+path, and :mod:`d3cli.batch.dispatch` imports it when a pair is computed.
 """
 
 from __future__ import annotations

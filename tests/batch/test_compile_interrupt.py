@@ -68,7 +68,7 @@ def test_a_cold_cache_again_forgets_the_interrupted_compile(empty_cache):
 def test_the_next_run_announces_the_rest_and_records_the_whole(empty_cache, monkeypatch, caplog):
     cache_location.record_interrupted("d3stereo", 10.0, 46)
     monkeypatch.setattr(cache_location, "is_cold", lambda *a, **k: False)
-    monkeypatch.setattr(warmup.methods, "compute_pair", lambda *a, **k: None)
+    monkeypatch.setattr(warmup.dispatch, "compute_pair", lambda *a, **k: None)
     with caplog.at_level(logging.INFO):
         warmup.warm_jit(Config(), "d3stereo")
     assert caplog.records[0].getMessage().startswith("compiling the rest of the kernels for this machine")
@@ -87,7 +87,7 @@ def test_the_rest_compiled_records_both_runs_seconds(empty_cache, monkeypatch, c
 
     cache_location.record_interrupted("d3stereo", 10.0, 46)
     monkeypatch.setattr(cache_location, "is_cold", lambda *a, **k: False)
-    monkeypatch.setattr(warmup.methods, "compute_pair", compute)
+    monkeypatch.setattr(warmup.dispatch, "compute_pair", compute)
     with caplog.at_level(logging.INFO):
         seconds = warmup.warm_jit(Config(), "d3stereo")
     assert [r.getMessage() for r in caplog.records if r.levelname == "NOTE"][1:] == [

@@ -77,7 +77,7 @@ def test_progress_counts_compiles_and_logs_once_per_period(caplog):
 
 def test_warm_jit_on_a_cold_cache_says_so_first(empty_cache, monkeypatch, caplog):
     seen = []
-    monkeypatch.setattr(warmup.methods, "compute_pair", lambda *a, **k: seen.append(a[0]))
+    monkeypatch.setattr(warmup.dispatch, "compute_pair", lambda *a, **k: seen.append(a[0]))
     with caplog.at_level(logging.INFO):  # the root's level: the notice comes from d3cli.kernels.cache_location
         warmup.warm_jit(Config(), "d3stereo")
     assert seen == ["d3stereo"]
@@ -91,7 +91,7 @@ def test_warm_jit_on_a_cold_cache_says_so_first(empty_cache, monkeypatch, caplog
 def test_warm_jit_on_a_warm_cache_is_silent(monkeypatch, caplog):
     monkeypatch.setattr(cache_location, "announced", False)
     monkeypatch.setattr(cache_location, "is_cold", lambda *a, **k: False)
-    monkeypatch.setattr(warmup.methods, "compute_pair", lambda *a, **k: None)
+    monkeypatch.setattr(warmup.dispatch, "compute_pair", lambda *a, **k: None)
     with caplog.at_level(logging.WARNING):
         warmup.warm_jit(Config(), "d3stereo")
     assert caplog.records == []
@@ -128,7 +128,7 @@ def fake_compute(monkeypatch):
         shape = left.shape[:2]
         return DisparityResult(np.full(shape, 4.0, np.float32), np.ones(shape, bool), timings={"total": 0.0})
 
-    monkeypatch.setattr(warmup.methods, "compute_pair", compute)
+    monkeypatch.setattr(warmup.dispatch, "compute_pair", compute)
     monkeypatch.setattr("d3cli.batch.runner.compute_pair", compute)
 
 

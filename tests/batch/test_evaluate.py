@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from d3cli.batch import evaluate_folders
 from d3cli.cli import main
-from d3cli.batch.evaluate import find_prediction, read_prediction
+from d3cli.batch.scoring import find_prediction, read_prediction
 from d3cli.data import formats as io, layouts as datasets
 from d3cli.errors import InputError
 
@@ -118,7 +118,7 @@ def test_same_folder_twice_gets_numbered_names(tmp_path, pairs_root):
 
 
 def test_method_names_are_single_safe_folder_names(tmp_path):
-    from d3cli.batch.evaluate import method_names
+    from d3cli.batch.scoring import method_names
 
     folders = []
     for i, method in enumerate(["../../escape", "/abs/path", "../../escape"]):
@@ -152,7 +152,7 @@ def test_a_long_method_name_in_run_json_is_not_blamed_on_the_report_folder(tmp_p
 
 
 def test_report_folder_names_are_at_most_100_characters(tmp_path):
-    from d3cli.batch.evaluate import method_names
+    from d3cli.batch.scoring import method_names
 
     deep = tmp_path / ("a" * 120) / "out"
     other = tmp_path / ("b" * 120) / "out"

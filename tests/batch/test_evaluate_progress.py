@@ -2,7 +2,7 @@
 
 from types import SimpleNamespace
 
-from d3cli.batch.evaluate import progress_bar, progress_done
+from d3cli.batch.scoring import progress_bar, progress_done
 
 
 def test_one_line_per_pair_without_terminal(capsys):

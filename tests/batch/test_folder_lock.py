@@ -32,7 +32,7 @@ from d3cli.errors import OutputError
 HELD = textwrap.dedent("""
     import os, sys, time
     from pathlib import Path
-    import d3cli.batch.evaluate, d3cli.batch.runner
+    import d3cli.batch.scoring, d3cli.batch.runner
 
     ready, go = Path(os.environ["READY"]), Path(os.environ["GO"])
 
@@ -45,7 +45,7 @@ HELD = textwrap.dedent("""
         return wait_then
 
     d3cli.batch.runner.compute_pair = paused(d3cli.batch.runner.compute_pair)
-    d3cli.batch.evaluate.evaluate_pair = paused(d3cli.batch.evaluate.evaluate_pair)
+    d3cli.batch.scoring.evaluate_pair = paused(d3cli.batch.scoring.evaluate_pair)
     from d3cli.cli import main
     main(sys.argv[1:], prog_name="d3stereo")
 """)

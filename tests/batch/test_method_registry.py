@@ -9,7 +9,7 @@ import inspect
 import click
 import pytest
 
-from d3cli.batch import methods, settings_fingerprint
+from d3cli.batch import dispatch, settings_fingerprint
 from d3cli.cli import main
 from d3cli.config import METHOD_SPECS, METHODS, NOT_READ_BY_MAP, Config, ConfigError
 
@@ -39,7 +39,7 @@ def test_the_cli_offers_the_declared_methods():
 
 def test_an_unknown_method_is_named_with_the_choices():
     with pytest.raises(ConfigError) as caught:
-        methods.spec_of("nope")
+        dispatch.spec_of("nope")
     assert str(caught.value) == "--method nope: unknown method; use one of " + ", ".join(METHODS)
 
 

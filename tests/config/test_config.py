@@ -13,7 +13,7 @@ from d3cli.cli import main
 from d3cli.config import Config, load_config, read_yaml
 from d3cli.errors import ConfigError
 
-DEFAULT_YAML = Path(__file__).resolve().parents[2] / "d3cli" / "configs" / "default.yaml"
+DEFAULT_YAML = Path(__file__).resolve().parents[2] / "d3cli" / "presets" / "default.yaml"
 
 
 def write(tmp_path, text, name="cfg.yaml"):
@@ -83,7 +83,7 @@ def test_wrong_type(tmp_path):
         load_config(path)
     assert str(exc.value) == (
         f"{path}:2: cost.window must be an integer, got 'five'; fix the value of cost.window "
-        "(see d3cli/configs/default.yaml)"
+        "(see d3cli/presets/default.yaml)"
     )
 
 
@@ -149,7 +149,7 @@ def test_bad_override_forms():
         (["--set", "run.foo=1"], "Error: --set run.foo=1: unknown key 'run.foo'; valid keys of run: "
                                  "method, backend, max_disparity, max_memory_gb, color_range, outputs"),
         (["--set", "diffusion.tau=abc"], "Error: --set diffusion.tau=abc: diffusion.tau must be an integer, "
-                                         "got 'abc'; fix the value of diffusion.tau (see d3cli/configs/default.yaml)"),
+                                         "got 'abc'; fix the value of diffusion.tau (see d3cli/presets/default.yaml)"),
     ],
 )
 def test_cli_config_errors_are_one_line(tmp_path, args, message):
@@ -186,7 +186,7 @@ def test_config_from_environment(tmp_path, monkeypatch):
         ("run:\n  method: sgbm\ncost:\n  window: 5\n  window: 7\n",
          "{path}:5: duplicate key 'window' (first at line 4); keep only one"),
         ("run:\n  method: sgbm\ncost:\n  window: [5]\n",
-         "{path}:4: cost.window must be an integer, got [5]; fix the value of cost.window (see d3cli/configs/default.yaml)"),
+         "{path}:4: cost.window must be an integer, got [5]; fix the value of cost.window (see d3cli/presets/default.yaml)"),
         ("run:\n  method: sgbm\n\ncolour:\n  on: true\n",
          "{path}:4: unknown section 'colour'; valid sections: run, pyramid, cost, features, aggregation, seeds, diffusion, "
          "inheritance, pt, refine, sgbm, peers, camera, road"),

@@ -31,7 +31,7 @@ def test_yaml_1_1_only_integers_are_strings(tmp_path, text):
     with pytest.raises(ConfigError) as info:
         load_config(path)
     assert str(info.value) == (f"{path}:2: pyramid.levels must be an integer, got '{text}'; fix the value of "
-                               "pyramid.levels (see d3cli/configs/default.yaml)")
+                               "pyramid.levels (see d3cli/presets/default.yaml)")
 
 
 @pytest.mark.parametrize("text", ["yes", "no", "on", "off", "y", "n"])
@@ -40,7 +40,7 @@ def test_yes_no_are_not_booleans(tmp_path, text):
     with pytest.raises(ConfigError) as info:
         load_config(path)
     assert str(info.value) == (f"{path}:2: refine.fill must be true or false, got '{text}'; fix the value of "
-                               "refine.fill (see d3cli/configs/default.yaml)")
+                               "refine.fill (see d3cli/presets/default.yaml)")
 
 
 @pytest.mark.parametrize("text, value", [("true", True), ("False", False), ("TRUE", True)])
@@ -65,4 +65,4 @@ def test_infinite_colour_range_is_refused(tmp_path):
     with pytest.raises(ConfigError) as info:
         load_config(path)
     assert str(info.value) == (f"{path}:2: run.color_range must be a number, got inf; fix the value of "
-                               "run.color_range (see d3cli/configs/default.yaml)")
+                               "run.color_range (see d3cli/presets/default.yaml)")

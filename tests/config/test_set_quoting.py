@@ -27,7 +27,7 @@ def test_shorten_keeps_short_text_and_cuts_long_text():
 
 @pytest.mark.parametrize("option, rest", [
     (f"seeds.pkrn_min={LONG}", f"seeds.pkrn_min must be a number, got {QUOTED}; "
-                               "fix the value of seeds.pkrn_min (see d3cli/configs/default.yaml)"),
+                               "fix the value of seeds.pkrn_min (see d3cli/presets/default.yaml)"),
     (f"sgbm.mode={LONG}", f"sgbm.mode must be one of sgbm, hh, 3way, hh4, got {QUOTED}; fix the value of sgbm.mode"),
     (f"nosuch.key={LONG}", "unknown section 'nosuch'; valid sections: run, pyramid, cost, features, aggregation, "
                            "seeds, diffusion, inheritance, pt, refine, sgbm, peers, camera, road"),

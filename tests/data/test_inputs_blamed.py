@@ -54,7 +54,7 @@ def test_npy_and_pfm_are_read_by_one_rule(tmp_path):
 def test_the_same_prediction_scores_the_same_as_npy_and_pfm(tmp_path, pairs_root):
     """A map whose estimate is 0 on some pixels: the .npy reader took those as "no estimate"
     (EPE 0.833 / density 79 % against 0.938 / 100 % for the same map as .pfm)."""
-    from d3cli.batch.evaluate import evaluate_predictions
+    from d3cli.batch.scoring import evaluate_predictions
 
     pairs = discover(pairs_root)
     scores = {}

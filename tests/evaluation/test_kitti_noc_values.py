@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from d3cli.batch import evaluate_folders
-from d3cli.batch.evaluate import evaluate_pair
+from d3cli.batch.scoring import evaluate_pair
 from d3cli.data import formats as io, layouts as datasets
 from d3cli.errors import InputError
 

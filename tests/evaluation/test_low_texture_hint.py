@@ -6,7 +6,7 @@ import json
 import numpy as np
 from click.testing import CliRunner
 
-from d3cli.batch.methods import compute_pair
+from d3cli.batch.dispatch import compute_pair
 from d3cli.cli import main
 from d3cli.config import load_config
 from d3cli.evaluation.diagnostics import suspicious_result, texture_share

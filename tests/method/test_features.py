@@ -166,7 +166,7 @@ def test_perspective_transformation_with_features_on_the_road_sample(tmp_path):
     repo = Path(__file__).resolve().parents[2]
     results = {}
     for kind in ("ncc", "features"):
-        cfg = load_config(repo / "d3cli" / "configs" / "road.yaml", [f"{k}={v}" for k, v in {
+        cfg = load_config(repo / "d3cli" / "presets" / "road.yaml", [f"{k}={v}" for k, v in {
             "features.model": tmp_path / "ncc.onnx", "features.outputs": f"[{', '.join(outputs)}]",
             "features.scale": 1, "features.mean": "[0]", "features.std": "[1]", "cost.kind": kind}.items()])
         result = D3Stereo(cfg).compute(left, right, max_disparity=40)

@@ -48,7 +48,7 @@ def test_a_textured_constant_shift_is_still_found_exactly():
 
 
 def test_kitti_config_turns_it_on():
-    cfg = load_config(Path(__file__).resolve().parents[2] / "d3cli" / "configs" / "kitti.yaml")
+    cfg = load_config(Path(__file__).resolve().parents[2] / "d3cli" / "presets" / "kitti.yaml")
     assert (cfg.aggregation.sgm_p1, cfg.aggregation.sgm_p2) == (0.6, 1.2)
     assert (load_config(None).aggregation.sgm_p1, load_config(None).aggregation.sgm_p2) == (0.1, 1.2)
     # where the smoothing runs (full resolution) the shipped configs run no RBF passes before it

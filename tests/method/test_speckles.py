@@ -16,7 +16,7 @@ from d3cli import ConfigError, D3Stereo, load_config
 from d3cli.method.refinement import fill_holes, speckles
 from tests.reference.finishing import ref_speckles
 
-CONFIGS = Path(__file__).resolve().parents[2] / "d3cli" / "configs"
+CONFIGS = Path(__file__).resolve().parents[2] / "d3cli" / "presets"
 
 
 def ramp(h=40, w=60):
