@@ -17,8 +17,9 @@ from __future__ import annotations
 import logging
 import os
 
-from ..config import Config, method_spec
-from ..errors import ConfigError, InputError, where_what_fix
+from ..config import Config
+from ..errors import InputError, where_what_fix
+from .dispatch import spec_of
 
 log = logging.getLogger(__name__)
 
@@ -53,10 +54,7 @@ def estimate_peak_bytes(shape, max_disparity: int, cfg: Config, *, method: str) 
     ConfigError
         No method of that name.
     """
-    spec = method_spec(method)
-    if spec is None:
-        raise ConfigError(f"--method {method}: unknown method")
-    return spec.estimate_peak_bytes(shape, max_disparity, cfg)
+    return spec_of(method).estimate_peak_bytes(shape, max_disparity, cfg)
 
 
 def physical_memory_bytes() -> int | None:
