@@ -63,8 +63,22 @@ class RoadAxes:
 
 
 def road_axes(normal, offset: float, baseline: float) -> RoadAxes | None:
-    """:class:`RoadAxes` of the plane ``normal . P + offset = 0`` for a rig of ``baseline``
-    metres; None for a plane the camera looks along (no forward direction) or through."""
+    """The road coordinates of a frame from its fitted plane.
+
+    Parameters
+    ----------
+    normal : sequence of 3 float
+        The plane's normal in the left camera frame (defects.json ``plane.normal``).
+    offset : float
+        The plane's offset c of ``normal . P + c = 0`` (``plane.offset_m``).
+    baseline : float
+        The rig's baseline, metres (the origin is half of it right of the left camera).
+
+    Returns
+    -------
+    RoadAxes or None
+        None for a plane the camera looks along (no forward direction) or through.
+    """
     n = np.asarray(normal, np.float64)
     norm = float(np.linalg.norm(n))
     if not (norm > 0 and math.isfinite(offset)):
@@ -86,8 +100,23 @@ def road_axes(normal, offset: float, baseline: float) -> RoadAxes | None:
 
 
 def pixels_to_road(uv, camera: Camera, axes: RoadAxes) -> np.ndarray:
-    """(N, 2) forward and right distances (metres) of the road points the pixels ``uv``
-    ((N, 2): u, v) see; NaN where the ray does not meet the plane ahead of the camera."""
+    """Road coordinates of the points that left-image pixels see.
+
+    Parameters
+    ----------
+    uv : array_like, (N, 2)
+        Pixel columns and rows of the left image.
+    camera : Camera
+        Its focal length and principal point.
+    axes : RoadAxes
+        The frame's road coordinates (:func:`road_axes`).
+
+    Returns
+    -------
+    ndarray, (N, 2)
+        Forward and right distances, metres, from the point below the rig's mid-point;
+        NaN where the ray does not meet the plane ahead of the camera.
+    """
     uv = np.atleast_2d(np.asarray(uv, np.float64))
     d = np.stack([(uv[:, 0] - camera.cx) / camera.f, (uv[:, 1] - camera.cy) / camera.f, np.ones(len(uv))], axis=1)
     denom = d @ axes.normal
@@ -100,9 +129,27 @@ def pixels_to_road(uv, camera: Camera, axes: RoadAxes) -> np.ndarray:
 
 def road_to_lonlat(road_xy, lon: float, lat: float, heading_deg: float, *, antenna_forward_m: float = 0.0,
                    antenna_right_m: float = 0.0, camera_yaw_deg: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Longitudes and latitudes (degrees) of road points ``road_xy`` ((N, 2) forward, right
-    metres from the point below the rig's mid-point) of a frame whose fix is (lon, lat) and
-    heading ``heading_deg`` (module docstring, step 3); NaN stays NaN."""
+    """Road points of a frame on the earth (module docstring, step 3).
+
+    Parameters
+    ----------
+    road_xy : array_like, (N, 2)
+        Forward and right distances, metres, from the point below the rig's mid-point (NaN
+        stays NaN).
+    lon, lat : float
+        The frame's fix, WGS84 degrees.
+    heading_deg : float
+        The frame's heading, degrees clockwise from north.
+    antenna_forward_m, antenna_right_m : float, keyword-only
+        Where the fix is, metres ahead of and right of the rig's mid-point.
+    camera_yaw_deg : float, keyword-only
+        The camera's forward axis, degrees clockwise of the heading.
+
+    Returns
+    -------
+    lon, lat : ndarray
+        Degrees.
+    """
     xy = np.atleast_2d(np.asarray(road_xy, np.float64))
     yaw = math.radians(camera_yaw_deg)
     fwd = xy[:, 0] * math.cos(yaw) - xy[:, 1] * math.sin(yaw) - antenna_forward_m

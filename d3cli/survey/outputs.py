@@ -6,7 +6,8 @@
   ``depth_mm`` (bump: height), ``mean_depth_mm``, ``area_m2``, ``volume_l``,
   ``diameter_mm``, ``severity``, ``confidence``, ``reasons``, ``flags`` of its best
   sighting, ``sightings`` (how many), ``frames``, ``best_frame``, ``best_id``,
-  ``longitude``/``latitude`` of its centroid, ``spread_m`` and ``seen`` (per sighting:
+  ``longitude``/``latitude`` of its centroid (the area centroid of its outline on the
+  road), ``spread_m`` and ``seen`` (per sighting:
   frame, id, depth_mm, area_m2, confidence, range_m, score, longitude, latitude).
 * ``OUT/track.geojson``: the drive as a LineString through the frames' fixes (properties:
   ``source``, ``frames``, ``length_m``, ``unplaced_frames``) and one Point per placed
@@ -29,7 +30,7 @@ from pathlib import Path
 from ..data.formats import atomic_write, read_calib
 from ..errors import InputError, plural
 from ..road.pointcloud import camera_from
-from ..road.report import DEFECTS_JSON, SURVEY_JSON
+from ..road.report import DEFECTS_CSV, DEFECTS_JSON, SURVEY_JSON
 from .geolocate import locate_defect, road_axes
 from .gis import INSTALL, have_gis, local_projection
 from .merge import merge_sightings
@@ -222,8 +223,9 @@ def _feature(n: int, group: list[dict], to_ll, frame_order: dict) -> dict:
 def survey_map(out: str | Path, pairs, cfg) -> dict | None:
     """Write the map's files (module docstring) after a batch; the ``map`` counts, or None.
 
-    Called after ``OUT/defects.csv`` and ``OUT/road_survey.json`` are written.  No map (and
-    an earlier one removed) without the road report or without positions.  A track that
+    Called after ``OUT/defects.csv`` and ``OUT/road_survey.json`` are written (from the
+    pairs' defects.json).  No map (and an earlier one removed) without them or without
+    positions.  A track that
     cannot be read, or pyproj/shapely missing, is a warning here (the CLI has refused a bad
     ``--track`` before the batch): the defects stay in defects.csv.
 
@@ -236,7 +238,7 @@ def survey_map(out: str | Path, pairs, cfg) -> dict | None:
     cfg : Config
     """
     out = Path(out)
-    if not cfg.road.report or not (out / SURVEY_JSON).is_file():
+    if not (out / DEFECTS_CSV).is_file() or not (out / SURVEY_JSON).is_file():
         _remove_ours(out)
         return None
     frames = _frames(pairs)
@@ -258,6 +260,11 @@ def survey_map(out: str | Path, pairs, cfg) -> dict | None:
         s["xy"] = tuple(float(v) for v in to_xy(s["centroid"][0], s["centroid"][1]))
         rings = [list(zip(*to_xy([p[0] for p in r], [p[1] for p in r]))) for r in s["outline"]]
         s["shape"] = _shape(rings, s["xy"], s.get("area_m2"))
+        # The outline's area centroid on the road: the centroid pixel's ray is off by the
+        # perspective (the near half of a defect covers more pixels than the far half).
+        c = s["shape"].centroid
+        lon, lat = to_ll(c.x, c.y)
+        s["xy"], s["centroid"] = (float(c.x), float(c.y)), (float(lon), float(lat))
     groups = merge_sightings(sightings, distance_m=cfg.road.merge_distance_m)
     frame_order = {f: i for i, f in enumerate(placed)}
     features = [_feature(n, g, to_ll, frame_order) for n, g in enumerate(groups, 1)]

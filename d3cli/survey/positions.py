@@ -308,6 +308,13 @@ def exif_fix(image: str | Path) -> Fix | None:
 def fill_headings(order: list[str], fixes: dict[str, Fix]) -> tuple[dict[str, float], dict[str, str]]:
     """Heading of every frame of ``order`` (module docstring): given, else from the fixes.
 
+    Parameters
+    ----------
+    order : list of str
+        The frames with a fix, in the order driven.
+    fixes : dict
+        Frame -> :class:`Fix`.
+
     Returns
     -------
     headings : dict

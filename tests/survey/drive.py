@@ -134,4 +134,5 @@ def write_drive(root: Path, lons, lats, heads, potholes, *, pose: Pose | None = 
     if track:
         (inp / "track.csv").write_text("\n".join(rows) + "\n")
     (out / "road_survey.json").write_text(json.dumps({"frames": len(pairs), "potholes": 0}))
+    (out / "defects.csv").write_text("pair,id\n")
     return inp, out, pairs

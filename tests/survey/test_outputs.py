@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+from pathlib import Path
 from dataclasses import replace
 
 import pytest
@@ -134,3 +135,41 @@ def test_no_positions_no_map_and_an_earlier_map_is_removed(drive, caplog):
     with caplog.at_level(logging.WARNING):
         assert survey_map(out, pairs, _cfg()) is None
     assert "no map of the defects" in caplog.text and "the header lacks the column longitude" in caplog.text
+
+
+def test_bench_drive_scores_the_map_against_the_drive_truth(drive, capsys):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_drive", Path(__file__).parents[2] / "scripts" / "bench_drive.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    inp, out, pairs, pits = drive
+    survey_map(out, pairs, _cfg())
+    truth = [{"latitude": p["lat"], "longitude": p["lon"], "depth_mm": p["depth_mm"], "area_m2": 0.1, "frames": ["x"]}
+             for p in pits] + [{"latitude": 48.2, "longitude": 11.6, "depth_mm": 20.0, "area_m2": 0.1, "frames": []}]
+    (inp / "drive_gt.json").write_text(json.dumps({"potholes": truth}))
+    s = bench.score_drive(out, inp / "drive_gt.json")
+    assert s["matched"] == len(pits) and s["missed"] == [] and s["duplicates"] == [] and s["false"] == []
+    assert s["seen_by_no_frame"] == 1 and s["median_position_error_m"] < 0.01
+    # A pothole put on the map twice (one sighting moved 0.5 m) is a duplicate.
+    data = json.loads((out / "defects.geojson").read_text())
+    extra = json.loads(json.dumps(data["features"][0]))
+    lon, lat, _ = GEOD.fwd(extra["properties"]["longitude"], extra["properties"]["latitude"], 0.0, 0.5)
+    extra["properties"].update(id=99, longitude=lon, latitude=lat)
+    data["features"].append(extra)
+    (out / "defects.geojson").write_text(json.dumps(data))
+    assert bench.main([str(out)]) == 0  # the truth beside the track
+    printed = capsys.readouterr().out
+    assert "duplicates 1" in printed and f"matched within 0.3 m: {len(pits)} of {len(pits)}" in printed
+
+
+def test_the_survey_line_ends_with_the_map(drive):
+    from d3cli.road.report import survey_line
+
+    inp, out, pairs, pits = drive
+    (out / "defects.csv").write_text("pair,id,kind,max_depth_mm,low_confidence,flags,severity\n")
+    assert "on the map" not in survey_line(out)
+    summary = survey_map(out, pairs, _cfg())
+    line = survey_line(out)
+    assert line.endswith(f"; none flagged; 5 defects on the map ({summary['merged']} sightings merged), "
+                         "1 frame unplaced") and "\n" not in line
