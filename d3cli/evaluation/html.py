@@ -710,9 +710,14 @@ def map_svg(defects: list[dict], track: list[dict], *, width: int = 900) -> str:
     for coords, frame in frames:
         out.append(f'<circle class="frame" cx="{px(coords).split(",")[0]}" cy="{px(coords).split(",")[1]}" r="2.5" '
                    f'fill="#555"><title>{e(str(frame))}</title></circle>')
-    if line:
-        sx, sy = px(line[0]).split(",")
-        out.append(f'<text x="{float(sx) + 6:.1f}" y="{float(sy) - 6:.1f}" font-size="12" fill="#333">start</text>')
+    if line:  # "start" beside the first fix, away from the direction driven
+        sx, sy = (float(v) for v in px(line[0]).split(","))
+        nx_, ny_ = (float(v) for v in px(line[1]).split(",")) if len(line) > 1 else (sx + 1, sy)
+        dx, dy = sx - nx_, sy - ny_
+        norm = math.hypot(dx, dy) or 1.0
+        anchor = "end" if dx < 0 else "start"
+        out.append(f'<text x="{sx + 14 * dx / norm:.1f}" y="{sy + 14 * dy / norm + 4:.1f}" font-size="12" '
+                   f'fill="#333" text-anchor="{anchor}">start</text>')
     for f, ring in zip(defects, rings):
         p = f.get("properties") or {}
         key = "bump" if p.get("kind") == "bump" else p.get("severity") if p.get("severity") in MAP_COLOURS else None
@@ -725,13 +730,19 @@ def map_svg(defects: list[dict], track: list[dict], *, width: int = 900) -> str:
                + (f"; flagged: {p.get('reasons') or 'low confidence'}" if flagged else ""))
         cls = "defect flagged" if flagged else "defect"
         out.append(f'<g class="{cls}" data-id="{e(str(p.get("id")))}"><title>{e(tip)}</title>')
+        size = 0.0
         if len(ring) >= 4:
-            out.append(f'<polygon points="{" ".join(px(c) for c in ring)}" fill="{fill}" stroke="#222" '
-                       f'stroke-width="1"{dash}/>')
+            pts_px = [tuple(float(v) for v in px(c).split(",")) for c in ring]
+            size = max(max(x for x, _ in pts_px) - min(x for x, _ in pts_px),
+                       max(y for _, y in pts_px) - min(y for _, y in pts_px))
+            out.append(f'<polygon points="{" ".join(f"{x:.1f},{y:.1f}" for x, y in pts_px)}" fill="{fill}" '
+                       f'stroke="#222" stroke-width="1"{dash}/>')
         if p.get("longitude") is not None and p.get("latitude") is not None:
             mx, my = (float(v) for v in px([p["longitude"], p["latitude"]]).split(","))
-            out.append(f'<circle cx="{mx:.1f}" cy="{my:.1f}" r="7" fill="{fill}" stroke="#222" stroke-width="1.5"'
-                       f'{dash}/><text x="{mx + 9:.1f}" y="{my + 4:.1f}" font-size="12" fill="#111">'
+            if size < 14:  # too small to see at this scale: a marker of fixed size
+                out.append(f'<circle cx="{mx:.1f}" cy="{my:.1f}" r="7" fill="{fill}" stroke="#222" '
+                           f'stroke-width="1.5"{dash}/>')
+            out.append(f'<text x="{mx + max(9.0, size / 2 + 3):.1f}" y="{my + 4:.1f}" font-size="12" fill="#111">'
                        f'{e(str(p.get("id")))}</text>')
         out.append("</g>")
     # The north arrow (top right) and the scale bar (bottom left).
@@ -753,7 +764,7 @@ def map_svg(defects: list[dict], track: list[dict], *, width: int = 900) -> str:
     for key, text in items:
         out.append(f'<rect x="{x}" y="{ly - 10}" width="14" height="14" fill="{MAP_COLOURS[key]}" stroke="#222"/>'
                    f'<text x="{x + 19}" y="{ly + 2}">{text}</text>')
-        x += 32 + 6.6 * len(text)
+        x += 40 + 6.6 * len(text)
     out.append(f'<rect x="{x}" y="{ly - 10}" width="14" height="14" fill="url(#hatch-medium)" stroke="#222" '
                f'stroke-dasharray="3,2"/><text x="{x + 19}" y="{ly + 2}">hatched: flagged (low confidence)</text>')
     x += 250
@@ -778,9 +789,10 @@ def road_map(out_dir: str | Path) -> list[str]:
     unplaced = list(line.get("unplaced_frames") or [])
     n_seen = sum(int(p.get("sightings") or 1) for p in props)
     length = _num(line.get("length_m"))
+    merged = n_seen - len(props)
     parts = ['<h3 id="road-map">Map</h3>',
-             f"<p>{plural(len(props), 'defect')} on the map from {plural(n_seen, 'sighting')} "
-             f"({plural(n_seen - len(props), 'sighting')} merged into the same defect seen from another frame)"
+             f"<p>{plural(len(props), 'defect')} on the map from {plural(n_seen, 'sighting')}"
+             + (f" ({merged} of them of a defect already seen from another frame, merged)" if merged else "")
              + (f", along {length:.0f} m of track" if length else "")
              + f" (positions: {e(str(line.get('source') or 'the track'))}). "
              'Files: <a href="defects.geojson">defects.geojson</a>, <a href="track.geojson">track.geojson</a> '

@@ -51,6 +51,8 @@ def _folders(pairs) -> list[Path]:
     """The folders that may hold a track beside the pair folders, nearest first."""
     seen: list[Path] = []
     for pair in pairs:
+        if getattr(pair, "left", None) is None:
+            continue
         left = Path(pair.left)
         for folder in (left.parent.parent, left.parent):
             if folder not in seen:

@@ -173,3 +173,20 @@ def test_the_survey_line_ends_with_the_map(drive):
     line = survey_line(out)
     assert line.endswith(f"; none flagged; 5 defects on the map ({summary['merged']} sightings merged), "
                          "1 frame unplaced") and "\n" not in line
+
+
+def test_a_track_beside_the_frames_without_the_gis_libraries_is_a_warning(drive, caplog, monkeypatch):
+    import d3cli.survey.gis as gis
+    from d3cli.survey import check_positions
+
+    inp, out, pairs, pits = drive
+    monkeypatch.setattr(gis.importlib.util, "find_spec", lambda name: None)
+    with caplog.at_level(logging.WARNING):
+        check_positions(pairs, _cfg())  # no Error: the run goes on without a map
+        assert survey_map(out, pairs, _cfg()) is None
+    assert (f'{inp / "track.csv"}: no map of the defects: pyproj and shapely are not installed; install them with '
+            'pip install "d3stereo[gis]"') in caplog.text
+    assert not (out / "defects.geojson").exists()
+    # Without the road report a track beside the frames is not even read.
+    (inp / "track.csv").write_text("broken")
+    check_positions(pairs, replace(_cfg(), road=replace(_cfg().road, report=False)))
