@@ -101,3 +101,39 @@ def test_the_error_budget_of_the_docs():
         # Heading 0.5 degree off: across by z * 0.5 degree.
         lon, lat = road_to_lonlat(p, 11.5, 48.1, 30.5)
         assert road_of(lon[0], lat[0], (11.5, 48.1), 30.0)[1] == pytest.approx(z * math.radians(0.5), rel=0.01)
+
+
+def test_rendered_synthetic_frames_put_their_potholes_where_they_are(tmp_path):
+    """d3stereo synth frames (their rig: the mid-point above the world origin, x right, y
+    forward): the road report on the ground-truth disparity, then each pothole's outline
+    onto its fitted plane, lands within 5 cm of the pothole's true centre (SOURCE.txt)."""
+    import json
+    import re
+
+    from shapely.geometry import Polygon
+
+    from d3cli.config import load_config
+    from d3cli.data import formats as io
+    from d3cli.data.synth import generate_dataset
+    from d3cli.road.pointcloud import camera_from
+    from d3cli.road.report import road_report
+
+    cfg = load_config("road")
+    folders = generate_dataset(tmp_path / "in", n=2, seed=0, width=320, height=192)
+    errors = []
+    for folder in folders:
+        gt = io.read_pfm(folder / "disp_gt.pfm")
+        camera = camera_from(io.read_calib(folder / "calib.txt"), cfg, gt.shape)
+        truth = [(float(y), float(x)) for x, y in re.findall(r" x=(-?[\d.]+) y=(-?[\d.]+)",
+                                                             (folder / "SOURCE.txt").read_text())]
+        out = tmp_path / folder.name
+        out.mkdir()
+        items, _ = road_report(out, io.read_image(folder / "left.png"), gt, np.isfinite(gt), camera, {}, cfg.road,
+                               groups=frozenset())
+        plane = json.loads((out / "defects.json").read_text())["plane"]
+        axes = road_axes(plane["normal"], plane["offset_m"], camera.baseline)
+        for d in items:
+            if d["kind"] == "pothole":
+                c = Polygon(pixels_to_road(np.asarray(d["outline_px"][0], float), camera, axes)).centroid
+                errors.append(min(math.dist((c.x, c.y), t) for t in truth))
+    assert len(errors) >= 3 and max(errors) < 0.05
