@@ -715,9 +715,11 @@ def map_svg(defects: list[dict], track: list[dict], *, width: int = 900) -> str:
         nx_, ny_ = (float(v) for v in px(line[1]).split(",")) if len(line) > 1 else (sx + 1, sy)
         dx, dy = sx - nx_, sy - ny_
         norm = math.hypot(dx, dy) or 1.0
-        anchor = "end" if dx < 0 else "start"
-        out.append(f'<text x="{sx + 14 * dx / norm:.1f}" y="{sy + 14 * dy / norm + 4:.1f}" font-size="12" '
-                   f'fill="#333" text-anchor="{anchor}">start</text>')
+        lx, ly, anchor = sx + 14 * dx / norm, sy + 14 * dy / norm + 4, "end" if dx < 0 else "start"
+        if (anchor == "end" and lx < 40) or (anchor == "start" and lx > width - 40):
+            lx, ly = sx, sy + (18 if dy >= 0 else -10)  # no room on that side: under (over) the first fix
+            anchor = "middle"
+        out.append(f'<text x="{lx:.1f}" y="{ly:.1f}" font-size="12" fill="#333" text-anchor="{anchor}">start</text>')
     for f, ring in zip(defects, rings):
         p = f.get("properties") or {}
         key = "bump" if p.get("kind") == "bump" else p.get("severity") if p.get("severity") in MAP_COLOURS else None
