@@ -299,10 +299,14 @@ def main():
               help="Per-pair files to write [default: run.outputs, all]: all, or survey (disp.pfm, valid.png, "
                    "result.json; defects.json with --road-report) plus any of kitti (disp.png), pictures (the PNG "
                    "pictures), height (height.pfm), comma-separated, e.g. survey,pictures.")
+@click.option("--track", type=click.Path(path_type=Path), default=None, metavar="FILE",
+              help="Positions of the frames (track.csv or GPX) for the map of the road report (OUT/defects.geojson, "
+                   "track.geojson) [default: road.track, else track.csv or track.gpx beside the pair folders, else "
+                   "the EXIF GPS tags]. Needs the 'gis' extra.")
 @_verbosity
 def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity, evaluate, overwrite,
         break_lock, no_fill, pointcloud, workers, prefetch, scheduler, shard, color_range, road_report, outputs,
-        verbose, quiet):
+        track, verbose, quiet):
     """Compute disparity maps for INPUT pairs (default: the bundled samples) into OUT.
 
     INPUT: a folder of pair folders (left.png, right.png[, disp_gt.*]), a Middlebury or
@@ -318,6 +322,8 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
         cfg = replace(cfg, run=replace(cfg.run, color_range=_color_range(color_range)))
     if road_report:
         cfg = replace(cfg, road=replace(cfg.road, report=True))
+    if track is not None:
+        cfg = replace(cfg, road=replace(cfg.road, track=str(track)))
     if outputs is not None:
         if output_groups(outputs) is None:
             raise InputError(where_what_fix(f"--outputs {quote(outputs)}", "not a set of per-pair files",
@@ -343,6 +349,9 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
     shard_of = batch.parse_shard(shard) if shard else None
     scheduler = scheduler or os.environ.get(batch.SCHEDULER_ENV) or None
     pairs = datasets.discover(list(inputs) if inputs else [samples_dir()])
+    from .survey import check_positions
+
+    check_positions(pairs, cfg)  # a malformed track: an Error now, not after the batch
     override = max_disparity if max_disparity is not None else cfg.run.max_disparity
     result = batch.run_batch(pairs, out_dir, cfg=cfg, method=method, evaluate=evaluate,
                              overwrite=overwrite, max_disparity=override, progress=not quiet,

@@ -16,12 +16,12 @@ from d3cli.config import Config
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
-PAGES = ["index", "getting-started", "cli", "datasets", "configuration", "road", "scaling", "gpu",
+PAGES = ["index", "getting-started", "cli", "datasets", "configuration", "road", "survey", "scaling", "gpu",
          "failures", "method", "metrics", "results", "paper", "performance", "design", "api"]
 #: The pages that describe the product (using it, the method, the reference): no project
 #: history and no numbers the program cannot keep true.
 PRODUCT_PAGES = ["index", "getting-started", "cli", "datasets", "configuration", "failures", "method",
-                 "metrics", "paper", "design", "development", "api", "results", "road", "scaling", "gpu",
+                 "metrics", "paper", "design", "development", "api", "results", "road", "survey", "scaling", "gpu",
                  "performance"]
 
 

@@ -44,6 +44,7 @@ from ..data import formats as io, layouts as datasets
 from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind, plural
 from ..evaluation import diagnostics, report
 from ..road.report import DEFECTS_CSV, write_defects_csv
+from ..survey import survey_map
 from . import resources
 from .scoring import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
 from .executors import make_executor, select_shard
@@ -555,6 +556,7 @@ def _finish(batch: BatchResult, records: list, meta: dict, pairs: list, out: Pat
         if (write_defects_csv(out, [out / p.name for p in pairs], frame_spacing_m=cfg.road.frame_spacing_m) is None
                 and remove_ours(out / DEFECTS_CSV)):
             log.info("%s: removed (no pair of this run has road outputs now)", out / DEFECTS_CSV)
+        survey_map(out, pairs, cfg)  # OUT/defects.geojson, track.geojson where the frames have positions
     if evaluate and shard is not None:
         log.info("--shard: summary files are left to `d3stereo eval %s --gt ... -o REPORT` once every shard is done", out)
     elif evaluate:

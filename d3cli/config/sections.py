@@ -513,6 +513,26 @@ class RoadConfig:
         0.0,
         "distance driven between frames, metres: road_survey.json gives potholes per km (0: unknown)",
         lambda v: v >= 0, "a number >= 0 (metres; 0: unknown)")
+    # The survey on a map (d3cli.survey, docs/survey.md): the frames' positions and the rig on the car.
+    track: str = setting(
+        "",
+        'track of the frames\' positions (track.csv or GPX; --track); "": track.csv or track.gpx beside the pair folders, else EXIF GPS')
+    antenna_forward_m: float = setting(
+        0.0,
+        "the GPS fix is this far ahead of the point below the stereo rig's mid-point, metres",
+        lambda v: abs(v) <= 100, "a number in [-100, 100] (metres)")
+    antenna_right_m: float = setting(
+        0.0,
+        "... and this far to its right, metres",
+        lambda v: abs(v) <= 100, "a number in [-100, 100] (metres)")
+    camera_yaw_deg: float = setting(
+        0.0,
+        "the camera looks this far clockwise of the heading of travel, degrees",
+        lambda v: -180 <= v <= 180, "a number in [-180, 180] (degrees)")
+    merge_distance_m: float = setting(
+        0.3,
+        "sightings of one kind in different frames are one defect within this distance (or where their outlines overlap), metres",
+        lambda v: v >= 0, "a number >= 0 (metres)")
 
 
 def _at_level(level: int, finest, rest):

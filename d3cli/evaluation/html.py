@@ -517,6 +517,7 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping], *, min_depth_mm: 
     if (out_dir / "defects.csv").is_file():
         parts.append('<p>Every defect of the batch: <a href="defects.csv">defects.csv</a>.</p>')
     parts += _road_survey(out_dir)
+    parts += road_map(out_dir)
     parts += _road_truth_table({p: t for p, t in truths.items() if t is not None}, len(done), min_depth_mm, warned)
 
     def deepest_of(data):
@@ -618,12 +619,213 @@ def _road_survey(out_dir: Path) -> list[str]:
     cols = ("frames", "potholes", "per frame", "survey length [km]", "per km", "low", "medium", "high", "no level")
     vals = [survey.get("frames"), survey.get("potholes"), survey.get("potholes_per_frame"), survey.get("length_km"),
             survey.get("potholes_per_km"), by.get("low"), by.get("medium"), by.get("high"), by.get("none")]
+    if survey.get("length_from") == "track":
+        length = ("per km from the track's geodesic length, each pothole counted once however many frames "
+                  "saw it")
+    elif survey.get("length_km") is not None:
+        length = "per km from road.frame_spacing_m"
+    else:
+        length = "per km when the length is known (a track of the frames' positions, or road.frame_spacing_m)"
     return ['<p id="road-survey">Survey summary (<a href="road_survey.json">road_survey.json</a>): potholes per '
-            "frame, per km when road.frame_spacing_m is set, and per ASTM D6433 severity level (equivalent "
+            f"frame, {length}, and per ASTM D6433 severity level (equivalent "
             "potholes: one wider than 750 mm counts its area / 0.5 m²; no level: shallower than 13 mm or "
             "narrower than 100 mm).</p>",
             "<table><thead><tr>" + "".join(f"<th>{c}</th>" for c in cols) + "</tr></thead><tbody><tr>"
             + "".join(f"<td>{cell(v)}</td>" for v in vals) + "</tr></tbody></table>"]
+
+
+#: The map's files (d3cli.survey writes them; read here, not imported).
+DEFECTS_GEOJSON = "defects.geojson"
+TRACK_GEOJSON = "track.geojson"
+#: Fill of a defect on the map by its ASTM D6433 severity (None: too small to grade); bumps blue.
+MAP_COLOURS = {"high": "#d73027", "medium": "#fc8d59", "low": "#fee08b", None: "#bdbdbd", "bump": "#4575b4"}
+_EARTH_R = 6371008.8
+
+
+def _read_geojson(path: Path) -> list[dict]:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        return [f for f in data.get("features", []) if isinstance(f, dict)]
+    except (OSError, ValueError, AttributeError):
+        return []
+
+
+def _nice_length(metres: float) -> float:
+    """The largest 1, 2 or 5 x 10^k not above ``metres`` (a scale bar's length)."""
+    k = 10.0 ** math.floor(math.log10(max(metres, 1e-3)))
+    return max(m * k for m in (1, 2, 5) if m * k <= max(metres, 1e-3))
+
+
+def map_svg(defects: list[dict], track: list[dict], *, width: int = 900) -> str:
+    """Inline SVG of the survey map from GeoJSON features: the track, every defect's outline
+    with a marker at its centroid (fill by severity, :data:`MAP_COLOURS`; hatched with a
+    dashed edge when flagged low confidence), a legend, a scale bar and a north arrow.
+    Lon/lat are drawn in a local equirectangular plane (metres east and north of the map's
+    centre: true within 0.1 % over a few km); nothing is fetched."""
+    e = html.escape
+    line = [c for f in track if (f.get("geometry") or {}).get("type") == "LineString"
+            for c in f["geometry"]["coordinates"]]
+    frames = [(f["geometry"]["coordinates"], (f.get("properties") or {}).get("frame", "")) for f in track
+              if (f.get("geometry") or {}).get("type") == "Point"]
+    rings = [((f.get("geometry") or {}).get("coordinates") or [[]])[0] for f in defects]
+    pts = line + [c for c, _ in frames] + [c for r in rings for c in r]
+    pts += [[(f.get("properties") or {}).get("longitude"), (f.get("properties") or {}).get("latitude")]
+            for f in defects]
+    pts = [p for p in pts if p and all(isinstance(v, (int, float)) and math.isfinite(v) for v in p[:2])]
+    if not pts:
+        return ""
+    lon0 = (min(p[0] for p in pts) + max(p[0] for p in pts)) / 2
+    lat0 = (min(p[1] for p in pts) + max(p[1] for p in pts)) / 2
+    kx, ky = math.radians(1) * _EARTH_R * math.cos(math.radians(lat0)), math.radians(1) * _EARTH_R
+
+    def metres(p):
+        return (p[0] - lon0) * kx, (p[1] - lat0) * ky
+
+    xy = [metres(p) for p in pts]
+    span_x = max(max(x for x, _ in xy) - min(x for x, _ in xy), 5.0)
+    span_y = max(max(y for _, y in xy) - min(y for _, y in xy), 5.0)
+    margin, legend_h = 40, 70
+    inner_w = width - 2 * margin
+    scale = min(inner_w / span_x, 560 / span_y)
+    inner_h = span_y * scale
+    height = int(inner_h + 2 * margin + legend_h)
+    cx = (max(x for x, _ in xy) + min(x for x, _ in xy)) / 2
+    cy = (max(y for _, y in xy) + min(y for _, y in xy)) / 2
+
+    def px(p):
+        x, y = metres(p)
+        return f"{width / 2 + (x - cx) * scale:.1f},{margin + inner_h / 2 - (y - cy) * scale:.1f}"
+
+    out = [f'<svg class="map" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width} {height}" width="{width}" '
+           f'height="{height}" role="img" aria-label="map of the defects">', "<defs>"]
+    for key, colour in MAP_COLOURS.items():
+        out.append(f'<pattern id="hatch-{key or "none"}" width="6" height="6" patternUnits="userSpaceOnUse" '
+                   f'patternTransform="rotate(45)"><rect width="6" height="6" fill="#fff"/>'
+                   f'<rect width="3" height="6" fill="{colour}"/></pattern>')
+    out.append("</defs>")
+    out.append(f'<rect x="0" y="0" width="{width}" height="{height}" fill="#fafafa" stroke="#ccc"/>')
+    if len(line) >= 2:
+        out.append(f'<polyline class="track" points="{" ".join(px(p) for p in line)}" fill="none" stroke="#555" '
+                   'stroke-width="2.5" stroke-linejoin="round"/>')
+    for coords, frame in frames:
+        out.append(f'<circle class="frame" cx="{px(coords).split(",")[0]}" cy="{px(coords).split(",")[1]}" r="2.5" '
+                   f'fill="#555"><title>{e(str(frame))}</title></circle>')
+    if line:  # "start" beside the first fix, away from the direction driven
+        sx, sy = (float(v) for v in px(line[0]).split(","))
+        nx_, ny_ = (float(v) for v in px(line[1]).split(",")) if len(line) > 1 else (sx + 1, sy)
+        dx, dy = sx - nx_, sy - ny_
+        norm = math.hypot(dx, dy) or 1.0
+        lx, ly, anchor = sx + 14 * dx / norm, sy + 14 * dy / norm + 4, "end" if dx < 0 else "start"
+        if (anchor == "end" and lx < 40) or (anchor == "start" and lx > width - 40):
+            lx, ly = sx, sy + (18 if dy >= 0 else -10)  # no room on that side: under (over) the first fix
+            anchor = "middle"
+        out.append(f'<text x="{lx:.1f}" y="{ly:.1f}" font-size="12" fill="#333" text-anchor="{anchor}">start</text>')
+    for f, ring in zip(defects, rings):
+        p = f.get("properties") or {}
+        key = "bump" if p.get("kind") == "bump" else p.get("severity") if p.get("severity") in MAP_COLOURS else None
+        flagged = p.get("confidence") == "low"
+        fill = f'url(#hatch-{key or "none"})' if flagged else MAP_COLOURS[key]
+        dash = ' stroke-dasharray="3,2"' if flagged else ""
+        depth = _num(p.get("depth_mm"))
+        tip = (f"#{p.get('id')} {p.get('kind')}, {depth or 0:.0f} mm, severity {p.get('severity') or 'none'}, "
+               f"{plural(int(p.get('sightings') or 1), 'sighting')} ({', '.join(map(str, p.get('frames') or []))})"
+               + (f"; flagged: {p.get('reasons') or 'low confidence'}" if flagged else ""))
+        cls = "defect flagged" if flagged else "defect"
+        out.append(f'<g class="{cls}" data-id="{e(str(p.get("id")))}"><title>{e(tip)}</title>')
+        size = 0.0
+        if len(ring) >= 4:
+            pts_px = [tuple(float(v) for v in px(c).split(",")) for c in ring]
+            size = max(max(x for x, _ in pts_px) - min(x for x, _ in pts_px),
+                       max(y for _, y in pts_px) - min(y for _, y in pts_px))
+            out.append(f'<polygon points="{" ".join(f"{x:.1f},{y:.1f}" for x, y in pts_px)}" fill="{fill}" '
+                       f'stroke="#222" stroke-width="1"{dash}/>')
+        if p.get("longitude") is not None and p.get("latitude") is not None:
+            mx, my = (float(v) for v in px([p["longitude"], p["latitude"]]).split(","))
+            if size < 14:  # too small to see at this scale: a marker of fixed size
+                out.append(f'<circle cx="{mx:.1f}" cy="{my:.1f}" r="7" fill="{fill}" stroke="#222" '
+                           f'stroke-width="1.5"{dash}/>')
+            out.append(f'<text x="{mx + max(9.0, size / 2 + 3):.1f}" y="{my + 4:.1f}" font-size="12" fill="#111">'
+                       f'{e(str(p.get("id")))}</text>')
+        out.append("</g>")
+    # The north arrow (top right) and the scale bar (bottom left).
+    nx = width - margin + 10
+    out.append(f'<g class="north"><path d="M{nx},{margin - 25} l-7,18 l7,-5 l7,5 z" fill="#222"/>'
+               f'<text x="{nx}" y="{margin + 8}" font-size="13" text-anchor="middle" font-weight="bold">N</text></g>')
+    bar_m = _nice_length(0.25 * inner_w / scale)
+    bar_px = bar_m * scale
+    by = margin + inner_h + 22
+    label = f"{bar_m / 1e3:g} km" if bar_m >= 1000 else f"{bar_m:g} m"
+    out.append(f'<g class="scale"><path d="M{margin},{by - 6} v6 h{bar_px:.1f} v-6" fill="none" stroke="#222" '
+               f'stroke-width="2"/><text x="{margin + bar_px / 2:.1f}" y="{by + 15}" font-size="12" '
+               f'text-anchor="middle">{label}</text></g>')
+    # The legend, under the map.
+    ly = height - 22
+    items = [("high", "high"), ("medium", "medium"), ("low", "low"), (None, "too small to grade"), ("bump", "bump")]
+    x = margin
+    out.append('<g class="legend" font-size="12">')
+    for key, text in items:
+        out.append(f'<rect x="{x}" y="{ly - 10}" width="14" height="14" fill="{MAP_COLOURS[key]}" stroke="#222"/>'
+                   f'<text x="{x + 19}" y="{ly + 2}">{text}</text>')
+        x += 40 + 6.6 * len(text)
+    out.append(f'<rect x="{x}" y="{ly - 10}" width="14" height="14" fill="url(#hatch-medium)" stroke="#222" '
+               f'stroke-dasharray="3,2"/><text x="{x + 19}" y="{ly + 2}">hatched: flagged (low confidence)</text>')
+    x += 250
+    out.append(f'<path d="M{x},{ly - 3} h24" stroke="#555" stroke-width="2.5"/><text x="{x + 29}" y="{ly + 2}">'
+               "track</text></g></svg>")
+    return "".join(out)
+
+
+def road_map(out_dir: str | Path) -> list[str]:
+    """HTML of the survey map (``defects.geojson``, ``track.geojson``, :mod:`d3cli.survey`):
+    the inline SVG of :func:`map_svg` and a sortable table of the defects on it; [] without
+    the files."""
+    out_dir = Path(out_dir)
+    defects, track = _read_geojson(out_dir / DEFECTS_GEOJSON), _read_geojson(out_dir / TRACK_GEOJSON)
+    if not track and not defects:
+        return []
+    e = html.escape
+    svg = map_svg(defects, track)
+    props = [f.get("properties") or {} for f in defects]
+    line = next((f.get("properties") or {} for f in track if (f.get("geometry") or {}).get("type") == "LineString"
+                 or "unplaced_frames" in (f.get("properties") or {})), {})
+    unplaced = list(line.get("unplaced_frames") or [])
+    n_seen = sum(int(p.get("sightings") or 1) for p in props)
+    length = _num(line.get("length_m"))
+    merged = n_seen - len(props)
+    parts = ['<h3 id="road-map">Map</h3>',
+             f"<p>{plural(len(props), 'defect')} on the map from {plural(n_seen, 'sighting')}"
+             + (f" ({merged} of them of a defect already seen from another frame, merged)" if merged else "")
+             + (f", along {length:.0f} m of track" if length else "")
+             + f" (positions: {e(str(line.get('source') or 'the track'))}). "
+             'Files: <a href="defects.geojson">defects.geojson</a>, <a href="track.geojson">track.geojson</a> '
+             "(GeoJSON, WGS84 longitude/latitude: open them in QGIS or any web map). Colour: ASTM D6433 severity "
+             "of the best-measured sighting; hatched with a dashed edge: flagged (low confidence). Hover a "
+             "defect for its depth and frames.</p>"]
+    if unplaced:
+        parts.append(f'<p class="low">{plural(len(unplaced), "frame")} without a position (measured, not on the '
+                     f"map): {e(', '.join(map(str, unplaced)))}.</p>")
+    if svg:
+        parts.append(f'<div class="scroll">{svg}</div>')
+    if props:
+        cols = ("id", "kind", "severity", "depth [mm] (bump: height)", "area [m²]", "sightings", "frames",
+                "best frame", "confidence", "latitude", "longitude")
+        parts.append('<div class="scroll"><table class="sortable" id="map-defects"><thead><tr>'
+                     + "".join(f"<th>{c}</th>" for c in cols) + "</tr></thead><tbody>")
+        for p in props:
+            low_d = p.get("confidence") == "low"
+            vals = [(p.get("id"), str(p.get("id"))), (None, str(p.get("kind"))), (None, p.get("severity") or "–"),
+                    (p.get("depth_mm"), f"{_num(p.get('depth_mm')) or 0.0:.1f}"),
+                    (p.get("area_m2"), f"{_num(p.get('area_m2')) or 0.0:.4f}"),
+                    (p.get("sightings"), str(p.get("sightings"))), (None, ", ".join(map(str, p.get("frames") or []))),
+                    (None, str(p.get("best_frame"))),
+                    (None, f"low: {p.get('reasons')}" if low_d and p.get("reasons") else "low" if low_d else "ok"),
+                    (p.get("latitude"), f"{_num(p.get('latitude')) or 0.0:.7f}"),
+                    (p.get("longitude"), f"{_num(p.get('longitude')) or 0.0:.7f}")]
+            cells = "".join(f'<td data-v="{_num(v) if _num(v) is not None else ""}">{e(t)}</td>' for v, t in vals)
+            row_cls = ' class="low"' if low_d else ""
+            parts.append(f"<tr{row_cls}>{cells}</tr>")
+        parts.append("</tbody></table></div>")
+    return parts
 
 
 def _road_card(out_dir: Path, pair: str, data: Mapping, truth: Mapping | None = None,

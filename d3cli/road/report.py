@@ -290,7 +290,9 @@ def survey_line(out: Path) -> str | None:
 
     ``road: 12 frames, 7 potholes (low 2, medium 4, high 1), 1 bump; deepest 62 mm
     (synth-0011-wet-cement #2); 3 defects flagged (wet or specular surface 2, dark or noisy 1)``,
-    from ``OUT/defects.csv`` and ``OUT/road_survey.json``.  Potholes are counted per ASTM
+    from ``OUT/defects.csv`` and ``OUT/road_survey.json``; where the frames have positions it
+    ends with the map's counts (``; 5 defects on the map (7 sightings merged), 1 frame
+    unplaced``, :mod:`d3cli.survey`).  Potholes are counted per ASTM
     D6433 severity (:mod:`d3cli.road.severity`); those too shallow or narrow for a severity
     are counted as "too small to grade".  The deepest is the deepest pothole, with its
     reasons when it is flagged (:mod:`d3cli.road.confidence`); a defect can have several.
@@ -313,9 +315,11 @@ def survey_line(out: Path) -> str | None:
     except (OSError, ValueError, KeyError, TypeError, csv.Error):
         return None  # no road outputs, or a file that is not d3stereo's: no line, never a failed run
     try:
-        frames = int(json.loads((Path(out) / SURVEY_JSON).read_text(encoding="utf-8"))["frames"])
+        survey = json.loads((Path(out) / SURVEY_JSON).read_text(encoding="utf-8"))
+        frames = int(survey["frames"])
     except (OSError, ValueError, KeyError, TypeError):
-        frames = len({r.get("pair") for r in rows})
+        survey, frames = {}, len({r.get("pair") for r in rows})
+    on_map = _on_map(survey)
     pits = [r for r in rows if r.get("kind") == "pothole"]
     n_bumps = sum(r.get("kind") == "bump" for r in rows)
     flagged = sum(r.get("low_confidence") == "True" for r in rows)
@@ -333,14 +337,26 @@ def survey_line(out: Path) -> str | None:
     else:
         line += f"no potholes, {plural(n_bumps, 'bump')}"
     if not flagged:
-        return line + "; none flagged"
+        return line + "; none flagged" + on_map
     reasons: dict = {}
     for r in rows:
         for code in (r.get("flags") or "").split(";") if r.get("low_confidence") == "True" else ():
             if code:
                 reasons[code] = reasons.get(code, 0) + 1
     why = ", ".join(f"{REASONS.get(code, code)} {n}" for code, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
-    return line + f"; {plural(flagged, 'defect')} flagged" + (f" ({why})" if why else "")
+    return line + f"; {plural(flagged, 'defect')} flagged" + (f" ({why})" if why else "") + on_map
+
+
+def _on_map(survey) -> str:
+    """``; 5 defects on the map (7 sightings merged), 1 frame unplaced`` from road_survey.json's
+    ``map`` (:mod:`d3cli.survey.outputs`); "" without one."""
+    try:
+        m = survey["map"]
+        text = (f"; {plural(int(m['defects']), 'defect')} on the map ({plural(int(m['merged']), 'sighting')} merged)"
+                f", {plural(int(m['frames_unplaced']), 'frame')} unplaced")
+    except (KeyError, TypeError, ValueError):
+        return ""
+    return text
 
 
 def _reasons_of(row: dict) -> str:
