@@ -42,7 +42,8 @@ from ..errors import InputError, OutputError, where_what_fix
 from ..evaluation.report import jsonable
 from .staging import file_records
 from ..road.report import CSV_FIELDS as DEFECTS_CSV_FIELDS
-from ..road.report import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE
+from ..road.report import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE, SURVEY_JSON
+from ..survey.outputs import DEFECTS_GEOJSON, TRACK_GEOJSON
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +72,7 @@ GROUP_FILES = {"kitti": ("disp.png",),
 #: Every file d3stereo writes into a pair's folder (anything else there is the user's).
 PAIR_FILES = (RESULT_FILE, *OUTPUT_FILES, ERROR_MAP, CLOUD_FILE, PANEL_FILE, OVERLAY_FILE, *ROAD_FILES)
 #: Files of a whole batch (or eval report) in OUT, beside the pairs' folders.
-BATCH_FILES = (RUN_FILE, REPORT_FILE, *SUMMARY_FILES, DEFECTS_CSV)
+BATCH_FILES = (RUN_FILE, REPORT_FILE, *SUMMARY_FILES, DEFECTS_CSV, SURVEY_JSON, DEFECTS_GEOJSON, TRACK_GEOJSON)
 #: A shard's run record, ``run-I-of-N.json``.
 _SHARD_RECORD = re.compile(r"run-\d+-of-\d+\.json")
 #: Prefix of d3stereo's hidden files in OUT (lock files, the writability probe).
