@@ -106,7 +106,8 @@ def test_eval_fails_such_a_pair_alone(tmp_path, with_pair_named):
 def test_reserved_names():
     from d3cli.batch.outputs import reserved_name
 
-    for name in ("run.json", "REPORT.html", "run-3-of-12.json", ".d3stereo.lock", ".d3stereo-shard-1-of-2.lock"):
+    for name in ("run.json", "REPORT.html", "run-3-of-12.json", ".d3stereo.lock", ".d3stereo-shard-1-of-2.lock",
+                 "road_survey.json", "defects.geojson", "Track.GeoJSON"):
         assert reserved_name(name) is not None, name
     for name in ("run", "run.json.d", "run-1-of-2.json.bak", "metrics", "a", "report.htm"):
         assert reserved_name(name) is None, name
