@@ -210,3 +210,17 @@ def test_missing_pyproj_names_the_extra(tmp_path, monkeypatch):
     with pytest.raises(InputError, match=r'pip install "d3stereo\[gis\]"'):
         generate_drive(tmp_path / "d", frames=2, width=W, height=H)
     assert not (tmp_path / "d").exists()
+
+
+def test_left_images_carry_their_fix_in_exif(drive, track):
+    from PIL import ExifTags, Image
+
+    for folder, row in zip(drive[1], track):
+        with Image.open(folder / "left.png") as image:
+            gps = image.getexif().get_ifd(ExifTags.IFD.GPSInfo)
+        lat = sum(float(part) / 60 ** i for i, part in enumerate(gps[ExifTags.GPS.GPSLatitude]))
+        lon = sum(float(part) / 60 ** i for i, part in enumerate(gps[ExifTags.GPS.GPSLongitude]))
+        lat *= -1 if gps[ExifTags.GPS.GPSLatitudeRef] == "S" else 1
+        lon *= -1 if gps[ExifTags.GPS.GPSLongitudeRef] == "W" else 1
+        assert (lat, lon) == pytest.approx((float(row["latitude"]), float(row["longitude"])), abs=1e-8)
+        assert float(gps[ExifTags.GPS.GPSImgDirection]) == pytest.approx(float(row["heading_deg"]), abs=1e-6)

@@ -392,16 +392,17 @@ def generate_drive(out_dir, *, frames: int, seed: int = 0, width: int = 1280, he
                 "height": int(height), "spacing_m": spacing, "potholes": len(holes), "gps_noise_m": float(gps_noise)}
     _claim_folder(out_dir, identity, "the same --drive/--seed/--width/--height/--spacing/--potholes/--gps-noise "
                                      "as before")
+    noise_rng = np.random.default_rng(np.random.SeedSequence([seed, _DRIVE_STREAM, 1]))
+    reported = _noisy(geod, fixes, float(gps_noise), noise_rng)
     seen: dict[int, list] = {p.id: [] for p in holes}
     folders = []
     for k, fix in enumerate(fixes):
         started = time.perf_counter()
         folders.append(_write_frame(out_dir, k, fix, rig, road, holes, lighting, identity, seen,
                                     variant=variant, material=material))
+        _tag_position(folders[-1] / "left.png", reported[k])
         if on_frame is not None:
             on_frame(k, folders[-1], time.perf_counter() - started)
-    noise_rng = np.random.default_rng(np.random.SeedSequence([seed, _DRIVE_STREAM, 1]))
-    reported = _noisy(geod, fixes, float(gps_noise), noise_rng)
     _write_track_csv(out_dir / TRACK_CSV, reported)
     _write_track_gpx(out_dir / TRACK_GPX, reported, seed)
     _write_truth(out_dir / DRIVE_TRUTH, geod, identity, rig, foot, road, fixes, holes, seen)
@@ -454,6 +455,37 @@ def _write_frame(out_dir: Path, k: int, fix: Fix, rig: StereoRig, road: _Road, h
     folder = _write_pair(out_dir / fix.frame, pair, dataset_seed=identity["seed"], index=k, source=source)
     log.info("synth: wrote %s (%d potholes in view)", fix.frame, sum(e["visible_px"] > 0 for e in pair.defects_gt))
     return folder
+
+
+def _tag_position(path: Path, fix: Fix) -> None:
+    """Rewrite the PNG ``path`` with ``fix`` in its EXIF GPS tags (an eXIf chunk), as a
+    camera with a GPS receiver tags its pictures; the pixels stay the same."""
+    from PIL import ExifTags, Image
+    from PIL.TiffImagePlugin import IFDRational
+
+    def dms(value: float) -> tuple:
+        degrees, rest = divmod(abs(value) * 3600.0, 3600.0)
+        minutes, seconds = divmod(rest, 60.0)
+        return IFDRational(int(degrees)), IFDRational(int(minutes)), IFDRational(round(seconds, 6))
+
+    moment = datetime.fromisoformat(fix.time.replace("Z", "+00:00"))
+    tag = ExifTags.GPS
+    exif = Image.Exif()
+    exif[ExifTags.IFD.GPSInfo] = {
+        tag.GPSVersionID: b"\x02\x03\x00\x00",
+        tag.GPSLatitudeRef: "N" if fix.latitude >= 0 else "S", tag.GPSLatitude: dms(fix.latitude),
+        tag.GPSLongitudeRef: "E" if fix.longitude >= 0 else "W", tag.GPSLongitude: dms(fix.longitude),
+        tag.GPSAltitudeRef: b"\x00" if fix.altitude_m >= 0 else b"\x01",
+        tag.GPSAltitude: IFDRational(round(abs(fix.altitude_m), 3)),
+        tag.GPSTimeStamp: (IFDRational(moment.hour), IFDRational(moment.minute),
+                           IFDRational(round(moment.second + moment.microsecond / 1e6, 3))),
+        tag.GPSDateStamp: moment.strftime("%Y:%m:%d"),
+        tag.GPSImgDirectionRef: "T", tag.GPSImgDirection: IFDRational(round(fix.heading_deg, 6)),
+        tag.GPSMapDatum: "WGS-84",
+    }
+    with Image.open(path) as image:
+        pixels = image.copy()
+    atomic_write(path, lambda tmp: pixels.save(tmp, format="PNG", exif=exif))
 
 
 def _write_track_csv(path: Path, fixes: list[Fix]) -> None:
@@ -519,6 +551,8 @@ _DEFINITIONS = {
     "volume_l": "fill volume of the profile up to the surrounding road, same grid",
     "frames": "the frames whose left image shows the pothole (visible_px > 0 in potholes_gt.png); id is its "
               "id in that frame's defects_gt.json, u, v where its centre projects there",
+    "exif": "each frame's left.png carries its track.csv fix in EXIF GPS tags (PNG eXIf chunk): latitude, "
+            "longitude, altitude, time, GPSImgDirection = heading_deg",
     "angle_deg": "bearing of the ellipse's first semi-axis (semi_axes_m[0]), clockwise from the direction of "
                  "travel, degrees",
 }
