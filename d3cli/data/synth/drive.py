@@ -184,6 +184,12 @@ def _reach(hole: Pothole) -> float:
     return 1.4 * max(hole.semi_a, hole.semi_b)
 
 
+def _drawn_reach(hole: Pothole) -> float:
+    """Half the side of the square window the height field and the truth draw ``hole``
+    in (``terrain._grid_window``, ``truth._group_grid``)."""
+    return 1.25 * max(hole.semi_a, hole.semi_b)
+
+
 def _sample_drive_potholes(rng, count: int | None, foot: Footprint, frames: int, spacing: float
                            ) -> tuple[DrivePothole, ...]:
     """Potholes along the road, none overlapping another; ``count`` None: one per 3 m of
@@ -223,7 +229,7 @@ class _Road:
     shape: _RoadShape  # undulation, cross slope and grade; holes in road coordinates
 
 
-def _sample_road(rng, holes: tuple[DrivePothole, ...]) -> _Road:
+def _sample_drive_road(rng, holes: tuple[DrivePothole, ...]) -> _Road:
     lat0, lon0 = _PLACES[int(rng.integers(0, len(_PLACES)))]
     latitude = lat0 + rng.uniform(-0.045, 0.045)
     longitude = lon0 + rng.uniform(-0.045, 0.045) / math.cos(math.radians(lat0))
@@ -316,11 +322,12 @@ def _frame_scene(rng, rig: StereoRig, road: _Road, along: float, lighting, varia
     texel, spacing = _grid_steps(rig)
     moved = tuple(dataclasses.replace(h, y=h.y - along) for h in road.shape.holes)
     # The height range (deepest pothole of the drive) bounds the patch; then the potholes
-    # that reach into the patch are the frame's.
+    # whose drawing window reaches into the patch are the frame's (the height field draws
+    # a pothole only in its window, and cannot draw one whose window misses the grid).
     bounds, z_range = _visible_patch(rig, dataclasses.replace(road.shape, holes=moved))
     x_min, x_max, y_min, y_max = bounds
-    kept = [i for i, h in enumerate(moved)
-            if h.x + _reach(h) > x_min and h.x - _reach(h) < x_max and h.y + _reach(h) > y_min and h.y - _reach(h) < y_max]
+    kept = [i for i, h in enumerate(moved) if h.x + _drawn_reach(h) > x_min and h.x - _drawn_reach(h) < x_max
+            and h.y + _drawn_reach(h) > y_min and h.y - _drawn_reach(h) < y_max]
     shape = dataclasses.replace(road.shape, holes=tuple(moved[i] for i in kept))
     field_, h_top = _surface(rng, shape, bounds, spacing, z_range)
     return _dress_scene(rng, variant, material, rig, shape, texel, spacing, bounds, field_, h_top, lighting), kept
@@ -384,7 +391,7 @@ def generate_drive(out_dir, *, frames: int, seed: int = 0, width: int = 1280, he
     foot = footprint(rig)
     spacing = default_spacing(rig) if spacing is None else float(spacing)
     holes = _sample_drive_potholes(drive_rng, potholes, foot, frames, spacing)
-    road = _sample_road(drive_rng, holes)
+    road = _sample_drive_road(drive_rng, holes)
     lighting = _sample_lighting(drive_rng, variant, rig)
     fixes = _track(geod, road, frames, spacing)
     out_dir = _make_folder(Path(out_dir))
@@ -451,7 +458,7 @@ def _write_frame(out_dir: Path, k: int, fix: Fix, rig: StereoRig, road: _Road, h
               f"along_m: {fix.along_m:.6f}", f"spacing_m: {identity['spacing_m']:g}",
               f"reproduce: generate_drive(OUT, frames={identity['drive']}, seed={identity['seed']}, "
               f"width={identity['width']}, height={identity['height']}, spacing={identity['spacing_m']!r}, "
-              f"potholes={identity['potholes']}) frame {k}"]
+              f"potholes={identity['potholes']}, gps_noise={identity['gps_noise_m']!r}) frame {k}"]
     folder = _write_pair(out_dir / fix.frame, pair, dataset_seed=identity["seed"], index=k, source=source)
     log.info("synth: wrote %s (%d potholes in view)", fix.frame, sum(e["visible_px"] > 0 for e in pair.defects_gt))
     return folder
