@@ -226,20 +226,10 @@ def test_left_images_carry_their_fix_in_exif(drive, track):
         assert float(gps[ExifTags.GPS.GPSImgDirection]) == pytest.approx(float(row["heading_deg"]), abs=1e-6)
 
 
-def test_a_pothole_whose_window_ends_just_before_a_frame_is_left_out_of_it():
-    from d3cli.data.synth import drive as drive_mod
-    from d3cli.data.synth.dataset import _visible_patch
-    from d3cli.data.synth.render import _sample_lighting
-    from d3cli.data.synth.rig import sample_rig
-    from d3cli.data.synth.terrain import _RoadShape
-
-    rng = np.random.default_rng(0)
-    rig = sample_rig(rng, 320, 180)
-    hole = synth.Pothole(0.0, 0.0, 0.4, 0.3, 0.0, 0.04, 0.5, (0.0, 0.0, 0.0, 0.0))
-    (_, _, y_min, _), _ = _visible_patch(rig, _RoadShape(2e-3, 0.0, 0.0, (hole,), None, False))
-    # Its outline's bound (1.4 semi-axes) reaches into the patch, its drawing window
-    # (1.25) ends 5 cm before it.
-    hole = synth.Pothole(0.0, y_min - 0.55, 0.4, 0.3, 0.0, 0.04, 0.5, (0.0, 0.0, 0.0, 0.0))
-    road = drive_mod._Road(0.0, 0.0, 0.0, 0.0, None, 1.0, _RoadShape(2e-3, 0.0, 0.0, (hole,), None, False))
-    scene, kept = drive_mod._frame_scene(rng, rig, road, 0.0, _sample_lighting(rng, "sun", rig), "sun", "asphalt")
-    assert kept == [] and scene.road.holes == ()
+def test_a_pothole_whose_window_ends_just_before_a_frame_is_left_out_of_it(tmp_path):
+    # Seed 17: a pothole's outline bound (1.4 semi-axes) reaches into a frame's patch while
+    # the window the height field draws it in (1.25) ends centimetres before it.
+    out = tmp_path / "edge"
+    generate_drive(out, frames=8, seed=17, width=W, height=H, potholes=3)
+    truth = json.loads((out / DRIVE_TRUTH).read_text())
+    assert len(truth["potholes"]) == 3 and all(len(p["frames"]) >= 2 for p in truth["potholes"])
