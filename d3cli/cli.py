@@ -490,32 +490,61 @@ def eval_(pred_dirs, gt_input, out_dir, break_lock, verbose, quiet):
               help="Image width, pixels.")
 @click.option("--height", type=click.IntRange(min=32, max=8192), default=720, show_default=True,
               help="Image height, pixels.")
+@click.option("--drive", "drive", type=int, default=None, metavar="N",
+              help="Write a drive instead: N overlapping frames along one road, a GPS track and drive_gt.json.")
+@click.option("--spacing", type=float, default=None, metavar="M",
+              help="With --drive: metres between frames [default: every pothole in two frames or more].")
+@click.option("--potholes", type=int, default=None, metavar="K",
+              help="With --drive: number of potholes [default: one per 3 m of road].")
+@click.option("--gps-noise", "gps_noise", type=float, default=None, metavar="M",
+              help="With --drive: std of the track's position error, metres [default: 0].")
 @_verbosity
-def synth(out_dir, n, seed, width, height, verbose, quiet):
-    """Write N synthetic road stereo pairs with exact ground truth into OUT_DIR."""
+@click.pass_context
+def synth(ctx, out_dir, n, seed, width, height, drive, spacing, potholes, gps_noise, verbose, quiet):
+    """Write N synthetic road stereo pairs with exact ground truth into OUT_DIR, or with
+    --drive a sequence of overlapping frames with a GPS track."""
     from tqdm import tqdm
 
     from .data import synth as synth_mod
 
     _setup_logging(verbose, quiet)
+    _check_synth_options(ctx, drive, spacing, potholes, gps_noise)
+    total, unit = (n, "pair") if drive is None else (max(drive, 0), "frame")
     # A pair takes seconds: a bar on a terminal, else one line per pair (as `run` does); -q: neither.
     on_terminal = sys.stderr is not None and sys.stderr.isatty()
-    bar = tqdm(total=n, desc="synth", unit="pair", disable=quiet or not on_terminal)
+    bar = tqdm(total=total, desc="synth", unit=unit, disable=quiet or not on_terminal)
 
     def written_one(index: int, folder: Path, seconds: float) -> None:
         if not bar.disable:
             bar.set_postfix_str(folder.name, refresh=False)
             bar.update()
         elif not quiet:
-            click.echo(f"[{index + 1}/{n}]  {folder.name}  written  {seconds:.1f} s", err=True)
+            click.echo(f"[{index + 1}/{total}]  {folder.name}  written  {seconds:.1f} s", err=True)
 
     try:
-        written = synth_mod.generate_dataset(out_dir, n=n, seed=seed, width=width, height=height,
-                                             on_pair=written_one)
+        if drive is None:
+            written = synth_mod.generate_dataset(out_dir, n=n, seed=seed, width=width, height=height,
+                                                 on_pair=written_one)
+        else:
+            written = synth_mod.generate_drive(out_dir, frames=drive, seed=seed, width=width, height=height,
+                                               spacing=spacing, potholes=potholes, gps_noise=gps_noise or 0.0,
+                                               on_frame=written_one)
     finally:
         bar.close()
     if not quiet:
-        click.echo(f"wrote {plural(len(written), 'pair')} to {out_dir}")
+        click.echo(f"wrote {plural(len(written), unit)} to {out_dir}")
+
+
+def _check_synth_options(ctx, drive, spacing, potholes, gps_noise) -> None:
+    """--n belongs to pair sets, --spacing/--potholes/--gps-noise to drives."""
+    if drive is not None and ctx.get_parameter_source("n") is not click.core.ParameterSource.DEFAULT:
+        raise InputError(where_what_fix("synth", "--n and --drive both given",
+                                        "give --n for a set of pairs or --drive for a drive, not both"))
+    given = [name for name, value in (("--spacing", spacing), ("--potholes", potholes), ("--gps-noise", gps_noise))
+             if value is not None]
+    if drive is None and given:
+        raise InputError(where_what_fix("synth", f"{', '.join(given)} given without --drive",
+                                        "add --drive N, or leave them out"))
 
 
 # ----------------------------------------------------------------------------- export

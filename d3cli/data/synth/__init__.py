@@ -20,9 +20,14 @@ Three illumination variants reproduce the conditions of UDTIRI-Stereo (paper, se
 (dim, high gain, strong shot and read noise) and ``wet`` (darker wet patches with
 view-dependent specular highlights, so left and right differ as on real wet roads).
 
-Modules: ``rig``, ``terrain``, ``texture``, ``render``, ``truth``, ``dataset``; this
-package re-exports the public API: :func:`render_pair`, :func:`generate_dataset`,
-:func:`self_test`, :func:`pothole_groups`, :func:`pothole_truth`,
+A *drive* (:func:`generate_drive`, module ``drive``) renders overlapping frames with one
+rig moving along a straight road, with a GPS track (``track.csv``, ``track.gpx``) and the
+potholes' map positions, outlines and measurements (``drive_gt.json``): ground truth for
+geolocating and merging detections across frames.
+
+Modules: ``rig``, ``terrain``, ``texture``, ``render``, ``truth``, ``dataset``, ``drive``;
+this package re-exports the public API: :func:`render_pair`, :func:`generate_dataset`,
+:func:`generate_drive`, :func:`self_test`, :func:`pothole_groups`, :func:`pothole_truth`,
 :func:`pothole_depth_image` and the records.
 
 May import: :mod:`d3cli.data.formats` (its writers), :mod:`d3cli.errors` only.
@@ -31,11 +36,12 @@ May import: :mod:`d3cli.data.formats` (its writers), :mod:`d3cli.errors` only.
 from __future__ import annotations
 
 from .dataset import DATASET_FILE, MAX_SIDE, MIN_SIDE, generate_dataset, pair_name, pothole_depth_image, render_pair
+from .drive import generate_drive
 from .rig import MATERIALS, VARIANTS, StereoRig
 from .terrain import Pothole
 from .truth import SynthPair, pothole_groups, pothole_truth, self_test
 
 __all__ = [
     "DATASET_FILE", "MATERIALS", "MAX_SIDE", "MIN_SIDE", "VARIANTS", "Pothole", "StereoRig", "SynthPair",
-    "generate_dataset", "pair_name", "pothole_depth_image", "pothole_groups", "pothole_truth", "render_pair", "self_test",
+    "generate_dataset", "generate_drive", "pair_name", "pothole_depth_image", "pothole_groups", "pothole_truth", "render_pair", "self_test",
 ]

@@ -131,12 +131,14 @@ def _check_size(width: int, height: int) -> None:
                                         f"use a width and height of at most {MAX_SIDE} pixels"))
 
 
-def _claim_folder(out_dir: Path, identity: dict) -> None:
+def _claim_folder(out_dir: Path, identity: dict,
+                  same: str = "the same --seed/--width/--height as before") -> None:
     """Refuse to mix two datasets in one folder; mark the folder as this dataset.
 
-    A folder may be empty, or hold a dataset made with the same seed and size (a rerun,
-    or more pairs of the same set: pairs are deterministic).  Anything else is refused,
-    so that pairs of two seeds or sizes never end up side by side.
+    A folder may be empty, or hold a dataset of the same ``identity`` (a rerun, or more
+    pairs of the same set: pairs are deterministic).  Anything else is refused, so that
+    pairs of two seeds or sizes never end up side by side; ``same`` names the options
+    that must match.
     """
     marker = out_dir / DATASET_FILE
     entries = [p.name for p in out_dir.iterdir()] if out_dir.is_dir() else []
@@ -146,12 +148,18 @@ def _claim_folder(out_dir: Path, identity: dict) -> None:
         except (OSError, ValueError):
             stored = None
         if stored != identity:
-            made_by = (f"a synthetic set with seed {stored.get('seed')} and size {stored.get('width')}x"
-                       f"{stored.get('height')}" if isinstance(stored, dict) else f"{len(entries)} other entries")
             raise OutputError(where_what_fix(
-                str(out_dir), f"the folder is not empty (it holds {made_by})",
-                "give an empty or new folder, or the same --seed/--width/--height as before"))
+                str(out_dir), f"the folder is not empty (it holds {_made_by(stored, entries)})",
+                f"give an empty or new folder, or {same}"))
     atomic_write(marker, lambda tmp: tmp.write_text(json.dumps(identity) + "\n", encoding="utf-8"))
+
+
+def _made_by(stored, entries: list) -> str:
+    """What a folder holds, by its marker (``stored``, None when unreadable)."""
+    if not isinstance(stored, dict):
+        return f"{len(entries)} other entries"
+    what = f"a synthetic drive of {stored.get('drive')} frames" if "drive" in stored else "a synthetic set"
+    return f"{what} with seed {stored.get('seed')} and size {stored.get('width')}x{stored.get('height')}"
 
 
 def render_pair(
@@ -217,15 +225,24 @@ def render_pair(
     rng = np.random.default_rng(seed)
     try:
         scene = _build_scene(rng, width, height, variant, material, potholes, flat, shapes)
-        left_img, right_img = _render_views(scene, width, height, int(supersample), rng, noise)
-        disparity, nocc, points = _ground_truth(scene.rig, scene.field_, scene.h_top)
-        pothole_ids, defects_gt = pothole_truth(scene.road.holes, scene.rig, points,
-                                                scene.field_ if shapes == "varied" else None)
+        return _render_scene(scene, rng, supersample=int(supersample), noise=noise, surface_truth=shapes == "varied",
+                             seed=seed, variant=variant, material=material, flat=flat)
     except MemoryError:
         raise _out_of_memory(width, height) from None
+
+
+def _render_scene(scene: _Scene, rng, *, supersample: int, noise: bool, surface_truth: bool, seed: int,
+                  variant: str, material: str, flat: bool) -> SynthPair:
+    """Both views, the exact disparity and the pothole truth of a drawn scene (``rng``
+    then draws the sensor noise); ``surface_truth`` measures the potholes on the rendered
+    surface (relief and water included), else on their profiles."""
+    rig = scene.rig
+    left_img, right_img = _render_views(scene, rig.width, rig.height, supersample, rng, noise)
+    disparity, nocc, points = _ground_truth(rig, scene.field_, scene.h_top)
+    pothole_ids, defects_gt = pothole_truth(scene.road.holes, rig, points, scene.field_ if surface_truth else None)
     finite = disparity[np.isfinite(disparity)]
-    calib = scene.rig.calib()
-    calib["ndisp"] = int(math.ceil(float(finite.max()))) + 8 if finite.size else width // 4
+    calib = rig.calib()
+    calib["ndisp"] = int(math.ceil(float(finite.max()))) + 8 if finite.size else rig.width // 4
     info = _pair_info(scene, seed=seed, variant=variant, material=material, noise=noise, flat=flat)
     return SynthPair(left_img, right_img, disparity, nocc, calib, info, pothole_ids, defects_gt)
 
@@ -249,8 +266,16 @@ def _build_scene(rng, width: int, height: int, variant: str, material: str, poth
                  flat: bool, shapes: str = "varied") -> _Scene:
     """Draw the rig, road, height field, light and texture, in the order the seed fixes."""
     rig, road, texel, spacing, bounds, field_, h_top = _build_surface(rng, width, height, potholes, flat, shapes)
+    return _dress_scene(rng, variant, material, rig, road, texel, spacing, bounds, field_, h_top)
+
+
+def _dress_scene(rng, variant: str, material: str, rig: StereoRig, road: _RoadShape, texel: float, spacing: float,
+                 bounds, field_: _HeightField, h_top: float, lighting: _Lighting | None = None) -> _Scene:
+    """The light (drawn unless given), texture and wetness of a surface, in the order the
+    seed fixes."""
     holes = road.holes
-    lighting = _sample_lighting(rng, variant, rig)
+    if lighting is None:
+        lighting = _sample_lighting(rng, variant, rig)
     light_pool = None
     if variant == "dusk":
         light_pool = (*_sample_road_point(rng, rig), rng.uniform(1.0, 2.5))
@@ -273,20 +298,37 @@ def _build_surface(rng, width: int, height: int, potholes: int | None, flat: boo
     texel, grid spacing, bounds, field, h_top."""
     rig = sample_rig(rng, width, height)
     road = _sample_road(rng, rig, potholes, flat, shapes)
+    texel, spacing = _grid_steps(rig)
+    bounds, z_range = _visible_patch(rig, road)
+    field_, h_top = _surface(rng, road, bounds, spacing, z_range)
+    return rig, road, texel, spacing, bounds, field_, h_top
+
+
+def _grid_steps(rig: StereoRig) -> tuple[float, float]:
+    """Texel size and height-grid spacing (metres) for a rig."""
     texel = _texel_size(rig)
-    spacing = float(np.clip(1.5 * texel, 2e-3, 2e-2))
+    return texel, float(np.clip(1.5 * texel, 2e-3, 2e-2))
+
+
+def _visible_patch(rig: StereoRig, road: _RoadShape):
+    """Bounds (x_min, x_max, y_min, y_max) of the road both views see and the height
+    range (z_low, z_high) the surface stays in there."""
     # The visible patch depends on the height range and the tilt part of the height
     # range on the patch: two rounds from a generous start settle it.
     z_low, z_high = -0.15, 0.1
     for _ in range(2):
         bounds = _road_bounds(rig, z_low, z_high, margin=0.05)
         z_low, z_high = road.height_range(bounds)
-    bounds = _road_bounds(rig, z_low, z_high, margin=0.05)
+    return _road_bounds(rig, z_low, z_high, margin=0.05), (z_low, z_high)
+
+
+def _surface(rng, road: _RoadShape, bounds, spacing: float, z_range) -> tuple[_HeightField, float]:
+    """The height field of ``road`` over ``bounds`` and the top of the surface (metres)."""
     field_ = _build_height_field(rng, road, bounds, spacing)
     h_top = float(field_.h.max()) + 1e-3
-    if field_.h.max() > z_high or field_.h.min() < z_low:
+    if field_.h.max() > z_range[1] or field_.h.min() < z_range[0]:
         raise RuntimeError("synthetic road height left the range its visible patch was computed for")
-    return rig, road, texel, spacing, bounds, field_, h_top
+    return field_, h_top
 
 
 def pothole_depth_image(*, seed: int, width: int, height: int, disparity: np.ndarray,
@@ -446,7 +488,10 @@ def generate_dataset(out_dir, *, n: int = 12, seed: int = 0, width: int = 1280, 
     return folders
 
 
-def _write_pair(folder: Path, pair: SynthPair, *, dataset_seed: int, index: int) -> Path:
+def _write_pair(folder: Path, pair: SynthPair, *, dataset_seed: int, index: int,
+                source: list[str] | None = None) -> Path:
+    """Write ``pair``'s files into ``folder``; ``source`` replaces the SOURCE.txt lines
+    that say how to render the pair again (its seed and ``reproduce``)."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -483,7 +528,7 @@ def _write_pair(folder: Path, pair: SynthPair, *, dataset_seed: int, index: int)
         "gt_invalid: inf",
         f"dataset_seed: {dataset_seed}",
         f"index: {index}",
-        f"pair_seed: {info['seed']}",
+        *(source if source is not None else [f"pair_seed: {info['seed']}"]),
         f"variant: {info['variant']}",
         f"material: {info['material']}",
         f"potholes: {holes}",
@@ -492,8 +537,9 @@ def _write_pair(folder: Path, pair: SynthPair, *, dataset_seed: int, index: int)
         f"image_size: {calib['width']}x{calib['height']}",
         f"disparity_range: {finite.min():.3f} {finite.max():.3f}",
         f"nocc_share: {pair.nocc.mean():.4f}",
-        f"reproduce: render_pair(seed={info['seed']}, width={calib['width']}, height={calib['height']}, "
-        f"variant={info['variant']!r}, material={info['material']!r})",
+        *([] if source is not None else
+          [f"reproduce: render_pair(seed={info['seed']}, width={calib['width']}, height={calib['height']}, "
+           f"variant={info['variant']!r}, material={info['material']!r})"]),
     ])
     return folder
 

@@ -71,6 +71,22 @@ def _sample_road_point(rng, rig: StereoRig) -> tuple[float, float]:
     return float(left[0] + t * direction[0]), float(left[1] + t * direction[1])
 
 
+def _classic_pothole(rng, x: float, y: float) -> Pothole:
+    """A classic pothole centred on world (x, y): size, aspect, depth, walls, outline
+    and orientation drawn from ``rng``."""
+    diameter = rng.uniform(0.2, 0.8)
+    aspect = rng.uniform(0.6, 1.0)
+    depth = rng.uniform(0.02, 0.06)
+    semi_a = diameter / 2.0
+    semi_b = semi_a * aspect
+    # Walls at least 1.2x as wide as the pothole is deep keep slopes below ~1.3.
+    wall = max(1.2 * depth, rng.uniform(0.25, 0.5) * semi_b)
+    flat_fraction = max(0.0, 1.0 - wall / semi_b)
+    wobble = (rng.uniform(0.0, 0.12), rng.uniform(0, 2 * math.pi),
+              rng.uniform(0.0, 0.08), rng.uniform(0, 2 * math.pi))
+    return Pothole(x, y, semi_a, semi_b, rng.uniform(0, math.pi), depth, flat_fraction, wobble)
+
+
 def _sample_potholes(rng, rig: StereoRig, count: int, shape_rng=None) -> list[Pothole]:
     """Potholes centred on road points seen near the middle of the left image; with a
     ``shape_rng``, of the families of :mod:`.potholes` (else all classic)."""
@@ -79,17 +95,7 @@ def _sample_potholes(rng, rig: StereoRig, count: int, shape_rng=None) -> list[Po
     start = int(shape_rng.integers(0, len(FAMILIES))) if shape_rng is not None else 0
     for _ in range(count):
         x, y = _sample_road_point(rng, rig)
-        diameter = rng.uniform(0.2, 0.8)
-        aspect = rng.uniform(0.6, 1.0)
-        depth = rng.uniform(0.02, 0.06)
-        semi_a = diameter / 2.0
-        semi_b = semi_a * aspect
-        # Walls at least 1.2x as wide as the pothole is deep keep slopes below ~1.3.
-        wall = max(1.2 * depth, rng.uniform(0.25, 0.5) * semi_b)
-        flat_fraction = max(0.0, 1.0 - wall / semi_b)
-        wobble = (rng.uniform(0.0, 0.12), rng.uniform(0, 2 * math.pi),
-                  rng.uniform(0.0, 0.08), rng.uniform(0, 2 * math.pi))
-        holes.append(Pothole(x, y, semi_a, semi_b, rng.uniform(0, math.pi), depth, flat_fraction, wobble))
+        holes.append(_classic_pothole(rng, x, y))
         if shape_rng is not None:
             holes[-1] = varied_pothole(holes[-1], shape_rng, FAMILIES[(start + len(holes) - 1) % len(FAMILIES)])
     return holes

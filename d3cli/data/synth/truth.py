@@ -71,6 +71,7 @@ def _describe_hole(hole: Pothole, rig: StereoRig) -> dict:
 
 
 _OPENING_M = 0.01  # a pothole's opening: where it lowers the road by more than 10 mm
+_TRUTH_GRID_M = 2e-3  # the world grid area and volume are integrated on
 
 
 def _opening_ratio(hole: Pothole, x: float, y: float) -> float:
@@ -178,7 +179,7 @@ def pothole_truth(holes, rig: StereoRig, points: np.ndarray, field_: _HeightFiel
         take = finite & (sink > 1e-3) & (sink > best)
         ids[take] = groups[k] + 1
         best = np.where(take, sink, best)
-    spacing = 2e-3
+    spacing = _TRUTH_GRID_M
     truth = []
     for k, hole in enumerate(holes):
         desc = _describe_hole(hole, rig)
@@ -187,9 +188,7 @@ def pothole_truth(holes, rig: StereoRig, points: np.ndarray, field_: _HeightFiel
                           "visible_px": 0, "u": desc["u"], "v": desc["v"], "part_of": groups[k] + 1})
             continue
         group = [holes[j] for j in members[k]]
-        reach = [1.25 * max(g.semi_a, g.semi_b) for g in group]
-        gx, gy = np.meshgrid(np.arange(min(g.x - r for g, r in zip(group, reach)), max(g.x + r for g, r in zip(group, reach)), spacing),
-                             np.arange(min(g.y - r for g, r in zip(group, reach)), max(g.y + r for g, r in zip(group, reach)), spacing))
+        gx, gy = _group_grid(group, spacing)
         own = np.max([g.depth * _pothole_weight(g, gx, gy) for g in group], axis=0)
         for j, other in enumerate(holes):
             if groups[j] != k:
@@ -207,6 +206,16 @@ def pothole_truth(holes, rig: StereoRig, points: np.ndarray, field_: _HeightFiel
                       "visible_px": int((ids == k + 1).sum()), "u": desc["u"], "v": desc["v"],
                       "members": [j + 1 for j in members[k]]})
     return ids, truth
+
+
+def _group_grid(group, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """World x, y (float64 2-D) of the regular grid, ``spacing`` metres, over the boxes
+    that hold a group of potholes' profiles; anchored at their edges, so a pothole moved
+    by a whole vector keeps its samples."""
+    reach = [1.25 * max(g.semi_a, g.semi_b) for g in group]
+    return np.meshgrid(
+        np.arange(min(g.x - r for g, r in zip(group, reach)), max(g.x + r for g, r in zip(group, reach)), spacing),
+        np.arange(min(g.y - r for g, r in zip(group, reach)), max(g.y + r for g, r in zip(group, reach)), spacing))
 
 
 def _deepest_node(field_: _HeightField, group: list, others: list) -> float:
