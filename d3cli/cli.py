@@ -371,7 +371,7 @@ def run(inputs, out_dir, method, backend, config_path, overrides, max_disparity,
             counts = "\n".join([counts, *table[1:]])  # the table's first line is its counts line
         click.echo(counts)
         if cfg.road.report:  # what the road report found, in one line
-            from .road.report import survey_line
+            from .road.outputs import survey_line
 
             road_line = survey_line(Path(out_dir))
             if road_line:

@@ -6,7 +6,7 @@ once into a cache folder per seed), one process warms up (kernels loaded or comp
 
 * the stereo compute, ``compute_pair("d3stereo", road config)``, as ``d3stereo run -c road``
   matches a pair;
-* the road report of that map (:func:`d3cli.road.report.road_report`, the re-match with the
+* the road report of that map (:func:`d3cli.road.outputs.road_report`, the re-match with the
   right image included), writing the default files (``run.outputs: all``: height.pfm,
   height_color.png, defects.json, defects.png);
 * the road report writing the ``survey`` set (defects.json only).
@@ -65,7 +65,7 @@ def main(argv=None) -> int:
     from d3cli.config import output_groups
     from d3cli.data import formats as io, layouts as datasets
     from d3cli.road.pointcloud import camera_from
-    from d3cli.road.report import road_report
+    from d3cli.road.outputs import road_report
 
     cfg = load_config("road", ["run.backend=cpu", "road.report=true"])
     pairs = _pairs(args.seed, args.pairs)

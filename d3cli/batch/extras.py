@@ -14,7 +14,7 @@ from pathlib import Path
 from ..config import output_groups
 from ..data import formats as io, layouts as datasets
 from ..road.pointcloud import camera_from, save_pair_cloud
-from ..road.report import road_report
+from ..road.outputs import road_report
 from .fingerprint import cloud_fingerprint
 from .outputs import CLOUD_FILE, write_result
 from .steps import step
@@ -73,7 +73,7 @@ def write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -
         stored = {**stored, "cloud": {"fingerprint": cloud_fp, "points": n_points,
                                       "depth_range_m": list(depth_range),
                                       "camera": dataclasses.asdict(camera)}}
-    if cfg.road.report:  # all the logic in d3cli.road.report
+    if cfg.road.report:  # all the logic in d3cli.road.outputs
         with step("road report"):
             warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road,
                                     right=right, groups=output_groups(cfg.run.outputs))[1]

@@ -41,8 +41,8 @@ from ..evaluation.html import REPORT_FILE
 from ..errors import InputError, OutputError, where_what_fix
 from ..evaluation.report import jsonable
 from .staging import file_records
-from ..road.report import CSV_FIELDS as DEFECTS_CSV_FIELDS
-from ..road.report import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE, SURVEY_JSON
+from ..road.outputs import CSV_FIELDS as DEFECTS_CSV_FIELDS
+from ..road.outputs import DEFECTS_CSV, DEFECTS_JSON, DEFECTS_PNG, HEIGHT_COLOR_FILE, HEIGHT_FILE, SURVEY_JSON
 from ..survey.outputs import DEFECTS_GEOJSON, TRACK_GEOJSON
 
 log = logging.getLogger(__name__)

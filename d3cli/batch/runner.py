@@ -43,7 +43,7 @@ from ..config import Config, method_spec, output_groups
 from ..data import formats as io, layouts as datasets
 from ..errors import D3Error, InputError, OutputError, Terminated, interrupt_behind, plural
 from ..evaluation import diagnostics, report
-from ..road.report import DEFECTS_CSV, write_defects_csv
+from ..road.outputs import DEFECTS_CSV, write_defects_csv
 from ..survey import survey_map
 from . import resources
 from .scoring import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start

@@ -11,7 +11,7 @@ and units are those of summary.md and the terminal
 unscored, with the number of pairs that have ground truth and the flag that scores them.
 Links are relative and point only to files that exist when the page is written.
 
-After ``--road-report`` (a pair folder holds ``defects.json``, :mod:`d3cli.road.report`)
+After ``--road-report`` (a pair folder holds ``defects.json``, :mod:`d3cli.road.outputs`)
 the page has a "Road inspection" section, read from those files: the batch totals, the
 survey summary of ``road_survey.json``, the defects against the pothole ground truth where
 a pair has one (``defects_gt.json`` and ``potholes_gt.png`` beside its left image, as
@@ -351,7 +351,7 @@ def definitions_section(keys: Iterable[str]) -> list[str]:
     return parts
 
 
-#: Per-pair road files (d3cli.road.report writes them; read here, not imported: the
+#: Per-pair road files (d3cli.road.outputs writes them; read here, not imported: the
 #: evaluation room does not depend on the road room).
 ROAD_JSON, ROAD_PICTURES = "defects.json", ("defects.png", "height_color.png")
 #: The batch's survey summary (d3cli.road.severity.survey_summary, written beside defects.csv).

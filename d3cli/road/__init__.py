@@ -2,7 +2,7 @@
 plane and heights above it (``plane``), potholes and bumps measured in 3-D (``defects``,
 cut apart by ``splitting``, re-matched with a small window by ``rematch``), whether each
 can be trusted and why not (``confidence``), their ASTM D6433 severity (``severity``), the
-labelled picture (``overlay``) and the files of ``--road-report`` (``report``); the
+labelled picture (``overlay``) and the files of ``--road-report`` (``outputs``); the
 compiled loops they share are in ``compiled`` and the masks' morphology in ``morphology``.
 
 May import: :mod:`d3cli.data`, :mod:`d3cli.config`, :mod:`d3cli.errors` (and the PT

@@ -93,7 +93,7 @@ class ConfidenceRules:
 
 def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules | None = None) -> tuple:
     """The reason codes of one defect from its evidence (keys as written by
-    :func:`d3cli.road.defects.find_defects` and :func:`d3cli.road.report.road_report`; a
+    :func:`d3cli.road.defects.find_defects` and :func:`d3cli.road.outputs.road_report`; a
     missing key raises no flag).
 
     Parameters

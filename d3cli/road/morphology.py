@@ -1,6 +1,6 @@
 """Morphology of one region's mask at the cost of the region, not of the image.
 
-Used by :mod:`d3cli.road.defects` and :mod:`d3cli.road.report`, which dilate every candidate
+Used by :mod:`d3cli.road.defects` and :mod:`d3cli.road.outputs`, which dilate every candidate
 region of a map by the reference ring and the local-noise disc.  May import numpy, OpenCV,
 :mod:`d3cli.road.compiled` and the standard library only.
 """

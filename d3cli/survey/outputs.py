@@ -30,7 +30,7 @@ from pathlib import Path
 from ..data.formats import atomic_write, read_calib
 from ..errors import InputError, plural
 from ..road.pointcloud import camera_from
-from ..road.report import DEFECTS_CSV, DEFECTS_JSON, SURVEY_JSON
+from ..road.outputs import DEFECTS_CSV, DEFECTS_JSON, SURVEY_JSON
 from .geolocate import locate_defect, road_axes
 from .gis import INSTALL, have_gis, local_projection
 from .merge import merge_sightings

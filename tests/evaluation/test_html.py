@@ -184,7 +184,7 @@ def test_road_section_shows_the_survey_summary_by_severity(tmp_path):
     survey = {"frames": 4, "potholes": 3, "bumps": 1, "low_confidence": 1,
               "by_severity": {"low": 1.0, "medium": 0.0, "high": 2.5, "none": 0},
               "potholes_per_frame": 0.75, "frame_spacing_m": 5.0, "length_km": 0.02, "potholes_per_km": 150.0}
-    (tmp_path / "road_survey.json").write_text(json.dumps(survey))  # as d3cli.road.report writes it
+    (tmp_path / "road_survey.json").write_text(json.dumps(survey))  # as d3cli.road.outputs writes it
     text = write_report_html(tmp_path, [{"pair": "p", "status": "ok"}], title="t").read_text()
     road = text[text.index('<h2 id="road">'):]
     survey_html = road[road.index('id="road-survey"'):]

@@ -6,7 +6,7 @@ import pytest
 
 from d3cli.data import legend
 from d3cli.evaluation import pictures
-from d3cli.road.report import height_colour
+from d3cli.road.outputs import height_colour
 
 
 def ink_rows(img, *, dark=False):

@@ -12,7 +12,7 @@ from d3cli.data.synth import render_pair
 from d3cli.road.defects import find_defects
 from d3cli.road.plane import fit_road_plane, height_map
 from d3cli.road.pointcloud import Camera, disparity_to_points
-from d3cli.road.report import road_report
+from d3cli.road.outputs import road_report
 
 from .scene import cone_truth, paraboloid_truth, pothole_scene
 

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 
 from d3cli.cli import main, samples_dir
 from d3cli.config import RoadConfig
-from d3cli.road.report import road_report
+from d3cli.road.outputs import road_report
 
 from .scene import pothole_scene
 

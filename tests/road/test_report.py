@@ -12,7 +12,7 @@ from d3cli.cli import main
 from d3cli.config import RoadConfig
 from d3cli.data import formats as io
 from d3cli.road.plane import seen_by_both
-from d3cli.road.report import height_colour, road_report, write_defects_csv
+from d3cli.road.outputs import height_colour, road_report, write_defects_csv
 
 from .scene import pothole_scene
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from d3cli.config import RoadConfig
-from d3cli.road.report import road_report, write_defects_csv
+from d3cli.road.outputs import road_report, write_defects_csv
 from d3cli.road.severity import pothole_severity, survey_summary
 
 from .scene import pothole_scene

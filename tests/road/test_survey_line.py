@@ -6,7 +6,7 @@ import json
 from click.testing import CliRunner
 
 from d3cli.cli import main
-from d3cli.road.report import CSV_FIELDS, survey_line
+from d3cli.road.outputs import CSV_FIELDS, survey_line
 
 
 def write_survey(out, rows, frames):

@@ -116,7 +116,7 @@ def test_rendered_synthetic_frames_put_their_potholes_where_they_are(tmp_path):
     from d3cli.data import formats as io
     from d3cli.data.synth import generate_dataset
     from d3cli.road.pointcloud import camera_from
-    from d3cli.road.report import road_report
+    from d3cli.road.outputs import road_report
 
     cfg = load_config("road")
     folders = generate_dataset(tmp_path / "in", n=2, seed=0, width=320, height=192)

@@ -164,7 +164,7 @@ def test_bench_drive_scores_the_map_against_the_drive_truth(drive, capsys):
 
 
 def test_the_survey_line_ends_with_the_map(drive):
-    from d3cli.road.report import survey_line
+    from d3cli.road.outputs import survey_line
 
     inp, out, pairs, pits = drive
     (out / "defects.csv").write_text("pair,id,kind,max_depth_mm,low_confidence,flags,severity\n")
