@@ -18,8 +18,15 @@ How it counts (numba-cuda's and numba's bundled CUDA target, and the simulator):
 * a device-to-host copy is a call of the driver's ``device_to_host`` on a GPU, and of
   ``FakeCUDAArray.copy_to_host`` in the simulator: explicit ``copy_to_host`` calls and the
   implicit copy back of a NumPy array passed to a kernel both go through them;
-* host-to-device copies likewise (``host_to_device``; ``FakeCUDAArray.copy_to_device`` in the
-  simulator, which misses some uploads: a figure to read on a GPU).
+* host-to-device copies likewise (the driver's ``host_to_device`` on a GPU; in the simulator
+  ``cuda.to_device``, the simulator's ``to_device`` that kernels use for host arguments, and
+  ``FakeCUDAArray.copy_to_device`` from a host array);
+* bytes: :attr:`CudaCalls.host_to_device_bytes` and :attr:`CudaCalls.device_to_host_bytes`
+  (the driver's ``size`` on a GPU, the array's ``nbytes`` in the simulator), and per call
+  site (:attr:`CudaCalls.by_site`: the first frame of the caller outside numba and this
+  module).  A NumPy array passed straight to a kernel is one upload and one download of
+  its bytes (the simulator's launch wrapper counts it so, as the driver does on a GPU);
+  device-to-device copies are not counted.
 
 ``timing=True`` synchronises the device around every launch and records its wall time per
 kernel name (meaningful on a GPU only; it serialises the stream, so a timed run is slower
@@ -30,6 +37,8 @@ blocks do not nest.
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
 import threading
 import time
 from collections import Counter, defaultdict
@@ -37,6 +46,8 @@ from dataclasses import dataclass, field
 
 _lock = threading.Lock()
 _active: list[CudaCalls] = []
+_inside = threading.local()  # simulator: inside a launch, whose host arguments are counted once
+_HERE = os.path.abspath(__file__)
 
 
 @dataclass
@@ -46,6 +57,13 @@ class CudaCalls:
     launches: int = 0
     device_to_host: int = 0
     host_to_device: int = 0
+    #: Bytes copied from the host to the device.
+    host_to_device_bytes: int = 0
+    #: Bytes copied from the device to the host.
+    device_to_host_bytes: int = 0
+    #: ``("h2d" or "d2h", "file:line function")`` -> [copies, bytes]; the site is the first
+    #: frame outside numba and this module.
+    by_site: dict = field(default_factory=dict)
     #: Kernel name -> launches.
     by_kernel: Counter = field(default_factory=Counter)
     #: Kernel name -> seconds (``timing=True`` only), each launch synchronised.
@@ -66,9 +84,45 @@ def _record_launch(name: str, seconds: float | None) -> None:
             calls.seconds[name] += seconds
 
 
-def _count(attr: str) -> None:
+def _site() -> str:
+    frame = sys._getframe(2)
+    while frame is not None:
+        name = frame.f_code.co_filename
+        if os.path.abspath(name) != _HERE and f"{os.sep}numba{os.sep}" not in name:
+            return f"{os.path.basename(name)}:{frame.f_lineno} {frame.f_code.co_name}"
+        frame = frame.f_back
+    return "?"
+
+
+def _count(attr: str, nbytes: int = 0) -> None:
+    direction = "h2d" if attr == "host_to_device" else "d2h"
+    site = _site() if _active else "?"
     for calls in _active:
         setattr(calls, attr, getattr(calls, attr) + 1)
+        setattr(calls, attr + "_bytes", getattr(calls, attr + "_bytes") + int(nbytes))
+        entry = calls.by_site.setdefault((direction, site), [0, 0])
+        entry[0] += 1
+        entry[1] += int(nbytes)
+
+
+def _host_arguments(args):
+    """[(uploaded, downloaded bytes)] of the host arrays among a kernel's arguments, as
+    the launch copies them (``numba.cuda.args``: a bare array is ``InOut``)."""
+    import numpy as np
+    from numba.cuda.args import In, InOut, Out
+
+    copies = []
+    for arg in args:
+        if isinstance(arg, np.ndarray) and arg.ndim > 0:
+            copies.append((arg.nbytes, arg.nbytes))
+        elif isinstance(arg, (In, Out, InOut)) and isinstance(arg.value, np.ndarray):
+            n = arg.value.nbytes
+            copies.append((0 if isinstance(arg, Out) else n, 0 if isinstance(arg, In) else n))
+    return copies
+
+
+def _nbytes(array) -> int:
+    return int(getattr(array, "nbytes", 0) or 0)
 
 
 def _hooks(simulator: bool):
@@ -78,6 +132,20 @@ def _hooks(simulator: bool):
             kernel = a[0]
             if simulator and getattr(kernel, "_device", False):
                 return original(*a, **k)  # a device function called from a kernel
+            if simulator:
+                copies = _host_arguments(a[1:])
+                for up, _ in copies:
+                    if up:
+                        _count("host_to_device", up)
+                _record_launch(_kernel_name(kernel), None)
+                _inside.depth = getattr(_inside, "depth", 0) + 1
+                try:
+                    return original(*a, **k)
+                finally:
+                    _inside.depth -= 1
+                    for _, down in copies:
+                        if down:
+                            _count("device_to_host", down)
             timed = any(c.timing for c in _active) and not simulator
             if timed:
                 from numba import cuda
@@ -93,10 +161,44 @@ def _hooks(simulator: bool):
 
         return wrapped
 
-    def counting_wrapper(original, attr):
+    def driver_wrapper(original, attr):
+        # driver.host_to_device(dst, src, size, stream=0) / device_to_host(dst, src, size, ...)
         def wrapped(*a, **k):
-            _count(attr)
+            _count(attr, k.get("size", a[2] if len(a) > 2 else 0))
             return original(*a, **k)
+
+        return wrapped
+
+    def quiet():
+        return getattr(_inside, "depth", 0) > 0  # a launch's own copies: counted by the launch
+
+    def sim_to_host(original):
+        def wrapped(self, *a, **k):
+            if not quiet():
+                _count("device_to_host", _nbytes(self))
+            return original(self, *a, **k)
+
+        return wrapped
+
+    def sim_copy_to_device(original):
+        def wrapped(self, ary, *a, **k):
+            import numpy as np
+
+            if not quiet() and not hasattr(ary, "copy_to_host"):  # device to device: no copy to count
+                _count("host_to_device", np.asarray(ary).nbytes)
+            return original(self, ary, *a, **k)
+
+        return wrapped
+
+    def sim_to_device(original):
+        def wrapped(ary, *a, **k):
+            import numpy as np
+
+            result = original(ary, *a, **k)
+            to = k.get("to", a[2] if len(a) > 2 else None)
+            if not quiet() and to is None:  # with ``to``: copy_to_device counts it
+                _count("host_to_device", np.asarray(ary).nbytes)
+            return result
 
         return wrapped
 
@@ -104,18 +206,22 @@ def _hooks(simulator: bool):
         from numba.cuda.simulator import kernel as sim_kernel
         from numba.cuda.simulator.cudadrv import devicearray as sim_array
 
+        import numba.cuda as numba_cuda
+
         return [
             (sim_kernel.FakeCUDAKernel, "__call__", launch_wrapper),
-            (sim_array.FakeCUDAArray, "copy_to_host", lambda f: counting_wrapper(f, "device_to_host")),
-            (sim_array.FakeCUDAArray, "copy_to_device", lambda f: counting_wrapper(f, "host_to_device")),
+            (sim_array.FakeCUDAArray, "copy_to_host", sim_to_host),
+            (sim_array.FakeCUDAArray, "copy_to_device", sim_copy_to_device),
+            (sim_array, "to_device", sim_to_device),  # auto_device: host arrays given to kernels
+            (numba_cuda, "to_device", sim_to_device),  # cuda.to_device
         ]
     from numba.cuda import dispatcher
     from numba.cuda.cudadrv import driver
 
     return [
         (dispatcher.CUDADispatcher, "call", launch_wrapper),
-        (driver, "device_to_host", lambda f: counting_wrapper(f, "device_to_host")),
-        (driver, "host_to_device", lambda f: counting_wrapper(f, "host_to_device")),
+        (driver, "device_to_host", lambda f: driver_wrapper(f, "device_to_host")),
+        (driver, "host_to_device", lambda f: driver_wrapper(f, "host_to_device")),
     ]
 
 
