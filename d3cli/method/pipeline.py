@@ -18,13 +18,12 @@ from ..data.layouts import normalise_bit_depth
 from ..errors import InputError
 from ..kernels import get_backend, host
 from ..kernels.backend import Backend
-from ..kernels.host import band_indexes
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
 from .perspective import (RoadModel, band_end_share, fit_road_model, restored_shares,
                           restored_validity_counts)
-from .pyramid import build_pyramid, level_max_disparity, usable_levels
+from .pyramid import level_max_disparity, usable_levels
 from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel, smooth_disparity
 
 log = logging.getLogger(__name__)
@@ -103,6 +102,15 @@ def _grey(img: np.ndarray, name: str) -> np.ndarray:
     return to_grey(arr)
 
 
+def _narrowest(raw, grey: np.ndarray) -> np.ndarray:
+    """The image to hand to ``backend.pyramid``: ``raw`` itself when it is a uint8 grey
+    image (the same values as ``grey``, a quarter of its bytes to upload), else ``grey``."""
+    arr = np.asarray(raw)
+    if arr.dtype == np.uint8 and arr.shape[:2] == grey.shape and (arr.ndim == 2 or arr.shape[2:] == (1,)):
+        return arr.reshape(grey.shape)
+    return grey
+
+
 def _float_images_scaled(left, right):
     """Two float images on the 0-255 scale, by the rule float image files follow
     (:func:`d3cli.data.layouts.normalise_bit_depth`): [0, 1] (scikit-image's convention)
@@ -129,7 +137,7 @@ def _as_0_255(img) -> np.ndarray:
 
 
 #: The per-level statistics that are counts (read from the device together).
-_COUNT_KEYS = ("seeds", "inherited", "decided", "sweeps")
+_COUNT_KEYS = ("seeds", "inherited", "decided", "sweeps", "band_cells")
 
 
 @dataclass
@@ -231,9 +239,10 @@ class D3Stereo:
         grey_l, grey_r, dmax = self._prepare(left, right, max_disparity)
         levels = usable_levels(grey_l.shape, cfg.pyramid.levels)
         backend = self.backend
-        # One upload of the pair (its pyramid); everything below stays on the backend.
-        pyr_l = [backend.to_device(img) for img in build_pyramid(grey_l, levels)]
-        pyr_r = [backend.to_device(img) for img in build_pyramid(grey_r, levels)]
+        # One upload of each image (a uint8 grey image in its own bytes); the pyramid is
+        # built on the backend, and everything below stays there.
+        pyr_l = backend.pyramid(_narrowest(left, grey_l), levels)
+        pyr_r = backend.pyramid(_narrowest(right, grey_r), levels)
         timings["pyramid"] = time.perf_counter() - t_start
 
         info: dict = {"backend": self.backend_name, "levels": levels, "max_disparity": dmax}
@@ -414,7 +423,7 @@ class D3Stereo:
     def _read_counts(self, per_level: list[dict]) -> None:
         """Turn every level's counts into ints, all at once, and log the levels.
 
-        On CUDA the counts (seeds, inherited and decided pixels, sweeps) stay on the device
+        On CUDA the counts (seeds, inherited and decided pixels, sweeps, band cells) stay on the device
         while the levels run, so that no level waits for a copy to the host; they are read
         here together (``backend.counts_to_host``: one copy).
         """
@@ -453,9 +462,9 @@ class D3Stereo:
         t0 = time.perf_counter()
         bands = None
         if coarser is not None and cfg.pyramid.band:
-            bands = band_indexes(backend.to_host(coarser), shape, n_disp=level_max_disparity(dmax, level) + 1,
-                                 margin=cfg.pyramid.band_margin, tile=cfg.level_band_tile(level),
-                                 halo=aggregation_halo(cfg, level))
+            bands = backend.band_indexes(coarser, shape, n_disp=level_max_disparity(dmax, level) + 1,
+                                         margin=cfg.pyramid.band_margin, tile=cfg.level_band_tile(level),
+                                         halo=aggregation_halo(cfg, level))
             stats["band_cells"] = bands[2]
         cost = level_cost(left, right, level=level, max_disparity=dmax, cfg=cfg, backend=backend,
                           features=features, bands=bands, step_times=stats)
@@ -563,7 +572,7 @@ class D3Stereo:
         )
         # pyr_r[0] is the full-resolution right image, already on the backend
         warped = backend.pt_warp(pyr_r[0], model.a0, model.b1, model.b2, float(pt.margin))
-        pyr_r = [backend.to_device(img) for img in build_pyramid(backend.to_host(warped), levels)]
+        pyr_r = backend.pyramid(warped, levels)
         timings["pt_warp"] = time.perf_counter() - t2
         return model, pyr_r, narrow
 
@@ -576,8 +585,9 @@ class D3Stereo:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Step 8: sub-pixel refinement, occlusion check, hole filling; host arrays.
 
-        The one download of the result happens here: the integer map and the sub-pixel
-        map; the occlusion tests, the filling and the smoothing run on the host
+        The one download of the result happens here: the sub-pixel map and the decided
+        pixels (a bool map; the integer map where the road model's rules need it); the
+        occlusion tests, the filling and the smoothing run on the host
         (``kernels/finishing/``).  With a road model (step 6) the disparity is
         restored to the full range first; estimates
         at the ends of the narrow range (the true match probably lies outside it: not
@@ -595,13 +605,13 @@ class D3Stereo:
             if road is not None:
                 sub = self._pt_restore(sub, road)
             out = backend.to_host(sub)
-            disp = backend.to_host(match.disparity)
+            disp = backend.to_host(match.disparity) if road is not None else None
         else:
             disp = backend.to_host(match.disparity)
             out = np.where(disp >= 0, disp, np.inf).astype(np.float32)
             if road is not None:
                 out = backend.to_host(self._pt_restore(backend.to_device(out), road))
-        valid = disp >= 0
+        valid = disp >= 0 if disp is not None else backend.to_host(backend.decided_mask(match.disparity))
         # Peak memory: each test below makes its holes in one pass (valid in place, the map
         # masked into ``out``); ``owned``: ``out`` is this method's own map, written in place.
         owned = False
