@@ -327,6 +327,39 @@ class Backend(Protocol):
         """
         ...
 
+    def count_range_ends(self, narrow, narrow_range) -> Any:
+        """Pixels of a narrow-range integer map (docs/design.md, step 6) matched at an end of
+        the range: ``d' == 0`` or ``d' >= narrow_range``.
+
+        An ``int`` on the CPU; on CUDA a count left on the device (as :meth:`count_decided`'s).
+        """
+        ...
+
+    def pt_validity(self, narrow, restored, narrow_range) -> Any:
+        """The estimates that survive the restore of the perspective transformation: the road
+        model's rule (``restore_drops`` of :mod:`d3cli.kernels.road_model`) at every pixel
+        (:func:`d3cli.kernels.finishing.restored_validity`).
+
+        Parameters
+        ----------
+        narrow : ndarray, int32, (H, W)
+            Narrow-range integer map, decided where ``>= 0``.
+        restored : ndarray, float32, (H, W)
+            Its sub-pixel map restored to the full range (:meth:`pt_restore`).
+        narrow_range : int
+            Largest narrow-range disparity.
+
+        Returns
+        -------
+        kept : ndarray, bool, (H, W)
+        masked : ndarray, float32, (H, W)
+            ``restored`` where kept, else inf.
+        counts : list of 3 counts
+            Decided pixels dropped at the range ends, outside the right image, and negative
+            (but neither of the others); ints on the CPU, counts left on the device on CUDA.
+        """
+        ...
+
     def pt_restore(self, disp, a0, b1, b2, delta) -> Any:
         """Full-range disparity from the disparity against the warped right image.
 

@@ -35,7 +35,7 @@ from .decisive.cuda_diffusion import diffuse, min_cost
 from .decisive.cuda_inheritance import inherit
 from .decisive.cuda_seeds import decided_mask, decisive_seeds, merge_sparse
 from .device_counts import count_decided, counts_to_host
-from .perspective.cuda import pt_restore, pt_warp
+from .perspective.cuda import count_range_ends, pt_restore, pt_validity, pt_warp
 from .pyramid.cuda import pyramid
 from .sgm.cuda import sgm_smooth
 from .subpixel.cuda import subpixel
@@ -48,6 +48,7 @@ __all__ = [
     "bilateral_filter",
     "cosine_cost_volume",
     "count_decided",
+    "count_range_ends",
     "counts_to_host",
     "decided_mask",
     "decisive_seeds",
@@ -59,6 +60,7 @@ __all__ = [
     "merge_sparse",
     "ncc_cost_volume",
     "pt_restore",
+    "pt_validity",
     "pt_warp",
     "pyramid",
     "rbf_filter",

@@ -23,10 +23,14 @@ How it counts (numba-cuda's and numba's bundled CUDA target, and the simulator):
   ``FakeCUDAArray.copy_to_device`` from a host array);
 * bytes: :attr:`CudaCalls.host_to_device_bytes` and :attr:`CudaCalls.device_to_host_bytes`
   (the driver's ``size`` on a GPU, the array's ``nbytes`` in the simulator), and per call
-  site (:attr:`CudaCalls.by_site`: the first frame of the caller outside numba and this
-  module).  A NumPy array passed straight to a kernel is one upload and one download of
+  site (:attr:`CudaCalls.by_site`: the first frame of the caller outside numba, this
+  module and the transfer helpers of :mod:`d3cli.kernels.cuda_launch`).  A NumPy array passed straight to a kernel is one upload and one download of
   its bytes (the simulator's launch wrapper counts it so, as the driver does on a GPU);
   device-to-device copies are not counted.
+
+:attr:`CudaCalls.spans` holds the wall-clock span of every launch and copy, so that a
+step's time splits into time inside them and host time outside them
+(:meth:`CudaCalls.seconds_in_calls`; ``scripts/profile_cuda.py`` prints it per step).
 
 ``timing=True`` synchronises the device around every launch and records its wall time per
 kernel name (meaningful on a GPU only; it serialises the stream, so a timed run is slower
@@ -48,6 +52,8 @@ _lock = threading.Lock()
 _active: list[CudaCalls] = []
 _inside = threading.local()  # simulator: inside a launch, whose host arguments are counted once
 _HERE = os.path.abspath(__file__)
+#: Frames skipped to name a copy's call site: this module and the transfer helpers.
+_SKIPPED = {_HERE, os.path.join(os.path.dirname(_HERE), "cuda_launch.py")}
 
 
 @dataclass
@@ -62,18 +68,39 @@ class CudaCalls:
     #: Bytes copied from the device to the host.
     device_to_host_bytes: int = 0
     #: ``("h2d" or "d2h", "file:line function")`` -> [copies, bytes]; the site is the first
-    #: frame outside numba and this module.
+    #: frame outside numba, this module and ``cuda_launch.py``.
     by_site: dict = field(default_factory=dict)
+    #: ``(start, end)`` perf_counter seconds of every launch and copy, in order (launches
+    #: and copies may overlap: a launch's own copies of host arguments on a GPU).
+    spans: list = field(default_factory=list)
     #: Kernel name -> launches.
     by_kernel: Counter = field(default_factory=Counter)
     #: Kernel name -> seconds (``timing=True`` only), each launch synchronised.
     seconds: defaultdict = field(default_factory=lambda: defaultdict(float))
     timing: bool = False
 
+    def seconds_in_calls(self, start: float = float("-inf"), end: float = float("inf")) -> float:
+        """Wall seconds spent inside launches and copies between ``start`` and ``end``
+        (perf_counter times; overlapping spans counted once).  In the simulator this is
+        the kernels' own run time: what is left of a step's time is the host's."""
+        total, reach = 0.0, float("-inf")
+        for s0, s1 in sorted(self.spans):
+            s0, s1 = max(s0, start, reach), min(s1, end)
+            if s1 > s0:
+                total += s1 - s0
+                reach = s1
+        return total
+
 
 def _kernel_name(kernel) -> str:
     fn = getattr(kernel, "py_func", None) or getattr(kernel, "fn", None) or kernel
     return getattr(fn, "__name__", type(kernel).__name__)
+
+
+def _record_span(start: float) -> None:
+    end = time.perf_counter()
+    for calls in _active:
+        calls.spans.append((start, end))
 
 
 def _record_launch(name: str, seconds: float | None) -> None:
@@ -88,7 +115,7 @@ def _site() -> str:
     frame = sys._getframe(2)
     while frame is not None:
         name = frame.f_code.co_filename
-        if os.path.abspath(name) != _HERE and f"{os.sep}numba{os.sep}" not in name:
+        if os.path.abspath(name) not in _SKIPPED and f"{os.sep}numba{os.sep}" not in name:
             return f"{os.path.basename(name)}:{frame.f_lineno} {frame.f_code.co_name}"
         frame = frame.f_back
     return "?"
@@ -139,9 +166,11 @@ def _hooks(simulator: bool):
                         _count("host_to_device", up)
                 _record_launch(_kernel_name(kernel), None)
                 _inside.depth = getattr(_inside, "depth", 0) + 1
+                start = time.perf_counter()
                 try:
                     return original(*a, **k)
                 finally:
+                    _record_span(start)
                     _inside.depth -= 1
                     for _, down in copies:
                         if down:
@@ -155,9 +184,14 @@ def _hooks(simulator: bool):
                 result = original(*a, **k)
                 cuda.synchronize()
                 _record_launch(_kernel_name(kernel), time.perf_counter() - start)
+                _record_span(start)
                 return result
             _record_launch(_kernel_name(kernel), None)
-            return original(*a, **k)
+            start = time.perf_counter()
+            try:
+                return original(*a, **k)
+            finally:
+                _record_span(start)
 
         return wrapped
 
@@ -165,7 +199,11 @@ def _hooks(simulator: bool):
         # driver.host_to_device(dst, src, size, stream=0) / device_to_host(dst, src, size, ...)
         def wrapped(*a, **k):
             _count(attr, k.get("size", a[2] if len(a) > 2 else 0))
-            return original(*a, **k)
+            start = time.perf_counter()
+            try:
+                return original(*a, **k)
+            finally:
+                _record_span(start)
 
         return wrapped
 
@@ -174,9 +212,14 @@ def _hooks(simulator: bool):
 
     def sim_to_host(original):
         def wrapped(self, *a, **k):
-            if not quiet():
-                _count("device_to_host", _nbytes(self))
-            return original(self, *a, **k)
+            if quiet():
+                return original(self, *a, **k)
+            _count("device_to_host", _nbytes(self))
+            start = time.perf_counter()
+            try:
+                return original(self, *a, **k)
+            finally:
+                _record_span(start)
 
         return wrapped
 
@@ -184,9 +227,14 @@ def _hooks(simulator: bool):
         def wrapped(self, ary, *a, **k):
             import numpy as np
 
-            if not quiet() and not hasattr(ary, "copy_to_host"):  # device to device: no copy to count
-                _count("host_to_device", np.asarray(ary).nbytes)
-            return original(self, ary, *a, **k)
+            if quiet() or hasattr(ary, "copy_to_host"):  # device to device: no copy to count
+                return original(self, ary, *a, **k)
+            _count("host_to_device", np.asarray(ary).nbytes)
+            start = time.perf_counter()
+            try:
+                return original(self, ary, *a, **k)
+            finally:
+                _record_span(start)
 
         return wrapped
 
@@ -194,10 +242,12 @@ def _hooks(simulator: bool):
         def wrapped(ary, *a, **k):
             import numpy as np
 
+            start = time.perf_counter()
             result = original(ary, *a, **k)
             to = k.get("to", a[2] if len(a) > 2 else None)
             if not quiet() and to is None:  # with ``to``: copy_to_device counts it
                 _count("host_to_device", np.asarray(ary).nbytes)
+                _record_span(start)
             return result
 
         return wrapped

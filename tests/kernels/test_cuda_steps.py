@@ -96,3 +96,32 @@ def test_a_device_band_costs_what_the_cpu_band_costs(gpu):
     flat = host(gpu, got.cost)
     assert flat.shape[0] == H * W * 8  # allocated at the full-range size
     np.testing.assert_allclose(flat[:n_cells], want.cost, rtol=0, atol=COST_ATOL)
+
+
+def test_a_device_dense_index_sizes_its_volume_without_a_copy(gpu):
+    from d3cli.kernels.cuda_calls import count_cuda_calls
+
+    rng = np.random.default_rng(5)
+    left, right = random_images(rng, (H, W))
+    d_left, d_right = gpu.to_device(left), gpu.to_device(right)
+    with count_cuda_calls() as calls:
+        got = gpu.ncc_cost_volume(d_left, d_right, 5, 3, 0.5, index=gpu.dense_index(H, W, 6))
+    assert calls.device_to_host == 0 and calls.host_to_device == 0
+    want = cpu.ncc_cost_volume(left, right, 5, 3, 0.5, index=cpu.dense_index(H, W, 6))
+    np.testing.assert_allclose(host(gpu, got.cost), want.cost, rtol=0, atol=COST_ATOL)
+
+
+@pytest.mark.parametrize("narrow_range", [6, 9])
+def test_pt_validity_and_range_ends_match_cpu(gpu, narrow_range):
+    rng = np.random.default_rng(narrow_range)
+    narrow = rng.integers(-1, 11, (H, W)).astype(np.int32)
+    restored = (rng.random((H, W)) * 30.0 - 3.0).astype(np.float32)
+    restored[0, :4] = [np.inf, np.nan, -0.0, 0.5]
+    restored[1, :3] = [np.float32(1.5), np.float32(2.5), np.float32(2.4999)]  # at the left border's slack
+    want_kept, want_masked, want_counts = cpu.pt_validity(narrow, restored, narrow_range)
+    kept, masked, counts = gpu.pt_validity(gpu.to_device(narrow), gpu.to_device(restored), narrow_range)
+    np.testing.assert_array_equal(host(gpu, kept), want_kept)
+    assert host(gpu, masked).tobytes() == want_masked.tobytes()
+    assert gpu.counts_to_host(counts) == want_counts and sum(want_counts) > 0
+    ends = gpu.count_range_ends(gpu.to_device(narrow), narrow_range)
+    assert gpu.counts_to_host([ends]) == [cpu.count_range_ends(narrow, narrow_range)]

@@ -60,6 +60,7 @@ def dense_index(height, width, n_disp):
     index = cuda.device_array((h, w, 3), np.int32)
     blocks, threads = grid_2d(w, h)
     _dense_index[blocks, threads](np.int32(n_disp), index)
+    setattr(index, CELLS_BOUND, h * w * n_disp)  # its volume is sized without a copy
     return index
 
 
