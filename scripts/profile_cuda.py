@@ -130,7 +130,7 @@ def profile_case(name: str, spec: dict, reps: int) -> dict:
     t0 = time.perf_counter()
     compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
     cold = time.perf_counter() - t0
-    with count_cuda_calls() as calls, _StepSpans() as steps:
+    with count_cuda_calls() as calls, _StepSpans() as step_spans:
         t_start = time.perf_counter()
         res = compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
         t_end = time.perf_counter()
@@ -147,7 +147,7 @@ def profile_case(name: str, spec: dict, reps: int) -> dict:
         "launches": calls.launches, "device_to_host": calls.device_to_host, "host_to_device": calls.host_to_device,
         "device_to_host_bytes": calls.device_to_host_bytes, "host_to_device_bytes": calls.host_to_device_bytes,
         "copies_by_site": {f"{d} {site}": {"copies": n, "bytes": b} for (d, site), (n, b) in calls.by_site.items()},
-        "host_by_step": split_steps(steps.spans, calls, t_start, t_end),
+        "host_by_step": split_steps(step_spans.spans, calls, t_start, t_end),
         "launches_by_kernel": dict(calls.by_kernel.most_common()),
         "wall_ms": 1e3 * statistics.median(walls) if walls else None,
         "steps_ms": {k: 1e3 * statistics.median(v) for k, v in steps.items()},

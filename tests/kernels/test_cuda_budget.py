@@ -74,8 +74,12 @@ _COUNT = textwrap.dedent(
     rng = np.random.default_rng(0)
     wide = cv2.GaussianBlur(rng.uniform(0, 255, (32, 80)).astype(np.float32), (3, 3), 0.8)
     wide = np.round(wide).astype(np.uint8)
-    left, right = np.ascontiguousarray(wide[:, 0:64]), np.ascontiguousarray(wide[:, 5:69])  # disparity 5
+    textured = np.ascontiguousarray(wide[:, 0:64]), np.ascontiguousarray(wide[:, 5:69])  # disparity 5
+    # the road config on a synthetic road (a flat road seen from above: the road model holds)
+    from d3cli.data.synth import render_pair
+    synth = render_pair(seed=1, width=64, height=32, variant="sun", flat=True, noise=False, supersample=1)
     for config in sys.argv[1:]:
+        left, right = (synth.left, synth.right) if config == "road" else textured
         stereo = D3Stereo(load_config(config, overrides=["run.backend=cuda"]))
         with count_cuda_calls() as calls:
             result = stereo.compute(left, right, max_disparity=16)
@@ -85,6 +89,7 @@ _COUNT = textwrap.dedent(
                           "d2h_bytes": calls.device_to_host_bytes, "by_kernel": dict(calls.by_kernel),
                           "sites": {f"{k[0]} {k[1]}": v for k, v in calls.by_site.items()},
                           "median": float(np.median(inner)), "levels": len(result.levels),
+                          "valid_share": float(result.valid.mean()), "pt": result.info.get("pt"),
                           "level0": list(result.levels[0].shape[::-1]), "per_level": result.info["per_level"]}),
               flush=True)
     """
@@ -100,11 +105,11 @@ for _name, _configs in GROUPS.items():
 #: pool of counts (64 int64 slots).
 OUTPUTS = 4 * H * W + H * W + 64 * 8
 #: config -> (launches, device-to-host copies, device-to-host bytes) asserted.  The road
-#: config also downloads its coarsest map (the road fit) and the full-resolution integer
-#: map (the road model's rules), and reads the counts of its full-range coarse pass
-#: separately: two more copies.
+#: config (a synthetic road pair) also downloads its coarsest map for the road fit, reads
+#: the counts of its full-range coarse pass, and the three counts of the restored validity,
+#: each a copy of its own: three more.
 BUDGET = {"default": (80, 3, OUTPUTS + 4096), "paper": (80, 3, OUTPUTS + 4096), "kitti": (80, 3, OUTPUTS + 4096),
-          "road": (100, 5, OUTPUTS + 4096 + 4 * H * W + (H // 4) * (W // 4) * 4 + 512)}
+          "road": (100, 6, OUTPUTS + 4096 + (H // 4) * (W // 4) * 4 + 2 * 64 * 8)}
 
 
 def _rows(test_name: str) -> dict:
@@ -123,12 +128,17 @@ def _check(row: dict) -> None:
     assert row["d2h_bytes"] <= d2h_bytes, row["sites"]
     assert row["d2h"] <= copies, row["sites"]
     assert row["launches"] <= launches, row["by_kernel"]
-    # one launch per level for all the diffusion sweeps, two for the four integral images
-    assert row["by_kernel"]["_diffuse_level"] <= row["levels"]
+    # one launch per level for all the diffusion sweeps (and the road's coarse pass), two for
+    # the four integral images
+    assert row["by_kernel"]["_diffuse_level"] <= row["levels"] + (row["config"] == "road")
     assert row["by_kernel"]["_row_prefixes"] == row["by_kernel"]["_column_prefixes"]
-    # and the answer is right: the pair's true disparity is 5
-    assert abs(row["median"] - 5.0) < 0.25
     assert row["level0"] == [W, H]
+    if row["config"] == "road":  # the road model held: the narrow match, restored on the device
+        assert row["pt"]["road_like"] and not row["pt"].get("fallback") and row["valid_share"] > 0.5
+    elif row["config"] == "paper":  # seeds at the coarsest level only: none on this small pair (so on the CPU)
+        assert row["valid_share"] == 0.0
+    else:  # and the answer is right: the pair's true disparity is 5
+        assert abs(row["median"] - 5.0) < 0.25
     for stats in row["per_level"]:
         assert isinstance(stats["sweeps"], int) and 0 < stats["decided_share"] <= 1
 
