@@ -2,7 +2,8 @@
 
 For every case (the pairs and configs of ``scripts/bench_speed.py``, plus ``tiny``, a 64x32
 uint8 textured pair made here that needs no data and suits the CUDA simulator, with the
-default settings, and ``tiny-road``, ``tiny-kitti``, ``tiny-paper`` with those configs)::
+default settings, ``tiny-kitti`` and ``tiny-paper`` with those configs, and ``tiny-road``, a
+64x32 synthetic road with road.yaml)::
 
     1. one warm-up call (compiles or loads the kernels);
     2. one call inside ``count_cuda_calls()``: kernel launches, device-to-host and
@@ -104,11 +105,17 @@ def split_steps(spans, calls, start: float, end: float) -> dict:
     return out
 
 
-def _tiny_pair():
-    """A 64x32 uint8 textured pair, true disparity 5 everywhere, range 16 (the pair of
-    ``tests/kernels/test_cuda_budget.py``)."""
+def _tiny_pair(road: bool = False):
+    """A 64x32 uint8 textured pair, true disparity 5 everywhere, range 16, or with ``road``
+    a 64x32 synthetic road (the pairs of ``tests/kernels/test_cuda_budget.py``)."""
     import cv2
     import numpy as np
+
+    if road:
+        from d3cli.data.synth import render_pair
+
+        pair = render_pair(seed=1, width=64, height=32, variant="sun", flat=True, noise=False, supersample=1)
+        return pair.left, pair.right, 16, "tiny synthetic road 64x32"
 
     rng = np.random.default_rng(0)
     wide = cv2.GaussianBlur(rng.uniform(0, 255, (32, 80)).astype(np.float32), (3, 3), 0.8)
@@ -123,7 +130,7 @@ def profile_case(name: str, spec: dict, reps: int) -> dict:
     from d3cli.kernels.cuda_calls import count_cuda_calls
 
     if spec.get("tiny"):
-        left, right, dmax, label = _tiny_pair()
+        left, right, dmax, label = _tiny_pair(road=spec["config"] == "road")
     else:
         left, right, dmax, label = bench_speed._load(spec)
     cfg = bench_speed._config(spec)
