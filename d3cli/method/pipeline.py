@@ -384,7 +384,7 @@ class D3Stereo:
         return warped[0] if img.ndim == 2 else np.stack(warped, axis=2)
 
     def _match(self, pyr_l, pyr_r, dmax: int, timings: dict, *, stop_level: int = 0,
-               features=None, range_ends: int | None = None) -> "_Match":
+               features=None, range_ends: int | None = None, read_counts: bool = True) -> "_Match":
         """Steps 2-5 and 7 over the pyramid, coarsest level first (paper Fig. 1).
 
         Parameters
@@ -400,6 +400,9 @@ class D3Stereo:
         range_ends : int, optional
             The narrow range of a match against the warped right image: the pixels matched
             at its ends are counted (``_Match.range_ends``) with the levels' counts.
+        read_counts : bool
+            False: counts left on the device stay there (no copy; the levels are not
+            logged), for a pass whose statistics nobody reads (the road fit's coarse pass).
 
         Returns
         -------
@@ -424,7 +427,8 @@ class D3Stereo:
             if level > stop_level:
                 cost = None  # free the coarse volume before the next, larger one
         extra = [] if range_ends is None else [self.backend.count_range_ends(disp, range_ends)]
-        extra = self._read_counts(per_level, extra)
+        if read_counts or all(isinstance(s[k], (int, np.integer)) for s in per_level for k in _COUNT_KEYS if k in s):
+            extra = self._read_counts(per_level, extra)
         return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level,
                       range_ends=extra[0] if extra else None)
 
@@ -555,7 +559,7 @@ class D3Stereo:
         backend = self.backend
         levels = len(pyr_l)
         t0 = time.perf_counter()
-        coarse = self._match(pyr_l, pyr_r, dmax, {}, stop_level=levels - 1)
+        coarse = self._match(pyr_l, pyr_r, dmax, {}, stop_level=levels - 1, read_counts=False)
         coarse_map = backend.to_host(coarse.disparity)  # small: 1/4^(k-1) of the image
         del coarse
         t1 = time.perf_counter()
