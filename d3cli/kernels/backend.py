@@ -47,6 +47,54 @@ class Backend(Protocol):
         """
         ...
 
+    def pyramid(self, image, levels) -> list:
+        """Grey pyramid of an image (docs/design.md, 'Pyramid and bands'), finest first.
+
+        Parameters
+        ----------
+        image : ndarray, uint8 or float32, (H, W)
+            Grey image on the 0-255 scale (a host or backend array).
+        levels : int
+            Number of levels; level i + 1 is the 2x2 area average of level i, an odd last
+            row or column dropped (``kernels/pyramid/halve.py``: float32 ``0.25 (((a00 +
+            a10) + a01) + a11)``).
+
+        Returns
+        -------
+        list of ndarray, float32, (H >> i, W >> i)
+            Backend arrays.  CUDA uploads a host image once in its own dtype (uint8: a
+            quarter of the float32 bytes) and converts and halves it on the device.
+        """
+        ...
+
+    def dense_index(self, height, width, n_disp) -> Any:
+        """Index of the full-range volume (:func:`d3cli.kernels.volume.dense_index`), int32
+        (H, W, 3), a backend array (CUDA builds it on the device).
+        """
+        ...
+
+    def band_indexes(self, coarse, shape, *, n_disp, margin, tile, halo) -> Any:
+        """Indexes of the stored and of the visible volume of a finer level
+        (:func:`d3cli.kernels.cost.band.band_indexes`, which says what the bands are).
+
+        Parameters
+        ----------
+        coarse : ndarray, int32, (Hc, Wc)
+            Integer map of the coarser level (-1 undecided), a backend array.
+        shape, n_disp, margin, tile, halo
+            As :func:`d3cli.kernels.cost.band.band_indexes`.
+
+        Returns
+        -------
+        store, visible : ndarray, int32, (H, W, 3)
+            Backend arrays, equal on both backends.
+        n_cells : int
+            Cells of the stored volume; on CUDA a count left on the device (as
+            :meth:`count_decided`'s), the volume allocated at the level's full-range size
+            instead (``kernels/cost/band_cuda.py``).
+        """
+        ...
+
     def ncc_cost_volume(self, left, right, max_disparity, window, min_variance, index=None) -> Any:
         """NCC cost volume ``(1 - NCC) / 2`` with box sums (docs/design.md, step 2).
 
@@ -242,6 +290,11 @@ class Backend(Protocol):
         """
         ...
 
+    def decided_mask(self, disparity) -> Any:
+        """``disparity >= 0`` of an integer map: bool (H, W), a new backend map.
+        """
+        ...
+
     def count_decided(self, disparity) -> Any:
         """Number of decided pixels (>= 0) of an integer disparity map.
 
@@ -251,7 +304,8 @@ class Backend(Protocol):
         ...
 
     def counts_to_host(self, values) -> list[int]:
-        """Plain ints of counts from :meth:`count_decided` and :meth:`diffuse` (its sweeps),
+        """Plain ints of counts from :meth:`count_decided`, :meth:`diffuse` (its sweeps) and
+        :meth:`band_indexes` (its cells),
         read from the device in one copy (per pool of counts) on CUDA.
         """
         ...
@@ -270,6 +324,39 @@ class Backend(Protocol):
         -------
         ndarray, float32, (H, W)
             Bilinear samples; columns beyond the image replicate the border.
+        """
+        ...
+
+    def count_range_ends(self, narrow, narrow_range) -> Any:
+        """Pixels of a narrow-range integer map (docs/design.md, step 6) matched at an end of
+        the range: ``d' == 0`` or ``d' >= narrow_range``.
+
+        An ``int`` on the CPU; on CUDA a count left on the device (as :meth:`count_decided`'s).
+        """
+        ...
+
+    def pt_validity(self, narrow, restored, narrow_range) -> Any:
+        """The estimates that survive the restore of the perspective transformation: the road
+        model's rule (``restore_drops`` of :mod:`d3cli.kernels.road_model`) at every pixel
+        (:func:`d3cli.kernels.finishing.restored_validity`).
+
+        Parameters
+        ----------
+        narrow : ndarray, int32, (H, W)
+            Narrow-range integer map, decided where ``>= 0``.
+        restored : ndarray, float32, (H, W)
+            Its sub-pixel map restored to the full range (:meth:`pt_restore`).
+        narrow_range : int
+            Largest narrow-range disparity.
+
+        Returns
+        -------
+        kept : ndarray, bool, (H, W)
+        masked : ndarray, float32, (H, W)
+            ``restored`` where kept, else inf.
+        counts : list of 3 counts
+            Decided pixels dropped at the range ends, outside the right image, and negative
+            (but neither of the others); ints on the CPU, counts left on the device on CUDA.
         """
         ...
 

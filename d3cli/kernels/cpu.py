@@ -1,8 +1,8 @@
 """The CPU backend: every step's CPU driver under one name (``get_backend("cpu")``).
 
-A facade: the drivers live with their step (``cost/``, ``aggregation/``, ``sgm/``,
-``decisive/``, ``subpixel/``, ``perspective/``), the functions both backends provide and their contract
-in :mod:`d3cli.kernels.backend`.  The per-pixel functions are compiled with
+A facade: the drivers live with their step (``pyramid/``, ``cost/``, ``aggregation/``,
+``sgm/``, ``decisive/``, ``subpixel/``, ``perspective/``), the functions both backends
+provide and their contract in :mod:`d3cli.kernels.backend`.  The per-pixel functions are compiled with
 ``numba.njit`` in :mod:`d3cli.kernels.cpu_common` and driven by parallel (``prange``)
 loops over rows or over frontier pixels.  Every driver is deterministic and independent
 of the thread count.  This module names exactly the functions of the contract; tests of a
@@ -15,18 +15,23 @@ import numpy as np
 
 from . import compile_cache as _compile_cache  # noqa: F401  (chooses the numba cache folder first)
 from .aggregation.cpu import bilateral_filter, rbf_filter, rbf_weights
+from .cost.band import band_indexes
 from .cost.cpu import cosine_cost_volume, invalidate_out_of_view, ncc_cost_volume
 from .decisive.cpu_diffusion import diffuse, min_cost
 from .decisive.cpu_inheritance import inherit
-from .decisive.cpu_seeds import decisive_seeds, merge_sparse
+from .decisive.cpu_seeds import decided_mask, decisive_seeds, merge_sparse
+from .finishing.occlusion import count_range_ends, pt_validity
 from .perspective.cpu import pt_restore, pt_warp
+from .pyramid.cpu import pyramid
 from .sgm.cpu import sgm_smooth
 from .subpixel.cpu import subpixel
+from .volume import dense_index
 
 __all__ = [
-    "bilateral_filter", "cosine_cost_volume", "count_decided", "counts_to_host", "decisive_seeds", "diffuse",
-    "inherit", "invalidate_out_of_view", "merge_sparse", "min_cost", "ncc_cost_volume", "pt_restore", "pt_warp",
-    "rbf_filter", "rbf_weights", "sgm_smooth", "subpixel", "to_device", "to_host",
+    "band_indexes", "bilateral_filter", "cosine_cost_volume", "count_decided", "count_range_ends", "counts_to_host",
+    "decided_mask", "decisive_seeds", "dense_index", "diffuse", "inherit", "invalidate_out_of_view", "merge_sparse",
+    "min_cost", "ncc_cost_volume", "pt_restore", "pt_validity", "pt_warp", "pyramid", "rbf_filter", "rbf_weights",
+    "sgm_smooth", "subpixel", "to_device", "to_host",
 ]
 
 

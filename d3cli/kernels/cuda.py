@@ -7,9 +7,12 @@ in :mod:`d3cli.kernels.backend`.  The per-pixel functions are compiled with
 thread per pixel or per (pixel, disparity) cell.
 
 Every public function accepts device arrays or host arrays (uploaded on the way in).
-Results stay on the device, so the pipeline uploads the pair once and downloads the
-result once; :func:`to_host` brings any array back.  Counts (decided pixels, diffusion
-sweeps) stay on the device too until :func:`counts_to_host` reads them all at once.
+Results stay on the device, so the pipeline uploads the pair once (a uint8 grey image in
+its own bytes: :func:`pyramid` converts and halves it on the device) and downloads the
+result once; :func:`to_host` brings any array back.  The band indexes of the finer levels
+are built on the device from the coarser map (:func:`band_indexes`), the full-range index
+too (:func:`dense_index`).  Counts (decided pixels, diffusion sweeps, band cells) stay on
+the device until :func:`counts_to_host` reads them all at once.
 
 Exactness: the drivers evaluate the same expressions in the same order as the CPU
 drivers (float64 window sums, float32 filter accumulation, Jacobi diffusion over the
@@ -25,13 +28,15 @@ from __future__ import annotations
 from numba import cuda  # noqa: F401  (the tests watch its transfers)
 
 from .aggregation.cuda import bilateral_filter, rbf_filter, rbf_weights
-from .cost.cuda import NCC_SCRATCH_BYTES, cosine_cost_volume, invalidate_out_of_view, ncc_cost_volume
+from .cost.band_cuda import band_indexes
+from .cost.cuda import NCC_SCRATCH_BYTES, cosine_cost_volume, dense_index, invalidate_out_of_view, ncc_cost_volume
 from .cuda_launch import BLOCK_1D, BLOCK_2D, to_device, to_host
 from .decisive.cuda_diffusion import diffuse, min_cost
 from .decisive.cuda_inheritance import inherit
-from .decisive.cuda_seeds import decisive_seeds, merge_sparse
+from .decisive.cuda_seeds import decided_mask, decisive_seeds, merge_sparse
 from .device_counts import count_decided, counts_to_host
-from .perspective.cuda import pt_restore, pt_warp
+from .perspective.cuda import count_range_ends, pt_restore, pt_validity, pt_warp
+from .pyramid.cuda import pyramid
 from .sgm.cuda import sgm_smooth
 from .subpixel.cuda import subpixel
 
@@ -39,11 +44,15 @@ __all__ = [
     "BLOCK_1D",
     "BLOCK_2D",
     "NCC_SCRATCH_BYTES",
+    "band_indexes",
     "bilateral_filter",
     "cosine_cost_volume",
     "count_decided",
+    "count_range_ends",
     "counts_to_host",
+    "decided_mask",
     "decisive_seeds",
+    "dense_index",
     "diffuse",
     "inherit",
     "invalidate_out_of_view",
@@ -51,7 +60,9 @@ __all__ = [
     "merge_sparse",
     "ncc_cost_volume",
     "pt_restore",
+    "pt_validity",
     "pt_warp",
+    "pyramid",
     "rbf_filter",
     "rbf_weights",
     "sgm_smooth",

@@ -16,7 +16,7 @@ import threading
 import numpy as np
 from numba import cuda
 
-from .cuda_launch import grid_2d, is_device
+from .cuda_launch import device_zeros, grid_2d, is_device
 
 #: Slots of one pool; a pipeline run uses a few per level.
 POOL_SLOTS = 64
@@ -28,7 +28,7 @@ class CountPool:
     """An int64 device array of zeroed slots, handed out one by one, read back once."""
 
     def __init__(self, slots: int = POOL_SLOTS):
-        self.array = cuda.to_device(np.zeros(int(slots), np.int64))  # zeroed for the atomic counts
+        self.array = device_zeros(int(slots), np.int64)  # zeroed on the device, for the atomic counts
         self.used = 0
         self.values: np.ndarray | None = None
 

@@ -6,8 +6,10 @@ or ``cuda.py``, picked by :func:`d3cli.kernels.get_backend`).  A few steps run o
 for every backend, and are reached through this facade only:
 
 - the layout of a banded cost volume (:class:`Volume`, :func:`dense_index`,
-  :data:`MAX_CELLS`) and the band indexes of a finer level (:func:`band_indexes`);
-- the pyramid's halving (:func:`halve_area`);
+  :data:`MAX_CELLS`) and the band indexes of a finer level on the host (:func:`band_indexes`;
+  the pipeline builds them through the backend, ``backend.band_indexes``, where its maps are);
+- the pyramid's halving of a host image (:func:`halve_area`; the pipeline's pyramid:
+  ``backend.pyramid``);
 - the finishing (occlusion tests, speckles, hole filling, smoothing: ``finishing/``),
   with the road model's rules over a map (:func:`shift_plane_f32`, :func:`restored_validity`,
   :func:`right_image_mask`; the rules themselves: :mod:`d3cli.kernels.road_model`);

@@ -24,7 +24,7 @@ only (``tests/test_architecture.py``); :mod:`d3cli.data` (grey conversion),
 the CLI.  Per-pixel arithmetic lives in the kernels' step packages, not here: these
 modules turn configuration into scalars and call one kernel per step, on the backend
 object (``backend: Backend``) or on the host facade.  The band of disparities a finer
-level searches ('Pyramid and bands') is built by ``kernels.host.band_indexes``.
+level searches ('Pyramid and bands') is built by the backend (``backend.band_indexes``).
 """
 
 from .pipeline import D3Stereo, DisparityResult

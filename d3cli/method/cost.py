@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 
 from ..config import Config
-from ..kernels.host import Volume, dense_index
+from ..kernels.host import Volume
 from .pyramid import level_max_disparity
 from ..kernels.backend import Backend
 
@@ -164,9 +164,9 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
     backend : Backend
     features : LevelFeatures, optional
         The level's deep features (``cost.kind: features``): the cosine cost replaces NCC.
-    bands : (store, visible) int32 (H, W, 3) host arrays, optional
-        From :func:`d3cli.kernels.cost.band.band_indexes`: the cells to compute and aggregate,
-        and the band each pixel shows afterwards.  Default: the full range.
+    bands : (store, visible, ...) int32 (H, W, 3) backend arrays, optional
+        From ``backend.band_indexes``: the cells to compute and aggregate, and the band each
+        pixel shows afterwards.  Default: the full range.
     step_times : dict, optional
         Gets ``time_sgm``, the seconds of the semi-global smoothing, where it runs (a
         step of ``result.timings`` of its own: ``sgm``).
@@ -179,10 +179,10 @@ def level_cost(left, right, *, level: int, max_disparity: int, cfg: Config, back
         (``backend.sgm_smooth``).
     """
     level_dmax = level_max_disparity(max_disparity, level)
-    # The cost drivers take the host store index (uploaded once); the result carries it.
+    # The store index is a backend array (built where the volume is); the result carries it.
     if bands is None:
         h, w = left.shape
-        store = dense_index(h, w, level_dmax + 1)
+        store = backend.dense_index(h, w, level_dmax + 1)
         visible = None
     else:
         store = bands[0]

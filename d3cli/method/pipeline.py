@@ -18,13 +18,11 @@ from ..data.layouts import normalise_bit_depth
 from ..errors import InputError
 from ..kernels import get_backend, host
 from ..kernels.backend import Backend
-from ..kernels.host import band_indexes
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
-from .perspective import (RoadModel, band_end_share, fit_road_model, restored_shares,
-                          restored_validity_counts)
-from .pyramid import build_pyramid, level_max_disparity, usable_levels
+from .perspective import RoadModel, fit_road_model, restored_shares, restored_validity_counts
+from .pyramid import level_max_disparity, usable_levels
 from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel, smooth_disparity
 
 log = logging.getLogger(__name__)
@@ -103,6 +101,15 @@ def _grey(img: np.ndarray, name: str) -> np.ndarray:
     return to_grey(arr)
 
 
+def _narrowest(raw, grey: np.ndarray) -> np.ndarray:
+    """The image to hand to ``backend.pyramid``: ``raw`` itself when it is a uint8 grey
+    image (the same values as ``grey``, a quarter of its bytes to upload), else ``grey``."""
+    arr = np.asarray(raw)
+    if arr.dtype == np.uint8 and arr.shape[:2] == grey.shape and (arr.ndim == 2 or arr.shape[2:] == (1,)):
+        return arr.reshape(grey.shape)
+    return grey
+
+
 def _float_images_scaled(left, right):
     """Two float images on the 0-255 scale, by the rule float image files follow
     (:func:`d3cli.data.layouts.normalise_bit_depth`): [0, 1] (scikit-image's convention)
@@ -129,7 +136,7 @@ def _as_0_255(img) -> np.ndarray:
 
 
 #: The per-level statistics that are counts (read from the device together).
-_COUNT_KEYS = ("seeds", "inherited", "decided", "sweeps")
+_COUNT_KEYS = ("seeds", "inherited", "decided", "sweeps", "band_cells")
 
 
 @dataclass
@@ -140,6 +147,7 @@ class _Match:
     cost: object  # Volume, aggregated (the visible bands)
     level_maps: list
     per_level: list
+    range_ends: int | None = None  # pixels at an end of the narrow range (a narrow match only)
 
 
 def fallback_settings(cfg: Config) -> Config | None:
@@ -231,9 +239,10 @@ class D3Stereo:
         grey_l, grey_r, dmax = self._prepare(left, right, max_disparity)
         levels = usable_levels(grey_l.shape, cfg.pyramid.levels)
         backend = self.backend
-        # One upload of the pair (its pyramid); everything below stays on the backend.
-        pyr_l = [backend.to_device(img) for img in build_pyramid(grey_l, levels)]
-        pyr_r = [backend.to_device(img) for img in build_pyramid(grey_r, levels)]
+        # One upload of each image (a uint8 grey image in its own bytes); the pyramid is
+        # built on the backend, and everything below stays there.
+        pyr_l = backend.pyramid(_narrowest(left, grey_l), levels)
+        pyr_r = backend.pyramid(_narrowest(right, grey_r), levels)
         timings["pyramid"] = time.perf_counter() - t_start
 
         info: dict = {"backend": self.backend_name, "levels": levels, "max_disparity": dmax}
@@ -246,7 +255,8 @@ class D3Stereo:
             if road is None and cfg.pt.fallback_config:
                 return self._fallback(given, dmax, pair_dir, timings, info, warnings, t_start)
         features = self._pair_features(left, right, grey_l.shape, pyr_l, pair_dir, road, timings, info)
-        match = self._match(pyr_l, pyr_r, search, timings, features=features)
+        match = self._match(pyr_l, pyr_r, search, timings, features=features,
+                            range_ends=None if road is None else cfg.pt.narrow_range)
         if road is not None and not self._on_road_band(match, road, dmax, info, warnings):
             # Not a road after all: the pair is matched again over the full range, unwarped.
             road, search, match, features = None, dmax, None, None
@@ -336,7 +346,9 @@ class D3Stereo:
         pixels are matched at an end of the narrow range.
         """
         pt = self.cfg.pt
-        share = band_end_share(self.backend.to_host(match.disparity), narrow_range=pt.narrow_range)
+        # perspective.band_end_share of the map, from the count the match read with its others
+        h, w = match.disparity.shape
+        share = float(match.range_ends) / max(h * w, 1)
         checked = road.off_band(share, limit=pt.max_band_end_share, margin=pt.margin)
         if checked.road_like:  # the share is recorded as range_end_share by _pt_valid
             return True
@@ -372,7 +384,7 @@ class D3Stereo:
         return warped[0] if img.ndim == 2 else np.stack(warped, axis=2)
 
     def _match(self, pyr_l, pyr_r, dmax: int, timings: dict, *, stop_level: int = 0,
-               features=None) -> "_Match":
+               features=None, range_ends: int | None = None, read_counts: bool = True) -> "_Match":
         """Steps 2-5 and 7 over the pyramid, coarsest level first (paper Fig. 1).
 
         Parameters
@@ -385,6 +397,12 @@ class D3Stereo:
         stop_level : int
             Finest level to compute (0 = full resolution); the perspective transformation
             stops at the coarsest level.
+        range_ends : int, optional
+            The narrow range of a match against the warped right image: the pixels matched
+            at its ends are counted (``_Match.range_ends``) with the levels' counts.
+        read_counts : bool
+            False: counts left on the device stay there (no copy; the levels are not
+            logged), for a pass whose statistics nobody reads (the road fit's coarse pass).
 
         Returns
         -------
@@ -408,18 +426,23 @@ class D3Stereo:
             level_maps.insert(0, disp)
             if level > stop_level:
                 cost = None  # free the coarse volume before the next, larger one
-        self._read_counts(per_level)
-        return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level)
+        extra = [] if range_ends is None else [self.backend.count_range_ends(disp, range_ends)]
+        if read_counts or all(isinstance(s[k], (int, np.integer)) for s in per_level for k in _COUNT_KEYS if k in s):
+            extra = self._read_counts(per_level, extra)
+        return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level,
+                      range_ends=extra[0] if extra else None)
 
-    def _read_counts(self, per_level: list[dict]) -> None:
-        """Turn every level's counts into ints, all at once, and log the levels.
+    def _read_counts(self, per_level: list[dict], extra=()) -> list[int]:
+        """Turn every level's counts into ints, all at once, and log the levels; returns
+        ``extra`` (more counts, read with them) as ints.
 
-        On CUDA the counts (seeds, inherited and decided pixels, sweeps) stay on the device
+        On CUDA the counts (seeds, inherited and decided pixels, sweeps, band cells) stay on the device
         while the levels run, so that no level waits for a copy to the host; they are read
         here together (``backend.counts_to_host``: one copy).
         """
         keys = [(stats, key) for stats in per_level for key in _COUNT_KEYS if key in stats]
-        for (stats, key), value in zip(keys, self.backend.counts_to_host([s[k] for s, k in keys])):
+        values = self.backend.counts_to_host([s[k] for s, k in keys] + list(extra))
+        for (stats, key), value in zip(keys, values):
             stats[key] = value
         for stats in per_level:
             shape = stats["shape"]
@@ -438,6 +461,7 @@ class D3Stereo:
                 stats["time_decide"],
                 stats["time_diffusion"],
             )
+        return values[len(keys):]
 
     def _match_level(self, left, right, coarser, *, level: int, coarsest: bool, dmax: int, stop_level: int,
                      features):
@@ -453,9 +477,9 @@ class D3Stereo:
         t0 = time.perf_counter()
         bands = None
         if coarser is not None and cfg.pyramid.band:
-            bands = band_indexes(backend.to_host(coarser), shape, n_disp=level_max_disparity(dmax, level) + 1,
-                                 margin=cfg.pyramid.band_margin, tile=cfg.level_band_tile(level),
-                                 halo=aggregation_halo(cfg, level))
+            bands = backend.band_indexes(coarser, shape, n_disp=level_max_disparity(dmax, level) + 1,
+                                         margin=cfg.pyramid.band_margin, tile=cfg.level_band_tile(level),
+                                         halo=aggregation_halo(cfg, level))
             stats["band_cells"] = bands[2]
         cost = level_cost(left, right, level=level, max_disparity=dmax, cfg=cfg, backend=backend,
                           features=features, bands=bands, step_times=stats)
@@ -535,7 +559,7 @@ class D3Stereo:
         backend = self.backend
         levels = len(pyr_l)
         t0 = time.perf_counter()
-        coarse = self._match(pyr_l, pyr_r, dmax, {}, stop_level=levels - 1)
+        coarse = self._match(pyr_l, pyr_r, dmax, {}, stop_level=levels - 1, read_counts=False)
         coarse_map = backend.to_host(coarse.disparity)  # small: 1/4^(k-1) of the image
         del coarse
         t1 = time.perf_counter()
@@ -563,7 +587,7 @@ class D3Stereo:
         )
         # pyr_r[0] is the full-resolution right image, already on the backend
         warped = backend.pt_warp(pyr_r[0], model.a0, model.b1, model.b2, float(pt.margin))
-        pyr_r = [backend.to_device(img) for img in build_pyramid(backend.to_host(warped), levels)]
+        pyr_r = backend.pyramid(warped, levels)
         timings["pt_warp"] = time.perf_counter() - t2
         return model, pyr_r, narrow
 
@@ -576,12 +600,13 @@ class D3Stereo:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Step 8: sub-pixel refinement, occlusion check, hole filling; host arrays.
 
-        The one download of the result happens here: the integer map and the sub-pixel
-        map; the occlusion tests, the filling and the smoothing run on the host
-        (``kernels/finishing/``).  With a road model (step 6) the disparity is
-        restored to the full range first; estimates
-        at the ends of the narrow range (the true match probably lies outside it: not
-        road) and estimates whose match falls left of the right image become holes.
+        The one download of the result happens here: the sub-pixel map and the decided
+        pixels (a bool map; the integer map without the sub-pixel step); the occlusion
+        tests, the filling and the smoothing run on the host (``kernels/finishing/``).
+        With a road model (step 6) the disparity is restored to the full range first, and
+        on the backend estimates at the ends of the narrow range (the true match probably
+        lies outside it: not road) and estimates whose match falls left of the right image
+        become holes (``backend.pt_validity``: the map and the validity come back masked).
         """
         cfg = self.cfg
         backend = self.backend
@@ -591,21 +616,30 @@ class D3Stereo:
         # The volume's last reader was the sub-pixel step: release it before the host
         # finishing allocates its own maps (the peak of a 720p road pair).
         match.cost = None
+        restored = False  # the road model's validity applied on the backend
         if cfg.refine.subpixel:
             if road is not None:
                 sub = self._pt_restore(sub, road)
+                kept, sub, counts = backend.pt_validity(match.disparity, sub, self.cfg.pt.narrow_range)
+                restored = True
             out = backend.to_host(sub)
-            disp = backend.to_host(match.disparity)
+            disp = None
         else:
             disp = backend.to_host(match.disparity)
             out = np.where(disp >= 0, disp, np.inf).astype(np.float32)
             if road is not None:
                 out = backend.to_host(self._pt_restore(backend.to_device(out), road))
-        valid = disp >= 0
+        if restored:
+            valid = backend.to_host(kept)
+            info["pt"].update(restored_shares(backend.counts_to_host(counts), valid.size))
+        elif disp is not None:
+            valid = disp >= 0
+        else:
+            valid = backend.to_host(backend.decided_mask(match.disparity))
         # Peak memory: each test below makes its holes in one pass (valid in place, the map
         # masked into ``out``); ``owned``: ``out`` is this method's own map, written in place.
-        owned = False
-        if road is not None:
+        owned = restored
+        if road is not None and not restored:
             valid, out = self._pt_valid(valid, disp, out, info)
             owned = True
         occluded = None

@@ -39,7 +39,8 @@ def test_cuda_kernels_match_cpu_under_the_simulator():
         import numba.cuda  # noqa: F401
     except ImportError as exc:
         pytest.skip(f"numba.cuda cannot be imported ({exc}); install the cuda extra to run the CUDA tests")
-    proc = simulator_children.result("test_cuda_kernels_match_cpu_under_the_simulator", timeout=1200)
+    # (the launch budget's own children run inside it, one after the other: minutes more)
+    proc = simulator_children.result("test_cuda_kernels_match_cpu_under_the_simulator", timeout=2400)
     output = proc.stdout + proc.stderr
     assert proc.returncode == 0, "CUDA tests under the simulator failed:\n" + output[-6000:]
     summary = output.strip().splitlines()[-1]

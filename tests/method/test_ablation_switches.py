@@ -183,16 +183,16 @@ def test_bilateral_sigma_override_and_its_effect():
 
 @pytest.mark.parametrize("finest, tiles", [("null", [8, 8]), ("4", [8, 4]), ("16", [8, 16])])
 def test_finest_band_tile_sets_the_tile_at_full_resolution_only(pair, monkeypatch, finest, tiles):
-    from d3cli.method import pipeline
+    from d3cli.kernels import cpu  # the backend the pipeline builds the bands with here
 
     calls = []
-    real = pipeline.band_indexes
+    real = cpu.band_indexes
 
     def band_indexes(coarse, shape, **kw):
         calls.append(kw["tile"])
         return real(coarse, shape, **kw)
 
-    monkeypatch.setattr(pipeline, "band_indexes", band_indexes)
+    monkeypatch.setattr(cpu, "band_indexes", band_indexes)
     per_level(pair, "pyramid.band_tile=8", f"pyramid.finest_band_tile={finest}")
     assert calls == tiles  # the two levels below the coarsest, finest last
 

@@ -30,9 +30,11 @@ then has all its neighbours' cells (q, d) computed, and holds exactly the full-r
 value (tests/method/test_band.py checks this against the full-range volume).  The
 stored extra cells are scratch of the filter and are never read afterwards.
 
-The indexes are built on the host by compiled loops (0.15 s as NumPy array code at
-1280x720, a few ms compiled), for every backend (CUDA uploads them); the pipeline reaches
-:func:`band_indexes` through :mod:`d3cli.kernels.host`.
+On the CPU the indexes are built by compiled loops (0.15 s as NumPy array code at
+1280x720, a few ms compiled); the CUDA backend builds them on the device from the coarser
+map it holds (``band_cuda.py``).  The band arithmetic is written once
+(``band_pixel.py``) and compiled for both.  The pipeline reaches them through the backend
+(``backend.band_indexes``); :func:`band_indexes` is also in :mod:`d3cli.kernels.host`.
 """
 
 from __future__ import annotations
@@ -44,6 +46,12 @@ from .. import compile_cache as _compile_cache  # noqa: F401  (chooses the numba
 from ..intrinsics import store_fence, store_nt
 from ..pixel import UINT
 from ..volume import MAX_CELLS
+from .band_pixel import build
+
+_px = build(njit(cache=True, error_model="numpy"))
+_own_band = _px.own_band
+_tiles_within = _px.tiles_within
+_hull = _px.hull
 
 
 # ----------------------------------------------------------------------------- band search
@@ -60,8 +68,7 @@ def _column_tables(w, tile, halo, cw, ntx):
     for u in range(w):
         col_cu[u] = min(u // 2, cw - 1)
         col_tx[u] = u // tile
-        col_tx0[u] = min(max((u - halo) // tile, 0), ntx - 1)
-        col_tx1[u] = min(max((u + halo) // tile, 0), ntx - 1)
+        col_tx0[u], col_tx1[u] = _tiles_within(u, tile, halo, ntx)
     return col_cu, col_tx, col_tx0, col_tx1
 
 
@@ -95,11 +102,7 @@ def _tile_bands(coarse, h, w, n_disp, margin, tile, nty, ntx, col_cu, col_tx):
                     t_min[tx] = min(t_min[tx], dc)
                     t_max[tx] = max(t_max[tx], dc)
         for tx in range(ntx):
-            if t_max[tx] >= 0:
-                lo = min(max(2 * t_min[tx] - margin, 0), n_disp - 1)
-                hi = min(max(2 * t_max[tx] + margin + 1, 1), n_disp)
-                own_lo[ty, tx] = lo
-                own_hi[ty, tx] = max(hi, lo + 1)
+            own_lo[ty, tx], own_hi[ty, tx] = _own_band(t_min[tx], t_max[tx], n_disp, margin)
     return own_lo, own_hi
 
 
@@ -111,10 +114,8 @@ def _neighbour_hulls(own_lo, own_hi):
     t_hi = own_hi.copy()
     for ty in range(nty):
         for tx in range(ntx):
-            for yy in range(max(ty - 1, 0), min(ty + 1, nty - 1) + 1):
-                for xx in range(max(tx - 1, 0), min(tx + 1, ntx - 1) + 1):
-                    t_lo[ty, tx] = min(t_lo[ty, tx], own_lo[yy, xx])
-                    t_hi[ty, tx] = max(t_hi[ty, tx], own_hi[yy, xx])
+            t_lo[ty, tx], t_hi[ty, tx] = _hull(own_lo, own_hi, max(ty - 1, 0), min(ty + 1, nty - 1),
+                                               max(tx - 1, 0), min(tx + 1, ntx - 1), own_lo[ty, tx], own_hi[ty, tx])
     return t_lo, t_hi
 
 
@@ -141,19 +142,13 @@ def _stored_runs(h, tile, halo, nty, seg, n_seg, col_tx, col_tx0, col_tx1, t_lo,
     seg_hi = np.empty((h, n_seg), np.int64)
     row_cells = np.zeros(h + 1, np.int64)
     for v in prange(h):
-        ty0 = min(max((v - halo) // tile, 0), nty - 1)
-        ty1 = min(max((v + halo) // tile, 0), nty - 1)
+        ty0, ty1 = _tiles_within(v, tile, halo, nty)
         ty = v // tile
         total = 0
         for k in range(n_seg):
             u = seg[k]
             tx = col_tx[u]
-            s_lo = t_lo[ty, tx]
-            s_hi = t_hi[ty, tx]
-            for yy in range(ty0, ty1 + 1):
-                for xx in range(col_tx0[u], col_tx1[u] + 1):
-                    s_lo = min(s_lo, t_lo[yy, xx])
-                    s_hi = max(s_hi, t_hi[yy, xx])
+            s_lo, s_hi = _hull(t_lo, t_hi, ty0, ty1, col_tx0[u], col_tx1[u], t_lo[ty, tx], t_hi[ty, tx])
             seg_lo[v, k] = s_lo
             seg_hi[v, k] = s_hi
             total += (s_hi - s_lo) * (seg[k + 1] - u)

@@ -8,7 +8,8 @@ import numpy as np
 from numba import cuda
 
 from ..cuda_launch import as_f64, grid_1d, grid_2d, is_device, on_device, ops, pack_volume, unpack_volume
-from ..volume import dense_index
+from ..volume import MAX_CELLS
+from .band_cuda import CELLS_BOUND
 
 
 #: Largest float64 scratch (bytes) of the NCC cross-term prefix sums; the cost volume
@@ -23,15 +24,44 @@ _cosine_cost = ops.cosine_cost
 
 
 def _index_and_cells(index, h, w, n_disp):
-    """The device index (the full range when ``index`` is None) and its number of cells,
-    read from the host index before the upload (a device index costs one tiny download)."""
+    """The device index (the full range, built on the device, when ``index`` is None) and
+    the cells to allocate: the bound a device index from ``band_indexes`` carries, else
+    read from the host index before the upload (any other device index costs one tiny
+    download)."""
     if index is None:
-        index = dense_index(h, w, n_disp)
+        return dense_index(h, w, n_disp), int(h) * int(w) * int(n_disp)
+    bound = getattr(index, CELLS_BOUND, None)
+    if bound is not None:
+        return index, int(bound)
     if is_device(index):
         last = index[index.shape[0] - 1:, index.shape[1] - 1:, :].copy_to_host()
     else:
         last = np.asarray(index)[-1:, -1:, :]
     return on_device(index), int(last[0, 0, 0]) + int(last[0, 0, 2])
+
+
+@cuda.jit(cache=True)
+def _dense_index(n_disp, index):
+    u, v = cuda.grid(2)
+    if v < index.shape[0] and u < index.shape[1]:
+        index[v, u, 0] = (v * index.shape[1] + u) * n_disp
+        index[v, u, 1] = 0
+        index[v, u, 2] = n_disp
+
+
+def dense_index(height, width, n_disp):
+    """Index of the full-range volume (:func:`d3cli.kernels.volume.dense_index`), built on the device.
+
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.dense_index`.
+    """
+    h, w, n_disp = int(height), int(width), int(n_disp)
+    if h * w * n_disp > MAX_CELLS:
+        raise MemoryError(f"a {h}x{w}x{n_disp} cost volume has more than 2^31 cells")
+    index = cuda.device_array((h, w, 3), np.int32)
+    blocks, threads = grid_2d(w, h)
+    _dense_index[blocks, threads](np.int32(n_disp), index)
+    setattr(index, CELLS_BOUND, h * w * n_disp)  # its volume is sized without a copy
+    return index
 
 
 # ----------------------------------------------------------------------------- NCC cost (step 2)

@@ -134,3 +134,9 @@ def merge_sparse(primary, fallback):
         for u in range(w):
             out[v, u] = primary[v, u] if primary[v, u] >= 0 else fallback[v, u]
     return out
+
+
+# ----------------------------------------------------------------------------- the decided pixels
+def decided_mask(disparity):
+    """``disparity >= 0``: bool (H, W), a new map."""
+    return np.asarray(disparity) >= 0

@@ -51,3 +51,18 @@ def merge_sparse(primary, fallback):
     """``primary`` where decided (>= 0), else ``fallback``; int32 (H, W), a new device map."""
     d_primary = on_device(primary)
     return per_pixel(_merge_kernel, d_primary.shape, np.int32, d_primary, on_device(fallback))
+
+
+# ----------------------------------------------------------------------------- the decided pixels
+@cuda.jit(cache=True)
+def _decided_kernel(disp, out):
+    u, v = cuda.grid(2)
+    if v < disp.shape[0] and u < disp.shape[1]:
+        out[v, u] = disp[v, u] >= 0
+
+
+def decided_mask(disparity):
+    """``disparity >= 0``: bool (H, W), a new device map (a quarter of the int32 map's bytes
+    to download)."""
+    d_disp = on_device(disparity)
+    return per_pixel(_decided_kernel, d_disp.shape, np.bool_, d_disp)

@@ -86,6 +86,31 @@ def restored_validity(valid, narrow, restored, hi, masked=None):
     return kept, counts.sum(axis=0)
 
 
+def pt_validity(narrow, restored, narrow_range):
+    """The CPU backend's ``pt_validity``: :func:`restored_validity` of a narrow-range integer
+    map (decided where ``>= 0``) and its restored sub-pixel map, the map masked.
+
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.pt_validity`.
+    """
+    narrow = np.ascontiguousarray(narrow)
+    restored = np.ascontiguousarray(restored, dtype=np.float32)
+    # the type NumPy compares ``narrow >= narrow_range`` in (NEP 50: float32 stays float32)
+    hi = np.result_type(narrow, narrow_range).type(narrow_range)
+    masked = np.empty(restored.shape, np.float32)
+    kept, counts = restored_validity(narrow >= 0, narrow, restored, hi, masked)
+    return kept, masked, [int(c) for c in counts]
+
+
+def count_range_ends(narrow, narrow_range):
+    """The CPU backend's ``count_range_ends``: pixels of a narrow-range integer map at
+    ``d' == 0`` or ``d' >= narrow_range``.
+
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.count_range_ends`.
+    """
+    narrow = np.asarray(narrow)
+    return int(np.count_nonzero((narrow == 0) | (narrow >= narrow_range)))
+
+
 @njit(cache=True, nogil=True)
 def _right_image_task(task, tasks, disparity, finite, out):
     h, w = disparity.shape

@@ -1,14 +1,17 @@
 """Numba kernel of the image pyramid (pipeline step 1; docs/design.md, 'Pyramid and bands').
 
-Host only: both backends build their pyramids on the host (the CUDA backend uploads the
-levels), so one kernel serves both.  ``d3cli.method.pyramid`` calls it; its docstrings say
-what a level means.
+Each backend builds the pyramid where it computes: the CPU with ``halve.py``, CUDA on the
+device from the image uploaded once in its own dtype (``cuda.py``).  ``d3cli.method.pyramid``
+calls them through the backend; its docstrings say what a level means.
 
-- ``halve.py``: the 2x2 area average that halves an image, the bytes of a NumPy
-  expression (``tests/kernels/test_pyramid.py`` holds it to that expression).
+- ``pixel.py``: the per-pixel 2x2 average, compiled for both targets;
+- ``halve.py``: the CPU kernel that halves an image, the bytes of a NumPy expression
+  (``tests/kernels/test_pyramid.py`` holds it to that expression), and ``cpu.py`` the
+  backend's driver;
+- ``cuda.py``: the CUDA driver (conversion of a uint8 image and halving on the device).
 
 May import: ``d3cli.kernels.pool``, ``d3cli.kernels.compile_cache`` (the numba cache folder, chosen on
-import), numba and numpy; no other kernel step.
+import), ``d3cli.kernels.cuda_launch`` (``cuda.py``), numba and numpy; no other kernel step.
 """
 
 from __future__ import annotations

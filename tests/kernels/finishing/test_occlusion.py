@@ -144,3 +144,23 @@ def test_the_right_image_mask_is_the_road_models_rule(dtype):
     assert road_model.RIGHT_IMAGE_SLACK == 0.5
     rule = road_model.build(lambda f: f)  # the per-pixel form, plain Python
     assert rule.in_right_image(3, 3.5) and not rule.in_right_image(3, 3.75) and not rule.in_right_image(0, np.nan)
+
+
+@pytest.mark.parametrize("narrow_range", [6, 9])
+def test_the_cpu_backends_pt_validity_is_the_pipelines_restored_validity(narrow_range):
+    """``pt_validity`` and ``count_range_ends`` (the CPU backend's) give what the host
+    formulation gives: :func:`restored_validity_counts` and :func:`band_end_share`."""
+    from d3cli.kernels import cpu
+    from d3cli.method.perspective import band_end_share, restored_validity_counts
+
+    rng = np.random.default_rng(narrow_range)
+    narrow = rng.integers(-1, 11, (13, 29)).astype(np.int32)
+    restored = (rng.random((13, 29)) * 30.0 - 3.0).astype(np.float32)
+    restored[0, :4] = [np.inf, np.nan, -0.0, 0.5]
+    kept, masked, counts = cpu.pt_validity(narrow, restored, narrow_range)
+    want_kept, want_counts, want_masked = restored_validity_counts(narrow >= 0, narrow, restored,
+                                                                   narrow_range=narrow_range, masked=True)
+    np.testing.assert_array_equal(kept, want_kept)
+    assert masked.tobytes() == want_masked.tobytes() and counts == [int(c) for c in want_counts]
+    share = band_end_share(narrow, narrow_range=narrow_range)
+    assert float(cpu.count_range_ends(narrow, narrow_range)) / narrow.size == share
