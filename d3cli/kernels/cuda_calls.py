@@ -103,6 +103,15 @@ def _record_span(start: float) -> None:
         calls.spans.append((start, end))
 
 
+def _spanned(call, *a, **k):
+    """``call(*a, **k)``, its wall time recorded as a span of calls (:func:`_record_span`)."""
+    start = time.perf_counter()
+    try:
+        return call(*a, **k)
+    finally:
+        _record_span(start)
+
+
 def _record_launch(name: str, seconds: float | None) -> None:
     for calls in _active:
         calls.launches += 1
@@ -187,11 +196,7 @@ def _hooks(simulator: bool):
                 _record_span(start)
                 return result
             _record_launch(_kernel_name(kernel), None)
-            start = time.perf_counter()
-            try:
-                return original(*a, **k)
-            finally:
-                _record_span(start)
+            return _spanned(original, *a, **k)
 
         return wrapped
 
@@ -199,11 +204,7 @@ def _hooks(simulator: bool):
         # driver.host_to_device(dst, src, size, stream=0) / device_to_host(dst, src, size, ...)
         def wrapped(*a, **k):
             _count(attr, k.get("size", a[2] if len(a) > 2 else 0))
-            start = time.perf_counter()
-            try:
-                return original(*a, **k)
-            finally:
-                _record_span(start)
+            return _spanned(original, *a, **k)
 
         return wrapped
 
