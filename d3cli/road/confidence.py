@@ -134,8 +134,8 @@ def spikiness(depth: np.ndarray, inside: np.ndarray, *, peak_px: int, spike_px: 
     """Ratio of the peak depth of ``depth`` over ``inside`` to the peak of ``depth``
     median-filtered over ``spike_px`` pixels (1 where the filtered peak is not positive).
 
-    The peak is the mean of the ``peak_px`` largest values, as the reported maximum depth
-    (:func:`d3cli.road.defects.find_defects`).  The filter is evaluated only at the pixels
+    The peak is the mean of the ``peak_px`` largest values: the extremes a spike makes
+    (the reported depth averages a share of the region, :class:`d3cli.road.defects.DefectTuning`).  The filter is evaluated only at the pixels
     around the deepest ones (the ``16 peak_px`` deepest of ``inside``): a median of a window
     is at most the window's largest value, so the filtered peak lies where the depth is deep.
 
