@@ -120,7 +120,9 @@ def installed_methods(methods) -> tuple[list[str], dict[str, str]]:
     ok, skipped = [], {}
     for name in methods:
         try:
-            method_spec(name).require()
+            spec = method_spec(name)
+            if spec is not None:  # a name of this script only (e.g. a d3stereo preset) needs nothing more
+                spec.require()
         except BackendUnavailable as exc:
             skipped[name] = str(exc)
         else:

@@ -162,3 +162,16 @@ def test_replace_block_swaps_only_the_marked_text(rt):
 def test_machine_text_names_cpu_count_and_versions(rt):
     text = rt.machine_text("AMD EPYC", 2, {"Python": "3.11.7", "numpy": "2.4.6", "pyelas": None})
     assert text == "AMD EPYC, 2 vCPUs; Python 3.11.7, numpy 2.4.6"
+
+
+def test_the_script_s_own_names_need_no_package_and_a_missing_peer_is_skipped(rt, monkeypatch):
+    import dataclasses
+
+    from d3cli.config import methods as declarations
+
+    monkeypatch.setattr(declarations, "METHOD_SPECS", tuple(
+        dataclasses.replace(s, requires=("d3stereo_no_such_module",)) if s.name == "elas" else s
+        for s in declarations.METHOD_SPECS))
+    ok, skipped = rt.installed_methods(("d3", "sgbm", "elas"))
+    assert ok == ["d3", "sgbm"] and list(skipped) == ["elas"]
+    assert "d3stereo_no_such_module" in skipped["elas"]
