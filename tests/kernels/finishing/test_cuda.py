@@ -71,3 +71,45 @@ def test_drop_occluded_updates_a_host_validity_in_place(gpu, rows):
     occ, _, _ = rows.drop_occluded(disp, valid, 1.0, 4)
     np.testing.assert_array_equal(valid, want_valid)
     np.testing.assert_array_equal(host(gpu, occ), want_occ)
+
+
+def _holes(shape, seed):
+    """Maps for the filling: random estimates with inf / NaN among the invalid pixels,
+    non-finite ones among the valid, rows with nothing valid."""
+    for i, (disp, valid) in enumerate(_maps(shape, seed)):
+        if i % 3 == 1 and disp.size > 2:
+            disp.reshape(-1)[1] = np.inf
+            valid.reshape(-1)[1] = True
+        yield disp, valid
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+def test_fill_rows_matches_cpu(gpu, rows, shape):
+    for i, (disp, valid) in enumerate(_holes(shape, 11 + hash(shape) % 2**32)):
+        want_filled, want_use = finishing.fill.fill_rows(disp, valid)
+        filled, use = rows.fill_rows(disp, valid)
+        np.testing.assert_array_equal(host(gpu, use), want_use, err_msg=f"{shape} {i}")
+        assert host(gpu, filled).tobytes() == want_filled.tobytes(), f"{shape} {i}"
+        # the pipeline's host path: usable, the row fill, the empty rows
+        use2, row_has, _ = finishing.usable(disp, valid)
+        ref, _ = finishing.fill_rows_smaller_side(disp, use2)
+        if row_has.any() and not row_has.all():
+            finishing.copy_nearest_rows(ref, row_has)
+        if row_has.any():
+            assert ref.tobytes() == want_filled.tobytes(), f"{shape} {i}"
+        else:
+            assert np.all(want_filled == np.inf)
+
+
+@pytest.mark.parametrize("shape", [(5, 5), (7, 13), (11, 23), (17, 9)])
+def test_median_of_holes_matches_opencv_and_cpu(gpu, rows, shape):
+    import cv2
+
+    for i, (disp, valid) in enumerate(_holes(shape, 23 + hash(shape) % 2**32)):
+        filled, use = finishing.fill.fill_rows(disp, valid)
+        want = filled.copy()
+        finishing.keep_valid(want, use, cv2.medianBlur(filled, 5))
+        got_cpu = finishing.fill.median_of_holes(filled, use)
+        assert got_cpu.tobytes() == want.tobytes(), f"{shape} {i}"
+        got = host(gpu, rows.median_of_holes(filled, use))
+        assert got.tobytes() == want.tobytes(), f"{shape} {i}"
