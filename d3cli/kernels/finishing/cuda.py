@@ -76,23 +76,20 @@ def out_of_view_mask(disparity, valid, start):
     return out
 
 
-def drop_occluded(disparity, valid, tolerance, start, out=None):
+def drop_occluded(disparity, valid, tolerance, start, out):
     """Both occlusion tests, their holes and the masked map, one thread per row
-    (:func:`d3cli.kernels.finishing.drop_occluded`): ``valid`` updated in place (a host
-    map through an upload and a download), ``out`` (a new device map when None; may be ``disparity``) masked.
+    (:func:`d3cli.kernels.finishing.drop_occluded`): ``valid`` updated in place (a host map
+    through an upload and a download), ``out`` (a device map; may be ``disparity``) masked.
 
     Returns
     -------
     occluded : device array, bool, (H, W)
     count : DeviceCount
         Occluded pixels, left on the device.
-    out : device array, float32, (H, W)
     """
     d_disp = on_device(disparity)
     d_valid = on_device(valid)
     h, w = d_disp.shape
-    if out is None:
-        out = cuda.device_array((h, w), np.float32)
     occluded = cuda.device_array((h, w), np.bool_)
     best, target = _row_buffers(h, w)
     pool, slot = next_slot()
@@ -101,7 +98,7 @@ def drop_occluded(disparity, valid, tolerance, start, out=None):
                                            out, occluded, pool.array, slot)
     if not is_device(valid):  # a host map: updated in place as the contract says
         d_valid.copy_to_host(valid)
-    return occluded, DeviceCount(pool, slot), out
+    return occluded, DeviceCount(pool, slot)
 
 
 @cuda.jit(cache=True)

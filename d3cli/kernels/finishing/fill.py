@@ -242,14 +242,14 @@ def keep_valid(filled, valid, other):
     run_tasks(_keep_valid_task, row_tasks(filled.shape[0]), filled, valid, other)
 
 
-def fill_rows(disp, valid):
+def fill_rows(disparity, valid):
     """The backends' ``fill_rows`` on the CPU: the usable pixels (:func:`usable`), the
     row-wise fill from them (:func:`fill_rows_smaller_side`), empty rows from the nearest
     filled row (:func:`copy_nearest_rows`).
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.fill_rows`.
     """
-    disp = np.ascontiguousarray(disp, dtype=np.float32)
+    disp = np.ascontiguousarray(disparity, dtype=np.float32)
     use, _, _ = usable(disp, np.ascontiguousarray(valid, dtype=np.bool_))
     filled, row_has = fill_rows_smaller_side(disp, use)
     if not row_has.all():

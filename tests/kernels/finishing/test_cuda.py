@@ -57,7 +57,8 @@ def test_drop_occluded_matches_cpu(gpu, rows, shape, in_place):
         cpu_out = cpu_disp if in_place else np.empty(disp.shape, np.float32)
         want_occ, want_count = finishing.drop_occluded(cpu_disp, cpu_valid, 1.0, start, cpu_out)
         d_disp, d_valid = gpu.to_device(disp), gpu.to_device(valid)
-        occ, count, out = rows.drop_occluded(d_disp, d_valid, 1.0, start, d_disp if in_place else None)
+        out = d_disp if in_place else gpu.to_device(np.zeros(disp.shape, np.float32))
+        occ, count = rows.drop_occluded(d_disp, d_valid, 1.0, start, out)
         np.testing.assert_array_equal(host(gpu, occ), want_occ, err_msg=f"{shape} {i}")
         np.testing.assert_array_equal(host(gpu, d_valid), cpu_valid, err_msg=f"{shape} {i}")
         assert host(gpu, out).tobytes() == cpu_out.tobytes(), f"{shape} {i}"
@@ -68,7 +69,7 @@ def test_drop_occluded_updates_a_host_validity_in_place(gpu, rows):
     disp, valid = next(iter(list(_maps((7, 13), 5))[2:]))
     want_valid = valid.copy()
     want_occ, _ = finishing.drop_occluded(disp.copy(), want_valid, 1.0, 4, np.empty(disp.shape, np.float32))
-    occ, _, _ = rows.drop_occluded(disp, valid, 1.0, 4)
+    occ, _ = rows.drop_occluded(disp, valid, 1.0, 4, gpu.to_device(np.zeros(disp.shape, np.float32)))
     np.testing.assert_array_equal(valid, want_valid)
     np.testing.assert_array_equal(host(gpu, occ), want_occ)
 
