@@ -360,6 +360,53 @@ class Backend(Protocol):
         """
         ...
 
+    def drop_occluded(self, disparity, valid, tolerance, start, out) -> Any:
+        """Both occlusion tests of the finishing, their holes and the masked map, a row at a
+        time (:func:`d3cli.kernels.finishing.drop_occluded`, which says what the tests are;
+        the row bodies: ``kernels/finishing/pixel_occlusion.py``).
+
+        Parameters
+        ----------
+        disparity : ndarray, float32, (H, W)
+        valid : ndarray, bool, (H, W)
+            Updated in place: ``valid &= ~occluded``.
+        tolerance : float
+            The uniqueness test's tolerance.
+        start : int
+            First column the left-border test searches (0 <= start < W).
+        out : ndarray, float32, (H, W)
+            Receives ``np.where(valid, disparity, inf)``; may be ``disparity``.
+
+        Returns
+        -------
+        occluded : ndarray, bool, (H, W)
+        count : occluded pixels; an ``int`` on the CPU, on CUDA a count left on the device
+            (as :meth:`count_decided`'s).
+        """
+        ...
+
+    def fill_rows(self, disparity, valid) -> Any:
+        """The row-wise hole filling (docs/design.md, 'Finishing'): each hole the smaller of
+        the nearest usable values left and right in its row, a row without one a copy of the
+        nearest row that has one (the upper on a tie); all inf when nothing is usable
+        (``kernels/finishing/pixel_fill.py``, the values of ``refinement.fill_holes``
+        without its median).
+
+        Returns
+        -------
+        filled : ndarray, float32, (H, W)
+        use : ndarray, bool, (H, W)
+            The usable pixels, ``valid & isfinite(disparity)``: those filled from.
+        """
+        ...
+
+    def median_of_holes(self, filled, use) -> Any:
+        """``filled`` where ``use``, else the median of its 5x5 window, borders replicated:
+        the values of ``cv2.medianBlur(filled, 5)`` at the holes, for a map without NaN
+        (what :meth:`fill_rows` gives); float32 (H, W), a new map.
+        """
+        ...
+
     def pt_restore(self, disp, a0, b1, b2, delta) -> Any:
         """Full-range disparity from the disparity against the warped right image.
 

@@ -20,7 +20,8 @@ from .cost.cpu import cosine_cost_volume, invalidate_out_of_view, ncc_cost_volum
 from .decisive.cpu_diffusion import diffuse, min_cost
 from .decisive.cpu_inheritance import inherit
 from .decisive.cpu_seeds import decided_mask, decisive_seeds, merge_sparse
-from .finishing.occlusion import count_range_ends, pt_validity
+from .finishing.fill import fill_rows, median_of_holes
+from .finishing.occlusion import count_range_ends, drop_occluded, pt_validity
 from .perspective.cpu import pt_restore, pt_warp
 from .pyramid.cpu import pyramid
 from .sgm.cpu import sgm_smooth
@@ -29,9 +30,10 @@ from .volume import dense_index
 
 __all__ = [
     "band_indexes", "bilateral_filter", "cosine_cost_volume", "count_decided", "count_range_ends", "counts_to_host",
-    "decided_mask", "decisive_seeds", "dense_index", "diffuse", "inherit", "invalidate_out_of_view", "merge_sparse",
-    "min_cost", "ncc_cost_volume", "pt_restore", "pt_validity", "pt_warp", "pyramid", "rbf_filter", "rbf_weights",
-    "sgm_smooth", "subpixel", "to_device", "to_host",
+    "decided_mask", "decisive_seeds", "dense_index", "diffuse", "drop_occluded", "fill_rows", "inherit",
+    "invalidate_out_of_view", "median_of_holes", "merge_sparse", "min_cost", "ncc_cost_volume", "pt_restore",
+    "pt_validity", "pt_warp", "pyramid", "rbf_filter", "rbf_weights", "sgm_smooth", "subpixel", "to_device",
+    "to_host",
 ]
 
 

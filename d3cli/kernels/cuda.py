@@ -35,6 +35,7 @@ from .decisive.cuda_diffusion import diffuse, min_cost
 from .decisive.cuda_inheritance import inherit
 from .decisive.cuda_seeds import decided_mask, decisive_seeds, merge_sparse
 from .device_counts import count_decided, counts_to_host
+from .finishing.cuda import drop_occluded, fill_rows, median_of_holes
 from .perspective.cuda import count_range_ends, pt_restore, pt_validity, pt_warp
 from .pyramid.cuda import pyramid
 from .sgm.cuda import sgm_smooth
@@ -54,10 +55,13 @@ __all__ = [
     "decisive_seeds",
     "dense_index",
     "diffuse",
+    "drop_occluded",
+    "fill_rows",
     "inherit",
     "invalidate_out_of_view",
-    "min_cost",
+    "median_of_holes",
     "merge_sparse",
+    "min_cost",
     "ncc_cost_volume",
     "pt_restore",
     "pt_validity",

@@ -10,7 +10,9 @@ for every backend, and are reached through this facade only:
   the pipeline builds them through the backend, ``backend.band_indexes``, where its maps are);
 - the pyramid's halving of a host image (:func:`halve_area`; the pipeline's pyramid:
   ``backend.pyramid``);
-- the finishing (occlusion tests, speckles, hole filling, smoothing: ``finishing/``),
+- the finishing (occlusion tests, speckles, hole filling, smoothing: ``finishing/``; the
+  occlusion tests and the row-wise filling also on the backend, ``backend.drop_occluded``,
+  ``backend.fill_rows``, ``backend.median_of_holes``),
   with the road model's rules over a map (:func:`shift_plane_f32`, :func:`restored_validity`,
   :func:`right_image_mask`; the rules themselves: :mod:`d3cli.kernels.road_model`);
 - the road fit's solvers (:func:`solve_weighted`, :func:`ransac_inlier_counts`,

@@ -148,6 +148,13 @@ class _Match:
     level_maps: list
     per_level: list
     range_ends: int | None = None  # pixels at an end of the narrow range (a narrow match only)
+    counts_read: bool = True  # False: the levels' counts are still on the device (_finish reads them)
+
+
+def _border_start(max_disparity: int, width: int) -> int:
+    """First column the left-border test searches (``refinement.drop_occluded``'s start)."""
+    start = min(int(max_disparity), width - 1)
+    return max(start + width, 0) if start < 0 else start
 
 
 def fallback_settings(cfg: Config) -> Config | None:
@@ -255,24 +262,26 @@ class D3Stereo:
             if road is None and cfg.pt.fallback_config:
                 return self._fallback(given, dmax, pair_dir, timings, info, warnings, t_start)
         features = self._pair_features(left, right, grey_l.shape, pyr_l, pair_dir, road, timings, info)
+        # the levels' counts are read with the finishing's (one copy), except where the road
+        # check needs them first
         match = self._match(pyr_l, pyr_r, search, timings, features=features,
-                            range_ends=None if road is None else cfg.pt.narrow_range)
+                            range_ends=None if road is None else cfg.pt.narrow_range, read_counts=road is not None)
         if road is not None and not self._on_road_band(match, road, dmax, info, warnings):
             # Not a road after all: the pair is matched again over the full range, unwarped.
             road, search, match, features = None, dmax, None, None
             if cfg.pt.fallback_config:
                 return self._fallback(given, dmax, pair_dir, timings, info, warnings, t_start)
             features = self._pair_features(left, right, grey_l.shape, pyr_l, pair_dir, None, timings, info)
-            match = self._match(pyr_l, plain_r, search, timings, features=features)
+            match = self._match(pyr_l, plain_r, search, timings, features=features, read_counts=False)
         info["per_level"] = match.per_level
-        if match.per_level[0].get("seeds", 0) == 0:
+        t0 = time.perf_counter()
+        out, valid = self._finish(match, dmax, info, road=road)
+        timings["finish"] = time.perf_counter() - t0
+        if match.per_level[0].get("seeds", 0) == 0:  # read by _finish
             warnings.append(
                 "no decisive seeds at the coarsest level (textureless or unrectified pair?); "
                 "the disparity map is all invalid"
             )
-        t0 = time.perf_counter()
-        out, valid = self._finish(match, dmax, info, road=road)
-        timings["finish"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
         return DisparityResult(
             disparity=out,
@@ -402,7 +411,8 @@ class D3Stereo:
             at its ends are counted (``_Match.range_ends``) with the levels' counts.
         read_counts : bool
             False: counts left on the device stay there (no copy; the levels are not
-            logged), for a pass whose statistics nobody reads (the road fit's coarse pass).
+            logged), for a pass whose statistics nobody reads (the road fit's coarse pass)
+            or that :meth:`_finish` reads with its own counts (``_Match.counts_read``).
 
         Returns
         -------
@@ -427,10 +437,12 @@ class D3Stereo:
             if level > stop_level:
                 cost = None  # free the coarse volume before the next, larger one
         extra = [] if range_ends is None else [self.backend.count_range_ends(disp, range_ends)]
-        if read_counts or all(isinstance(s[k], (int, np.integer)) for s in per_level for k in _COUNT_KEYS if k in s):
+        counts_read = read_counts or all(isinstance(s[k], (int, np.integer))
+                                         for s in per_level for k in _COUNT_KEYS if k in s)
+        if counts_read:
             extra = self._read_counts(per_level, extra)
         return _Match(disparity=disp, cost=cost, level_maps=level_maps, per_level=per_level,
-                      range_ends=extra[0] if extra else None)
+                      range_ends=extra[0] if extra else None, counts_read=counts_read)
 
     def _read_counts(self, per_level: list[dict], extra=()) -> list[int]:
         """Turn every level's counts into ints, all at once, and log the levels; returns
@@ -600,13 +612,14 @@ class D3Stereo:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Step 8: sub-pixel refinement, occlusion check, hole filling; host arrays.
 
-        The one download of the result happens here: the sub-pixel map and the decided
-        pixels (a bool map; the integer map without the sub-pixel step); the occlusion
-        tests, the filling and the smoothing run on the host (``kernels/finishing/``).
         With a road model (step 6) the disparity is restored to the full range first, and
         on the backend estimates at the ends of the narrow range (the true match probably
         lies outside it: not road) and estimates whose match falls left of the right image
         become holes (``backend.pt_validity``: the map and the validity come back masked).
+        On a device backend the occlusion check and the row-wise filling with its median
+        run there too (:meth:`_finish_on_backend`); the rest of the finishing (speckles,
+        the filling inside surfaces, smoothing: ``kernels/finishing/``) runs on the host,
+        after the one download of the map and the validity.
         """
         cfg = self.cfg
         backend = self.backend
@@ -616,6 +629,11 @@ class D3Stereo:
         # The volume's last reader was the sub-pixel step: release it before the host
         # finishing allocates its own maps (the peak of a 720p road pair).
         match.cost = None
+        if cfg.refine.subpixel and not isinstance(sub, np.ndarray):
+            return self._finish_on_backend(match, sub, dmax, info, road)
+        if not match.counts_read:
+            self._read_counts(match.per_level)
+            match.counts_read = True
         restored = False  # the road model's validity applied on the backend
         if cfg.refine.subpixel:
             if road is not None:
@@ -642,8 +660,58 @@ class D3Stereo:
         if road is not None and not restored:
             valid, out = self._pt_valid(valid, disp, out, info)
             owned = True
+        return self._finish_on_host(out, valid, owned, dmax, info, road)
+
+    def _finish_on_backend(self, match: "_Match", sub, dmax: int, info: dict, road: RoadModel | None):
+        """:meth:`_finish` of a sub-pixel map on a device: the road model's validity, the
+        occlusion check (``backend.drop_occluded``) and, where no host step comes between
+        them, the row-wise filling and its median (``backend.fill_rows``,
+        ``backend.median_of_holes``) run on the device; then one download of the map and
+        of the validity, and one of every count (the levels', the road model's, the
+        occluded pixels) together.  The occlusion check stays on the host where the
+        filling inside surfaces needs its map there (``refine.fill_inside``)."""
+        cfg = self.cfg
+        backend = self.backend
+        pending = []
+        if road is not None:
+            sub = self._pt_restore(sub, road)
+            valid, sub, pt_counts = backend.pt_validity(match.disparity, sub, cfg.pt.narrow_range)
+            pending += list(pt_counts)
+        else:
+            valid = backend.decided_mask(match.disparity)
+        fill_inside = cfg.refine.fill and cfg.refine.fill_inside
+        occlusion = cfg.refine.occlusion_check and not fill_inside
+        if occlusion:
+            # sub is this method's own map: masked in place
+            _, count = backend.drop_occluded(sub, valid, 1.0, _border_start(dmax, sub.shape[1]), sub)
+            pending.append(count)
+        filled = cfg.refine.fill and not fill_inside and cfg.refine.speckle_size <= 0
+        if filled:
+            sub, use = backend.fill_rows(sub, valid)
+            if cfg.refine.smooth_filled and min(sub.shape) >= 5:
+                sub = backend.median_of_holes(sub, use)
+        out = backend.to_host(sub)
+        valid = backend.to_host(valid)
+        if match.counts_read:
+            values = backend.counts_to_host(pending)
+        else:
+            values = self._read_counts(match.per_level, pending)
+            match.counts_read = True
+        if road is not None:
+            info["pt"].update(restored_shares(values[:3], valid.size))
+        if occlusion:
+            info["occluded_share"] = values[-1] / valid.size
+        return self._finish_on_host(out, valid, True, dmax, info, road, occlusion=not occlusion, fill=not filled)
+
+    def _finish_on_host(self, out: np.ndarray, valid: np.ndarray, owned: bool, dmax: int, info: dict,
+                        road: RoadModel | None, *, occlusion: bool = True, fill: bool = True):
+        """The host part of :meth:`_finish`: the occlusion check (unless ``occlusion`` is
+        False: done on the backend), the speckles, the filling (unless ``fill`` is False)
+        and the smoothing of a host map and its validity (``owned``: ``out`` may be written
+        in place)."""
+        cfg = self.cfg
         occluded = None
-        if cfg.refine.occlusion_check:
+        if occlusion and cfg.refine.occlusion_check:
             occluded, count, out = drop_occluded(out, valid, max_disparity=dmax, out=out if owned else None)
             owned = True
             info["occluded_share"] = count / valid.size
@@ -652,7 +720,7 @@ class D3Stereo:
                                        max_diff=cfg.refine.speckle_range, out=out if owned else None)
             owned = True
             info["speckle_share"] = count / valid.size
-        if cfg.refine.fill:
+        if fill and cfg.refine.fill:
             out = fill_holes(
                 out, valid, smooth=cfg.refine.smooth_filled, occluded=occluded if cfg.refine.fill_inside else None
             )

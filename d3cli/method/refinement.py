@@ -1,9 +1,12 @@
 """Step 8: sub-pixel refinement and the finishing (docs/design.md, 'Finishing').
 
-The occlusion tests, the speckle filter, the filling and the smoothing run on the host for
-every backend, as numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of a
+The occlusion tests, the speckle filter, the filling and the smoothing of this module run
+on the host, as numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of a
 NumPy/OpenCV formulation bit for bit (that formulation is the reference in
-``tests/reference/finishing.py``).
+``tests/reference/finishing.py``).  On a device backend ``D3Stereo._finish`` runs the
+occlusion tests and the row-wise filling on the device instead (``backend.drop_occluded``,
+``backend.fill_rows``, ``backend.median_of_holes``: the same row bodies, the same values)
+where no host step comes before them.
 """
 
 from __future__ import annotations

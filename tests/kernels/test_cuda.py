@@ -123,11 +123,13 @@ def test_pipeline_on_cuda_equals_cpu(gpu, monkeypatch):
     want, got = results["cpu"], results["cuda"]
     n_levels = len(want.levels)
     # one upload of each uint8 image (the pyramid, the indexes and the counts' slots are
-    # made on the device); downloads: the sub-pixel map, the decided pixels, the counts
-    # once (the level maps only when read, below)
+    # made on the device); downloads: the map (occlusion check, row-wise filling and its
+    # median on the device), the decided pixels, the counts once, the levels' with the
+    # occluded pixels' (the level maps only when read, below)
     assert left.dtype == np.uint8 and n_levels >= 2
     assert spy.uploads == [left.shape, right.shape]
-    assert spy.downloads == [POOL_SLOTS, left.size, left.size]
+    assert spy.downloads == [left.size, left.size, POOL_SLOTS]
+    assert got.info["occluded_share"] == want.info["occluded_share"]
     assert got.info["backend"] == "cuda"
     assert len(got.levels) == len(want.levels) >= 2
     for level_got, level_want in zip(got.levels, want.levels):
@@ -210,6 +212,7 @@ def test_road_pipeline_on_cuda_equals_cpu(gpu):
     want, got = results["cpu"], results["cuda"]
     assert want.info["pt"]["road_like"] and not want.info["pt"].get("fallback")
     assert got.info["pt"] == want.info["pt"]
+    assert got.info["occluded_share"] == want.info["occluded_share"]
     for level_got, level_want in zip(got.levels, want.levels):
         np.testing.assert_array_equal(level_got, level_want)
     np.testing.assert_array_equal(got.valid, want.valid)

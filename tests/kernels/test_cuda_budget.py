@@ -8,8 +8,10 @@ the decided pixels and the counts.  The count is taken under the CUDA simulator 
 processes (the simulator must be on before numba is imported) with
 :func:`d3cli.kernels.cuda_calls.count_cuda_calls`, for the bundled configs on a 64x32
 uint8 pair (``scripts/profile_cuda.py --cases tiny`` prints the same figures), while every
-CPU kernel of the matching steps raises: the CUDA run computes on the device only (the
-finishing and the road fit run on the host by design, ``docs/gpu.md``).
+CPU kernel of the matching steps raises, and so do those of the occlusion check and of the
+row-wise filling where the config runs them on the device: the CUDA run computes on the
+device only (the road fit and the rest of the finishing run on the host by design,
+``docs/gpu.md``).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ _COUNT = textwrap.dedent(
     from d3cli.kernels.sgm import cpu as s1
     from d3cli.kernels.subpixel import cpu as u1
     from d3cli.kernels import cpu_common
+    from d3cli.kernels.finishing import fill as f1, occlusion as f2
     from d3cli.method import pyramid as method_pyramid
 
     # the simulator runs every thread of a block as a Python thread: small blocks and one lane
@@ -71,6 +74,21 @@ _COUNT = textwrap.dedent(
         setattr(host, name, forbidden(f"host.{name}"))
     method_pyramid.halve_area = forbidden("method.pyramid.halve_area")
 
+    # the finishing's steps that run on the device (D3Stereo._finish_on_backend): their CPU
+    # kernels raise during a compute whose settings run them there
+    OCCLUSION = {f2: ("_uniqueness_task", "_out_of_view_task", "_drop_occluded_task"),
+                 host: ("uniqueness_occluded", "out_of_view_mask", "drop_occluded")}
+    FILL = {f1: ("_usable_task", "_fill_rows_task", "copy_nearest_rows", "_keep_valid_task", "_median_holes_task"),
+            host: ("usable", "fill_rows_smaller_side", "copy_nearest_rows", "keep_valid")}
+
+    def forbid(table):
+        saved = []
+        for module, names in table.items():
+            for name in names:
+                saved.append((module, name, getattr(module, name)))
+                setattr(module, name, forbidden(f"{module.__name__}.{name}"))
+        return saved
+
     rng = np.random.default_rng(0)
     wide = cv2.GaussianBlur(rng.uniform(0, 255, (32, 80)).astype(np.float32), (3, 3), 0.8)
     wide = np.round(wide).astype(np.uint8)
@@ -81,8 +99,15 @@ _COUNT = textwrap.dedent(
     for config in sys.argv[1:]:
         left, right = (synth.left, synth.right) if config == "road" else textured
         stereo = D3Stereo(load_config(config, overrides=["run.backend=cuda"]))
+        refine = stereo.cfg.refine
+        fill_inside = refine.fill and refine.fill_inside  # needs the occluded pixels on the host
+        on_device = {"occlusion": refine.occlusion_check and not fill_inside,
+                     "fill": refine.fill and not fill_inside and refine.speckle_size <= 0}
+        saved = (forbid(OCCLUSION) if on_device["occlusion"] else []) + (forbid(FILL) if on_device["fill"] else [])
         with count_cuda_calls() as calls:
             result = stereo.compute(left, right, max_disparity=16)
+        for module, name, value in saved:
+            setattr(module, name, value)
         inner = result.disparity[4:-4, 12:-4]
         print(json.dumps({"config": config, "launches": calls.launches, "d2h": calls.device_to_host,
                           "h2d": calls.host_to_device, "h2d_bytes": calls.host_to_device_bytes,
@@ -90,7 +115,8 @@ _COUNT = textwrap.dedent(
                           "sites": {f"{k[0]} {k[1]}": v for k, v in calls.by_site.items()},
                           "median": float(np.median(inner)), "levels": len(result.levels),
                           "valid_share": float(result.valid.mean()), "pt": result.info.get("pt"),
-                          "level0": list(result.levels[0].shape[::-1]), "per_level": result.info["per_level"]}),
+                          "level0": list(result.levels[0].shape[::-1]), "per_level": result.info["per_level"],
+                          "on_device": on_device}),
               flush=True)
     """
 )
@@ -116,7 +142,7 @@ def _rows(test_name: str) -> dict:
     assert proc.returncode == 0, proc.stderr[-3000:]
     rows = [json.loads(line) for line in proc.stdout.strip().splitlines() if line.startswith("{")]
     for row in rows:
-        print(f"{row['config']}: {row['launches']} launches, {row['d2h']} device-to-host copies "
+        print(f"{row['config']} (finishing on the device: {row['on_device']}): {row['launches']} launches, {row['d2h']} device-to-host copies "
               f"({row['d2h_bytes']} bytes), {row['h2d']} host-to-device copies ({row['h2d_bytes']} bytes)")
     return {row["config"]: row for row in rows}
 
@@ -132,6 +158,13 @@ def _check(row: dict) -> None:
     assert row["by_kernel"]["_diffuse_level"] <= row["levels"] + (row["config"] == "road")
     assert row["by_kernel"]["_row_prefixes"] == row["by_kernel"]["_column_prefixes"]
     assert row["level0"] == [W, H]
+    expected = {"default": (True, True), "paper": (False, True), "road": (True, True), "kitti": (False, False)}
+    assert (row["on_device"]["occlusion"], row["on_device"]["fill"]) == expected[row["config"]]
+    if row["on_device"]["occlusion"]:
+        assert row["by_kernel"]["_drop_occluded_kernel"] == 1
+    if row["on_device"]["fill"]:
+        assert row["by_kernel"]["_fill_rows_kernel"] == row["by_kernel"]["_copy_rows_kernel"] == 1
+        assert row["by_kernel"]["_median_holes_kernel"] == 1
     if row["config"] == "road":  # the road model held: the narrow match, restored on the device
         assert row["pt"]["road_like"] and not row["pt"].get("fallback") and row["valid_share"] > 0.5
     elif row["config"] == "paper":  # seeds at the coarsest level only: none on this small pair (so on the CPU)

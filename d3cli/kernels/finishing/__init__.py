@@ -1,9 +1,12 @@
 """Numba kernels of the finishing of the disparity map (docs/design.md, 'Finishing').
 
-Host only: the finishing runs on the CPU for every backend (the CUDA backend downloads its
-integer and sub-pixel maps first, see ``D3Stereo._finish``), so these kernels serve the CPU
-and the CUDA pipeline alike.  ``d3cli.method.refinement`` calls them; its docstrings say
-what each step means.  By concern:
+The CPU kernels serve the CPU pipeline and the host part of the CUDA pipeline
+(``D3Stereo._finish`` says which steps run on the device); ``d3cli.method.refinement``
+calls them; its docstrings say what each step means.  The row-wise steps that also run on
+the device have their row bodies written once, in a factory taking the ``jit`` decorator
+(``pixel_occlusion.py``), compiled with ``numba.njit`` for the CPU tasks here and with
+``numba.cuda.jit(device=True)`` for the one-thread-per-row kernels of ``cuda.py`` (not
+imported by this package: the CUDA backend's facade does).  By concern:
 
 - ``occlusion.py``: the uniqueness and left-border tests, fused with the masking, and the
   road model's rules over a map (:mod:`d3cli.kernels.road_model`): the validity after the
@@ -25,7 +28,8 @@ re-exports the public kernels of its modules: ``finishing.fill_inside(...)`` and
 ``finishing.fill.fill_inside(...)`` are the same function.
 
 May import: ``d3cli.kernels.pool``, ``d3cli.kernels.road_model`` (the road model's per-pixel
-rules), ``d3cli.kernels.compile_cache`` (the numba cache folder, chosen on import), numba,
+rules), ``d3cli.kernels.compile_cache`` (the numba cache folder, chosen on import),
+``d3cli.kernels.cuda_launch`` and ``d3cli.kernels.device_counts`` (``cuda.py`` only), numba,
 numpy and llvmlite; no other kernel step.
 """
 

@@ -13,22 +13,28 @@ import numpy as np
 from numba import njit
 
 from ..pool import row_tasks, run_tasks, threads
+from .pixel_fill import build as build_rows
 
 _F32_TWO = np.float32(2.0)
 _F32_INF = np.float32(np.inf)
 
 
+# the row bodies, written once for the CPU and CUDA (pixel_fill.py), as globals numba can type
+_rows = build_rows(njit(cache=True, nogil=True))
+_np_minimum = _rows.np_minimum
+_usable_row = _rows.usable_row
+_fill_row = _rows.fill_row
+_copy_nearest_row = _rows.copy_nearest_row
+_median5_at = _rows.median5_at
+
+
 @njit(cache=True, nogil=True)
 def _usable_task(task, tasks, disp, valid, use, row_has, counts):
-    h, w = disp.shape
+    h = disp.shape[0]
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     n = 0
     for y in range(y0, y1):
-        m = 0
-        for u in range(w):
-            ok = valid[y, u] & np.isfinite(disp[y, u])  # &: no branch
-            use[y, u] = ok
-            m += ok
+        m = _usable_row(disp, valid, use, y)
         row_has[y] = m > 0
         n += m
     counts[task] = n
@@ -46,41 +52,12 @@ def usable(disp, valid):
     return use, row_has, int(counts.sum())
 
 
-@njit(cache=True, inline="always")
-def _np_minimum(a, b):
-    """``np.minimum`` of two non-NaN values (the second when they compare equal)."""
-    return a if a < b else b
-
-
 @njit(cache=True, nogil=True)
 def _fill_rows_task(task, tasks, disp, valid, filled, row_has):
-    h, w = disp.shape
+    h = disp.shape[0]
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        # One pass: the holes of a run between two valid pixels (or a row end, inf) all
-        # take the same value, the smaller of the two, written when the run ends (instead
-        # of a right-to-left scan of the whole row and a second pass)
-        d_row = disp[y]
-        v_row = valid[y]
-        f_row = filled[y]
-        left = _F32_INF
-        start = 0  # the first hole of the current run
-        has = False
-        for u in range(w):
-            x = d_row[u]
-            f_row[u] = x
-            if v_row[u]:
-                if start < u:
-                    fill = _np_minimum(left, x)
-                    for j in range(start, u):
-                        f_row[j] = fill
-                left = x
-                has = True
-                start = u + 1
-        fill = _np_minimum(left, _F32_INF)
-        for j in range(start, w):
-            f_row[j] = fill
-        row_has[y] = has
+        row_has[y] = _fill_row(disp, valid, filled, y)
 
 
 def fill_rows_smaller_side(disp, valid):
@@ -246,23 +223,8 @@ def copy_nearest_rows(filled, row_has):
     row_has : ndarray, bool, (H,)
         At least one True.
     """
-    h = filled.shape[0]
-    above = np.full(h, -1, np.int64)
-    last = -1
-    for y in range(h):
-        if row_has[y]:
-            last = y
-        above[y] = last
-    below = -1
-    for y in range(h - 1, -1, -1):
-        if row_has[y]:
-            below = y
-            continue
-        up = above[y]
-        if below < 0 or (up >= 0 and y - up <= below - y):
-            filled[y, :] = filled[up, :]
-        else:
-            filled[y, :] = filled[below, :]
+    for y in range(filled.shape[0]):
+        _copy_nearest_row(filled, row_has, y)
 
 
 @njit(cache=True, nogil=True)
@@ -280,6 +242,45 @@ def keep_valid(filled, valid, other):
     run_tasks(_keep_valid_task, row_tasks(filled.shape[0]), filled, valid, other)
 
 
+def fill_rows(disparity, valid):
+    """The backends' ``fill_rows`` on the CPU: the usable pixels (:func:`usable`), the
+    row-wise fill from them (:func:`fill_rows_smaller_side`), empty rows from the nearest
+    filled row (:func:`copy_nearest_rows`).
+
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.fill_rows`.
+    """
+    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    use, _, _ = usable(disp, np.ascontiguousarray(valid, dtype=np.bool_))
+    filled, row_has = fill_rows_smaller_side(disp, use)
+    if not row_has.all():
+        copy_nearest_rows(filled, row_has)
+    return filled, use
+
+
+@njit(cache=True, nogil=True)
+def _median_holes_task(task, tasks, filled, use, out):
+    h, w = filled.shape
+    buf = np.empty(25, np.float32)
+    y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
+    for y in range(y0, y1):
+        for u in range(w):
+            out[y, u] = filled[y, u] if use[y, u] else _median5_at(filled, y, u, buf)
+
+
+def median_of_holes(filled, use):
+    """The backends' ``median_of_holes`` on the CPU: ``filled`` where ``use``, else the
+    median of its 5x5 window, borders replicated (the values of ``cv2.medianBlur(filled,
+    5)`` on a map without NaN, which the pipeline's host path takes); a new map.
+
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.median_of_holes`.
+    """
+    filled = np.ascontiguousarray(filled, dtype=np.float32)
+    out = np.empty(filled.shape, np.float32)
+    run_tasks(_median_holes_task, row_tasks(filled.shape[0]), filled, np.ascontiguousarray(use, dtype=np.bool_),
+              out)
+    return out
+
+
 #: The compiled kernels of this module (nogil, cached on disk), run by :func:`d3cli.kernels.pool.run_tasks`.
 KERNELS = (_usable_task, _fill_rows_task, _nearest_columns_task, _fill_inside_task, copy_nearest_rows,
-           _keep_valid_task)
+           _keep_valid_task, _median_holes_task)

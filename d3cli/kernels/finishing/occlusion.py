@@ -15,12 +15,9 @@ from numba import njit
 
 from ..pool import row_tasks, run_tasks
 from ..road_model import host as _road_model
+from .pixel_occlusion import build as build_rows
 
-_F32_ONE = np.float32(1.0)
 _F32_INF = np.float32(np.inf)
-# NumPy's float -> int64 cast of a value outside the int64 range (and of NaN) gives
-# INT64_MIN on x86, which the reference's clip then maps to column 0
-_INT64_LIMIT = 9.223372036854775807e18
 # the road model's rules (kernels/road_model.py), as globals numba can type
 _restore_drops = _road_model.restore_drops
 _in_right_image = _road_model.in_right_image
@@ -144,54 +141,21 @@ def right_image_mask(disparity, finite=False):
 
 
 # ----------------------------------------------------------------------------- occlusion tests
-@njit(cache=True, inline="always")
-def _right_column(u, d, w):
-    """Column ``round(u - d)`` clipped to [0, w-1], as NumPy computes it (float64, half to
-    even): 0 where ``u - d`` is NaN, infinite or beyond the int64 range (NumPy's cast gives
-    INT64_MIN there, which the clip maps to 0).  Selects only, so that a loop over a row
-    vectorises."""
-    x = np.float64(u) - d
-    inside = (x > -0.5) & (x < w - 0.5)  # rounds to 0 .. w-1 (False for NaN)
-    beyond = (x >= w - 0.5) & (abs(x) < _INT64_LIMIT)  # rounds to w - 1 or above
-    # np.rint (half to even) of |x| < 2^51: adding and subtracting 1.5 * 2^52 rounds to an
-    # integer in the current (nearest-even) mode; measured 25 % faster than np.rint here
-    r = np.int64(((x if inside else 0.0) + 6755399441055744.0) - 6755399441055744.0)
-    return r if inside else (w - 1 if beyond else 0)
-
-
-@njit(cache=True, nogil=True)
-def _nearest_claims(disparity, valid, y, row_best, row_target):
-    """The uniqueness test's scatter for row y: ``row_target[u]`` the right column of every
-    pixel u, ``row_best[x]`` the largest valid disparity that claims right column x (-inf
-    where none does; a NaN disparity wins its column); shared by the test alone and by
-    the fused hole-making pass.  Returns the number of valid pixels of the row."""
-    w = disparity.shape[1]
-    d_row = disparity[y]
-    v_row = valid[y]
-    for u in range(w):  # no branch: vectorised (the scatter below is not)
-        row_target[u] = _right_column(u, np.float64(d_row[u]), w)
-    row_best[:] = -np.inf
-    n_valid = 0
-    for u in range(w):
-        if v_row[u]:
-            n_valid += 1
-            d = np.float64(d_row[u])
-            xr = row_target[u]
-            if d > row_best[xr] or d != d:
-                row_best[xr] = d
-    return n_valid
+# the row bodies, written once for the CPU and CUDA (pixel_occlusion.py), as globals numba can type
+_rows = build_rows(njit(cache=True, nogil=True))
+_uniqueness_row = _rows.uniqueness_row
+_out_of_view_row = _rows.out_of_view_row
+_drop_occluded_row = _rows.drop_occluded_row
 
 
 @njit(cache=True, nogil=True)
 def _uniqueness_task(task, tasks, disparity, valid, tolerance, best, target, out):
-    h, w = disparity.shape
+    h = disparity.shape[0]
     row_best = best[task]
     row_target = target[task]
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        _nearest_claims(disparity, valid, y, row_best, row_target)
-        for u in range(w):
-            out[y, u] = valid[y, u] and np.float64(disparity[y, u]) < row_best[row_target[u]] - tolerance
+        _uniqueness_row(disparity, valid, tolerance, y, row_best, row_target, out)
 
 
 def uniqueness_occluded(disparity, valid, tolerance):
@@ -221,24 +185,11 @@ def uniqueness_occluded(disparity, valid, tolerance):
 
 
 @njit(cache=True, nogil=True)
-def _first_valid_from(disparity, valid, y, start):
-    """The left-border test's ``b`` of row y: the first valid disparity at or right of
-    column ``start`` (float32), -inf when the row has none."""
-    for u in range(start, disparity.shape[1]):
-        if valid[y, u]:
-            return disparity[y, u]
-    return -_F32_INF
-
-
-@njit(cache=True, nogil=True)
 def _out_of_view_task(task, tasks, disparity, valid, start, out):
-    h, w = disparity.shape
+    h = disparity.shape[0]
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        b = _first_valid_from(disparity, valid, y, start)
-        b_minus_1 = b - _F32_ONE
-        for u in range(w):
-            out[y, u] = valid[y, u] and u < b and disparity[y, u] < b_minus_1
+        _out_of_view_row(disparity, valid, start, y, out)
 
 
 def out_of_view_mask(disparity, valid, start):
@@ -264,48 +215,13 @@ def out_of_view_mask(disparity, valid, start):
 
 @njit(cache=True, nogil=True)
 def _drop_occluded_task(task, tasks, disparity, valid, tolerance, start, best, target, out, occluded, counts):
-    h, w = disparity.shape
+    h = disparity.shape[0]
     row_best = best[task]
     row_target = target[task]
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     n = 0
     for y in range(y0, y1):
-        # both tests read the row's validity before any of it is dropped
-        n_valid = _nearest_claims(disparity, valid, y, row_best, row_target)
-        b = _first_valid_from(disparity, valid, y, start)
-        b_minus_1 = b - _F32_ONE
-        d_row = disparity[y]
-        v_row = valid[y]
-        o_row = out[y]
-        c_row = occluded[y]
-        # the loop chosen by the row's share of holes: selects or branches, whichever is
-        # faster for that share (measured on the pipeline's inputs of every data set)
-        if 8 * (w - n_valid) > w:
-            # many holes: selects (a branch on validity is mispredicted); every pixel has a
-            # right column, so reading row_best there is safe
-            for u in range(w):
-                d32 = d_row[u]
-                keep = v_row[u]
-                claimed = np.float64(d32) < row_best[row_target[u]] - tolerance
-                occ = keep & (claimed | ((u < b) & (d32 < b_minus_1)))
-                c_row[u] = occ
-                keep = keep & (not occ)
-                v_row[u] = keep
-                o_row[u] = d32 if keep else _F32_INF
-                n += occ
-        else:
-            # few holes: branches (predicted; the vectorised loop above gathers row_best,
-            # slower here)
-            for u in range(w):
-                d32 = d_row[u]
-                keep = v_row[u]
-                occ = keep and (np.float64(d32) < row_best[row_target[u]] - tolerance
-                                or (u < b and d32 < b_minus_1))
-                c_row[u] = occ
-                keep = keep and not occ
-                v_row[u] = keep
-                o_row[u] = d32 if keep else _F32_INF
-                n += occ
+        n += _drop_occluded_row(disparity, valid, tolerance, start, y, row_best, row_target, out, occluded)
     counts[task] = n
 
 
