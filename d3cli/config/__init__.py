@@ -33,6 +33,7 @@ from .load import bundled_configs, config_from_dict, load_config, resolve_config
 from .methods import INSTALL_ELAS, INSTALL_PANDORA, METHOD_SPECS, METHODS, NOT_READ_BY_MAP, MethodSpec, method_spec
 from .sections import (
     BACKENDS,
+    INSTALL_GIS,
     OUTPUT_CHOICES,
     OUTPUT_GROUPS,
     output_groups,
@@ -66,6 +67,7 @@ from .yamlfile import (
 __all__ = [
     "BACKENDS",
     "INSTALL_ELAS",
+    "INSTALL_GIS",
     "INSTALL_PANDORA",
     "OUTPUT_CHOICES",
     "OUTPUT_GROUPS",

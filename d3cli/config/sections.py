@@ -453,6 +453,11 @@ class CameraConfig:
         lambda v: v > 0, "a number > 0 (metres)")
 
 
+#: The command that installs the optional GIS libraries (pyproj, shapely): the GPS track of
+#: ``synth --drive`` and the survey map of ``run --track`` need them.
+INSTALL_GIS = 'pip install "d3stereo[gis]"'
+
+
 @dataclass(frozen=True)
 class RoadConfig:
     """Road inspection outputs (``--road-report``): height above the road plane, defects."""

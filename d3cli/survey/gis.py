@@ -9,10 +9,8 @@ from __future__ import annotations
 import functools
 import importlib.util
 
+from ..config import INSTALL_GIS as INSTALL
 from ..errors import InputError, where_what_fix
-
-#: The command that installs the map's libraries.
-INSTALL = 'pip install "d3stereo[gis]"'
 
 
 def have_gis() -> bool:

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...config import INSTALL_GIS
 from ...errors import InputError, OutputError, where_what_fix
 from ..formats import atomic_write
 from .dataset import (_check_memory, _check_size, _claim_folder, _dress_scene, _grid_steps, _out_of_memory,
@@ -123,7 +124,7 @@ def _geod():
         from pyproj import Geod
     except ImportError as exc:
         raise InputError(where_what_fix("synth --drive", "the GPS track needs pyproj, which is not installed",
-                                        'install it with pip install "d3stereo[gis]"')) from exc
+                                        f"install it with {INSTALL_GIS}")) from exc
     return Geod(ellps="WGS84")
 
 
