@@ -12,7 +12,8 @@
 #
 # Steps, each under its own timeout, each logged to LOGDIR/<step>.log, none stopping the rest:
 #   info       d3stereo info (the CUDA probe launches a test kernel)
-#   tests      the CUDA tests on the GPU (pytest -m cuda tests/kernels)
+#   tests      the CUDA tests on the GPU (pytest -m cuda tests/kernels, and a batch's run.json
+#              device record: tests/batch/test_device_record.py)
 #   profile    launches, copies and their bytes, per-kernel time, host time per step: road
 #              (road.yaml) and KITTI (kitti.yaml)
 #   bench-cuda scripts/bench_speed.py --backend cuda on its four cases (beside OpenCV SGBM)
@@ -57,7 +58,8 @@ $py -m d3cli run --backend cpu -o /tmp/d3-warm-cpu -q >"$logs/warm-cpu.log" 2>&1
 warm=$!
 # (the launch budget counts under the simulator in child processes: the same figures on any
 # machine, minutes of CPU; the profile step below counts on the GPU)
-run tests 240 $py -m pytest -q -m cuda tests/kernels -p no:cacheprovider --ignore=tests/kernels/test_cuda_budget.py
+run tests 240 $py -m pytest -q -m cuda tests/kernels tests/batch/test_device_record.py -p no:cacheprovider \
+    --ignore=tests/kernels/test_cuda_budget.py
 tail -n 3 "$logs/tests.log" | tee -a "$summary"
 wait "$warm"
 
@@ -104,7 +106,7 @@ for out in ("/tmp/d3-batch-cuda", "/tmp/d3-batch-cuda-serial", "/tmp/d3-batch-cp
     if path.is_file():
         run = json.loads(path.read_text())
         print(f"{out}: {run['execution']}, compile_s {run['compile_s']}, {run['n_computed']} computed, "
-              f"{run['n_failed']} failed")
+              f"{run['n_failed']} failed, device {run.get('device')}")
 PY
 $py - <<'PY' | tee -a "$summary"
 import json

@@ -64,7 +64,7 @@ class BatchResult:
 
 def write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, started,
                    config_source, interrupted, n_total=None, stopped_at=None, stop_reason=None,
-                   execution=None, compile_s=None, shard=None) -> None:
+                   execution=None, compile_s=None, shard=None, device=None) -> None:
     """Write ``batch.run_json``: versions, settings, counts and one record per pair.
 
     ``records`` are the run.json records of the pairs done so far (``status`` ok, skipped
@@ -96,6 +96,9 @@ def write_run_json(batch: BatchResult, records, *, cfg, method, max_disparity, s
         # Seconds spent compiling numba kernels up front; not part of any pair's wall time.
         "compile_s": compile_s,
         "execution": execution or {"mode": "serial", "workers": 1},
+        # A CUDA batch in this process: kernel time over wall time, launches and copies per
+        # pair (d3cli.batch.device); null otherwise.
+        "device": device,
         "shard": list(shard) if shard else None,
         "pairs": records,
         "failed": failed,

@@ -47,6 +47,7 @@ from ..road.outputs import DEFECTS_CSV, write_defects_csv
 from ..survey import survey_map
 from . import resources
 from .scoring import evaluate_pair, failed_row, pair_row, progress_bar, progress_done, progress_start
+from .device import device_activity
 from .executors import make_executor, select_shard
 from .extras import write_extras
 from .fingerprint import feature_files, package_versions, pair_fingerprint, settings_fingerprint
@@ -476,16 +477,23 @@ def _locked_batch(pairs: list, out: Path, *, cfg, method, evaluate, overwrite, m
                 meta["compile_s"] = round(executor.warm(cfg, method), 3) if pairs else 0.0
             bar = progress_bar(None, progress, method)
             bar.reset(total=len(pairs))
-            try:
-                for _pair, (row, record) in executor.imap(task, pairs):
-                    batch.rows.append(row)
-                    records.append(record)
-                    progress_start(bar, _pair)  # the bar names the pair last finished
-                    # Without a terminal: one line per pair, saying "skipped" as run.json does.
-                    progress_done(bar, {**row, "status": record["status"]})
-                    bar.update()
-            finally:
-                bar.close()
+            # A CUDA batch in this process: launches, copies and kernel time for run.json's
+            # ``device`` (how busy the GPU was); None otherwise.
+            with device_activity(cfg, method, meta["execution"]) as device:
+                try:
+                    for _pair, (row, record) in executor.imap(task, pairs):
+                        batch.rows.append(row)
+                        records.append(record)
+                        if device is not None:
+                            device.pair_done()
+                        progress_start(bar, _pair)  # the bar names the pair last finished
+                        # Without a terminal: one line per pair, saying "skipped" as run.json does.
+                        progress_done(bar, {**row, "status": record["status"]})
+                        bar.update()
+                finally:
+                    bar.close()
+                    if device is not None:
+                        meta["device"] = device.record()
     except KeyboardInterrupt as exc:
         for _pair, (row, record) in executor.drain():  # pool workers finish the pair they hold
             batch.rows.append(row)

@@ -34,8 +34,13 @@ step's time splits into time inside them and host time outside them
 
 ``timing=True`` synchronises the device around every launch and records its wall time per
 kernel name (meaningful on a GPU only; it serialises the stream, so a timed run is slower
-than an untimed one).  The hooks are installed on entry and removed on exit; counting
-blocks do not nest.
+than an untimed one).  ``device_time=True`` times the kernels without stopping the host: a
+pair of CUDA events is recorded on the stream around every launch, and
+:meth:`CudaCalls.collect_kernel_seconds` (called where the device is idle anyway, after a
+pair's download) adds their elapsed times to :attr:`CudaCalls.kernel_seconds`: the time the
+device spent in kernels, which a batch divides by its wall time (run.json's ``device``).
+The simulator records no time (its events are empty): ``kernel_seconds`` stays None there.
+The hooks are installed on entry and removed on exit; counting blocks do not nest.
 """
 
 from __future__ import annotations
@@ -78,6 +83,27 @@ class CudaCalls:
     #: Kernel name -> seconds (``timing=True`` only), each launch synchronised.
     seconds: defaultdict = field(default_factory=lambda: defaultdict(float))
     timing: bool = False
+    #: Record a pair of CUDA events around every launch (on a GPU; ``device_time=True``).
+    device_time: bool = False
+    #: Seconds the device spent in kernels, summed by :meth:`collect_kernel_seconds`; None
+    #: until a GPU's events were collected (always None in the simulator).
+    kernel_seconds: float | None = None
+    #: The (start, end) events of the launches not collected yet.
+    events: list = field(default_factory=list)
+
+    def collect_kernel_seconds(self) -> float:
+        """Add the elapsed time between each recorded pair of events to
+        :attr:`kernel_seconds` and forget them; returns the seconds added.  Waits for the
+        last event, so call it where the host waits for the device anyway (after a
+        download).  Launches on one stream do not overlap, so the sum is the device's time
+        in kernels."""
+        events, self.events = self.events, []
+        if not events:
+            return 0.0
+        events[-1][1].synchronize()
+        added = sum(start.elapsed_time(end) for start, end in events) / 1000.0  # ms -> s
+        self.kernel_seconds = (self.kernel_seconds or 0.0) + added
+        return added
 
     def seconds_in_calls(self, start: float = float("-inf"), end: float = float("inf")) -> float:
         """Wall seconds spent inside launches and copies between ``start`` and ``end``
@@ -196,6 +222,17 @@ def _hooks(simulator: bool):
                 _record_span(start)
                 return result
             _record_launch(_kernel_name(kernel), None)
+            timers = [c for c in _active if c.device_time]
+            if timers:
+                from numba import cuda
+
+                start, end = cuda.event(), cuda.event()
+                start.record()
+                result = _spanned(original, *a, **k)
+                end.record()
+                for calls in timers:
+                    calls.events.append((start, end))
+                return result
             return _spanned(original, *a, **k)
 
         return wrapped
@@ -277,7 +314,7 @@ def _hooks(simulator: bool):
 
 
 @contextlib.contextmanager
-def count_cuda_calls(*, timing: bool = False):
+def count_cuda_calls(*, timing: bool = False, device_time: bool = False):
     """Count the CUDA launches and copies made inside the block.
 
     Parameters
@@ -285,6 +322,9 @@ def count_cuda_calls(*, timing: bool = False):
     timing : bool
         Synchronise around every launch and add its wall time to
         :attr:`CudaCalls.seconds` (on a GPU; ignored in the simulator).
+    device_time : bool
+        Record CUDA events around every launch, without synchronising, for
+        :meth:`CudaCalls.collect_kernel_seconds` (on a GPU; ignored in the simulator).
 
     Yields
     ------
@@ -293,7 +333,7 @@ def count_cuda_calls(*, timing: bool = False):
     """
     from numba import config as numba_config
 
-    calls = CudaCalls(timing=timing)
+    calls = CudaCalls(timing=timing, device_time=device_time)
     with _lock:
         if _active:
             raise RuntimeError("count_cuda_calls blocks do not nest")
