@@ -123,18 +123,19 @@ def test_outputs_come_back_in_one_copy(gpu, monkeypatch, shape):
     read_before = gpu.count_decided(gpu.to_device(maps[0]))
     int(read_before)  # its pool is read: counts taken later come from a new pool
     counts = [gpu.count_decided(gpu.to_device(m)) for m in maps]
-    from d3cli.kernels import device_counts
+    from d3cli.kernels.device_counts import CountPool, DeviceCount
 
-    device_counts._local.pool = device_counts.CountPool(4)  # a second unread pool
-    counts.append(gpu.count_decided(gpu.to_device(maps[2])))
-    assert counts[0].pool is not counts[-1].pool
+    extra = CountPool(4)  # a second unread pool, of 4 slots
+    extra.array.copy_to_device(np.array([11, 12, 13, 14], np.int64))
+    extra.take()
+    counts.append(DeviceCount(extra, extra.take()))
     d_disp, d_valid = gpu.to_device(disp), gpu.to_device(valid)
     spy = TransferSpy(gpu, monkeypatch)
     got_disp, got_valid, values = gpu.outputs_to_host(d_disp, d_valid, [read_before, 5, *counts])
     assert spy.downloads == [-(-5 * disp.size // 8) * 8 + 8 * (POOL_SLOTS + 4)]
     want = [int((m >= 0).sum()) for m in maps]
-    assert values == [want[0], 5, *want, want[2]]
-    assert counts_to_host(counts) == [*want, want[2]] and len(spy.downloads) == 1  # read: no copy
+    assert values == [want[0], 5, *want, 12]
+    assert counts_to_host(counts) == [*want, 12] and len(spy.downloads) == 1  # read: no copy
     np.testing.assert_array_equal(got_disp, disp)
     np.testing.assert_array_equal(got_valid, valid)
     assert got_disp.dtype == np.float32 and got_valid.dtype == np.bool_ and got_disp.flags.writeable
