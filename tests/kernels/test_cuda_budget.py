@@ -240,7 +240,7 @@ def test_budget_of_the_road_config_at_160x96():
     height=96, variant="sun", flat=True, noise=False, supersample=1)``, its range 23 as its
     dataset folder names it, three levels: :data:`LARGE_ROAD`): the same launch and copy
     budgets as the 64x32 pair, the byte budgets scaled to the image.  One compute takes
-    about 8 minutes under the simulator, so the test is marked ``slow`` and left out of the
+    6.5-8 minutes under the simulator, so the test is marked ``slow`` and left out of the
     suite's simulator child
     (``tests/kernels/test_cuda_simulator.py`` runs ``-m "cuda and not slow"``); run it with
     ``NUMBA_ENABLE_CUDASIM=1 python -m pytest -q -s -m "cuda and slow" tests/kernels/test_cuda_budget.py``."""
