@@ -16,7 +16,8 @@ step's per-pixel functions), ``volume.py`` (banded volume layout), ``compile_cac
 ``cache_location.py`` (where the cache lives, the first-run compile notice; standard
 library only), ``intrinsics.py`` (LLVM intrinsics), ``cpu_common.py`` / ``cuda_launch.py``
 (each target's compiled ops and launch helpers), ``device_counts.py`` (counts left on the
-device), ``pool.py`` (task pool), ``allocator.py`` (malloc settings, applied on import
+device), ``device_outputs.py`` (the finished map, its validity and the counts in one
+download), ``pool.py`` (task pool), ``allocator.py`` (malloc settings, applied on import
 below), ``cuda_probe.py`` (the CUDA smoke test) and ``cuda_calls.py`` (launch and copy
 counter).
 May import: ``errors`` only, numba, numpy and llvmlite (``tests/test_architecture.py``).

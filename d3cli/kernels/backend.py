@@ -310,6 +310,38 @@ class Backend(Protocol):
         """
         ...
 
+    def outputs_to_host(self, disparity, valid, counts=()) -> tuple:
+        """The finished map, its validity and counts on the host.
+
+        Parameters
+        ----------
+        disparity : ndarray, float32, (H, W)
+        valid : ndarray, bool, (H, W)
+            Backend arrays.
+        counts : sequence
+            Counts as :meth:`counts_to_host` takes them.
+
+        Returns
+        -------
+        disparity, valid : ndarray
+            Host arrays: the CPU returns the arrays themselves; CUDA packs both with the
+            counts' pools into one device buffer and downloads it in one copy (the arrays
+            are views of it, and the pools are read: :meth:`counts_to_host` of any of their
+            counts makes no copy).
+        values : list of int
+            ``counts`` as ints.
+        """
+        ...
+
+    def small_ints_to_host(self, disparity, max_value) -> Any:
+        """An integer map with values in ``[-1, max_value]`` on the host, the same values.
+
+        The CPU returns the array itself; CUDA downloads it as int8 (``max_value`` up to
+        127) or int16 (up to 32767), a quarter or half of the int32 bytes (the road fit's
+        coarse map).
+        """
+        ...
+
     def pt_warp(self, right, a0, b1, b2, delta) -> Any:
         """Right image warped by the road model (docs/design.md, step 6): ``R'(x, v) = R(x - s(x, v), v)``.
 

@@ -31,9 +31,9 @@ from .volume import dense_index
 __all__ = [
     "band_indexes", "bilateral_filter", "cosine_cost_volume", "count_decided", "count_range_ends", "counts_to_host",
     "decided_mask", "decisive_seeds", "dense_index", "diffuse", "drop_occluded", "fill_rows", "inherit",
-    "invalidate_out_of_view", "median_of_holes", "merge_sparse", "min_cost", "ncc_cost_volume", "pt_restore",
-    "pt_validity", "pt_warp", "pyramid", "rbf_filter", "rbf_weights", "sgm_smooth", "subpixel", "to_device",
-    "to_host",
+    "invalidate_out_of_view", "median_of_holes", "merge_sparse", "min_cost", "ncc_cost_volume", "outputs_to_host",
+    "pt_restore", "pt_validity", "pt_warp", "pyramid", "rbf_filter", "rbf_weights", "sgm_smooth",
+    "small_ints_to_host", "subpixel", "to_device", "to_host",
 ]
 
 
@@ -50,6 +50,16 @@ def to_host(array):
 def counts_to_host(values):
     """Plain ints of counts (the CPU's counts are ints already)."""
     return [int(v) for v in values]
+
+
+def outputs_to_host(disparity, valid, counts=()):
+    """The finished map, its validity (the arrays themselves) and plain ints of counts."""
+    return np.asarray(disparity), np.asarray(valid), counts_to_host(counts)
+
+
+def small_ints_to_host(disparity, max_value):
+    """The integer map itself (the CPU's memory is the host's)."""
+    return np.asarray(disparity)
 
 
 def count_decided(disparity) -> int:

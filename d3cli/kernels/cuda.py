@@ -12,7 +12,9 @@ its own bytes: :func:`pyramid` converts and halves it on the device) and downloa
 result once; :func:`to_host` brings any array back.  The band indexes of the finer levels
 are built on the device from the coarser map (:func:`band_indexes`), the full-range index
 too (:func:`dense_index`).  Counts (decided pixels, diffusion sweeps, band cells) stay on
-the device until :func:`counts_to_host` reads them all at once.
+the device until :func:`counts_to_host` reads them all at once, or
+:func:`outputs_to_host` packs them with the finished map and its validity into one
+download.
 
 Exactness: the drivers evaluate the same expressions in the same order as the CPU
 drivers (float64 window sums, float32 filter accumulation, Jacobi diffusion over the
@@ -35,6 +37,7 @@ from .decisive.cuda_diffusion import diffuse, min_cost
 from .decisive.cuda_inheritance import inherit
 from .decisive.cuda_seeds import decided_mask, decisive_seeds, merge_sparse
 from .device_counts import count_decided, counts_to_host
+from .device_outputs import outputs_to_host, small_ints_to_host
 from .finishing.cuda import drop_occluded, fill_rows, median_of_holes
 from .perspective.cuda import count_range_ends, pt_restore, pt_validity, pt_warp
 from .pyramid.cuda import pyramid
@@ -63,6 +66,7 @@ __all__ = [
     "merge_sparse",
     "min_cost",
     "ncc_cost_volume",
+    "outputs_to_host",
     "pt_restore",
     "pt_validity",
     "pt_warp",
@@ -70,6 +74,7 @@ __all__ = [
     "rbf_filter",
     "rbf_weights",
     "sgm_smooth",
+    "small_ints_to_host",
     "subpixel",
     "to_device",
     "to_host",

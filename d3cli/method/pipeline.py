@@ -139,6 +139,11 @@ def _as_0_255(img) -> np.ndarray:
 _COUNT_KEYS = ("seeds", "inherited", "decided", "sweeps", "band_cells")
 
 
+def _count_keys(per_level: list[dict]) -> list[tuple[dict, str]]:
+    """``(stats, key)`` of every count of the levels' statistics."""
+    return [(stats, key) for stats in per_level for key in _COUNT_KEYS if key in stats]
+
+
 @dataclass
 class _Match:
     """What :meth:`D3Stereo._match` leaves for the next step (backend arrays)."""
@@ -452,7 +457,7 @@ class D3Stereo:
         while the levels run, so that no level waits for a copy to the host; they are read
         here together (``backend.counts_to_host``: one copy).
         """
-        keys = [(stats, key) for stats in per_level for key in _COUNT_KEYS if key in stats]
+        keys = _count_keys(per_level)
         values = self.backend.counts_to_host([s[k] for s, k in keys] + list(extra))
         for (stats, key), value in zip(keys, values):
             stats[key] = value
@@ -572,7 +577,9 @@ class D3Stereo:
         levels = len(pyr_l)
         t0 = time.perf_counter()
         coarse = self._match(pyr_l, pyr_r, dmax, {}, stop_level=levels - 1, read_counts=False)
-        coarse_map = backend.to_host(coarse.disparity)  # small: 1/4^(k-1) of the image
+        # small: 1/4^(k-1) of the image, downloaded as int8 where the level's range allows
+        # (the same values, a quarter of the bytes)
+        coarse_map = backend.small_ints_to_host(coarse.disparity, level_max_disparity(dmax, levels - 1))
         del coarse
         t1 = time.perf_counter()
         model = fit_road_model(
@@ -666,9 +673,9 @@ class D3Stereo:
         """:meth:`_finish` of a sub-pixel map on a device: the road model's validity, the
         occlusion check (``backend.drop_occluded``) and, where no host step comes between
         them, the row-wise filling and its median (``backend.fill_rows``,
-        ``backend.median_of_holes``) run on the device; then one download of the map and
-        of the validity, and one of every count (the levels', the road model's, the
-        occluded pixels) together.  The occlusion check stays on the host where the
+        ``backend.median_of_holes``) run on the device; then one download of the map, the
+        validity and every count (the levels', the road model's, the occluded pixels)
+        together (``backend.outputs_to_host``).  The occlusion check stays on the host where the
         filling inside surfaces needs its map there (``refine.fill_inside``)."""
         cfg = self.cfg
         backend = self.backend
@@ -690,12 +697,13 @@ class D3Stereo:
             sub, use = backend.fill_rows(sub, valid)
             if cfg.refine.smooth_filled and min(sub.shape) >= 5:
                 sub = backend.median_of_holes(sub, use)
-        out = backend.to_host(sub)
-        valid = backend.to_host(valid)
-        if match.counts_read:
-            values = backend.counts_to_host(pending)
-        else:
-            values = self._read_counts(match.per_level, pending)
+        # one download of whatever map and validity the device steps above leave, with
+        # every count not read yet (the levels' too): on CUDA one copy of one packed buffer
+        unread = [] if match.counts_read else [s[k] for s, k in _count_keys(match.per_level)]
+        out, valid, values = backend.outputs_to_host(sub, valid, pending + unread)
+        values = values[:len(pending)]
+        if not match.counts_read:
+            self._read_counts(match.per_level)  # read with the outputs: no copy
             match.counts_read = True
         if road is not None:
             info["pt"].update(restored_shares(values[:3], valid.size))

@@ -109,6 +109,54 @@ def test_a_level_stays_on_the_device(gpu, monkeypatch):
     assert np.isfinite(gpu.to_host(sub)).sum() == n_decided
 
 
+@pytest.mark.parametrize("shape", [(H, W), (3, 2)])  # (3, 2): fewer pixels than a pool has slots
+def test_outputs_come_back_in_one_copy(gpu, monkeypatch, shape):
+    """The map, the validity and every unread pool of counts in one download, the values
+    equal to separate downloads; counts of a pool read before are taken as they are."""
+    from d3cli.kernels.device_counts import counts_to_host
+
+    rng = np.random.default_rng(7)
+    disp = rng.uniform(0, 9, shape).astype(np.float32)
+    disp[rng.random(shape) < 0.3] = np.inf
+    valid = np.isfinite(disp)
+    maps = [sparse_map(rng, shape, 5, share=share) for share in (0.2, 0.5, 0.8)]
+    read_before = gpu.count_decided(gpu.to_device(maps[0]))
+    int(read_before)  # its pool is read: counts taken later come from a new pool
+    counts = [gpu.count_decided(gpu.to_device(m)) for m in maps]
+    from d3cli.kernels.device_counts import CountPool, DeviceCount
+
+    extra = CountPool(4)  # a second unread pool, of 4 slots
+    extra.array.copy_to_device(np.array([11, 12, 13, 14], np.int64))
+    extra.take()
+    counts.append(DeviceCount(extra, extra.take()))
+    d_disp, d_valid = gpu.to_device(disp), gpu.to_device(valid)
+    spy = TransferSpy(gpu, monkeypatch)
+    got_disp, got_valid, values = gpu.outputs_to_host(d_disp, d_valid, [read_before, 5, *counts])
+    assert spy.downloads == [-(-5 * disp.size // 8) * 8 + 8 * (POOL_SLOTS + 4)]
+    want = [int((m >= 0).sum()) for m in maps]
+    assert values == [want[0], 5, *want, 12]
+    assert counts_to_host(counts) == [*want, 12] and len(spy.downloads) == 1  # read: no copy
+    np.testing.assert_array_equal(got_disp, disp)
+    np.testing.assert_array_equal(got_valid, valid)
+    assert got_disp.dtype == np.float32 and got_valid.dtype == np.bool_ and got_disp.flags.writeable
+    on_cpu = cpu.outputs_to_host(disp, valid, [3])
+    assert on_cpu[0] is disp and on_cpu[1] is valid and on_cpu[2] == [3]
+
+
+@pytest.mark.parametrize("max_value", [40, 300, 40000])
+def test_small_ints_come_back_narrow(gpu, monkeypatch, max_value):
+    """An integer map downloaded as int8, int16 or int32 by its range: the same values."""
+    rng = np.random.default_rng(8)
+    disp = rng.integers(-1, max_value + 1, (H, W)).astype(np.int32)
+    d_disp = gpu.to_device(disp)
+    spy = TransferSpy(gpu, monkeypatch)
+    got = gpu.small_ints_to_host(d_disp, max_value)
+    np.testing.assert_array_equal(got, disp)
+    assert spy.downloads == [disp.size]
+    assert got.itemsize == {40: 1, 300: 2, 40000: 4}[max_value]
+    assert cpu.small_ints_to_host(disp, max_value) is disp
+
+
 def test_pipeline_on_cuda_equals_cpu(gpu, monkeypatch):
     from d3cli import D3Stereo, load_config
 
@@ -123,12 +171,12 @@ def test_pipeline_on_cuda_equals_cpu(gpu, monkeypatch):
     want, got = results["cpu"], results["cuda"]
     n_levels = len(want.levels)
     # one upload of each uint8 image (the pyramid, the indexes and the counts' slots are
-    # made on the device); downloads: the map (occlusion check, row-wise filling and its
-    # median on the device), the decided pixels, the counts once, the levels' with the
-    # occluded pixels' (the level maps only when read, below)
+    # made on the device); one download: the map (occlusion check, row-wise filling and its
+    # median on the device), the decided pixels and the counts, the levels' with the
+    # occluded pixels', packed in one byte buffer (the level maps only when read, below)
     assert left.dtype == np.uint8 and n_levels >= 2
     assert spy.uploads == [left.shape, right.shape]
-    assert spy.downloads == [left.size, left.size, POOL_SLOTS]
+    assert spy.downloads == [-(-5 * left.size // 8) * 8 + 8 * POOL_SLOTS]
     assert got.info["occluded_share"] == want.info["occluded_share"]
     assert got.info["backend"] == "cuda"
     assert len(got.levels) == len(want.levels) >= 2
