@@ -10,13 +10,12 @@ Rounding on a GPU: the CUDA build takes libdevice's rounded multiplies (``fmul_r
 the compiler cannot fuse them into FMAs, and ``cuda.fma`` where the exponential wants one
 rounding; the road plane's float64 ``a0 + b1 v + b2 u`` may be fused (its float32 rounding
 hides that but for a tie).  Under the simulator (``NUMBA_ENABLE_CUDASIM=1``) the FMA is an
-exactly rounded Python one (:func:`_fma_f32_exact`).
+exactly rounded Python one (:func:`fma_f32_exact`).
 """
 
 from __future__ import annotations
 
 import math
-import struct
 
 import numpy as np
 from numba import config, cuda
@@ -34,7 +33,7 @@ MAX_LEVELS = 257
 LEVEL_BYTES = 1 << 29
 
 
-def _fma_f32_exact(a, b, c):
+def fma_f32_exact(a, b, c):
     """``a * b + c`` of three float32 rounded once, in Python: the product is exact in
     float64, the sum's float64 rounding error (TwoSum) turns it into the round-to-odd sum,
     whose rounding to float32 is the exact sum's (53 >= 24 + 2 bits)."""
@@ -44,7 +43,7 @@ def _fma_f32_exact(a, b, c):
     if math.isfinite(s):
         bb = s - p
         e = (p - (s - bb)) + (cf - bb)
-        if e != 0.0 and not struct.unpack("<q", struct.pack("<d", s))[0] & 1:
+        if e != 0.0 and not np.float64(s).view(np.int64) & 1:  # an even last bit
             s = math.nextafter(s, math.inf if e > 0.0 else -math.inf)
     return np.float32(s)
 
@@ -52,7 +51,7 @@ def _fma_f32_exact(a, b, c):
 if config.ENABLE_CUDASIM:  # the simulator runs device functions as Python
     @cuda.jit(device=True)
     def _fma_f32(a, b, c):
-        return _fma_f32_exact(a, b, c)
+        return fma_f32_exact(a, b, c)
 
     @cuda.jit(device=True)
     def _mul(a, b):
@@ -112,7 +111,7 @@ def _plane_at(has_plane, a0, b1, b2, y, u):
 
 
 @cuda.jit(cache=True)
-def _copy_kernel(disp, non_negative, out):
+def _smooth_copy_kernel(disp, non_negative, out):
     u, y = cuda.grid(2)
     if y < disp.shape[0] and u < disp.shape[1]:
         d = disp[y, u]
@@ -120,7 +119,7 @@ def _copy_kernel(disp, non_negative, out):
 
 
 @cuda.jit(cache=True)
-def _box_residual_kernel(disp, has_plane, a0, b1, b2, resid, masked):
+def _smooth_box_residual_kernel(disp, has_plane, a0, b1, b2, resid, masked):
     u, y = cuda.grid(2)
     if y < disp.shape[0] and u < disp.shape[1]:
         r, m = _box_residual(disp[y, u], _plane_at(has_plane, a0, b1, b2, y, u), True)
@@ -129,7 +128,7 @@ def _box_residual_kernel(disp, has_plane, a0, b1, b2, resid, masked):
 
 
 @cuda.jit(cache=True)
-def _box_smooth_kernel(disp, resid, masked, radius, thr, has_plane, a0, b1, b2, non_negative, out):
+def _smooth_box_kernel(disp, resid, masked, radius, thr, has_plane, a0, b1, b2, non_negative, out):
     u, y = cuda.grid(2)
     if y < disp.shape[0] and u < disp.shape[1]:
         smoothed = _box_pixel(resid, masked, y, u, radius, thr)
@@ -137,7 +136,7 @@ def _box_smooth_kernel(disp, resid, masked, radius, thr, has_plane, a0, b1, b2, 
 
 
 @cuda.jit(cache=True)
-def _residual_kernel(disp, has_plane, a0, b1, b2, resid, use, row_lo, row_hi, row_use):
+def _smooth_residual_kernel(disp, has_plane, a0, b1, b2, resid, use, row_lo, row_hi, row_use):
     y = cuda.grid(1)
     if y < disp.shape[0]:
         lo = _F32_INF
@@ -159,7 +158,7 @@ def _residual_kernel(disp, has_plane, a0, b1, b2, resid, use, row_lo, row_hi, ro
 
 
 @cuda.jit(cache=True)
-def _range_kernel(row_lo, row_hi, row_use, sigma, params, ints, used):
+def _smooth_range_kernel(row_lo, row_hi, row_use, sigma, params, ints, used):
     # one thread: the residual's range over the rows, the level spacing and count (the
     # host driver's float64 arithmetic), the level flags cleared
     if cuda.grid(1) == 0:
@@ -183,7 +182,7 @@ def _range_kernel(row_lo, row_hi, row_use, sigma, params, ints, used):
 
 
 @cuda.jit(cache=True)
-def _levels_kernel(resid, params, ints, used, low, up):
+def _smooth_levels_kernel(resid, params, ints, used, low, up):
     u, y = cuda.grid(2)
     if y < resid.shape[0] and u < resid.shape[1] and ints[1]:
         n_levels = ints[0]
@@ -222,7 +221,7 @@ def _pad_terms(resid, use, y, p, radius, level, neg_inv2s2):
 
 
 @cuda.jit(cache=True)
-def _row_sums_kernel(resid, use, params, ints, used, j0, neg_inv2s2, radius, rows_n, rows_d):
+def _smooth_row_sums_kernel(resid, use, params, ints, used, j0, neg_inv2s2, radius, rows_n, rows_d):
     # a thread per (row, level of the launch): the row pass of cv2.boxFilter (BORDER_CONSTANT,
     # unnormalised) of the level's w r and w, as the CPU computes it: direct 3- and 5-tap sums,
     # else float64 running sums (entering minus leaving element added)
@@ -268,7 +267,7 @@ def _row_sums_kernel(resid, use, params, ints, used, j0, neg_inv2s2, radius, row
 
 
 @cuda.jit(cache=True)
-def _column_kernel(resid, params, ints, used, j0, radius, rows_n, rows_d, low, up):
+def _smooth_column_kernel(resid, params, ints, used, j0, radius, rows_n, rows_d, low, up):
     # a thread per (column, level of the launch): the float64 running column sums from the
     # top (cv2.boxFilter's column pass, the CPU's order), the estimate at each row and the
     # pixel's share where the level is its lower (upper) one
@@ -314,7 +313,7 @@ def _column_kernel(resid, params, ints, used, j0, radius, rows_n, rows_d, low, u
 
 
 @cuda.jit(cache=True)
-def _combine_kernel(disp, up, ints, has_plane, a0, b1, b2, non_negative, low):
+def _smooth_combine_kernel(disp, up, ints, has_plane, a0, b1, b2, non_negative, low):
     # the smoothed map written over low (each thread reads its own cell first)
     u, y = cuda.grid(2)
     if y < disp.shape[0] and u < disp.shape[1]:
@@ -340,15 +339,15 @@ def _gaussian(d_disp, radius, sigma, plane_args, non_negative):
     row_hi = cuda.device_array(h, np.float32)
     row_use = cuda.device_array(h, np.bool_)
     blocks, threads = grid_1d(h)
-    _residual_kernel[blocks, threads](d_disp, *plane_args, resid, use, row_lo, row_hi, row_use)
+    _smooth_residual_kernel[blocks, threads](d_disp, *plane_args, resid, use, row_lo, row_hi, row_use)
     params = cuda.device_array(2, np.float64)  # lo, step
     ints = cuda.device_array(2, np.int64)  # n_levels, whether any pixel is used
     used = cuda.device_array(MAX_LEVELS + 1, np.int32)
-    _range_kernel[1, 1](row_lo, row_hi, row_use, np.float64(sigma), params, ints, used)
+    _smooth_range_kernel[1, 1](row_lo, row_hi, row_use, np.float64(sigma), params, ints, used)
     low = cuda.device_array((h, w), np.float32)
     up = cuda.device_array((h, w), np.float32)
     blocks, threads = grid_2d(w, h)
-    _levels_kernel[blocks, threads](resid, params, ints, used, low, up)
+    _smooth_levels_kernel[blocks, threads](resid, params, ints, used, low, up)
     # Which levels and how many are on the device: each pair of launches takes the next
     # ``g`` used levels (a thread finds its level itself), a pair for every ``g`` levels
     # there may be, and the threads past the last used level return at once.
@@ -358,13 +357,13 @@ def _gaussian(d_disp, radius, sigma, plane_args, non_negative):
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
     for j0 in range(0, min(MAX_LEVELS, 2 * h * w), g):
         blocks, threads = grid_2d(h, g)
-        _row_sums_kernel[blocks, threads](resid, use, params, ints, used, np.int64(j0), neg_inv2s2,
-                                          np.int64(radius), rows_n, rows_d)
+        _smooth_row_sums_kernel[blocks, threads](resid, use, params, ints, used, np.int64(j0), neg_inv2s2,
+                                                 np.int64(radius), rows_n, rows_d)
         blocks, threads = grid_2d(w, g)
-        _column_kernel[blocks, threads](resid, params, ints, used, np.int64(j0), np.int64(radius), rows_n, rows_d,
-                                        low, up)
+        _smooth_column_kernel[blocks, threads](resid, params, ints, used, np.int64(j0), np.int64(radius), rows_n,
+                                               rows_d, low, up)
     blocks, threads = grid_2d(w, h)
-    _combine_kernel[blocks, threads](d_disp, up, ints, *plane_args, bool(non_negative), low)
+    _smooth_combine_kernel[blocks, threads](d_disp, up, ints, *plane_args, bool(non_negative), low)
     return low
 
 
@@ -388,7 +387,7 @@ def smooth_map(disparity, radius, sigma, kernel, plane, non_negative):
         out = cuda.device_array((h, w), np.float32)
         if h * w:
             blocks, threads = grid_2d(w, h)
-            _copy_kernel[blocks, threads](d_disp, bool(non_negative), out)
+            _smooth_copy_kernel[blocks, threads](d_disp, bool(non_negative), out)
         return out
     if kernel == "gaussian":
         return _gaussian(d_disp, int(radius), float(sigma), plane_args, non_negative)
@@ -396,7 +395,7 @@ def smooth_map(disparity, radius, sigma, kernel, plane, non_negative):
     masked = cuda.device_array((h, w), np.float32)
     out = cuda.device_array((h, w), np.float32)
     blocks, threads = grid_2d(w, h)
-    _box_residual_kernel[blocks, threads](d_disp, *plane_args, resid, masked)
-    _box_smooth_kernel[blocks, threads](d_disp, resid, masked, np.int64(radius), np.float32(sigma), *plane_args,
+    _smooth_box_residual_kernel[blocks, threads](d_disp, *plane_args, resid, masked)
+    _smooth_box_kernel[blocks, threads](d_disp, resid, masked, np.int64(radius), np.float32(sigma), *plane_args,
                                         bool(non_negative), out)
     return out

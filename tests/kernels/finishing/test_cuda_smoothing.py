@@ -77,14 +77,16 @@ def test_smoothing_of_maps_without_estimates_and_radius_0(gpu, smoothing, kernel
 
 
 def test_simulator_fma_rounds_once():
-    from d3cli.kernels.finishing.cuda_smoothing import _fma_f32_exact
+    from d3cli.kernels.finishing.cuda_smoothing import fma_f32_exact
 
     rng = np.random.default_rng(0)
     a, b, c = (rng.normal(0, 4, 2000).astype(np.float32) for _ in range(3))
     # float64 holds a * b exactly and a * b + c to 1 ulp: the once-rounded sum, except at ties
     want = (a.astype(np.float64) * b + c).astype(np.float32)
-    got = np.array([_fma_f32_exact(x, y, z) for x, y, z in zip(a, b, c)], np.float32)
+    got = np.array([fma_f32_exact(x, y, z) for x, y, z in zip(a, b, c)], np.float32)
     assert np.array_equal(got, want)
-    # a tie of float32 that float64's rounding makes: 1 + 2^-24 + 2^-60 rounds up, not to even
-    one = np.float32(1.0)
-    assert _fma_f32_exact(one + np.float32(2.0**-23), np.float32(1.0), np.float32(2.0**-24)) == np.float32(1.0) + np.float32(2.0**-22)
+    # (1 + 2^-12)^2 + 2^-60 = 1 + 2^-11 + 2^-24 + 2^-60: float64 drops the 2^-60 and leaves a
+    # float32 tie (rounded to even: down); once rounded it goes up
+    a, c = np.float32(1.0 + 2.0**-12), np.float32(2.0**-60)
+    assert np.float32(float(a) * float(a) + float(c)) == np.float32(1.0 + 2.0**-11)
+    assert fma_f32_exact(a, a, c) == np.float32(1.0 + 2.0**-11 + 2.0**-23)
