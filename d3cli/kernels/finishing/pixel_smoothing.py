@@ -117,9 +117,9 @@ def build(jit, numpy_expf, mul_f64):
     -------
     types.SimpleNamespace
         ``at_least_zero``; the box kernel's ``box_residual``, ``box_row_terms``,
-        ``box_pixel``, ``box_output``; the Gaussian's ``level_position``, ``level_value``,
-        ``range_weight``, ``level_estimate``, ``combine_at``, ``residual_row``,
-        ``range_params``.
+        ``box_mean``, ``box_pixel``, ``box_output``; the Gaussian's ``residual_at``,
+        ``range_params``, ``level_position``, ``level_value``, ``range_weight``,
+        ``level_estimate``, ``combine_at``.
     """
 
     @jit
