@@ -28,6 +28,9 @@ from .pixel_smoothing import build_expf
 #: The most range levels of the Gaussian smoothing (its host driver's limit plus one: levels
 #: ``0 .. floor((hi - lo) / step) + 1`` with ``step >= (hi - lo) / 255``).
 MAX_LEVELS = 257
+#: Threads per row (row sums) and per column (column sums) of the Gaussian's levels: thread
+#: ``lane`` takes the launch's levels ``lane, lane + LEVEL_LANES, ...``.
+LEVEL_LANES = 16
 #: Device bytes of the row sums of the levels filtered in one pair of launches (float64 ``w r``
 #: and ``w`` per level and pixel): a 1280x720 map takes 36 levels a pair.
 LEVEL_BYTES = 1 << 29
@@ -197,18 +200,6 @@ def _smooth_levels_kernel(resid, params, ints, used, low, up):
 
 
 @cuda.jit(device=True)
-def _used_level(used, n_levels, j):
-    """The j-th level (increasing) that some pixel interpolates from; -1 when there are fewer."""
-    c = 0
-    for k in range(n_levels):
-        if used[k]:
-            if c == j:
-                return k
-            c += 1
-    return -1
-
-
-@cuda.jit(device=True)
 def _pad_terms(resid, use, y, p, radius, level, neg_inv2s2):
     """Position p of row y's zero-padded weight rows: ``w r`` and ``w`` in float64 (the float32
     product widened), 0 outside the row."""
@@ -220,19 +211,12 @@ def _pad_terms(resid, use, y, p, radius, level, neg_inv2s2):
     return 0.0, 0.0
 
 
-@cuda.jit(cache=True)
-def _smooth_row_sums_kernel(resid, use, params, ints, used, j0, neg_inv2s2, radius, rows_n, rows_d):
-    # a thread per (row, level of the launch): the row pass of cv2.boxFilter (BORDER_CONSTANT,
-    # unnormalised) of the level's w r and w, as the CPU computes it: direct 3- and 5-tap sums,
-    # else float64 running sums (entering minus leaving element added)
-    y, g = cuda.grid(2)
-    h, w = resid.shape
-    if y >= h or g >= rows_n.shape[0] or not ints[1]:
-        return
-    k = _used_level(used, ints[0], j0 + g)
-    if k < 0:
-        return
-    level = _level_value(params[0], params[1], k)
+@cuda.jit(device=True)
+def _row_sums(resid, use, y, g, level, neg_inv2s2, radius, rows_n, rows_d):
+    """Row y of a level's row pass of cv2.boxFilter (BORDER_CONSTANT, unnormalised) of ``w r``
+    and ``w`` into slot g, as the CPU computes it: direct 3- and 5-tap sums, else float64
+    running sums (the entering minus the leaving element added)."""
+    w = resid.shape[1]
     kk = 2 * radius + 1
     if kk == 3 or kk == 5:
         for i in range(w):
@@ -267,25 +251,35 @@ def _smooth_row_sums_kernel(resid, use, params, ints, used, j0, neg_inv2s2, radi
 
 
 @cuda.jit(cache=True)
-def _smooth_column_kernel(resid, params, ints, used, j0, radius, rows_n, rows_d, low, up):
-    # a thread per (column, level of the launch): the float64 running column sums from the
-    # top (cv2.boxFilter's column pass, the CPU's order), the estimate at each row and the
-    # pixel's share where the level is its lower (upper) one
-    u, g = cuda.grid(2)
-    h, w = resid.shape
-    if u >= w or g >= rows_n.shape[0] or not ints[1]:
+def _smooth_row_sums_kernel(resid, use, params, ints, used, j0, lanes, neg_inv2s2, radius, rows_n, rows_d):
+    # a thread per (row, lane): the lane's used levels j0 + g (g = lane, lane + lanes, ...
+    # below the launch's slots), found in one scan of the level flags
+    y, lane = cuda.grid(2)
+    if y >= resid.shape[0] or lane >= lanes or not ints[1]:
         return
-    n_levels = ints[0]
-    k = _used_level(used, n_levels, j0 + g)
-    if k < 0:
-        return
+    c = 0
+    for k in range(ints[0]):
+        if used[k]:
+            g = c - j0
+            if 0 <= g < rows_n.shape[0] and g % lanes == lane:
+                _row_sums(resid, use, y, g, _level_value(params[0], params[1], k), neg_inv2s2, radius, rows_n,
+                          rows_d)
+            c += 1
+
+
+@cuda.jit(device=True)
+def _column_sums(resid, params, n_levels, k, g, u, radius, rows_n, rows_d, low, up):
+    """Column u of level k (slot g): the float64 running column sums from the top
+    (cv2.boxFilter's column pass, the CPU's order), the estimate at each row and the pixel's
+    share where the level is its lower (upper) one."""
+    h = resid.shape[0]
     lo = np.float32(params[0])
     step = np.float32(params[1])
     top = np.float32(n_levels - 2)
     top_plus_1 = np.float32(n_levels - 1)
     sn = 0.0
     sd = 0.0
-    for j in range(2 * radius):  # padded rows 0 .. k-2 (image rows -radius .. radius-1)
+    for j in range(2 * radius):  # padded rows 0 .. 2 radius - 1 (image rows -radius .. radius-1)
         y = j - radius
         if 0 <= y < h:
             sn += rows_n[g, y, u]
@@ -310,6 +304,21 @@ def _smooth_column_kernel(resid, params, ints, used, j0, radius, rows_n, rows_d,
             low[y, u] = (_F32_ONE - t) * _level_estimate(s0n, s0d, r)
         elif k0 == k - 1:
             up[y, u] = t * _level_estimate(s0n, s0d, r)
+
+
+@cuda.jit(cache=True)
+def _smooth_column_kernel(resid, params, ints, used, j0, lanes, radius, rows_n, rows_d, low, up):
+    # a thread per (column, lane), the lanes' levels as in _smooth_row_sums_kernel
+    u, lane = cuda.grid(2)
+    if u >= resid.shape[1] or lane >= lanes or not ints[1]:
+        return
+    c = 0
+    for k in range(ints[0]):
+        if used[k]:
+            g = c - j0
+            if 0 <= g < rows_n.shape[0] and g % lanes == lane:
+                _column_sums(resid, params, ints[0], k, g, u, radius, rows_n, rows_d, low, up)
+            c += 1
 
 
 @cuda.jit(cache=True)
@@ -349,19 +358,20 @@ def _gaussian(d_disp, radius, sigma, plane_args, non_negative):
     blocks, threads = grid_2d(w, h)
     _smooth_levels_kernel[blocks, threads](resid, params, ints, used, low, up)
     # Which levels and how many are on the device: each pair of launches takes the next
-    # ``g`` used levels (a thread finds its level itself), a pair for every ``g`` levels
-    # there may be, and the threads past the last used level return at once.
+    # ``g`` used levels (a thread finds its levels itself), a pair for every ``g`` levels
+    # there may be; a launch past the last used level finds none.
     g = levels_per_launch(h, w)
     rows_n = cuda.device_array((g, h, w), np.float64)
     rows_d = cuda.device_array((g, h, w), np.float64)
     neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
+    lanes = np.int64(min(int(LEVEL_LANES), g))
     for j0 in range(0, min(MAX_LEVELS, 2 * h * w), g):
-        blocks, threads = grid_2d(h, g)
-        _smooth_row_sums_kernel[blocks, threads](resid, use, params, ints, used, np.int64(j0), neg_inv2s2,
+        blocks, threads = grid_2d(h, lanes)
+        _smooth_row_sums_kernel[blocks, threads](resid, use, params, ints, used, np.int64(j0), lanes, neg_inv2s2,
                                                  np.int64(radius), rows_n, rows_d)
-        blocks, threads = grid_2d(w, g)
-        _smooth_column_kernel[blocks, threads](resid, params, ints, used, np.int64(j0), np.int64(radius), rows_n,
-                                               rows_d, low, up)
+        blocks, threads = grid_2d(w, lanes)
+        _smooth_column_kernel[blocks, threads](resid, params, ints, used, np.int64(j0), lanes, np.int64(radius),
+                                               rows_n, rows_d, low, up)
     blocks, threads = grid_2d(w, h)
     _smooth_combine_kernel[blocks, threads](d_disp, up, ints, *plane_args, bool(non_negative), low)
     return low

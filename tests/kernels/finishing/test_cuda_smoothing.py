@@ -56,12 +56,18 @@ def test_gaussian_smoothing_matches_cpu(gpu, smoothing, shape, radius):
 
 
 def test_gaussian_smoothing_with_spread_levels_in_several_launches(gpu, smoothing, monkeypatch):
-    """A wide range (the level spacing grows past sigma: 256 levels at most) filtered a few
-    levels per launch pair."""
-    disp = _map((4, 5), 3, spread=600.0)
-    monkeypatch.setattr(smoothing, "LEVEL_BYTES", 16 * 4 * 5 * 12)  # 12 levels per launch pair
-    assert smoothing.levels_per_launch(4, 5) == 12
-    _same(gpu, smoothing, disp, 2, 0.5, "gaussian", PLANE, True, "spread")
+    """A wide range (the level spacing grows past sigma: 256 levels at most) whose columns
+    hold close values (neighbours within sigma), filtered 12 levels per launch pair, 3 per
+    thread."""
+    rng = np.random.default_rng(3)
+    disp = (np.linspace(0.0, 600.0, 7)[None, :] + rng.normal(0.0, 1.0, (5, 7))).astype(np.float32)
+    disp[1, 2], disp[3, 5] = np.inf, np.nan
+    monkeypatch.setattr(smoothing, "LEVEL_BYTES", 16 * 5 * 7 * 12)  # 12 levels per launch pair
+    monkeypatch.setattr(smoothing, "LEVEL_LANES", 4)
+    assert smoothing.levels_per_launch(5, 7) == 12
+    _same(gpu, smoothing, disp, 2, 2.0, "gaussian", None, True, "spread")
+    unsmoothed = finishing.smooth_map(disp, 0, 2.0, "gaussian", None, True)
+    assert np.sum(finishing.smooth_map(disp, 2, 2.0, "gaussian", None, True) != unsmoothed) > 20
 
 
 @pytest.mark.parametrize("kernel", ["box", "gaussian"])
