@@ -381,8 +381,8 @@ def smooth_map(disparity, radius, sigma, kernel, plane, non_negative):
     """The finishing's smoothing of a map on the device (:func:`d3cli.kernels.finishing.smooth_map`
     on the CPU): ``box`` two launches, a thread per pixel; ``gaussian`` a thread per row for
     the residual, one for the range, a thread per pixel for the levels, per group of levels
-    a thread per (row, level) for the row sums and per (column, level) for the column sums
-    and shares, a thread per pixel for the blend.
+    (:func:`levels_per_launch`) :data:`LEVEL_LANES` threads per row for the row sums and as
+    many per column for the column sums and shares, a thread per pixel for the blend.
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.smooth_map`.
     """
