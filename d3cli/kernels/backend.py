@@ -439,6 +439,34 @@ class Backend(Protocol):
         """
         ...
 
+    def smooth_map(self, disparity, radius, sigma, kernel, plane, non_negative) -> Any:
+        """The finishing's edge-preserving smoothing of a finished map, every finite pixel
+        used (:func:`d3cli.method.refinement.smooth_disparity` with ``valid=None``, which says
+        what it computes; the per-pixel bodies: ``kernels/finishing/pixel_smoothing.py``).
+
+        Parameters
+        ----------
+        disparity : ndarray, float32, (H, W)
+            Non-finite = no estimate (stays as it is).
+        radius : int
+            Box radius in pixels; 0 returns a copy.
+        sigma : float
+            Range sigma (Gaussian) or threshold (box) in disparity pixels.
+        kernel : {"box", "gaussian"}
+        plane : tuple (a0, b1, b2) or None
+            The road plane ``s(u, v) = a0 + b1 v + b2 u`` (float64, rounded once to float32
+            per pixel: :func:`d3cli.kernels.finishing.shift_plane_f32` with a zero margin)
+            whose residual is smoothed; None: the disparity itself.
+        non_negative : bool
+            Negative results become 0.
+
+        Returns
+        -------
+        ndarray, float32, (H, W)
+            A new map.  CUDA computes the plane per pixel from its coefficients.
+        """
+        ...
+
     def pt_restore(self, disp, a0, b1, b2, delta) -> Any:
         """Full-range disparity from the disparity against the warped right image.
 

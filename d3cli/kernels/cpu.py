@@ -22,6 +22,7 @@ from .decisive.cpu_inheritance import inherit
 from .decisive.cpu_seeds import decided_mask, decisive_seeds, merge_sparse
 from .finishing.fill import fill_rows, median_of_holes
 from .finishing.occlusion import count_range_ends, drop_occluded, pt_validity
+from .finishing.smooth import smooth_map
 from .perspective.cpu import pt_restore, pt_warp
 from .pyramid.cpu import pyramid
 from .sgm.cpu import sgm_smooth
@@ -33,7 +34,7 @@ __all__ = [
     "decided_mask", "decisive_seeds", "dense_index", "diffuse", "drop_occluded", "fill_rows", "inherit",
     "invalidate_out_of_view", "median_of_holes", "merge_sparse", "min_cost", "ncc_cost_volume", "outputs_to_host",
     "pt_restore", "pt_validity", "pt_warp", "pyramid", "rbf_filter", "rbf_weights", "sgm_smooth",
-    "small_ints_to_host", "subpixel", "to_device", "to_host",
+    "small_ints_to_host", "smooth_map", "subpixel", "to_device", "to_host",
 ]
 
 

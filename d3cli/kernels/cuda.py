@@ -39,6 +39,7 @@ from .decisive.cuda_seeds import decided_mask, decisive_seeds, merge_sparse
 from .device_counts import count_decided, counts_to_host
 from .device_outputs import outputs_to_host, small_ints_to_host
 from .finishing.cuda import drop_occluded, fill_rows, median_of_holes
+from .finishing.cuda_smoothing import smooth_map
 from .perspective.cuda import count_range_ends, pt_restore, pt_validity, pt_warp
 from .pyramid.cuda import pyramid
 from .sgm.cuda import sgm_smooth
@@ -75,6 +76,7 @@ __all__ = [
     "rbf_weights",
     "sgm_smooth",
     "small_ints_to_host",
+    "smooth_map",
     "subpixel",
     "to_device",
     "to_host",

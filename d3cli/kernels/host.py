@@ -11,8 +11,9 @@ for every backend, and are reached through this facade only:
 - the pyramid's halving of a host image (:func:`halve_area`; the pipeline's pyramid:
   ``backend.pyramid``);
 - the finishing (occlusion tests, speckles, hole filling, smoothing: ``finishing/``; the
-  occlusion tests and the row-wise filling also on the backend, ``backend.drop_occluded``,
-  ``backend.fill_rows``, ``backend.median_of_holes``),
+  occlusion tests, the row-wise filling and the smoothing also on the backend,
+  ``backend.drop_occluded``, ``backend.fill_rows``, ``backend.median_of_holes``,
+  ``backend.smooth_map``),
   with the road model's rules over a map (:func:`shift_plane_f32`, :func:`restored_validity`,
   :func:`right_image_mask`; the rules themselves: :mod:`d3cli.kernels.road_model`);
 - the road fit's solvers (:func:`solve_weighted`, :func:`ransac_inlier_counts`,
@@ -28,9 +29,9 @@ from __future__ import annotations
 from .cost.band import band_indexes
 from .finishing import (box_smooth_disparity, clamp_negative, combine_shares, copy_nearest_rows, drop_marked,
                         drop_occluded, fill_inside, fill_rows_smaller_side, fixed_point_16, fixed_point_16_finite,
-                        keep_valid, nearest_along_columns, out_of_view_mask, range_levels, residual_and_range,
-                        restored_validity, right_image_mask, shift_plane_f32, smooth_groups,
-                        uniqueness_occluded, usable)
+                        gaussian_smooth, keep_valid, nearest_along_columns, out_of_view_mask, range_levels,
+                        residual_and_range, restored_validity, right_image_mask, shift_plane_f32, smooth_groups,
+                        uniqueness_occluded, unsmoothed, usable)
 from .perspective.cpu import pt_restore, pt_warp
 from .perspective.road_fit import irls, ransac_inlier_counts, solve_weighted
 from .pyramid import halve_area
@@ -39,8 +40,8 @@ from .volume import MAX_CELLS, Volume, dense_index
 __all__ = [
     "MAX_CELLS", "Volume", "band_indexes", "box_smooth_disparity", "clamp_negative", "combine_shares",
     "copy_nearest_rows", "dense_index", "drop_marked", "drop_occluded", "fill_inside", "fill_rows_smaller_side",
-    "fixed_point_16", "fixed_point_16_finite", "halve_area", "irls", "keep_valid", "nearest_along_columns",
+    "fixed_point_16", "fixed_point_16_finite", "gaussian_smooth", "halve_area", "irls", "keep_valid", "nearest_along_columns",
     "out_of_view_mask", "pt_restore", "pt_warp", "range_levels", "ransac_inlier_counts", "residual_and_range",
     "restored_validity", "right_image_mask", "shift_plane_f32", "smooth_groups", "solve_weighted",
-    "uniqueness_occluded", "usable",
+    "uniqueness_occluded", "unsmoothed", "usable",
 ]

@@ -623,10 +623,11 @@ class D3Stereo:
         on the backend estimates at the ends of the narrow range (the true match probably
         lies outside it: not road) and estimates whose match falls left of the right image
         become holes (``backend.pt_validity``: the map and the validity come back masked).
-        On a device backend the occlusion check and the row-wise filling with its median
-        run there too (:meth:`_finish_on_backend`); the rest of the finishing (speckles,
-        the filling inside surfaces, smoothing: ``kernels/finishing/``) runs on the host,
-        after the one download of the map and the validity.
+        On a device backend the occlusion check, the row-wise filling with its median and
+        the smoothing run there too (:meth:`_finish_on_backend`); the rest of the finishing
+        (speckles, the filling inside surfaces, and the steps after those:
+        ``kernels/finishing/``) runs on the host, after the one download of the map and the
+        validity.
         """
         cfg = self.cfg
         backend = self.backend
@@ -673,9 +674,11 @@ class D3Stereo:
         """:meth:`_finish` of a sub-pixel map on a device: the road model's validity, the
         occlusion check (``backend.drop_occluded``) and, where no host step comes between
         them, the row-wise filling and its median (``backend.fill_rows``,
-        ``backend.median_of_holes``) run on the device; then one download of the map, the
-        validity and every count (the levels', the road model's, the occluded pixels)
-        together (``backend.outputs_to_host``).  The occlusion check stays on the host where the
+        ``backend.median_of_holes``) run on the device, and so does the smoothing
+        (``backend.smooth_map``, the road plane from its coefficients) where no host step
+        comes before it; then one download of the map, the validity and every count (the
+        levels', the road model's, the occluded pixels) together
+        (``backend.outputs_to_host``).  The occlusion check stays on the host where the
         filling inside surfaces needs its map there (``refine.fill_inside``)."""
         cfg = self.cfg
         backend = self.backend
@@ -697,6 +700,14 @@ class D3Stereo:
             sub, use = backend.fill_rows(sub, valid)
             if cfg.refine.smooth_filled and min(sub.shape) >= 5:
                 sub = backend.median_of_holes(sub, use)
+        # the smoothing too, where no host step comes before it (the map is still here)
+        host_before = (cfg.refine.occlusion_check and not occlusion) or cfg.refine.speckle_size > 0 or (
+            cfg.refine.fill and not filled)
+        smoothed = cfg.refine.smooth_radius > 0 and not host_before
+        if smoothed:
+            plane = None if road is None else (road.a0, road.b1, road.b2)
+            sub = backend.smooth_map(sub, cfg.refine.smooth_radius, cfg.refine.smooth_sigma, cfg.refine.smooth_kernel,
+                                     plane, True)
         # one download of whatever map and validity the device steps above leave, with
         # every count not read yet (the levels' too): on CUDA one copy of one packed buffer
         unread = [] if match.counts_read else [s[k] for s, k in _count_keys(match.per_level)]
@@ -709,14 +720,15 @@ class D3Stereo:
             info["pt"].update(restored_shares(values[:3], valid.size))
         if occlusion:
             info["occluded_share"] = values[-1] / valid.size
-        return self._finish_on_host(out, valid, True, dmax, info, road, occlusion=not occlusion, fill=not filled)
+        return self._finish_on_host(out, valid, True, dmax, info, road, occlusion=not occlusion, fill=not filled,
+                                    smooth=not smoothed)
 
     def _finish_on_host(self, out: np.ndarray, valid: np.ndarray, owned: bool, dmax: int, info: dict,
-                        road: RoadModel | None, *, occlusion: bool = True, fill: bool = True):
+                        road: RoadModel | None, *, occlusion: bool = True, fill: bool = True, smooth: bool = True):
         """The host part of :meth:`_finish`: the occlusion check (unless ``occlusion`` is
         False: done on the backend), the speckles, the filling (unless ``fill`` is False)
-        and the smoothing of a host map and its validity (``owned``: ``out`` may be written
-        in place)."""
+        and the smoothing (unless ``smooth`` is False) of a host map and its validity
+        (``owned``: ``out`` may be written in place)."""
         cfg = self.cfg
         occluded = None
         if occlusion and cfg.refine.occlusion_check:
@@ -732,7 +744,7 @@ class D3Stereo:
             out = fill_holes(
                 out, valid, smooth=cfg.refine.smooth_filled, occluded=occluded if cfg.refine.fill_inside else None
             )
-        if cfg.refine.smooth_radius > 0:
+        if smooth and cfg.refine.smooth_radius > 0:
             # edge-preserving smoothing of the finished map; the range weight compares
             # residuals from the road plane when there is one (a slanted road is no edge)
             plane = None if road is None else host.shift_plane_f32(road.a0, road.b1, road.b2, 0.0, out.shape)

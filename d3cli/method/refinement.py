@@ -253,17 +253,6 @@ def fill_holes(
     return filled
 
 
-def _unsmoothed(disp: np.ndarray, non_negative: bool) -> np.ndarray:
-    """A copy of the map, its negative values 0 with ``non_negative``."""
-    out = disp.copy()
-    return host.clamp_negative(out) if non_negative else out
-
-
-# The piecewise-linear bilateral filter needs one pair of box filters per range level;
-# beyond this many levels the level spacing grows instead (wide-range maps without a plane).
-_MAX_RANGE_LEVELS = 256
-
-
 def smooth_disparity(
     disparity: np.ndarray,
     valid: np.ndarray | None,
@@ -325,7 +314,7 @@ def smooth_disparity(
     disp = _as_map(disparity)
     valid = None if valid is None else _like(valid, disp, bool)
     if radius <= 0 or disp.size == 0:
-        return _unsmoothed(disp, non_negative)
+        return host.unsmoothed(disp, non_negative)
     if kernel == "box":
         # the residual with its masked copy, then the sums with the plane added back: two
         # passes (see box_smooth_disparity); no plane is a zero plane, still subtracted and
@@ -335,28 +324,4 @@ def smooth_disparity(
     base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
     if kernel != "gaussian":
         raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
-    return _gaussian_smoothing(disp, valid, base, int(radius), float(sigma), non_negative)
-
-
-def _gaussian_smoothing(disp: np.ndarray, valid: np.ndarray | None, base: np.ndarray, radius: int, sigma: float,
-                        non_negative: bool) -> np.ndarray:
-    """:func:`smooth_disparity` with the Gaussian range kernel, radius > 0: the residual and
-    its range, the levels, their box-filtered groups and the blend of each pixel's shares."""
-    resid, use, row_lo, row_hi, row_use = host.residual_and_range(disp, base, valid)
-    if not row_use.any():
-        return _unsmoothed(disp, non_negative)
-    lo, hi = float(row_lo.min()), float(row_hi.max())
-    step = max(float(sigma), (hi - lo) / (_MAX_RANGE_LEVELS - 1))
-    n_levels = int(np.floor((hi - lo) / step)) + 2
-    # the shares of each pixel's lower and upper level: every cell is written, by
-    # range_levels (0 where the residual is NaN) or by smooth_groups
-    low = np.empty(disp.shape, np.float32)
-    up = np.empty(disp.shape, np.float32)
-    # NumPy float32 arithmetic with Python floats: the scalars act as float32
-    used, row_lower = host.range_levels(resid, np.float32(lo), np.float32(step), n_levels, low, up)
-    neg_inv2s2 = np.float32(-(0.5 / float(sigma) ** 2))
-    levels = np.flatnonzero(used)  # levels no pixel interpolates from are skipped
-    values = np.array([lo + int(k) * step for k in levels], np.float64).astype(np.float32)
-    host.smooth_groups(resid, use, np.float32(lo), np.float32(step), n_levels, levels, values, row_lower,
-                            neg_inv2s2, int(radius), low, up)
-    return host.combine_shares(low, up, base, disp, non_negative)
+    return host.gaussian_smooth(disp, valid, base, int(radius), float(sigma), non_negative)

@@ -9,10 +9,10 @@ under the CUDA simulator in child processes (the simulator must be on before num
 imported) with :func:`d3cli.kernels.cuda_calls.count_cuda_calls`, for the bundled configs
 on a 64x32 uint8 pair (``scripts/profile_cuda.py --cases tiny`` prints the same figures)
 and, marked ``slow``, for the road config on a 160x96 synthetic road, while every CPU
-kernel of the matching steps raises, and so do those of the occlusion check and of the
-row-wise filling where the config runs them on the device: the CUDA run computes on the
-device only (the road fit and the rest of the finishing run on the host by design,
-``docs/gpu.md``).
+kernel of the matching steps raises, and so do those of the occlusion check, of the
+row-wise filling and of the smoothing where the config runs them on the device: the CUDA
+run computes on the device only (the road fit and the rest of the finishing run on the
+host by design, ``docs/gpu.md``).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ _COUNT = textwrap.dedent(
     from d3cli.kernels.sgm import cpu as s1
     from d3cli.kernels.subpixel import cpu as u1
     from d3cli.kernels import cpu_common
-    from d3cli.kernels.finishing import fill as f1, occlusion as f2
+    from d3cli.kernels.finishing import fill as f1, occlusion as f2, range_box as f3, smoothing as f4
     from d3cli.method import pyramid as method_pyramid
 
     # the simulator runs every thread of a block as a Python thread: small blocks and one lane
@@ -82,6 +82,11 @@ _COUNT = textwrap.dedent(
                  host: ("uniqueness_occluded", "out_of_view_mask", "drop_occluded")}
     FILL = {f1: ("_usable_task", "_fill_rows_task", "copy_nearest_rows", "_keep_valid_task", "_median_holes_task"),
             host: ("usable", "fill_rows_smaller_side", "copy_nearest_rows", "keep_valid")}
+    SMOOTH = {f3: ("_masked_task", "_residual_task", "_smooth_task"),
+              f4: ("_residual_task", "_range_levels_task", "_smooth_group_task", "_combine_task", "_plane_task",
+                   "_clamp_task"),
+              host: ("box_smooth_disparity", "gaussian_smooth", "unsmoothed", "shift_plane_f32", "residual_and_range",
+                     "range_levels", "smooth_groups", "combine_shares", "clamp_negative")}
 
     def forbid(table):
         saved = []
@@ -115,7 +120,11 @@ _COUNT = textwrap.dedent(
         fill_inside = refine.fill and refine.fill_inside  # needs the occluded pixels on the host
         on_device = {"occlusion": refine.occlusion_check and not fill_inside,
                      "fill": refine.fill and not fill_inside and refine.speckle_size <= 0}
+        # the smoothing follows on the device where no host step comes before it
+        on_device["smooth"] = refine.smooth_radius > 0 and refine.speckle_size <= 0 and (
+            on_device["occlusion"] or not refine.occlusion_check) and (on_device["fill"] or not refine.fill)
         saved = (forbid(OCCLUSION) if on_device["occlusion"] else []) + (forbid(FILL) if on_device["fill"] else [])
+        saved += forbid(SMOOTH) if on_device["smooth"] else []
         t0 = time.perf_counter()
         with count_cuda_calls() as calls:
             result = stereo.compute(left, right, max_disparity=dmax)
@@ -199,13 +208,24 @@ def _check(row: dict, size=(W, H)) -> None:
     assert row["level0"] == [w, h]
     # the map, the validity and the counts packed into one buffer: one launch
     assert row["by_kernel"]["_pack_kernel"] == 1
-    expected = {"default": (True, True), "paper": (False, True), "road": (True, True), "kitti": (False, False)}
-    assert (row["on_device"]["occlusion"], row["on_device"]["fill"]) == expected[row["config"]]
+    expected = {"default": (True, True, True), "paper": (False, True, False), "road": (True, True, True),
+                "kitti": (False, False, False)}
+    on_device = row["on_device"]
+    assert (on_device["occlusion"], on_device["fill"], on_device["smooth"]) == expected[row["config"]]
     if row["on_device"]["occlusion"]:
         assert row["by_kernel"]["_drop_occluded_kernel"] == 1
     if row["on_device"]["fill"]:
         assert row["by_kernel"]["_fill_rows_kernel"] == row["by_kernel"]["_copy_rows_kernel"] == 1
         assert row["by_kernel"]["_median_holes_kernel"] == 1
+    smooth_launches = {k: v for k, v in row["by_kernel"].items() if k.startswith("_smooth_")}
+    if row["config"] == "default":  # the box range kernel: the residual, the sums
+        assert smooth_launches == {"_smooth_box_residual_kernel": 1, "_smooth_box_kernel": 1}
+    elif row["config"] == "road":  # the Gaussian: residual, range, levels, one pair for every level, the blend
+        assert smooth_launches == {"_smooth_residual_kernel": 1, "_smooth_range_kernel": 1,
+                                   "_smooth_levels_kernel": 1, "_smooth_row_sums_kernel": 1,
+                                   "_smooth_column_kernel": 1, "_smooth_combine_kernel": 1}
+    else:
+        assert smooth_launches == {}
     if row["config"] == "road":  # the road model held: the narrow match, restored on the device
         assert row["pt"]["road_like"] and not row["pt"].get("fallback") and row["valid_share"] > 0.5
     elif row["config"] == "paper":  # seeds at the coarsest level only: none on this small pair (so on the CPU)

@@ -2,11 +2,12 @@
 
 The CPU kernels serve the CPU pipeline and the host part of the CUDA pipeline
 (``D3Stereo._finish`` says which steps run on the device); ``d3cli.method.refinement``
-calls them; its docstrings say what each step means.  The row-wise steps that also run on
-the device have their row bodies written once, in a factory taking the ``jit`` decorator
-(``pixel_occlusion.py``), compiled with ``numba.njit`` for the CPU tasks here and with
-``numba.cuda.jit(device=True)`` for the one-thread-per-row kernels of ``cuda.py`` (not
-imported by this package: the CUDA backend's facade does).  By concern:
+calls them; its docstrings say what each step means.  The steps that also run on the
+device have their row or pixel bodies written once, in a factory taking the ``jit``
+decorator (``pixel_occlusion.py``, ``pixel_fill.py``, ``pixel_smoothing.py``), compiled
+with ``numba.njit`` for the CPU tasks here and with ``numba.cuda.jit(device=True)`` for the
+kernels of ``cuda.py`` and ``cuda_smoothing.py`` (not imported by this package: the CUDA
+backend's facade does).  By concern:
 
 - ``occlusion.py``: the uniqueness and left-border tests, fused with the masking, and the
   road model's rules over a map (:mod:`d3cli.kernels.road_model`): the validity after the
@@ -17,7 +18,9 @@ imported by this package: the CUDA backend's facade does).  By concern:
 - ``exp.py``: NumPy's float32 ``exp``, bit for bit, for the range weights;
 - ``smoothing.py``: the Gaussian range smoothing (piecewise-linear bilateral filter), the
   road plane map (the road model's shift) and the clamp of negative values;
-- ``range_box.py``: the box range-kernel smoothing.
+- ``range_box.py``: the box range-kernel smoothing;
+- ``smooth.py``: the Gaussian smoothing's driver and the backends' smoothing of a finished
+  map (``smooth_map``: the road plane from its coefficients, either range kernel).
 
 Every kernel gives exactly the values of a NumPy/OpenCV formulation of the same step (the
 reference in ``tests/reference/finishing.py``): the same float32/float64
@@ -29,7 +32,8 @@ re-exports the public kernels of its modules: ``finishing.fill_inside(...)`` and
 
 May import: ``d3cli.kernels.pool``, ``d3cli.kernels.road_model`` (the road model's per-pixel
 rules), ``d3cli.kernels.compile_cache`` (the numba cache folder, chosen on import),
-``d3cli.kernels.cuda_launch`` and ``d3cli.kernels.device_counts`` (``cuda.py`` only), numba,
+``d3cli.kernels.cuda_launch`` and ``d3cli.kernels.device_counts`` (``cuda.py`` and
+``cuda_smoothing.py`` only), numba,
 numpy and llvmlite; no other kernel step.
 """
 
@@ -40,13 +44,14 @@ from __future__ import annotations
 # modules read that setting, so it must run first (a package's __init__ runs before any of
 # its modules).
 from .. import compile_cache as _compile_cache  # noqa: F401,E402  (import for its side effect)
-from . import exp, fill, occlusion, range_box, smoothing, speckle  # noqa: E402
+from . import exp, fill, occlusion, range_box, smooth, smoothing, speckle  # noqa: E402
 from .exp import numpy_exp, numpy_expf  # noqa: E402
 from .fill import (copy_nearest_rows, fill_inside, fill_rows_smaller_side, keep_valid,  # noqa: E402
                    nearest_along_columns, usable)
 from .occlusion import (drop_occluded, out_of_view_mask, restored_validity, right_image_mask,  # noqa: E402
                         uniqueness_occluded)
 from .range_box import box_range_smooth, box_smooth_disparity  # noqa: E402
+from .smooth import gaussian_smooth, smooth_map, unsmoothed  # noqa: E402
 from .smoothing import (at_least_zero, clamp_negative, combine_shares, range_levels,  # noqa: E402
                         residual_and_range, shift_plane_f32, smooth_groups)
 from .speckle import drop_marked, fixed_point_16, fixed_point_16_finite  # noqa: E402
@@ -58,7 +63,8 @@ KERNELS = occlusion.KERNELS + speckle.KERNELS + fill.KERNELS + exp.KERNELS + smo
 __all__ = [
     "KERNELS", "at_least_zero", "box_range_smooth", "box_smooth_disparity", "clamp_negative", "combine_shares",
     "copy_nearest_rows", "drop_marked", "drop_occluded", "exp", "fill", "fill_inside", "fill_rows_smaller_side",
-    "fixed_point_16", "fixed_point_16_finite", "keep_valid", "nearest_along_columns", "numpy_exp", "numpy_expf",
+    "fixed_point_16", "fixed_point_16_finite", "gaussian_smooth", "keep_valid", "nearest_along_columns", "numpy_exp", "numpy_expf",
     "occlusion", "out_of_view_mask", "range_box", "range_levels", "residual_and_range", "restored_validity",
-    "right_image_mask", "shift_plane_f32", "smooth_groups", "smoothing", "speckle", "uniqueness_occluded", "usable",
+    "right_image_mask", "shift_plane_f32", "smooth", "smooth_groups", "smooth_map", "smoothing", "speckle",
+    "uniqueness_occluded", "unsmoothed", "usable",
 ]

@@ -19,11 +19,17 @@ import numpy as np
 from numba import njit
 
 from ..pool import row_tasks, run_tasks
-from .smoothing import at_least_zero
+from .smoothing import _bodies
+
+# the per-pixel bodies, written once for the CPU and CUDA (pixel_smoothing.py), as globals
+# numba can type
+_box_residual = _bodies.box_residual
+_box_row_terms = _bodies.box_row_terms
+_box_mean = _bodies.box_mean
+_box_output = _bodies.box_output
 
 _F32_ZERO = np.float32(0.0)
 _F32_ONE = np.float32(1.0)
-_F32_INF = np.float32(np.inf)
 _F32_NAN = np.float32(np.nan)
 
 
@@ -44,14 +50,8 @@ def _residual_task(task, tasks, disp, base, valid, resid, masked):
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for v in range(y0, y1):
         for u in range(w):
-            d = disp[v, u]
-            if np.isfinite(d):
-                r = d - (base[v, u] if has_base else _F32_ZERO)
-                resid[v, u] = r
-                masked[v, u] = r if (all_valid or valid[v, u]) else _F32_NAN
-            else:
-                resid[v, u] = _F32_INF
-                masked[v, u] = _F32_NAN
+            resid[v, u], masked[v, u] = _box_residual(disp[v, u], base[v, u] if has_base else _F32_ZERO,
+                                                      all_valid or valid[v, u])
 
 
 @njit(cache=True, nogil=True)
@@ -110,20 +110,12 @@ def _smooth_task(task, tasks, resid, masked, radius, threshold, base, disp, non_
                 g += 1
             for j in range(w - n):  # the border columns
                 u = j if j < lo_in else hi_in + (j - lo_in)
-                r = centre[u]
-                for dx in range(max(-radius, -u), min(radius, w - 1 - u) + 1):
-                    q = row[u + dx]
-                    inside = abs(q - r) <= thr
-                    total[u] += q if inside else _F32_ZERO
-                    count[u] += _F32_ONE if inside else _F32_ZERO
+                total[u], count[u] = _box_row_terms(masked, y, u, centre[u], radius, thr, total[u], count[u])
         for u in range(w):
-            rp = centre[u]
-            smoothed = rp if (not np.isfinite(rp) or count[u] == _F32_ZERO) else total[u] / count[u]
+            smoothed = _box_mean(centre[u], total[u], count[u])
             if combine:
-                d = disp[v, u]
                 # the residual's sum back (+ 0 without a plane: -0 becomes +0 as in NumPy)
-                x = smoothed + (base[v, u] if has_base else _F32_ZERO) if np.isfinite(d) else d
-                out[v, u] = at_least_zero(x) if non_negative else x
+                out[v, u] = _box_output(smoothed, disp[v, u], base[v, u] if has_base else _F32_ZERO, non_negative)
             else:
                 out[v, u] = smoothed
 

@@ -21,10 +21,30 @@ from numba import njit
 from ..pool import row_tasks, run_tasks, threads
 from ..road_model import host as _road_model
 from .exp import numpy_expf
+from .pixel_smoothing import build as build_bodies
 
 _F32_ONE = np.float32(1.0)
 _F32_ZERO = np.float32(0.0)
 _F32_INF = np.float32(np.inf)
+
+
+@njit(cache=True, inline="always")
+def _mul_f64(a, b):
+    """``a * b`` (the CPU compiler fuses no multiply into an add: a plain product)."""
+    return a * b
+
+
+# the per-pixel bodies, written once for the CPU and CUDA (pixel_smoothing.py), as globals
+# numba can type; inlined into the tasks' loops (which vectorise over them)
+_bodies = build_bodies(njit(cache=True, inline="always", error_model="numpy"), numpy_expf, _mul_f64)
+_residual_at = _bodies.residual_at
+_level_position = _bodies.level_position
+_range_weight = _bodies.range_weight
+_level_estimate = _bodies.level_estimate
+_combine_at = _bodies.combine_at
+#: ``x``, or 0 where ``x < 0`` (NaN and -0 stay): the finished map's disparities are >= 0
+#: (:func:`clamp_negative`, and the smoothing passes that clamp as they write).
+at_least_zero = _bodies.at_least_zero
 
 
 @njit(cache=True, nogil=True)
@@ -38,16 +58,15 @@ def _residual_task(task, tasks, disp, base, valid, resid, use, row_lo, row_hi, r
         any_use = False
         for u in range(w):
             d = disp[y, u]
+            r = _residual_at(d, base[y, u])
+            resid[y, u] = r
             if np.isfinite(d):
-                r = d - base[y, u]
-                resid[y, u] = r
                 lo = min(lo, r)
                 hi = max(hi, r)
                 ok = all_valid or valid[y, u]
                 use[y, u] = ok
                 any_use |= ok
             else:
-                resid[y, u] = _F32_ZERO
                 use[y, u] = False
         row_lo[y] = lo
         row_hi[y] = hi
@@ -84,19 +103,6 @@ def residual_and_range(disp, base, valid):
         valid = np.empty((0, 0), np.bool_)
     run_tasks(_residual_task, row_tasks(h), disp, base, valid, resid, use, row_lo, row_hi, row_use)
     return resid, use, row_lo, row_hi, row_use
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _level_position(r, lo, step, top, top_plus_1):
-    """Lower range level ``k = clip(floor((r - lo) / step), 0, top).astype(int32)`` of a
-    residual (float32 arithmetic; NaN casts to INT32_MIN) and its interpolation weight
-    ``t = pos - k`` (float64 difference rounded to float32, as NumPy promotes it).  Selects
-    only (the cast of a clamped value), so that loops over it vectorise."""
-    pos = (r - lo) / step
-    inside = pos if pos < top_plus_1 else top
-    k = np.int32(inside if pos >= _F32_ZERO else _F32_ZERO)
-    k = k if pos == pos else np.int32(-2147483648)
-    return k, np.float32(np.float64(pos) - np.float64(k))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -175,10 +181,8 @@ def _level_weights(resid, use, y, level, neg_inv2s2, radius, pad_n, pad_d, tmp):
     u_row = use[y]
     w = r_row.shape[0]
     for u in range(w):
-        a = r_row[u] - level
-        x = neg_inv2s2 * (a * a)
-        # -inf where not used (exp gives +0), NaN stays NaN: the reference's use * exp(x)
-        tmp[u] = numpy_expf(x if (u_row[u] or x != x) else -_F32_INF)
+        # +0 where not used, NaN stays NaN: the reference's use * exp(x)
+        tmp[u] = _range_weight(r_row[u], u_row[u], level, neg_inv2s2)
     dst_n = pad_n[radius:radius + w]
     dst_d = pad_d[radius:radius + w]
     for u in range(w):
@@ -312,17 +316,13 @@ def _slide_and_share(sum_n, sum_d, pn, pd, mn, md, r_row, level, k_row, t_row, t
     """:func:`_slide_sums` on a row that interpolates from the level: its estimate
     ``num / den`` (the residual where ``den <= 1e-6``) from the sums before the leaving
     row is taken off, and its shares where it is the pixel's lower (upper) level."""
-    eps = np.float32(1e-6)
     w = sum_n.shape[0]
     for u in range(w):
         s0n = sum_n[u] + pn[u]
         s0d = sum_d[u] + pd[u]
         sum_n[u] = s0n - mn[u]
         sum_d[u] = s0d - md[u]
-        num = np.float32(s0n)
-        den = np.float32(s0d)
-        # the reference's np.maximum(den, 1e-6) is den where it is used
-        tmp[u] = num / den if den > eps else r_row[u]
+        tmp[u] = _level_estimate(s0n, s0d, r_row[u])
     # the shares where this level is the pixel's lower (upper) one: conditional
     # stores (a select that wrote the old value back elsewhere would race with the
     # task of the pixel's other level)
@@ -497,11 +497,9 @@ def _combine_task(task, tasks, low, up, base, disp, non_negative):
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
         for u in range(w):
-            d = disp[y, u]
-            x = ((_F32_ZERO + low[y, u]) + up[y, u]) + base[y, u] if np.isfinite(d) else d
             # written over low through low itself: with a separate output argument that is
             # low, the vectorised loop's runtime overlap check fails and the scalar loop runs
-            low[y, u] = at_least_zero(x) if non_negative else x
+            low[y, u] = _combine_at(low[y, u], up[y, u], base[y, u], disp[y, u], non_negative)
 
 
 def combine_shares(low, up, base, disp, non_negative=False):
@@ -532,13 +530,6 @@ def shift_plane_f32(a0, b1, b2, margin, shape):
     out = np.empty((h, w), np.float32)
     run_tasks(_plane_task, row_tasks(h), float(a0), float(b1), float(b2), float(margin), out)
     return out
-
-
-@njit(cache=True, inline="always")
-def at_least_zero(x):
-    """``x``, or 0 where ``x < 0`` (NaN and -0 stay): the finished map's disparities are
-    >= 0 (:func:`clamp_negative`, and the smoothing passes that clamp as they write)."""
-    return _F32_ZERO if x < _F32_ZERO else x
 
 
 @njit(cache=True, nogil=True)

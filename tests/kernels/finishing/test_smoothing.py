@@ -186,3 +186,21 @@ def test_shift_plane_and_clamp_match_the_numpy_formulation():
         want = np.where(a < 0, np.float32(0.0), a)
     assert_same_bytes(finishing.clamp_negative(a.copy()), want)
 
+
+
+@pytest.mark.parametrize("kernel", ["gaussian", "box"])
+def test_smooth_map_is_the_pipelines_host_smoothing(kernel):
+    """The backends' ``smooth_map`` on the CPU: the bytes of ``smooth_disparity`` with every
+    finite pixel, the road plane from ``shift_plane_f32`` (zero margin) and the clamp, as
+    ``D3Stereo._finish_on_host`` calls it; radius 0 a clamped copy."""
+    rng = np.random.default_rng(5)
+    disp, _ = random_map(rng, (23, 31), spread=8)
+    disp = (disp - 1.0).astype(np.float32)
+    coeffs = (2.4318944124307853, 0.0023954565662561485, 0.03496307423530236)
+    for plane in (None, coeffs):
+        p = None if plane is None else finishing.shift_plane_f32(*plane, 0.0, disp.shape)
+        for radius in (0, 3):
+            want = smooth_disparity(disp, None, radius=radius, sigma=1.5, plane=p, kernel=kernel, non_negative=True)
+            assert_same_bytes(finishing.smooth_map(disp, radius, 1.5, kernel, plane, True), want, f"{plane} {radius}")
+    with pytest.raises(ValueError, match="gaussian or box"):
+        finishing.smooth_map(disp, 3, 1.5, "median", None, True)
