@@ -208,11 +208,25 @@ def h_maxima(image: np.ndarray, h: float) -> np.ndarray:
     return ((image - rec) >= h).astype(np.uint8)
 
 
+_HALF_WIDTHS: dict = {}  # (shape, kernel bytes) -> symmetric_half_widths: a few kernels, used per region
+
+
 def symmetric_half_widths(kernel: np.ndarray) -> np.ndarray | None:
     """Half-width of each row of a structuring element whose rows are runs centred on its
     centre column (an ellipse, a rectangle, a cross), -1 for an empty row; None for any
-    other kernel (even sides, a row that is not one centred run)."""
+    other kernel (even sides, a row that is not one centred run).  Remembered per kernel:
+    the report dilates every region by the same few discs."""
     k = np.asarray(kernel) != 0
+    key = (k.shape, np.packbits(k).tobytes())
+    if key not in _HALF_WIDTHS:
+        if len(_HALF_WIDTHS) > 256:
+            _HALF_WIDTHS.clear()
+        _HALF_WIDTHS[key] = _half_widths(k)
+    return _HALF_WIDTHS[key]
+
+
+def _half_widths(k: np.ndarray) -> np.ndarray | None:
+    """:func:`symmetric_half_widths` of a bool kernel, computed."""
     if k.shape[0] % 2 == 0 or k.shape[1] % 2 == 0:
         return None
     centre = k.shape[1] // 2
@@ -340,3 +354,115 @@ def back_project(disparity, valid, f, baseline, cx, cy, doffs):  # pragma: no co
                 out[i, 2] = z
                 i += 1
     return out
+
+
+@njit(cache=True, nogil=True)
+def _value_range(values):  # pragma: no cover - compiled
+    lo = hi = float(values[0])
+    for i in range(values.size):
+        x = float(values[i])
+        lo = min(lo, x)
+        hi = max(hi, x)
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def _bucket_counts(values, lo, scale, nb):  # pragma: no cover - compiled
+    counts = np.zeros(nb, np.int64)
+    for i in range(values.size):
+        counts[min(int((float(values[i]) - lo) * scale), nb - 1)] += 1
+    return counts
+
+
+@njit(cache=True, nogil=True)
+def _bucket_values(values, lo, scale, nb, b0, b1, m):  # pragma: no cover - compiled
+    buf = np.empty(m, values.dtype)
+    j = 0
+    for i in range(values.size):
+        b = min(int((float(values[i]) - lo) * scale), nb - 1)
+        if b >= b0 and b <= b1:
+            buf[j] = values[i]
+            j += 1
+    return buf
+
+
+def _ranks(values: np.ndarray, k0: int, k1: int):
+    """The ``k0``-th and ``k1``-th smallest (0-based, ``k0 <= k1 < n``) of a 1-D array
+    without NaN.  A histogram of the values (4096 buckets between the least and the
+    greatest, the bucket a monotone function of the value) finds the buckets that hold the
+    two ranks, and only those buckets' values are sorted: two passes over the array
+    instead of a selection that moves it."""
+    nb = 4096
+    lo, hi = _value_range(values)
+    scale = (nb - 1) / (hi - lo) if hi > lo else 0.0
+    if values.size <= 4 * nb or not np.isfinite(scale) or scale == 0.0:
+        s = np.sort(values)
+        return s[k0], s[k1]
+    counts = _bucket_counts(values, lo, scale, nb)
+    cum = np.cumsum(counts)
+    b0, b1 = int(np.searchsorted(cum, k0, side="right")), int(np.searchsorted(cum, k1, side="right"))
+    start = int(cum[b0 - 1]) if b0 else 0
+    buf = np.sort(_bucket_values(values, lo, scale, nb, b0, b1, int(cum[b1]) - start))
+    return buf[k0 - start], buf[k1 - start]
+
+
+def median(values: np.ndarray):
+    """``np.median(values)`` of a 1-D float array without NaN, the same number (the middle
+    value, or the mean of the two middle values in the array's type), found by
+    :func:`_ranks` instead of a partition of a copy: the report takes medians of every
+    height of a 720p map (a million values) several times a map."""
+    values = np.ascontiguousarray(values).ravel()
+    if values.size <= 16384:  # numpy's partition is as quick there
+        return np.median(values)
+    n = values.size
+    a, b = _ranks(values, (n - 1) // 2, n // 2)
+    # numpy's own mean of the two middle values: the same rounding in the same type
+    return np.median(np.array([a, b], values.dtype))
+
+
+@njit(cache=True, nogil=True)
+def window_medians(depth, vs, us, r):  # pragma: no cover - compiled
+    """``np.nanmedian`` of ``depth`` over the ``2 r + 1`` square window (cut at the image)
+    around each pixel (``vs[i]``, ``us[i]``), the values that are not finite left out; NaN
+    where the window holds none.  float64 (N,)."""
+    h, w = depth.shape
+    out = np.empty(vs.size, np.float64)
+    buf = np.empty((2 * r + 1) * (2 * r + 1), depth.dtype)  # the mean of two middle values in their type
+    for i in range(vs.size):
+        m = 0
+        for y in range(max(vs[i] - r, 0), min(vs[i] + r + 1, h)):
+            for x in range(max(us[i] - r, 0), min(us[i] + r + 1, w)):
+                d = depth[y, x]
+                if np.isfinite(d):
+                    buf[m] = d
+                    m += 1
+        if m == 0:
+            out[i] = np.nan
+            continue
+        s = np.sort(buf[:m])
+        out[i] = s[m // 2] if m % 2 else (s[m // 2 - 1] + s[m // 2]) / 2
+    return out
+
+
+@njit(cache=True, nogil=True)
+def height_colours(height, range_mm, out):  # pragma: no cover - compiled
+    """The colours of :func:`d3cli.road.outputs.height_colour` written into ``out`` (uint8
+    (H, W, 3), the picture's left part): blue below the plane, white on it, red above,
+    saturated at +-``range_mm`` mm; 96 grey where the height is not finite.  The NumPy
+    ramp's float32 arithmetic (a float32 map times Python numbers stays float32), per pixel."""
+    h, w = height.shape
+    scale, span = np.float32(1e3), np.float32(range_mm)
+    one, full = np.float32(1.0), np.float32(255.0)
+    for v in range(h):
+        for u in range(w):
+            x = np.float32(height[v, u])
+            if not np.isfinite(x):
+                out[v, u, 0] = out[v, u, 1] = out[v, u, 2] = 96
+                continue
+            t = min(max((x * scale) / span, -one), one)
+            r = one + t if t < 0 else one
+            b = one - t if t > 0 else one
+            g = one - abs(t)
+            out[v, u, 0] = np.uint8(r * full)
+            out[v, u, 1] = np.uint8(g * full)
+            out[v, u, 2] = np.uint8(b * full)

@@ -43,6 +43,7 @@ from ..config import RoadConfig
 from .confidence import ConfidenceRules, deep_at_border, depressions, flags_of, spikiness
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
+from .compiled import median
 from .morphology import dilate_near, fill_holes
 from .splitting import smoothed_depth, split_parts
 
@@ -88,7 +89,7 @@ def _median_filled(height: np.ndarray, size: int) -> np.ndarray:
     finite = np.isfinite(height)
     if not finite.any():
         return height.copy()
-    fill = float(np.median(height[finite]))
+    fill = float(median(height[finite]))
     med = cv2.medianBlur(np.where(finite, height, fill).astype(np.float32), size)
     return np.where(finite, med, np.inf).astype(np.float32)
 
@@ -274,7 +275,7 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     sigma_d = disparity_noise(smooth, camera, plane, depth=depth)
     # Saddle depth that splits a region: half the threshold, but not less than the height
     # noise at the median distance (noisy floors would otherwise split into pieces).
-    z_med = float(np.median(depth[finite])) if finite.any() else 0.0
+    z_med = float(median(depth[finite])) if finite.any() else 0.0
     split_noise = tuning.noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
     return _Scene(height=height, decided=decided, camera=camera, plane=plane, road=road, tuning=tuning,
                   finite=finite, smooth=smooth, footprint=footprint, v_all=v_all, u_all=u_all,
@@ -493,7 +494,7 @@ def _local_sigma_h(s: _Scene, comp: np.ndarray, sigma_h: float) -> float:
     annulus = dilate_near(comp, s.kernel_local) & ~dilate_near(comp, s.kernel_ring) & s.finite
     if annulus.sum() >= 50:
         local = s.height[annulus]
-        sigma_h = max(sigma_h, float(1.4826 * np.median(np.abs(local - np.median(local)))))
+        sigma_h = max(sigma_h, float(1.4826 * median(np.abs(local - median(local)))))
     return sigma_h
 
 
@@ -510,7 +511,7 @@ def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane, *, dep
         return 0.0
     z = (_depth_grid(height, camera, plane) if depth is None else depth)[finite]
     resid = height[finite] * camera.f * camera.baseline / (plane.offset * np.maximum(z, 1e-6))
-    return float(1.4826 * np.median(np.abs(resid - np.median(resid))))
+    return float(1.4826 * median(np.abs(resid - median(resid))))
 
 
 def outline(mask: np.ndarray, *, tolerance_px: float = 1.0, offset: tuple = (0, 0)) -> tuple:

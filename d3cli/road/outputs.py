@@ -13,9 +13,12 @@ import csv
 import io as _io
 import json
 import logging
+import os
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import cv2
+import numba
 import numpy as np
 
 from ..data.formats import atomic_write, write_image, write_pfm
@@ -26,7 +29,7 @@ from .defects import find_defects, with_flags
 from .morphology import dilate_near
 from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
-from .compiled import back_project
+from .compiled import back_project, height_colours
 from .pointcloud import Camera
 from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, rematch
 from .severity import pothole_severity, survey_summary
@@ -55,8 +58,6 @@ def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
     The colour saturates at +-``range_mm``; a labelled colour bar is appended on the right.
     """
     h, w = height.shape
-    finite = np.isfinite(height)
-    t = np.clip(np.where(finite, height * 1e3, 0.0) / range_mm, -1.0, 1.0)
 
     def ramp(x):  # x in [-1, 1] -> RGB float: blue - white - red
         r = np.where(x < 0, 1 + x, 1.0)
@@ -64,8 +65,14 @@ def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
         g = 1 - np.abs(x)
         return np.stack([r, g, b], axis=-1)
 
-    img = (ramp(t) * 255).astype(np.uint8)
-    img[~finite] = 96
+    if height.dtype == np.float32:  # the maps of height_map: the same ramp, compiled
+        img = np.empty((h, w, 3), np.uint8)
+        height_colours(height, float(range_mm), img)
+    else:
+        finite = np.isfinite(height)
+        t = np.clip(np.where(finite, height * 1e3, 0.0) / range_mm, -1.0, 1.0)
+        img = (ramp(t) * 255).astype(np.uint8)
+        img[~finite] = 96
     ticks = [(0.5 - v / (2 * range_mm), f"{v:+g} mm" if v else "0 mm") for v in (range_mm, range_mm / 2, 0.0,
                                                                               -range_mm / 2, -range_mm)]
     bar = vertical_colour_bar(h, (ramp(np.linspace(1.0, -1.0, 256)) * 255).astype(np.uint8), ticks,
@@ -125,6 +132,29 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     if plane is None:
         return [], ["no road report: too few points for a road plane"]
     height = height_map(disparity, finite, camera, plane)
+    groups = frozenset(("height", "pictures")) if groups is None else groups
+
+    def write_height(values):
+        if "height" in groups:
+            write_pfm(pair_dir / HEIGHT_FILE, values)
+        if "pictures" in groups:
+            write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(values, range_mm=road_cfg.colour_range_mm))
+
+    # The height files are written on a second thread while the defects are measured: the
+    # stored map's heights at once (the final ones unless a re-match changes them, then
+    # written again).
+    writing = _in_background(write_height, height) if groups & {"height", "pictures"} else None
+    try:
+        return _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, groups, finite, plane,
+                       height, write_height, writing, warnings)
+    finally:
+        if writing is not None:
+            writing.result()
+
+
+def _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, groups, finite, plane, height,
+            write_height, writing, warnings):
+    """The rest of :func:`road_report` once the plane and the stored map's heights are known."""
     pt = (info or {}).get("pt")
     fallback = bool(pt and pt.get("fallback"))
     decided_share = float(decided.mean()) if decided.size else 0.0
@@ -139,6 +169,9 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
         if right is not None and regions:
             height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
+            if writing is not None:
+                writing.result()  # the stored map's files: written again with these heights
+                writing.replace(write_height, height)
             stored = list(zip(defects, regions))
             defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
             defects = [with_flags(d, road_cfg, rematch_change=_rematch_change(d, r, stored))
@@ -147,11 +180,6 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
             defects = [with_flags(d, road_cfg, map_decided_share=round(decided_share, 3)) for d in defects]
     # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
-    groups = frozenset(("height", "pictures")) if groups is None else groups
-    if "height" in groups:
-        write_pfm(pair_dir / HEIGHT_FILE, height)
-    if "pictures" in groups:
-        write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
     items = [{**d.to_dict(), "reasons": describe(d.flags) if d.flags else "",
               **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})} for d in defects]
     _write_json(pair_dir / DEFECTS_JSON, {
@@ -172,6 +200,46 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     else:
         log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
     return items, warnings
+
+
+class _Job:
+    """A call running on the report's helper thread (:func:`_in_background`), or done
+    already where there is none; :meth:`result` waits for it and raises its exception."""
+
+    def __init__(self, func, *args):
+        self.replace(func, *args)
+
+    def replace(self, func, *args):
+        """Start ``func(*args)`` (the previous call must be finished)."""
+        pool = _helper()
+        self._future = pool.submit(func, *args) if pool is not None else None
+        if pool is None:
+            func(*args)
+
+    def result(self):
+        if self._future is not None:
+            future, self._future = self._future, None
+            future.result()
+
+
+_HELPER: tuple = (0, None)  # (process id, ThreadPoolExecutor) of the helper thread
+
+
+def _helper():
+    """The report's helper thread (an executor of one), or None with one thread
+    (numba's thread count, ``--threads``: the stereo's threads, idle while the report runs)."""
+    global _HELPER
+    if numba.get_num_threads() < 2:
+        return None
+    if _HELPER[0] != os.getpid():  # a forked worker inherits the object but not its thread
+        _HELPER = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="d3stereo-road"))
+    return _HELPER[1]
+
+
+def _in_background(func, *args) -> _Job:
+    """``func(*args)`` on the helper thread (OpenCV's encoders and the compiled loops release
+    the interpreter lock), or here and now without one."""
+    return _Job(func, *args)
 
 
 def _rematch_change(defect, region: np.ndarray, stored: list) -> float:
