@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import io as _io
+import itertools
 import json
 import logging
 import os
@@ -31,7 +32,7 @@ from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
 from .compiled import back_project, height_colours
 from .pointcloud import Camera
-from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, rematch
+from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, _grey, rematch
 from .severity import pothole_severity, survey_summary
 
 log = logging.getLogger(__name__)
@@ -236,6 +237,30 @@ def _helper():
     return _HELPER[1]
 
 
+def _map_on_threads(func, items) -> list:
+    """``[func(x) for x in items]``, the items taken in turn by this thread and the helper
+    thread (:func:`_helper`); the results in the items' order."""
+    items = list(items)
+    pool = _helper()
+    if pool is None or len(items) < 2:
+        return [func(x) for x in items]
+    results = [None] * len(items)
+    counter = itertools.count()  # next() of a count is atomic (one C call under the interpreter lock)
+
+    def take():
+        for i in counter:
+            if i >= len(items):
+                return
+            results[i] = func(items[i])
+
+    future = pool.submit(take)
+    try:
+        take()
+    finally:
+        future.result()
+    return results
+
+
 def _in_background(func, *args) -> _Job:
     """``func(*args)`` on the helper thread (OpenCV's encoders and the compiled loops release
     the interpreter lock), or here and now without one."""
@@ -269,26 +294,33 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     ``NOISE_M`` on the outer ring (:func:`_highpass_noise`); a defect no window measures
     that cleanly keeps the stored map."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
-    out = disparity.copy()
-    grey = {}  # the grey images, made once for every region
-    for region in regions:
+    grey = (_grey(left), _grey(right))  # the grey images, made once for every region
+
+    def zone_disparity(region):
+        """(zone, its re-matched disparity, or None where no window matches it cleanly)."""
         inner = dilate_near(region, ring)
         zone = dilate_near(inner, ring) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
-        shared = {"pad_window": max(WINDOWS), **grey}  # the warps, made once for the zone
+        shared = {"pad_window": max(WINDOWS), "grey": grey}  # the warps, made once for the zone
         for window in WINDOWS:
             new, got = rematch(left, right, disparity, zone, window=window, shared=shared)
-            grey = {"grey": shared["grey"]} if "grey" in shared else grey
             if got[zone].mean() < MIN_RELIABLE:
                 continue
             # Heights only in a window around the band that holds the smoothing's support.
             crop = _around(band, int(np.ceil(4 * window)) + 2)
             if _highpass_noise(height_map(new[crop], finite[crop], camera, plane, origin=(crop[0].start, crop[1].start)),
                                (band & got)[crop], window) <= NOISE_M:
-                out[zone] = new[zone]
-                break
-        # else: no window matches the defect cleanly (a dark, noisy pair): the stored,
-        # smoothed map is the better measurement there.
+                return zone, new[zone]
+        # no window matches the defect cleanly (a dark, noisy pair): the stored, smoothed
+        # map is the better measurement there.
+        return zone, None
+
+    out = disparity.copy()
+    # The regions are matched on both threads (each reads the stored map only) and their
+    # zones written in the regions' order, as one after the other would.
+    for zone, values in _map_on_threads(zone_disparity, regions):
+        if values is not None:
+            out[zone] = values
     return height_map(out, finite, camera, plane)
 
 
