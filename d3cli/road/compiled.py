@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def weighted_scatter(points, normal, offset, min_tolerance, depth_factor, limit):  # pragma: no cover - compiled
     """Tukey-biweight IRLS round of the plane fit: weights ``(1 - (r / limit)^2)^2`` of the
     residuals ``r = (n . P + c) / t`` (0 beyond ``limit``), with the tolerance
@@ -64,7 +64,7 @@ def weighted_scatter(points, normal, offset, min_tolerance, depth_factor, limit)
     return total, centre, scatter
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def inlier_count(points, normal, offset, min_tolerance, depth_factor):  # pragma: no cover - compiled
     """Number of (N, 3) ``points`` with ``|n . P + c| < max(min_tolerance, depth_factor Z^2)``."""
     count = 0
@@ -76,7 +76,7 @@ def inlier_count(points, normal, offset, min_tolerance, depth_factor):  # pragma
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def ransac_scores(points, triples, tolerance):  # pragma: no cover - compiled
     """Inliers of the plane through each row of ``triples`` (K, 3) (indices into ``points``):
     ``|n . P + c| < tolerance`` counted over ``points`` (N, 3) float64; -1 for a degenerate
@@ -109,7 +109,7 @@ def ransac_scores(points, triples, tolerance):  # pragma: no cover - compiled
     return scores, normals, offsets
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def height_grid(disparity, valid, f, baseline, cx, cy, doffs, normal, offset, v0=0, u0=0):  # pragma: no cover - compiled
     """Signed height above the plane ``n . P + c = 0`` of every pixel, float32 (H, W), inf
     where ``valid`` is false, the disparity is not finite or ``d + doffs <= 0``.  The arrays
@@ -136,7 +136,7 @@ def height_grid(disparity, valid, f, baseline, cx, cy, doffs, normal, offset, v0
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _reconstruct_by_dilation(seed, mask):  # pragma: no cover - compiled
     """Grey reconstruction by dilation of ``seed`` under ``mask`` (8-connected; seed <= mask),
     by the hybrid algorithm (a forward and a backward raster scan, then a FIFO of the pixels
@@ -241,7 +241,7 @@ def _half_widths(k: np.ndarray) -> np.ndarray | None:
     return half
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _row_distance(mask, value):  # pragma: no cover - compiled
     """Per row, the distance (columns) of each pixel to the nearest pixel equal to ``value``
     in its row; a large number where the row holds none.  Also whether each row holds one."""
@@ -266,7 +266,7 @@ def _row_distance(mask, value):  # pragma: no cover - compiled
     return dist, any_row
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dilate_rows(mask, half):  # pragma: no cover - compiled
     """``cv2.dilate(mask, kernel)`` of a bool mask (default border: nothing outside the
     image counts) for a kernel of centred row runs of half-widths ``half``
@@ -289,7 +289,7 @@ def dilate_rows(mask, half):  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def erode_rows(mask, half):  # pragma: no cover - compiled
     """``cv2.erode(mask, kernel)`` of a bool mask (default border: what lies outside the
     image erodes nothing) for a kernel of centred row runs (:func:`dilate_rows`)."""
@@ -329,7 +329,7 @@ def opening(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return dilate_rows(erode_rows(np.ascontiguousarray(mask, np.bool_), half), half)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def back_project(disparity, valid, f, baseline, cx, cy, doffs):  # pragma: no cover - compiled
     """float32 (N, 3) points of the pixels where ``valid`` holds, the disparity is finite and
     ``d + doffs > 0``, in image order: what :func:`d3cli.road.pointcloud.disparity_to_points`

@@ -34,6 +34,7 @@ Definitions (what the numbers in defects.json mean):
 from __future__ import annotations
 
 import logging
+import threading
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -45,7 +46,8 @@ from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
 from .compiled import median
 from .morphology import dilate_near, fill_holes
-from .splitting import smoothed_depth, split_parts
+from .splitting import smoothed_depth, split_component
+from .threads import map_on_threads
 
 log = logging.getLogger(__name__)
 
@@ -230,10 +232,12 @@ def find_defects(
                     rules=rules)
     found: list = []
     blurred: list = []  # the split cue's smoothed height, made once for both kinds (it is odd in the height)
+    lock = threading.Lock()
 
     def smoothed_height():
-        if not blurred:
-            blurred.append(smoothed_depth(scene.smooth, scene.tuning.split_smooth_px))
+        with lock:
+            if not blurred:
+                blurred.append(smoothed_depth(scene.smooth, scene.tuning.split_smooth_px))
         return blurred[0]
 
     for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
@@ -292,30 +296,47 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, smoothed_height
         cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
     other = s.finite & (np.abs(s.smooth) > min(road.min_depth_mm, road.min_height_mm) * 1e-3)
     n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
-    found = []
-    # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
-    # below it the outline of a noisy map is drawn by the noise.
-    for piece, box in split_parts(labels, n, sign * s.smooth, s.footprint, level=max(thr_mm * 1e-3, s.split_noise),
-                                  prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
-                                  smooth_px=tuning.split_smooth_px, neck=road.split_neck,
-                                  min_part_m2=road.split_min_area_m2,
-                                  step=max(thr_mm * 1e-3, s.split_noise) if tuning.split_terrace else np.inf,
-                                  boxes=True, smoothed=None if smoothed_height is None
-                                  else (lambda: sign * smoothed_height())):
-        # Measured in a window around the part that holds everything its measurement
-        # reads (its walls, rings and noise annulus): the same pixels, the same results,
-        # at the cost of the window instead of the map (a noisy 720p map has hundreds of
-        # candidate parts; whole-image masks and dilations per part take seconds a map).
-        window = _window(s, box, int(piece.sum()))
-        local = _crop(s, window)
-        comp = np.zeros(local.height.shape, bool)
-        comp[tuple(slice(b.start - w.start, b.stop - w.start) for b, w in zip(box, window))] = piece
-        measured = measure_region(local, comp, other[window], sign, thr_mm)
-        if measured is not None:
-            region = np.zeros(s.height.shape, bool)
-            region[window] = measured[0]
-            found.append((kind, region, measured[1]))
-    return found
+    level = max(thr_mm * 1e-3, s.split_noise)
+    lock, made = threading.Lock(), []
+
+    def smoothed():  # made once for the kind, by whichever thread needs it first
+        with lock:
+            if not made:
+                made.append(sign * smoothed_height() if smoothed_height is not None
+                            else smoothed_depth(sign * s.smooth, tuning.split_smooth_px))
+        return made[0]
+
+    def component(item) -> list:
+        lab, box = item
+        found = []
+        # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
+        # below it the outline of a noisy map is drawn by the noise.
+        for piece in split_component(labels, lab, box, s.footprint, level=level,
+                                     prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
+                                     neck=road.split_neck, min_part_m2=road.split_min_area_m2,
+                                     step=level if tuning.split_terrace else np.inf, smoothed=smoothed):
+            # Measured in a window around the part that holds everything its measurement
+            # reads (its walls, rings and noise annulus): the same pixels, the same results,
+            # at the cost of the window instead of the map (a noisy 720p map has hundreds of
+            # candidate parts; whole-image masks and dilations per part take seconds a map).
+            window = _window(s, box, int(piece.sum()))
+            local = _crop(s, window)
+            comp = np.zeros(local.height.shape, bool)
+            comp[tuple(slice(b.start - w.start, b.stop - w.start) for b, w in zip(box, window))] = piece
+            measured = measure_region(local, comp, other[window], sign, thr_mm)
+            if measured is not None:
+                region = np.zeros(s.height.shape, bool)
+                region[window] = measured[0]
+                found.append((kind, region, measured[1]))
+        return found
+
+    # Components are cut and measured independently: on both threads, in their order
+    # (each component's bounding box in one pass over the labels).
+    from scipy import ndimage
+
+    components = [(lab, box) for lab, box in enumerate(ndimage.find_objects(labels, max(n - 1, 0)), start=1)
+                  if box is not None]
+    return [f for found in map_on_threads(component, components) for f in found]
 
 
 def _window(s: _Scene, box: tuple, n_px: int) -> tuple:

@@ -11,15 +11,11 @@ from __future__ import annotations
 
 import csv
 import io as _io
-import itertools
 import json
 import logging
-import os
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import cv2
-import numba
 import numpy as np
 
 from ..data.formats import atomic_write, write_image, write_pfm
@@ -34,6 +30,7 @@ from .compiled import back_project, height_colours
 from .pointcloud import Camera
 from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, _grey, rematch
 from .severity import pothole_severity, survey_summary
+from .threads import Job, map_on_threads
 
 log = logging.getLogger(__name__)
 
@@ -144,7 +141,7 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     # The height files are written on a second thread while the defects are measured: the
     # stored map's heights at once (the final ones unless a re-match changes them, then
     # written again).
-    writing = _in_background(write_height, height) if groups & {"height", "pictures"} else None
+    writing = Job(write_height, height) if groups & {"height", "pictures"} else None
     try:
         return _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, groups, finite, plane,
                        height, write_height, writing, warnings)
@@ -172,7 +169,7 @@ def _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, g
             height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
             if writing is not None:
                 writing.result()  # the stored map's files: written again with these heights
-                writing.replace(write_height, height)
+                writing.restart(write_height, height)
             stored = list(zip(defects, regions))
             defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
             defects = [with_flags(d, road_cfg, rematch_change=_rematch_change(d, r, stored))
@@ -201,70 +198,6 @@ def _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, g
     else:
         log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
     return items, warnings
-
-
-class _Job:
-    """A call running on the report's helper thread (:func:`_in_background`), or done
-    already where there is none; :meth:`result` waits for it and raises its exception."""
-
-    def __init__(self, func, *args):
-        self.replace(func, *args)
-
-    def replace(self, func, *args):
-        """Start ``func(*args)`` (the previous call must be finished)."""
-        pool = _helper()
-        self._future = pool.submit(func, *args) if pool is not None else None
-        if pool is None:
-            func(*args)
-
-    def result(self):
-        if self._future is not None:
-            future, self._future = self._future, None
-            future.result()
-
-
-_HELPER: tuple = (0, None)  # (process id, ThreadPoolExecutor) of the helper thread
-
-
-def _helper():
-    """The report's helper thread (an executor of one), or None with one thread
-    (numba's thread count, ``--threads``: the stereo's threads, idle while the report runs)."""
-    global _HELPER
-    if numba.get_num_threads() < 2:
-        return None
-    if _HELPER[0] != os.getpid():  # a forked worker inherits the object but not its thread
-        _HELPER = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="d3stereo-road"))
-    return _HELPER[1]
-
-
-def _map_on_threads(func, items) -> list:
-    """``[func(x) for x in items]``, the items taken in turn by this thread and the helper
-    thread (:func:`_helper`); the results in the items' order."""
-    items = list(items)
-    pool = _helper()
-    if pool is None or len(items) < 2:
-        return [func(x) for x in items]
-    results = [None] * len(items)
-    counter = itertools.count()  # next() of a count is atomic (one C call under the interpreter lock)
-
-    def take():
-        for i in counter:
-            if i >= len(items):
-                return
-            results[i] = func(items[i])
-
-    future = pool.submit(take)
-    try:
-        take()
-    finally:
-        future.result()
-    return results
-
-
-def _in_background(func, *args) -> _Job:
-    """``func(*args)`` on the helper thread (OpenCV's encoders and the compiled loops release
-    the interpreter lock), or here and now without one."""
-    return _Job(func, *args)
 
 
 def _rematch_change(defect, region: np.ndarray, stored: list) -> float:
@@ -318,7 +251,7 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     out = disparity.copy()
     # The regions are matched on both threads (each reads the stored map only) and their
     # zones written in the regions' order, as one after the other would.
-    for zone, values in _map_on_threads(zone_disparity, regions):
+    for zone, values in map_on_threads(zone_disparity, regions):
         if values is not None:
             out[zone] = values
     return height_map(out, finite, camera, plane)
