@@ -466,3 +466,22 @@ def height_colours(height, range_mm, out):  # pragma: no cover - compiled
             out[v, u, 0] = np.uint8(r * full)
             out[v, u, 1] = np.uint8(g * full)
             out[v, u, 2] = np.uint8(b * full)
+
+
+@njit(cache=True, nogil=True)
+def footprint_grid(h, w, f, f2, cx, cy, normal, offset):  # pragma: no cover - compiled
+    """:func:`d3cli.road.plane.plane_footprint` of an (``h``, ``w``) image, float64: per
+    pixel the same float64 arithmetic as the NumPy expression (``f2`` is ``f ** 2``), 0
+    where the ray misses the plane."""
+    out = np.empty((h, w), np.float64)
+    us = np.empty(w, np.float64)
+    for u in range(w):
+        us[u] = (u - cx) / f
+    for v in range(h):
+        rv = (v - cy) / f
+        for u in range(w):
+            nr = normal[0] * us[u] + normal[1] * rv + normal[2]
+            z = -offset / nr
+            area = z ** 2 / (f2 * abs(nr))
+            out[v, u] = area if z > 0 and np.isfinite(area) else 0.0
+    return out
