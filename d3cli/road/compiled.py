@@ -485,3 +485,36 @@ def footprint_grid(h, w, f, f2, cx, cy, normal, offset):  # pragma: no cover - c
             area = z ** 2 / (f2 * abs(nr))
             out[v, u] = area if z > 0 and np.isfinite(area) else 0.0
     return out
+
+
+@njit(cache=True, nogil=True)
+def noise_terms(smooth, f, baseline, cx, cy, normal, offset):  # pragma: no cover - compiled
+    """Depth ``Z`` and disparity residual ``h f B / (c max(Z, 1e-6))`` of every pixel of a
+    height map whose height is finite, in image order (float64 (N,) each): what
+    :func:`d3cli.road.defects.disparity_noise` takes the medians of, with NumPy's types (the
+    float32 heights times ``f`` and ``B`` stay float32, the division is float64)."""
+    h, w = smooth.shape
+    n = 0
+    for v in range(h):
+        for u in range(w):
+            if np.isfinite(smooth[v, u]):
+                n += 1
+    z = np.empty(n, np.float64)
+    resid = np.empty(n, np.float64)
+    us = np.empty(w, np.float64)
+    for u in range(w):
+        us[u] = (u - cx) / f
+    f32, b32 = np.float32(f), np.float32(baseline)
+    i = 0
+    for v in range(h):
+        rv = (v - cy) / f
+        for u in range(w):
+            x = smooth[v, u]
+            if not np.isfinite(x):
+                continue
+            nr = normal[0] * us[u] + normal[1] * rv + normal[2]
+            zz = (float(x) - offset) / nr
+            z[i] = zz
+            resid[i] = float(np.float32(np.float32(x * f32) * b32)) / (offset * max(zz, 1e-6))
+            i += 1
+    return z, resid

@@ -44,7 +44,7 @@ from ..config import RoadConfig
 from .confidence import ConfidenceRules, deep_at_border, depressions, flags_of, spikiness
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
-from .compiled import median
+from .compiled import median, noise_terms
 from .morphology import dilate_near, fill_holes
 from .splitting import smoothed_depth, split_component
 from .threads import map_on_threads
@@ -275,11 +275,15 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
     kernel_local = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * local_noise_px + 1, 2 * local_noise_px + 1))
     map_decided = float(decided[finite].mean()) if finite.any() else 0.0
-    depth = _depth_grid(smooth, camera, plane)  # Z of every pixel, once for both below
-    sigma_d = disparity_noise(smooth, camera, plane, depth=depth)
+    # Z of every pixel and its disparity residual (disparity_noise), in one compiled pass;
+    # the medians of the two on both threads.
+    z, resid = noise_terms(smooth, float(camera.f), float(camera.baseline), float(camera.cx), float(camera.cy),
+                           np.asarray(plane.normal, np.float64), float(plane.offset))
     # Saddle depth that splits a region: half the threshold, but not less than the height
     # noise at the median distance (noisy floors would otherwise split into pieces).
-    z_med = float(median(depth[finite])) if finite.any() else 0.0
+    sigma_d, z_med = map_on_threads(lambda task: task(), (
+        lambda: float(1.4826 * median(np.abs(resid - median(resid)))) if resid.size >= 10 else 0.0,
+        lambda: float(median(z)) if z.size else 0.0))
     split_noise = tuning.noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
     return _Scene(height=height, decided=decided, camera=camera, plane=plane, road=road, tuning=tuning,
                   finite=finite, smooth=smooth, footprint=footprint, v_all=v_all, u_all=u_all,
