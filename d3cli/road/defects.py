@@ -178,6 +178,8 @@ class _Scene:
     full_shape: tuple = (0, 0)
     origin: tuple = (0, 0)
     rules: ConfidenceRules = ConfidenceRules()
+    #: measure only what tells a defect from none and its depth (:func:`find_defects`' ``brief``)
+    brief: bool = False
 
 
 def find_defects(
@@ -190,6 +192,7 @@ def find_defects(
     *,
     return_regions: bool = False,
     rules: ConfidenceRules | None = None,
+    brief: bool = False,
 ):
     """Potholes and bumps of one height map.
 
@@ -220,6 +223,11 @@ def find_defects(
         Also return each defect's pixel mask (bool (H, W)), same order.
     rules : ConfidenceRules, optional, keyword-only
         The thresholds of the confidence flags (:mod:`d3cli.road.confidence`).
+    brief : bool, keyword-only
+        The same defects and regions, each with only ``kind``, ``bbox_px``, ``area_m2``,
+        ``max_depth_mm``, ``decided_share`` and ``at_border`` measured (the centroids, mean
+        depth, volume, outline and evidence left at zero or empty, no flags): what the
+        road report needs of the stored map before the re-match measures the defects again.
 
     Returns
     -------
@@ -229,7 +237,7 @@ def find_defects(
     road = RoadConfig() if road is None else road
     rules = ConfidenceRules() if rules is None else rules
     scene = replace(prepare_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
-                    rules=rules)
+                    rules=rules, brief=brief)
     found: list = []
     blurred: list = []  # the split cue's smoothed height, made once for both kinds (it is odd in the height)
     lock = threading.Lock()
@@ -416,10 +424,16 @@ def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, 
     share = float((s.decided & finite)[enclosed].mean())
     if share < road.min_region_decided_share and s.map_decided >= road.min_decided_share:
         return None  # measured on filled pixels: the hole filling's extrapolation, no depth
+    vs, us = s.v_all[region], s.u_all[region]
+    at_border = bool(vs.min() == 0 or us.min() == 0 or vs.max() == s.full_shape[0] - 1 or us.max() == s.full_shape[1] - 1)
+    if s.brief:
+        return region, dict(evidence={}, centroid_px=(0.0, 0.0), bbox_px=(int(us.min()), int(vs.min()), int(us.max()),
+                                                                          int(vs.max())),
+                            centroid_m=(0.0, 0.0, 0.0), area_m2=area, max_depth_mm=peak * 1e3, mean_depth_mm=0.0,
+                            volume_l=0.0, decided_share=share, at_border=at_border)
     zone = grown & finite
     vol = float((footprint[zone] * np.clip(depth_s[zone], 0, None)).sum())
     w = footprint[region]
-    vs, us = s.v_all[region], s.u_all[region]
     # 3-D centroid from the measured points of the region (footprint weighted).
     pts = _points_at(s.height[region], us, vs, s.camera, s.plane)
     rules = s.rules
@@ -442,8 +456,7 @@ def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, 
         mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
         volume_l=vol * 1e3,
         decided_share=share,
-        at_border=bool(vs.min() == 0 or us.min() == 0 or vs.max() == s.full_shape[0] - 1
-                       or us.max() == s.full_shape[1] - 1),
+        at_border=at_border,
         outline_px=outline(region, offset=s.origin),
     )
 

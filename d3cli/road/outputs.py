@@ -164,7 +164,10 @@ def _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, g
         notes.append(f"no road surface: {reason}; no defects measured")
         defects, regions = [], []
     else:
-        defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
+        # With the right image the defects found here are measured again on the re-matched
+        # map: here only what the re-match and the comparison with it need (brief).
+        defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True,
+                                        brief=right is not None)
         if right is not None and regions:
             height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
             if writing is not None:
