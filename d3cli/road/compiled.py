@@ -518,3 +518,33 @@ def noise_terms(smooth, f, baseline, cx, cy, normal, offset):  # pragma: no cove
             resid[i] = float(np.float32(np.float32(x * f32) * b32)) / (offset * max(zz, 1e-6))
             i += 1
     return z, resid
+
+
+@njit(cache=True, nogil=True)
+def best_offsets(scores, centre, offsets, step, min_score):  # pragma: no cover - compiled
+    """The re-match's choice per pixel (:func:`d3cli.road.rematch.rematch`) from the
+    ZNCC ``scores`` (K, H, W) float32 of the ``offsets`` (K,) float32 around ``centre``
+    (H, W) float32: the first best offset (``argmax``, a NaN counting as the largest), a
+    parabola through it and its neighbours (the ends moved one inward), and whether the
+    match is reliable (best score at least ``min_score``, not an end of the search).  The
+    NumPy expressions' float32 arithmetic.  Returns (disparity (H, W) float32, reliable
+    (H, W) bool)."""
+    k, h, w = scores.shape
+    new = np.empty((h, w), np.float32)
+    reliable = np.empty((h, w), np.bool_)
+    two, half, zero = np.float32(2.0), np.float32(0.5), np.float32(0.0)
+    step32, floor = np.float32(step), np.float32(min_score)
+    for v in range(h):
+        for u in range(w):
+            raw = 0
+            for j in range(1, k):
+                s, top = scores[j, v, u], scores[raw, v, u]
+                if s > top or (np.isnan(s) and not np.isnan(top)):
+                    raw = j
+            best = min(max(raw, 1), k - 2)
+            a, b, c = scores[best - 1, v, u], scores[best, v, u], scores[best + 1, v, u]
+            curvature = (a - two * b) + c
+            shift = half * (a - c) / curvature if curvature < 0 else zero
+            new[v, u] = (centre[v, u] + offsets[best]) + shift * step32
+            reliable[v, u] = b >= floor and raw > 0 and raw < k - 1
+    return new, reliable

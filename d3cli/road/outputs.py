@@ -30,7 +30,7 @@ from .compiled import back_project, height_colours
 from .pointcloud import Camera
 from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, _grey, rematch
 from .severity import pothole_severity, survey_summary
-from .threads import Job, map_on_threads
+from .threads import Job, helper, map_on_threads
 
 log = logging.getLogger(__name__)
 
@@ -140,7 +140,7 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
 
     # The height files are written on a second thread while the defects are measured: the
     # stored map's heights at once (the final ones unless a re-match changes them, then
-    # written again).
+    # written again); with one thread once, at the end.
     writing = Job(write_height, height) if groups & {"height", "pictures"} else None
     try:
         return _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, groups, finite, plane,
@@ -171,7 +171,8 @@ def _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, g
         if right is not None and regions:
             height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
             if writing is not None:
-                writing.result()  # the stored map's files: written again with these heights
+                if helper() is not None:
+                    writing.result()  # the stored map's files: written again with these heights
                 writing.restart(write_height, height)
             stored = list(zip(defects, regions))
             defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)

@@ -32,23 +32,27 @@ def helper():
 
 
 class Job:
-    """``func(*args)`` started on the helper thread (here and now without one);
-    :meth:`result` waits for it and raises its exception."""
+    """``func(*args)`` started on the helper thread; :meth:`result` waits for it and raises
+    its exception.  Without a helper thread the call runs when its result is asked for, and
+    a :meth:`restart` before that replaces it (the work done once, with the last arguments)."""
 
     def __init__(self, func, *args):
-        self._future = None
+        self._future = self._call = None
         self.restart(func, *args)
 
     def restart(self, func, *args):
-        """Start ``func(*args)``; the previous call must be finished (:meth:`result`)."""
+        """Start ``func(*args)``; a call already started must be finished (:meth:`result`)."""
         pool = helper()
         if pool is None:
-            func(*args)
+            self._call = (func, args)
         else:
             self._future = pool.submit(func, *args)
 
     def result(self):
-        """Wait for the call; its exception is raised here."""
+        """Wait for the call (or make it here); its exception is raised here."""
+        if self._call is not None:
+            (func, args), self._call = self._call, None
+            func(*args)
         if self._future is not None:
             future, self._future = self._future, None
             future.result()

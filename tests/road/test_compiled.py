@@ -238,3 +238,26 @@ def test_noise_terms_are_the_numpy_depth_and_residual():
     z, r = compiled.noise_terms(smooth, cam.f, cam.baseline, cam.cx, cam.cy, n, plane.offset)
     np.testing.assert_array_equal(z, depth)
     np.testing.assert_array_equal(r, resid)
+
+
+def test_best_offsets_are_the_numpy_choice():
+    rng = np.random.default_rng(16)
+    k, h, w = 9, 20, 30
+    scores = rng.uniform(-0.2, 1.0, (k, h, w)).astype(np.float32)
+    scores[:, 0, :5] = 0.5  # ties: the first best
+    scores[3, 1, 0] = np.nan  # a NaN counts as the largest
+    scores[0, 2, :] = 2.0  # best at an end of the search: not reliable
+    centre = rng.uniform(10, 50, (h, w)).astype(np.float32)
+    offsets = np.arange(-1.0, 1.0 + 1e-9, 0.25, dtype=np.float32)
+    raw = scores.argmax(axis=0)
+    best = np.clip(raw, 1, k - 2)
+    a, b, c = (np.take_along_axis(scores, (best + j)[None], axis=0)[0] for j in (-1, 0, 1))
+    curvature = a - 2.0 * b + c
+    with np.errstate(invalid="ignore"):
+        shift = np.where(curvature < 0, 0.5 * (a - c) / np.where(curvature < 0, curvature, -1.0), 0.0)
+        expected = centre + offsets[best] + shift * 0.25
+        reliable = (b >= 0.9) & (raw > 0) & (raw < k - 1)
+    got, got_reliable = compiled.best_offsets(scores, centre, offsets, 0.25, 0.9)
+    np.testing.assert_array_equal(got, expected)
+    np.testing.assert_array_equal(got_reliable, reliable)
+    assert got_reliable.any() and not got_reliable.all()
