@@ -1,10 +1,13 @@
 """Compiled loops of the road report (numba, cached beside this file like the kernels').
 
-Each function computes what a NumPy expression of :mod:`d3cli.road.plane`,
-:mod:`d3cli.road.defects` or :mod:`d3cli.road.morphology` computes, in one pass over the
-pixels or points instead of a chain of whole-array temporaries: on a 1280x720 map the
-NumPy versions took most of the road report's time (tests/road/test_compiled.py holds each
-against its NumPy reference).  May import numpy, numba and the standard library only.
+Each function computes what a NumPy, OpenCV or scikit-image expression of
+:mod:`d3cli.road.plane`, :mod:`d3cli.road.defects`, :mod:`d3cli.road.morphology`,
+:mod:`d3cli.road.confidence`, :mod:`d3cli.road.rematch` or :mod:`d3cli.road.outputs`
+computes, the same numbers, in one pass over the pixels or points instead of a chain of
+whole-array temporaries: on a 1280x720 map the NumPy versions took most of the road
+report's time (tests/road/test_compiled.py holds each against its reference).  The loops
+release the interpreter lock, so the report's second thread (:mod:`d3cli.road.threads`)
+runs beside them.  May import numpy, numba and the standard library only.
 """
 
 from __future__ import annotations
@@ -386,7 +389,7 @@ def _bucket_values(values, lo, scale, nb, b0, b1, m):  # pragma: no cover - comp
     return buf
 
 
-def _ranks(values: np.ndarray, k0: int, k1: int):
+def ranks(values: np.ndarray, k0: int, k1: int):
     """The ``k0``-th and ``k1``-th smallest (0-based, ``k0 <= k1 < n``) of a 1-D array
     without NaN.  A histogram of the values (4096 buckets between the least and the
     greatest, the bucket a monotone function of the value) finds the buckets that hold the
@@ -409,13 +412,13 @@ def _ranks(values: np.ndarray, k0: int, k1: int):
 def median(values: np.ndarray):
     """``np.median(values)`` of a 1-D float array without NaN, the same number (the middle
     value, or the mean of the two middle values in the array's type), found by
-    :func:`_ranks` instead of a partition of a copy: the report takes medians of every
+    :func:`ranks` instead of a partition of a copy: the report takes medians of every
     height of a 720p map (a million values) several times a map."""
     values = np.ascontiguousarray(values).ravel()
     if values.size <= 16384:  # numpy's partition is as quick there
         return np.median(values)
     n = values.size
-    a, b = _ranks(values, (n - 1) // 2, n // 2)
+    a, b = ranks(values, (n - 1) // 2, n // 2)
     # numpy's own mean of the two middle values: the same rounding in the same type
     return np.median(np.array([a, b], values.dtype))
 

@@ -164,7 +164,7 @@ def test_ranks_are_the_sorted_values():
     values = rng.exponential(1.0, 30000)
     ordered = np.sort(values)
     for k0, k1 in ((0, 0), (0, 1), (14999, 15000), (29998, 29999), (100, 4000)):
-        assert compiled._ranks(values, k0, k1) == (ordered[k0], ordered[k1])
+        assert compiled.ranks(values, k0, k1) == (ordered[k0], ordered[k1])
 
 
 def test_window_medians_are_nanmedians():
