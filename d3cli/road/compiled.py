@@ -1,10 +1,13 @@
 """Compiled loops of the road report (numba, cached beside this file like the kernels').
 
-Each function computes what a NumPy expression of :mod:`d3cli.road.plane`,
-:mod:`d3cli.road.defects` or :mod:`d3cli.road.morphology` computes, in one pass over the
-pixels or points instead of a chain of whole-array temporaries: on a 1280x720 map the
-NumPy versions took most of the road report's time (tests/road/test_compiled.py holds each
-against its NumPy reference).  May import numpy, numba and the standard library only.
+Each function computes what a NumPy, OpenCV or scikit-image expression of
+:mod:`d3cli.road.plane`, :mod:`d3cli.road.defects`, :mod:`d3cli.road.morphology`,
+:mod:`d3cli.road.confidence`, :mod:`d3cli.road.rematch` or :mod:`d3cli.road.outputs`
+computes, the same numbers, in one pass over the pixels or points instead of a chain of
+whole-array temporaries: on a 1280x720 map the NumPy versions took most of the road
+report's time (tests/road/test_compiled.py holds each against its reference).  The loops
+release the interpreter lock, so the report's second thread (:mod:`d3cli.road.threads`)
+runs beside them.  May import numpy, numba and the standard library only.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def weighted_scatter(points, normal, offset, min_tolerance, depth_factor, limit):  # pragma: no cover - compiled
     """Tukey-biweight IRLS round of the plane fit: weights ``(1 - (r / limit)^2)^2`` of the
     residuals ``r = (n . P + c) / t`` (0 beyond ``limit``), with the tolerance
@@ -64,7 +67,7 @@ def weighted_scatter(points, normal, offset, min_tolerance, depth_factor, limit)
     return total, centre, scatter
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def inlier_count(points, normal, offset, min_tolerance, depth_factor):  # pragma: no cover - compiled
     """Number of (N, 3) ``points`` with ``|n . P + c| < max(min_tolerance, depth_factor Z^2)``."""
     count = 0
@@ -76,7 +79,7 @@ def inlier_count(points, normal, offset, min_tolerance, depth_factor):  # pragma
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def ransac_scores(points, triples, tolerance):  # pragma: no cover - compiled
     """Inliers of the plane through each row of ``triples`` (K, 3) (indices into ``points``):
     ``|n . P + c| < tolerance`` counted over ``points`` (N, 3) float64; -1 for a degenerate
@@ -109,7 +112,7 @@ def ransac_scores(points, triples, tolerance):  # pragma: no cover - compiled
     return scores, normals, offsets
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def height_grid(disparity, valid, f, baseline, cx, cy, doffs, normal, offset, v0=0, u0=0):  # pragma: no cover - compiled
     """Signed height above the plane ``n . P + c = 0`` of every pixel, float32 (H, W), inf
     where ``valid`` is false, the disparity is not finite or ``d + doffs <= 0``.  The arrays
@@ -136,7 +139,7 @@ def height_grid(disparity, valid, f, baseline, cx, cy, doffs, normal, offset, v0
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _reconstruct_by_dilation(seed, mask):  # pragma: no cover - compiled
     """Grey reconstruction by dilation of ``seed`` under ``mask`` (8-connected; seed <= mask),
     by the hybrid algorithm (a forward and a backward raster scan, then a FIFO of the pixels
@@ -208,11 +211,25 @@ def h_maxima(image: np.ndarray, h: float) -> np.ndarray:
     return ((image - rec) >= h).astype(np.uint8)
 
 
+_HALF_WIDTHS: dict = {}  # (shape, kernel bytes) -> symmetric_half_widths: a few kernels, used per region
+
+
 def symmetric_half_widths(kernel: np.ndarray) -> np.ndarray | None:
     """Half-width of each row of a structuring element whose rows are runs centred on its
     centre column (an ellipse, a rectangle, a cross), -1 for an empty row; None for any
-    other kernel (even sides, a row that is not one centred run)."""
+    other kernel (even sides, a row that is not one centred run).  Remembered per kernel:
+    the report dilates every region by the same few discs."""
     k = np.asarray(kernel) != 0
+    key = (k.shape, np.packbits(k).tobytes())
+    if key not in _HALF_WIDTHS:
+        if len(_HALF_WIDTHS) > 256:
+            _HALF_WIDTHS.clear()
+        _HALF_WIDTHS[key] = _half_widths(k)
+    return _HALF_WIDTHS[key]
+
+
+def _half_widths(k: np.ndarray) -> np.ndarray | None:
+    """:func:`symmetric_half_widths` of a bool kernel, computed."""
     if k.shape[0] % 2 == 0 or k.shape[1] % 2 == 0:
         return None
     centre = k.shape[1] // 2
@@ -227,7 +244,7 @@ def symmetric_half_widths(kernel: np.ndarray) -> np.ndarray | None:
     return half
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _row_distance(mask, value):  # pragma: no cover - compiled
     """Per row, the distance (columns) of each pixel to the nearest pixel equal to ``value``
     in its row; a large number where the row holds none.  Also whether each row holds one."""
@@ -252,7 +269,7 @@ def _row_distance(mask, value):  # pragma: no cover - compiled
     return dist, any_row
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dilate_rows(mask, half):  # pragma: no cover - compiled
     """``cv2.dilate(mask, kernel)`` of a bool mask (default border: nothing outside the
     image counts) for a kernel of centred row runs of half-widths ``half``
@@ -275,7 +292,7 @@ def dilate_rows(mask, half):  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def erode_rows(mask, half):  # pragma: no cover - compiled
     """``cv2.erode(mask, kernel)`` of a bool mask (default border: what lies outside the
     image erodes nothing) for a kernel of centred row runs (:func:`dilate_rows`)."""
@@ -315,7 +332,7 @@ def opening(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return dilate_rows(erode_rows(np.ascontiguousarray(mask, np.bool_), half), half)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def back_project(disparity, valid, f, baseline, cx, cy, doffs):  # pragma: no cover - compiled
     """float32 (N, 3) points of the pixels where ``valid`` holds, the disparity is finite and
     ``d + doffs > 0``, in image order: what :func:`d3cli.road.pointcloud.disparity_to_points`
@@ -340,3 +357,197 @@ def back_project(disparity, valid, f, baseline, cx, cy, doffs):  # pragma: no co
                 out[i, 2] = z
                 i += 1
     return out
+
+
+@njit(cache=True, nogil=True)
+def _value_range(values):  # pragma: no cover - compiled
+    lo = hi = float(values[0])
+    for i in range(values.size):
+        x = float(values[i])
+        lo = min(lo, x)
+        hi = max(hi, x)
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def _bucket_counts(values, lo, scale, nb):  # pragma: no cover - compiled
+    counts = np.zeros(nb, np.int64)
+    for i in range(values.size):
+        counts[min(int((float(values[i]) - lo) * scale), nb - 1)] += 1
+    return counts
+
+
+@njit(cache=True, nogil=True)
+def _bucket_values(values, lo, scale, nb, b0, b1, m):  # pragma: no cover - compiled
+    buf = np.empty(m, values.dtype)
+    j = 0
+    for i in range(values.size):
+        b = min(int((float(values[i]) - lo) * scale), nb - 1)
+        if b >= b0 and b <= b1:
+            buf[j] = values[i]
+            j += 1
+    return buf
+
+
+def ranks(values: np.ndarray, k0: int, k1: int):
+    """The ``k0``-th and ``k1``-th smallest (0-based, ``k0 <= k1 < n``) of a 1-D array
+    without NaN.  A histogram of the values (4096 buckets between the least and the
+    greatest, the bucket a monotone function of the value) finds the buckets that hold the
+    two ranks, and only those buckets' values are sorted: two passes over the array
+    instead of a selection that moves it."""
+    nb = 4096
+    lo, hi = _value_range(values)
+    scale = (nb - 1) / (hi - lo) if hi > lo else 0.0
+    if values.size <= 4 * nb or not np.isfinite(scale) or scale == 0.0:
+        s = np.sort(values)
+        return s[k0], s[k1]
+    counts = _bucket_counts(values, lo, scale, nb)
+    cum = np.cumsum(counts)
+    b0, b1 = int(np.searchsorted(cum, k0, side="right")), int(np.searchsorted(cum, k1, side="right"))
+    start = int(cum[b0 - 1]) if b0 else 0
+    buf = np.sort(_bucket_values(values, lo, scale, nb, b0, b1, int(cum[b1]) - start))
+    return buf[k0 - start], buf[k1 - start]
+
+
+def median(values: np.ndarray):
+    """``np.median(values)`` of a 1-D float array without NaN, the same number (the middle
+    value, or the mean of the two middle values in the array's type), found by
+    :func:`ranks` instead of a partition of a copy: the report takes medians of every
+    height of a 720p map (a million values) several times a map."""
+    values = np.ascontiguousarray(values).ravel()
+    if values.size <= 16384:  # numpy's partition is as quick there
+        return np.median(values)
+    n = values.size
+    a, b = ranks(values, (n - 1) // 2, n // 2)
+    # numpy's own mean of the two middle values: the same rounding in the same type
+    return np.median(np.array([a, b], values.dtype))
+
+
+@njit(cache=True, nogil=True)
+def window_medians(depth, vs, us, r):  # pragma: no cover - compiled
+    """``np.nanmedian`` of ``depth`` over the ``2 r + 1`` square window (cut at the image)
+    around each pixel (``vs[i]``, ``us[i]``), the values that are not finite left out; NaN
+    where the window holds none.  float64 (N,)."""
+    h, w = depth.shape
+    out = np.empty(vs.size, np.float64)
+    buf = np.empty((2 * r + 1) * (2 * r + 1), depth.dtype)  # the mean of two middle values in their type
+    for i in range(vs.size):
+        m = 0
+        for y in range(max(vs[i] - r, 0), min(vs[i] + r + 1, h)):
+            for x in range(max(us[i] - r, 0), min(us[i] + r + 1, w)):
+                d = depth[y, x]
+                if np.isfinite(d):
+                    buf[m] = d
+                    m += 1
+        if m == 0:
+            out[i] = np.nan
+            continue
+        s = np.sort(buf[:m])
+        out[i] = s[m // 2] if m % 2 else (s[m // 2 - 1] + s[m // 2]) / 2
+    return out
+
+
+@njit(cache=True, nogil=True)
+def height_colours(height, range_mm, out):  # pragma: no cover - compiled
+    """The colours of :func:`d3cli.road.outputs.height_colour` written into ``out`` (uint8
+    (H, W, 3), the picture's left part): blue below the plane, white on it, red above,
+    saturated at +-``range_mm`` mm; 96 grey where the height is not finite.  The NumPy
+    ramp's float32 arithmetic (a float32 map times Python numbers stays float32), per pixel."""
+    h, w = height.shape
+    scale, span = np.float32(1e3), np.float32(range_mm)
+    one, full = np.float32(1.0), np.float32(255.0)
+    for v in range(h):
+        for u in range(w):
+            x = np.float32(height[v, u])
+            if not np.isfinite(x):
+                out[v, u, 0] = out[v, u, 1] = out[v, u, 2] = 96
+                continue
+            t = min(max((x * scale) / span, -one), one)
+            r = one + t if t < 0 else one
+            b = one - t if t > 0 else one
+            g = one - abs(t)
+            out[v, u, 0] = np.uint8(r * full)
+            out[v, u, 1] = np.uint8(g * full)
+            out[v, u, 2] = np.uint8(b * full)
+
+
+@njit(cache=True, nogil=True)
+def footprint_grid(h, w, f, f2, cx, cy, normal, offset):  # pragma: no cover - compiled
+    """:func:`d3cli.road.plane.plane_footprint` of an (``h``, ``w``) image, float64: per
+    pixel the same float64 arithmetic as the NumPy expression (``f2`` is ``f ** 2``), 0
+    where the ray misses the plane."""
+    out = np.empty((h, w), np.float64)
+    us = np.empty(w, np.float64)
+    for u in range(w):
+        us[u] = (u - cx) / f
+    for v in range(h):
+        rv = (v - cy) / f
+        for u in range(w):
+            nr = normal[0] * us[u] + normal[1] * rv + normal[2]
+            z = -offset / nr
+            area = z ** 2 / (f2 * abs(nr))
+            out[v, u] = area if z > 0 and np.isfinite(area) else 0.0
+    return out
+
+
+@njit(cache=True, nogil=True)
+def noise_terms(smooth, f, baseline, cx, cy, normal, offset):  # pragma: no cover - compiled
+    """Depth ``Z`` and disparity residual ``h f B / (c max(Z, 1e-6))`` of every pixel of a
+    height map whose height is finite, in image order (float64 (N,) each): what
+    :func:`d3cli.road.defects.disparity_noise` takes the medians of, with NumPy's types (the
+    float32 heights times ``f`` and ``B`` stay float32, the division is float64)."""
+    h, w = smooth.shape
+    n = 0
+    for v in range(h):
+        for u in range(w):
+            if np.isfinite(smooth[v, u]):
+                n += 1
+    z = np.empty(n, np.float64)
+    resid = np.empty(n, np.float64)
+    us = np.empty(w, np.float64)
+    for u in range(w):
+        us[u] = (u - cx) / f
+    f32, b32 = np.float32(f), np.float32(baseline)
+    i = 0
+    for v in range(h):
+        rv = (v - cy) / f
+        for u in range(w):
+            x = smooth[v, u]
+            if not np.isfinite(x):
+                continue
+            nr = normal[0] * us[u] + normal[1] * rv + normal[2]
+            zz = (float(x) - offset) / nr
+            z[i] = zz
+            resid[i] = float(np.float32(np.float32(x * f32) * b32)) / (offset * max(zz, 1e-6))
+            i += 1
+    return z, resid
+
+
+@njit(cache=True, nogil=True)
+def best_offsets(scores, centre, offsets, step, min_score):  # pragma: no cover - compiled
+    """The re-match's choice per pixel (:func:`d3cli.road.rematch.rematch`) from the
+    ZNCC ``scores`` (K, H, W) float32 of the ``offsets`` (K,) float32 around ``centre``
+    (H, W) float32: the first best offset (``argmax``, a NaN counting as the largest), a
+    parabola through it and its neighbours (the ends moved one inward), and whether the
+    match is reliable (best score at least ``min_score``, not an end of the search).  The
+    NumPy expressions' float32 arithmetic.  Returns (disparity (H, W) float32, reliable
+    (H, W) bool)."""
+    k, h, w = scores.shape
+    new = np.empty((h, w), np.float32)
+    reliable = np.empty((h, w), np.bool_)
+    two, half, zero = np.float32(2.0), np.float32(0.5), np.float32(0.0)
+    step32, floor = np.float32(step), np.float32(min_score)
+    for v in range(h):
+        for u in range(w):
+            raw = 0
+            for j in range(1, k):
+                s, top = scores[j, v, u], scores[raw, v, u]
+                if s > top or (np.isnan(s) and not np.isnan(top)):
+                    raw = j
+            best = min(max(raw, 1), k - 2)
+            a, b, c = scores[best - 1, v, u], scores[best, v, u], scores[best + 1, v, u]
+            curvature = (a - two * b) + c
+            shift = half * (a - c) / curvature if curvature < 0 else zero
+            new[v, u] = (centre[v, u] + offsets[best]) + shift * step32
+            reliable[v, u] = b >= floor and raw > 0 and raw < k - 1
+    return new, reliable

@@ -34,6 +34,7 @@ Definitions (what the numbers in defects.json mean):
 from __future__ import annotations
 
 import logging
+import threading
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -43,8 +44,10 @@ from ..config import RoadConfig
 from .confidence import ConfidenceRules, deep_at_border, depressions, flags_of, spikiness
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
+from .compiled import median, noise_terms
 from .morphology import dilate_near, fill_holes
-from .splitting import smoothed_depth, split_parts
+from .splitting import smoothed_depth, split_component
+from .threads import map_on_threads
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +91,7 @@ def _median_filled(height: np.ndarray, size: int) -> np.ndarray:
     finite = np.isfinite(height)
     if not finite.any():
         return height.copy()
-    fill = float(np.median(height[finite]))
+    fill = float(median(height[finite]))
     med = cv2.medianBlur(np.where(finite, height, fill).astype(np.float32), size)
     return np.where(finite, med, np.inf).astype(np.float32)
 
@@ -175,6 +178,8 @@ class _Scene:
     full_shape: tuple = (0, 0)
     origin: tuple = (0, 0)
     rules: ConfidenceRules = ConfidenceRules()
+    #: measure only what tells a defect from none and its depth (:func:`find_defects`' ``brief``)
+    brief: bool = False
 
 
 def find_defects(
@@ -187,6 +192,7 @@ def find_defects(
     *,
     return_regions: bool = False,
     rules: ConfidenceRules | None = None,
+    brief: bool = False,
 ):
     """Potholes and bumps of one height map.
 
@@ -217,6 +223,11 @@ def find_defects(
         Also return each defect's pixel mask (bool (H, W)), same order.
     rules : ConfidenceRules, optional, keyword-only
         The thresholds of the confidence flags (:mod:`d3cli.road.confidence`).
+    brief : bool, keyword-only
+        The same defects and regions, each with only ``kind``, ``bbox_px``, ``area_m2``,
+        ``max_depth_mm``, ``decided_share`` and ``at_border`` measured (the centroids, mean
+        depth, volume, outline and evidence left at zero or empty, no flags): what the
+        road report needs of the stored map before the re-match measures the defects again.
 
     Returns
     -------
@@ -226,13 +237,15 @@ def find_defects(
     road = RoadConfig() if road is None else road
     rules = ConfidenceRules() if rules is None else rules
     scene = replace(prepare_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
-                    rules=rules)
+                    rules=rules, brief=brief)
     found: list = []
     blurred: list = []  # the split cue's smoothed height, made once for both kinds (it is odd in the height)
+    lock = threading.Lock()
 
     def smoothed_height():
-        if not blurred:
-            blurred.append(smoothed_depth(scene.smooth, scene.tuning.split_smooth_px))
+        with lock:
+            if not blurred:
+                blurred.append(smoothed_depth(scene.smooth, scene.tuning.split_smooth_px))
         return blurred[0]
 
     for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
@@ -270,11 +283,15 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
     kernel_local = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * local_noise_px + 1, 2 * local_noise_px + 1))
     map_decided = float(decided[finite].mean()) if finite.any() else 0.0
-    depth = _depth_grid(smooth, camera, plane)  # Z of every pixel, once for both below
-    sigma_d = disparity_noise(smooth, camera, plane, depth=depth)
+    # Z of every pixel and its disparity residual (disparity_noise), in one compiled pass;
+    # the medians of the two on both threads.
+    z, resid = noise_terms(smooth, float(camera.f), float(camera.baseline), float(camera.cx), float(camera.cy),
+                           np.asarray(plane.normal, np.float64), float(plane.offset))
     # Saddle depth that splits a region: half the threshold, but not less than the height
     # noise at the median distance (noisy floors would otherwise split into pieces).
-    z_med = float(np.median(depth[finite])) if finite.any() else 0.0
+    sigma_d, z_med = map_on_threads(lambda task: task(), (
+        lambda: float(1.4826 * median(np.abs(resid - median(resid)))) if resid.size >= 10 else 0.0,
+        lambda: float(median(z)) if z.size else 0.0))
     split_noise = tuning.noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
     return _Scene(height=height, decided=decided, camera=camera, plane=plane, road=road, tuning=tuning,
                   finite=finite, smooth=smooth, footprint=footprint, v_all=v_all, u_all=u_all,
@@ -291,30 +308,47 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, smoothed_height
         cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
     other = s.finite & (np.abs(s.smooth) > min(road.min_depth_mm, road.min_height_mm) * 1e-3)
     n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
-    found = []
-    # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
-    # below it the outline of a noisy map is drawn by the noise.
-    for piece, box in split_parts(labels, n, sign * s.smooth, s.footprint, level=max(thr_mm * 1e-3, s.split_noise),
-                                  prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
-                                  smooth_px=tuning.split_smooth_px, neck=road.split_neck,
-                                  min_part_m2=road.split_min_area_m2,
-                                  step=max(thr_mm * 1e-3, s.split_noise) if tuning.split_terrace else np.inf,
-                                  boxes=True, smoothed=None if smoothed_height is None
-                                  else (lambda: sign * smoothed_height())):
-        # Measured in a window around the part that holds everything its measurement
-        # reads (its walls, rings and noise annulus): the same pixels, the same results,
-        # at the cost of the window instead of the map (a noisy 720p map has hundreds of
-        # candidate parts; whole-image masks and dilations per part take seconds a map).
-        window = _window(s, box, int(piece.sum()))
-        local = _crop(s, window)
-        comp = np.zeros(local.height.shape, bool)
-        comp[tuple(slice(b.start - w.start, b.stop - w.start) for b, w in zip(box, window))] = piece
-        measured = measure_region(local, comp, other[window], sign, thr_mm)
-        if measured is not None:
-            region = np.zeros(s.height.shape, bool)
-            region[window] = measured[0]
-            found.append((kind, region, measured[1]))
-    return found
+    level = max(thr_mm * 1e-3, s.split_noise)
+    lock, made = threading.Lock(), []
+
+    def smoothed():  # made once for the kind, by whichever thread needs it first
+        with lock:
+            if not made:
+                made.append(sign * smoothed_height() if smoothed_height is not None
+                            else smoothed_depth(sign * s.smooth, tuning.split_smooth_px))
+        return made[0]
+
+    def component(item) -> list:
+        lab, box = item
+        found = []
+        # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
+        # below it the outline of a noisy map is drawn by the noise.
+        for piece in split_component(labels, lab, box, s.footprint, level=level,
+                                     prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
+                                     neck=road.split_neck, min_part_m2=road.split_min_area_m2,
+                                     step=level if tuning.split_terrace else np.inf, smoothed=smoothed):
+            # Measured in a window around the part that holds everything its measurement
+            # reads (its walls, rings and noise annulus): the same pixels, the same results,
+            # at the cost of the window instead of the map (a noisy 720p map has hundreds of
+            # candidate parts; whole-image masks and dilations per part take seconds a map).
+            window = _window(s, box, int(piece.sum()))
+            local = _crop(s, window)
+            comp = np.zeros(local.height.shape, bool)
+            comp[tuple(slice(b.start - w.start, b.stop - w.start) for b, w in zip(box, window))] = piece
+            measured = measure_region(local, comp, other[window], sign, thr_mm)
+            if measured is not None:
+                region = np.zeros(s.height.shape, bool)
+                region[window] = measured[0]
+                found.append((kind, region, measured[1]))
+        return found
+
+    # Components are cut and measured independently: on both threads, in their order
+    # (each component's bounding box in one pass over the labels).
+    from scipy import ndimage
+
+    components = [(lab, box) for lab, box in enumerate(ndimage.find_objects(labels, max(n - 1, 0)), start=1)
+                  if box is not None]
+    return [f for found in map_on_threads(component, components) for f in found]
 
 
 def _window(s: _Scene, box: tuple, n_px: int) -> tuple:
@@ -390,10 +424,16 @@ def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, 
     share = float((s.decided & finite)[enclosed].mean())
     if share < road.min_region_decided_share and s.map_decided >= road.min_decided_share:
         return None  # measured on filled pixels: the hole filling's extrapolation, no depth
+    vs, us = s.v_all[region], s.u_all[region]
+    at_border = bool(vs.min() == 0 or us.min() == 0 or vs.max() == s.full_shape[0] - 1 or us.max() == s.full_shape[1] - 1)
+    if s.brief:
+        return region, dict(evidence={}, centroid_px=(0.0, 0.0), bbox_px=(int(us.min()), int(vs.min()), int(us.max()),
+                                                                          int(vs.max())),
+                            centroid_m=(0.0, 0.0, 0.0), area_m2=area, max_depth_mm=peak * 1e3, mean_depth_mm=0.0,
+                            volume_l=0.0, decided_share=share, at_border=at_border)
     zone = grown & finite
     vol = float((footprint[zone] * np.clip(depth_s[zone], 0, None)).sum())
     w = footprint[region]
-    vs, us = s.v_all[region], s.u_all[region]
     # 3-D centroid from the measured points of the region (footprint weighted).
     pts = _points_at(s.height[region], us, vs, s.camera, s.plane)
     rules = s.rules
@@ -416,8 +456,7 @@ def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, 
         mean_depth_mm=float(np.average(depth[region & finite], weights=footprint[region & finite]) * 1e3),
         volume_l=vol * 1e3,
         decided_share=share,
-        at_border=bool(vs.min() == 0 or us.min() == 0 or vs.max() == s.full_shape[0] - 1
-                       or us.max() == s.full_shape[1] - 1),
+        at_border=at_border,
         outline_px=outline(region, offset=s.origin),
     )
 
@@ -493,7 +532,7 @@ def _local_sigma_h(s: _Scene, comp: np.ndarray, sigma_h: float) -> float:
     annulus = dilate_near(comp, s.kernel_local) & ~dilate_near(comp, s.kernel_ring) & s.finite
     if annulus.sum() >= 50:
         local = s.height[annulus]
-        sigma_h = max(sigma_h, float(1.4826 * np.median(np.abs(local - np.median(local)))))
+        sigma_h = max(sigma_h, float(1.4826 * median(np.abs(local - median(local)))))
     return sigma_h
 
 
@@ -510,7 +549,7 @@ def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane, *, dep
         return 0.0
     z = (_depth_grid(height, camera, plane) if depth is None else depth)[finite]
     resid = height[finite] * camera.f * camera.baseline / (plane.offset * np.maximum(z, 1e-6))
-    return float(1.4826 * np.median(np.abs(resid - np.median(resid))))
+    return float(1.4826 * median(np.abs(resid - median(resid))))
 
 
 def outline(mask: np.ndarray, *, tolerance_px: float = 1.0, offset: tuple = (0, 0)) -> tuple:

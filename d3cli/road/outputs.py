@@ -26,10 +26,11 @@ from .defects import find_defects, with_flags
 from .morphology import dilate_near
 from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
-from .compiled import back_project
+from .compiled import back_project, height_colours
 from .pointcloud import Camera
-from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, rematch
+from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, _grey, rematch
 from .severity import pothole_severity, survey_summary
+from .threads import Job, helper, map_on_threads
 
 log = logging.getLogger(__name__)
 
@@ -55,8 +56,6 @@ def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
     The colour saturates at +-``range_mm``; a labelled colour bar is appended on the right.
     """
     h, w = height.shape
-    finite = np.isfinite(height)
-    t = np.clip(np.where(finite, height * 1e3, 0.0) / range_mm, -1.0, 1.0)
 
     def ramp(x):  # x in [-1, 1] -> RGB float: blue - white - red
         r = np.where(x < 0, 1 + x, 1.0)
@@ -64,8 +63,14 @@ def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
         g = 1 - np.abs(x)
         return np.stack([r, g, b], axis=-1)
 
-    img = (ramp(t) * 255).astype(np.uint8)
-    img[~finite] = 96
+    if height.dtype == np.float32:  # the maps of height_map: the same ramp, compiled
+        img = np.empty((h, w, 3), np.uint8)
+        height_colours(height, float(range_mm), img)
+    else:
+        finite = np.isfinite(height)
+        t = np.clip(np.where(finite, height * 1e3, 0.0) / range_mm, -1.0, 1.0)
+        img = (ramp(t) * 255).astype(np.uint8)
+        img[~finite] = 96
     ticks = [(0.5 - v / (2 * range_mm), f"{v:+g} mm" if v else "0 mm") for v in (range_mm, range_mm / 2, 0.0,
                                                                               -range_mm / 2, -range_mm)]
     bar = vertical_colour_bar(h, (ramp(np.linspace(1.0, -1.0, 256)) * 255).astype(np.uint8), ticks,
@@ -125,6 +130,29 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     if plane is None:
         return [], ["no road report: too few points for a road plane"]
     height = height_map(disparity, finite, camera, plane)
+    groups = frozenset(("height", "pictures")) if groups is None else groups
+
+    def write_height(values):
+        if "height" in groups:
+            write_pfm(pair_dir / HEIGHT_FILE, values)
+        if "pictures" in groups:
+            write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(values, range_mm=road_cfg.colour_range_mm))
+
+    # The height files are written on a second thread while the defects are measured: the
+    # stored map's heights at once (the final ones unless a re-match changes them, then
+    # written again); with one thread once, at the end.
+    writing = Job(write_height, height) if groups & {"height", "pictures"} else None
+    try:
+        return _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, groups, finite, plane,
+                       height, write_height, writing, warnings)
+    finally:
+        if writing is not None:
+            writing.result()
+
+
+def _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, groups, finite, plane, height,
+            write_height, writing, warnings):
+    """The rest of :func:`road_report` once the plane and the stored map's heights are known."""
     pt = (info or {}).get("pt")
     fallback = bool(pt and pt.get("fallback"))
     decided_share = float(decided.mean()) if decided.size else 0.0
@@ -136,9 +164,16 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         notes.append(f"no road surface: {reason}; no defects measured")
         defects, regions = [], []
     else:
-        defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
+        # With the right image the defects found here are measured again on the re-matched
+        # map: here only what the re-match and the comparison with it need (brief).
+        defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True,
+                                        brief=right is not None)
         if right is not None and regions:
             height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
+            if writing is not None:
+                if helper() is not None:
+                    writing.result()  # the stored map's files: written again with these heights
+                writing.restart(write_height, height)
             stored = list(zip(defects, regions))
             defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
             defects = [with_flags(d, road_cfg, rematch_change=_rematch_change(d, r, stored))
@@ -147,11 +182,6 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
             defects = [with_flags(d, road_cfg, map_decided_share=round(decided_share, 3)) for d in defects]
     # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
-    groups = frozenset(("height", "pictures")) if groups is None else groups
-    if "height" in groups:
-        write_pfm(pair_dir / HEIGHT_FILE, height)
-    if "pictures" in groups:
-        write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(height, range_mm=road_cfg.colour_range_mm))
     items = [{**d.to_dict(), "reasons": describe(d.flags) if d.flags else "",
               **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})} for d in defects]
     _write_json(pair_dir / DEFECTS_JSON, {
@@ -201,26 +231,33 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     ``NOISE_M`` on the outer ring (:func:`_highpass_noise`); a defect no window measures
     that cleanly keeps the stored map."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
-    out = disparity.copy()
-    grey = {}  # the grey images, made once for every region
-    for region in regions:
+    grey = (_grey(left), _grey(right))  # the grey images, made once for every region
+
+    def zone_disparity(region):
+        """(zone, its re-matched disparity, or None where no window matches it cleanly)."""
         inner = dilate_near(region, ring)
         zone = dilate_near(inner, ring) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
-        shared = {"pad_window": max(WINDOWS), **grey}  # the warps, made once for the zone
+        shared = {"pad_window": max(WINDOWS), "grey": grey}  # the warps, made once for the zone
         for window in WINDOWS:
             new, got = rematch(left, right, disparity, zone, window=window, shared=shared)
-            grey = {"grey": shared["grey"]} if "grey" in shared else grey
             if got[zone].mean() < MIN_RELIABLE:
                 continue
             # Heights only in a window around the band that holds the smoothing's support.
             crop = _around(band, int(np.ceil(4 * window)) + 2)
             if _highpass_noise(height_map(new[crop], finite[crop], camera, plane, origin=(crop[0].start, crop[1].start)),
                                (band & got)[crop], window) <= NOISE_M:
-                out[zone] = new[zone]
-                break
-        # else: no window matches the defect cleanly (a dark, noisy pair): the stored,
-        # smoothed map is the better measurement there.
+                return zone, new[zone]
+        # no window matches the defect cleanly (a dark, noisy pair): the stored, smoothed
+        # map is the better measurement there.
+        return zone, None
+
+    out = disparity.copy()
+    # The regions are matched on both threads (each reads the stored map only) and their
+    # zones written in the regions' order, as one after the other would.
+    for zone, values in map_on_threads(zone_disparity, regions):
+        if values is not None:
+            out[zone] = values
     return height_map(out, finite, camera, plane)
 
 

@@ -92,13 +92,14 @@ def place_labels(boxes: Sequence[Sequence[int]], sizes: Sequence[tuple[int, int]
         Per label, its rectangle (exclusive ends), or None where no position is free.
     """
     height, width = int(shape[0]), int(shape[1])
+    if not len(boxes):
+        return []
     if avoid is None:
         avoid = np.zeros((height, width), bool)
         for u0, v0, u1, v1 in boxes:
             avoid[max(int(v0), 0): max(int(v1) + 1, 0), max(int(u0), 0): max(int(u1) + 1, 0)] = True
     # Integral image: the number of avoided pixels under any rectangle in O(1).
-    covered = np.zeros((height + 1, width + 1), np.int64)
-    covered[1:, 1:] = np.cumsum(np.cumsum(np.asarray(avoid, bool), axis=0), axis=1)
+    covered = cv2.integral(np.asarray(avoid, np.uint8), sdepth=cv2.CV_32S)  # (height + 1, width + 1), exact counts
     placed: list[tuple[int, int, int, int]] = []
     out: list[tuple[int, int, int, int] | None] = []
     for box, (w, h) in zip(boxes, sizes):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..method.perspective import match_in_right_image
-from .compiled import height_grid, inlier_count, ransac_scores, weighted_scatter
+from .compiled import footprint_grid, height_grid, inlier_count, ransac_scores, weighted_scatter
 from .pointcloud import Camera
 
 log = logging.getLogger(__name__)
@@ -184,14 +184,17 @@ def plane_footprint(shape: tuple[int, int], camera: Camera, plane: RoadPlane) ->
 
     A pixel's ray ``r = ((u - cx)/f, (v - cy)/f, 1)`` meets the plane at depth
     ``Z = -c / (n . r)``; its footprint there is ``Z^2 / (f^2 |n . r|)`` (solid angle
-    ``1 / (f^2 |r|^3)`` times the squared range over the incidence cosine).
+    ``1 / (f^2 |r|^3)`` times the squared range over the incidence cosine).  Compiled
+    (:func:`d3cli.road.compiled.footprint_grid`); the array is read-only and the same
+    object for the same shape, camera and plane as the last call.
     """
-    h, w = shape
-    u = (np.arange(w) - camera.cx) / camera.f
-    v = (np.arange(h) - camera.cy) / camera.f
-    n = np.asarray(plane.normal)
-    nr = n[0] * u[None, :] + n[1] * v[:, None] + n[2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = -plane.offset / nr
-        area = z ** 2 / (camera.f ** 2 * np.abs(nr))
-    return np.where((z > 0) & np.isfinite(area), area, 0.0)
+    key = (tuple(shape), camera, plane)
+    if _FOOTPRINT[0] != key:  # the report's two passes over a map share it
+        _FOOTPRINT[:] = [key, footprint_grid(int(shape[0]), int(shape[1]), float(camera.f), float(camera.f) ** 2,
+                                             float(camera.cx), float(camera.cy),
+                                             np.asarray(plane.normal, np.float64), float(plane.offset))]
+        _FOOTPRINT[1].flags.writeable = False
+    return _FOOTPRINT[1]
+
+
+_FOOTPRINT: list = [None, None]  # (shape, camera, plane) and its footprint, read-only

@@ -15,6 +15,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .compiled import best_offsets
+
 #: Window side (pixels), search reach either side of the stored disparity (pixels) and
 #: the step of the search (pixels; parabola interpolation between steps).
 WINDOW, REACH, STEP = 9, 3.0, 0.25
@@ -127,13 +129,8 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
         r_mean = cv2.blur(warped, box)
         r_std = np.sqrt(np.maximum(cv2.blur(warped * warped, box) - r_mean * r_mean, 1e-6))
         scores[k] = (cv2.blur(lsub * warped, box) - l_mean * r_mean) / (l_std * r_std)
-    raw = scores.argmax(axis=0)
-    best = np.clip(raw, 1, len(offsets) - 2)
-    a, b, c = (np.take_along_axis(scores, (best + j)[None], axis=0)[0] for j in (-1, 0, 1))
-    curvature = a - 2.0 * b + c
-    shift = np.where(curvature < 0, 0.5 * (a - c) / np.where(curvature < 0, curvature, -1.0), 0.0)
-    new = centre + offsets[best] + shift * step
-    reliable = (b >= min_score) & (raw > 0) & (raw < len(offsets) - 1)
+    # the best offset, a parabola through its neighbours, reliable or not: compiled
+    new, reliable = best_offsets(scores, centre, offsets, float(step), float(min_score))
     inside = todo[v0:v1, u0:u1] & reliable
     sub[inside] = new[inside]
     done[v0:v1, u0:u1] = inside

@@ -58,39 +58,52 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
     """
     from scipy import ndimage
 
-    made = None  # the smoothed depth, made when a component is large enough to be cut
-    kernel_open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+    made = []  # the smoothed depth, made when a component is large enough to be cut
+
+    def smooth():
+        if not made:
+            made.append(smoothed() if smoothed is not None else smoothed_depth(depth, smooth_px))
+        return made[0]
+
     # each component's bounding box in one pass over the labels (a mask and a scan of the
     # whole image per component cost more than the splitting itself on a noisy map)
     for lab, box in enumerate(ndimage.find_objects(labels, max(n - 1, 0)), start=1):
         if box is None:
             continue
-        sub_comp = labels[box] == lab
-        if footprint[box][sub_comp].sum() < 2 * min_part_m2:  # too small to hold two parts
-            yield _full(sub_comp, box, labels.shape, boxes)
-            continue
-        if made is None:
-            made = smoothed() if smoothed is not None else smoothed_depth(depth, smooth_px)
-        sub_depth = np.where(sub_comp, made[box], 0.0)
-        parts = _watershed_parts(-sub_depth, h_maxima(sub_depth, prominence) & sub_comp, sub_comp)
-        pieces = []
-        for part in parts:
-            # Terraces before necks: a terrace is cut along the wall between the two floors
-            # (a watershed on the depth); a neck cut follows the outline and would leave part
-            # of the deep wall to the shallow pothole (its depth then reads too deep), and
-            # the concave cut of a terrace would show necks of its own.
-            terraces = _terrace_pieces(part, sub_depth, footprint[box], level=level, step=step, min_part_m2=min_part_m2)
-            if len(terraces) > 1:
-                pieces += terraces
-                continue
-            # The outline of the smoothed depth: the noisy map's own outline is ragged at
-            # the noise-cell scale and shows necks that are not there.
-            opened = opening(part & (sub_depth > level), kernel_open).astype(np.uint8)
-            dt = cv2.distanceTransform(np.pad(opened, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
-            lobes = h_maxima(np.log1p(dt), -np.log(neck)) & opened.astype(bool) if neck < 1 else np.zeros_like(part)
-            pieces += _watershed_parts(-dt, lobes, part)
-        for piece in _merge_nested(_merge_small(pieces, footprint[box], min_part_m2), ~sub_comp):
+        for piece in split_component(labels, lab, box, footprint, level=level, prominence=prominence, neck=neck,
+                                     min_part_m2=min_part_m2, step=step, smoothed=smooth):
             yield _full(piece, box, labels.shape, boxes)
+
+
+def split_component(labels: np.ndarray, lab: int, box: tuple, footprint: np.ndarray, *, level: float,
+                    prominence: float, neck: float, min_part_m2: float, step: float, smoothed) -> list:
+    """The parts of component ``lab`` of ``labels`` (:func:`split_parts`), as masks of its
+    bounding box ``box``; ``smoothed``: a function returning the smoothed depth of the whole
+    map (called only when the component is large enough to be cut).  Components are cut
+    independently of one another."""
+    sub_comp = labels[box] == lab
+    if footprint[box][sub_comp].sum() < 2 * min_part_m2:  # too small to hold two parts
+        return [sub_comp]
+    kernel_open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+    sub_depth = np.where(sub_comp, smoothed()[box], 0.0)
+    parts = _watershed_parts(-sub_depth, h_maxima(sub_depth, prominence) & sub_comp, sub_comp)
+    pieces = []
+    for part in parts:
+        # Terraces before necks: a terrace is cut along the wall between the two floors
+        # (a watershed on the depth); a neck cut follows the outline and would leave part
+        # of the deep wall to the shallow pothole (its depth then reads too deep), and
+        # the concave cut of a terrace would show necks of its own.
+        terraces = _terrace_pieces(part, sub_depth, footprint[box], level=level, step=step, min_part_m2=min_part_m2)
+        if len(terraces) > 1:
+            pieces += terraces
+            continue
+        # The outline of the smoothed depth: the noisy map's own outline is ragged at
+        # the noise-cell scale and shows necks that are not there.
+        opened = opening(part & (sub_depth > level), kernel_open).astype(np.uint8)
+        dt = cv2.distanceTransform(np.pad(opened, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
+        lobes = h_maxima(np.log1p(dt), -np.log(neck)) & opened.astype(bool) if neck < 1 else np.zeros_like(part)
+        pieces += _watershed_parts(-dt, lobes, part)
+    return _merge_nested(_merge_small(pieces, footprint[box], min_part_m2), ~sub_comp)
 
 
 def smoothed_depth(depth: np.ndarray, smooth_px: float) -> np.ndarray:

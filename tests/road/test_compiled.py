@@ -144,3 +144,120 @@ def test_back_project_is_disparity_to_points():
     got = compiled.back_project(disp, valid, cam.f, cam.baseline, cam.cx, cam.cy, cam.doffs)
     assert got.dtype == np.float32
     np.testing.assert_array_equal(got, points)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_median_is_numpys(dtype):
+    rng = np.random.default_rng(11)
+    # sizes on both sides of numpy's own range (16384) and of odd and even counts; a spread
+    # of values, ties, a heavy tail and a constant array
+    for n in (5, 16384, 16385, 20000, 50001):
+        for values in (rng.normal(0, 0.01, n), np.round(rng.normal(0, 3, n)), rng.standard_cauchy(n),
+                       np.full(n, 0.25)):
+            values = values.astype(dtype)
+            got, expected = compiled.median(values), np.median(values)
+            assert type(got) is type(expected) and got == expected
+
+
+def test_ranks_are_the_sorted_values():
+    rng = np.random.default_rng(12)
+    values = rng.exponential(1.0, 30000)
+    ordered = np.sort(values)
+    for k0, k1 in ((0, 0), (0, 1), (14999, 15000), (29998, 29999), (100, 4000)):
+        assert compiled.ranks(values, k0, k1) == (ordered[k0], ordered[k1])
+
+
+def test_window_medians_are_nanmedians():
+    rng = np.random.default_rng(13)
+    depth = rng.normal(0.02, 0.01, (40, 50)).astype(np.float32)  # the report's depths: float32, as its means
+    depth[rng.random(depth.shape) < 0.2] = np.inf
+    depth[:9, :9] = np.inf  # a window with no finite value: NaN
+    vs, us = rng.integers(0, 40, 60), rng.integers(0, 50, 60)
+    vs[0], us[0] = 2, 2
+    r = 3
+    got = compiled.window_medians(depth, vs, us, r)
+    finite = np.where(np.isfinite(depth), depth, np.nan)
+    with np.errstate(all="ignore"), pytest.warns(RuntimeWarning):
+        expected = [np.nanmedian(finite[max(v - r, 0):v + r + 1, max(u - r, 0):u + r + 1]) for v, u in zip(vs, us)]
+    np.testing.assert_array_equal(got, np.array(expected, np.float64))
+    assert np.isnan(got[0]) and np.isfinite(got[1:]).any()
+
+
+def test_height_colours_are_the_numpy_ramp():
+    rng = np.random.default_rng(14)
+    height = rng.normal(0, 0.03, (30, 40)).astype(np.float32)
+    height[rng.random(height.shape) < 0.1] = np.inf
+    height[0, :4] = (np.nan, -np.inf, 3e38, -1e-9)
+    range_mm = 50.0
+    finite = np.isfinite(height)
+    with np.errstate(over="ignore", invalid="ignore"):
+        t = np.clip(np.where(finite, height * 1e3, 0.0) / range_mm, -1.0, 1.0)
+    ramp = np.stack([np.where(t < 0, 1 + t, 1.0), 1 - np.abs(t), np.where(t > 0, 1 - t, 1.0)], axis=-1)
+    expected = (ramp * 255).astype(np.uint8)
+    expected[~finite] = 96
+    got = np.empty(expected.shape, np.uint8)
+    with np.errstate(over="ignore"):
+        compiled.height_colours(height, range_mm, got)
+    np.testing.assert_array_equal(got, expected)
+
+
+def _camera_and_plane():
+    from d3cli.road.plane import RoadPlane
+
+    n = np.array([0.02, -0.97, -0.2])
+    n /= np.linalg.norm(n)
+    return Camera(f=90.5, baseline=0.3, cx=31.5, cy=30.25), RoadPlane(tuple(float(x) for x in n), 1.55, 0.9)
+
+
+def test_footprint_grid_is_the_numpy_footprint():
+    cam, plane = _camera_and_plane()
+    h, w = 36, 64
+    n = np.asarray(plane.normal)
+    nr = n[0] * ((np.arange(w) - cam.cx) / cam.f)[None, :] + n[1] * ((np.arange(h) - cam.cy) / cam.f)[:, None] + n[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = -plane.offset / nr
+        area = z ** 2 / (cam.f ** 2 * np.abs(nr))
+    expected = np.where((z > 0) & np.isfinite(area), area, 0.0)
+    got = compiled.footprint_grid(h, w, cam.f, cam.f ** 2, cam.cx, cam.cy, n, plane.offset)
+    np.testing.assert_array_equal(got, expected)
+    assert 0.3 < (got > 0).mean() < 1.0  # the horizon crosses the picture: both cases were met
+
+
+def test_noise_terms_are_the_numpy_depth_and_residual():
+    cam, plane = _camera_and_plane()
+    rng = np.random.default_rng(15)
+    smooth = rng.normal(0, 0.01, (36, 64)).astype(np.float32)
+    smooth[rng.random(smooth.shape) < 0.15] = np.inf
+    n = np.asarray(plane.normal)
+    h, w = smooth.shape
+    nr = n[0] * ((np.arange(w) - cam.cx) / cam.f)[None, :] + n[1] * ((np.arange(h) - cam.cy) / cam.f)[:, None] + n[2]
+    finite = np.isfinite(smooth)
+    with np.errstate(invalid="ignore"):
+        depth = ((smooth.astype(np.float64) - plane.offset) / nr)[finite]
+    resid = smooth[finite] * cam.f * cam.baseline / (plane.offset * np.maximum(depth, 1e-6))
+    z, r = compiled.noise_terms(smooth, cam.f, cam.baseline, cam.cx, cam.cy, n, plane.offset)
+    np.testing.assert_array_equal(z, depth)
+    np.testing.assert_array_equal(r, resid)
+
+
+def test_best_offsets_are_the_numpy_choice():
+    rng = np.random.default_rng(16)
+    k, h, w = 9, 20, 30
+    scores = rng.uniform(-0.2, 1.0, (k, h, w)).astype(np.float32)
+    scores[:, 0, :5] = 0.5  # ties: the first best
+    scores[3, 1, 0] = np.nan  # a NaN counts as the largest
+    scores[0, 2, :] = 2.0  # best at an end of the search: not reliable
+    centre = rng.uniform(10, 50, (h, w)).astype(np.float32)
+    offsets = np.arange(-1.0, 1.0 + 1e-9, 0.25, dtype=np.float32)
+    raw = scores.argmax(axis=0)
+    best = np.clip(raw, 1, k - 2)
+    a, b, c = (np.take_along_axis(scores, (best + j)[None], axis=0)[0] for j in (-1, 0, 1))
+    curvature = a - 2.0 * b + c
+    with np.errstate(invalid="ignore"):
+        shift = np.where(curvature < 0, 0.5 * (a - c) / np.where(curvature < 0, curvature, -1.0), 0.0)
+        expected = centre + offsets[best] + shift * 0.25
+        reliable = (b >= 0.9) & (raw > 0) & (raw < k - 1)
+    got, got_reliable = compiled.best_offsets(scores, centre, offsets, 0.25, 0.9)
+    np.testing.assert_array_equal(got, expected)
+    np.testing.assert_array_equal(got_reliable, reliable)
+    assert got_reliable.any() and not got_reliable.all()
