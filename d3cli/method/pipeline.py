@@ -616,10 +616,10 @@ class D3Stereo:
         on the backend estimates at the ends of the narrow range (the true match probably
         lies outside it: not road) and estimates whose match falls left of the right image
         become holes (``backend.pt_validity``: the map and the validity come back masked).
-        On a device backend the occlusion check and the row-wise filling with its median
-        run there too (:meth:`_finish_on_backend`); the rest of the finishing (speckles,
-        the filling inside surfaces, smoothing: ``kernels/finishing/``) runs on the host,
-        after the one download of the map and the validity.
+        On a device backend the occlusion check, the speckle filter and the filling with
+        its median run there too (:meth:`_finish_on_backend`); the smoothing
+        (``kernels/finishing/``) runs on the host, after the one download of the map and
+        the validity.
         """
         cfg = self.cfg
         backend = self.backend
@@ -664,13 +664,15 @@ class D3Stereo:
 
     def _finish_on_backend(self, match: "_Match", sub, dmax: int, info: dict, road: RoadModel | None):
         """:meth:`_finish` of a sub-pixel map on a device: the road model's validity, the
-        occlusion check (``backend.drop_occluded``) and, where no host step comes between
-        them, the row-wise filling and its median (``backend.fill_rows``,
-        ``backend.median_of_holes``) run on the device; then one download of the map and
-        of the validity, and one of every count (the levels', the road model's, the
-        occluded pixels) together.  The occlusion check stays on the host where the
-        filling inside surfaces needs its map there (``refine.fill_inside``)."""
+        occlusion check (``backend.drop_occluded``), the speckle filter
+        (``backend.drop_speckles``) and the filling (``backend.fill_rows``, or
+        ``backend.fill_inside`` with the occluded pixels, and the median of the filled
+        pixels, ``backend.median_of_holes``) run on the device, in the order and with the
+        values of :meth:`_finish_on_host`; then one download of the map and of the
+        validity, and one of every count (the levels', the road model's, the occluded and
+        the speckle pixels) together."""
         cfg = self.cfg
+        refine = cfg.refine
         backend = self.backend
         pending = []
         if road is not None:
@@ -679,16 +681,23 @@ class D3Stereo:
             pending += list(pt_counts)
         else:
             valid = backend.decided_mask(match.disparity)
-        fill_inside = cfg.refine.fill and cfg.refine.fill_inside
-        occlusion = cfg.refine.occlusion_check and not fill_inside
-        if occlusion:
+        shares = {}  # info key -> index of its count in pending
+        occluded = None
+        if refine.occlusion_check:
             # sub is this method's own map: masked in place
-            _, count = backend.drop_occluded(sub, valid, 1.0, _border_start(dmax, sub.shape[1]), sub)
+            occluded, count = backend.drop_occluded(sub, valid, 1.0, _border_start(dmax, sub.shape[1]), sub)
+            shares["occluded_share"] = len(pending)
             pending.append(count)
-        filled = cfg.refine.fill and not fill_inside and cfg.refine.speckle_size <= 0
-        if filled:
-            sub, use = backend.fill_rows(sub, valid)
-            if cfg.refine.smooth_filled and min(sub.shape) >= 5:
+        if refine.speckle_size > 0:
+            count = backend.drop_speckles(sub, valid, refine.speckle_size, refine.speckle_range, sub)
+            shares["speckle_share"] = len(pending)
+            pending.append(count)
+        if refine.fill:
+            if refine.fill_inside and occluded is not None:
+                sub, use = backend.fill_inside(sub, valid, occluded)
+            else:
+                sub, use = backend.fill_rows(sub, valid)
+            if refine.smooth_filled and min(sub.shape) >= 5:
                 sub = backend.median_of_holes(sub, use)
         out = backend.to_host(sub)
         valid = backend.to_host(valid)
@@ -699,23 +708,23 @@ class D3Stereo:
             match.counts_read = True
         if road is not None:
             info["pt"].update(restored_shares(values[:3], valid.size))
-        if occlusion:
-            info["occluded_share"] = values[-1] / valid.size
-        return self._finish_on_host(out, valid, True, dmax, info, road, occlusion=not occlusion, fill=not filled)
+        for key, i in shares.items():
+            info[key] = values[i] / valid.size
+        return self._finish_on_host(out, valid, True, dmax, info, road, occlusion=False, speckles=False, fill=False)
 
     def _finish_on_host(self, out: np.ndarray, valid: np.ndarray, owned: bool, dmax: int, info: dict,
-                        road: RoadModel | None, *, occlusion: bool = True, fill: bool = True):
-        """The host part of :meth:`_finish`: the occlusion check (unless ``occlusion`` is
-        False: done on the backend), the speckles, the filling (unless ``fill`` is False)
-        and the smoothing of a host map and its validity (``owned``: ``out`` may be written
-        in place)."""
+                        road: RoadModel | None, *, occlusion: bool = True, speckles: bool = True,
+                        fill: bool = True):
+        """The host part of :meth:`_finish`: the occlusion check, the speckles and the
+        filling (each unless its flag is False: done on the backend) and the smoothing of a
+        host map and its validity (``owned``: ``out`` may be written in place)."""
         cfg = self.cfg
         occluded = None
         if occlusion and cfg.refine.occlusion_check:
             occluded, count, out = drop_occluded(out, valid, max_disparity=dmax, out=out if owned else None)
             owned = True
             info["occluded_share"] = count / valid.size
-        if cfg.refine.speckle_size > 0:
+        if speckles and cfg.refine.speckle_size > 0:
             count, out = drop_speckles(out, valid, max_size=cfg.refine.speckle_size,
                                        max_diff=cfg.refine.speckle_range, out=out if owned else None)
             owned = True

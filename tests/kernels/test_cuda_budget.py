@@ -8,10 +8,10 @@ the decided pixels and the counts.  The count is taken under the CUDA simulator 
 processes (the simulator must be on before numba is imported) with
 :func:`d3cli.kernels.cuda_calls.count_cuda_calls`, for the bundled configs on a 64x32
 uint8 pair (``scripts/profile_cuda.py --cases tiny`` prints the same figures), while every
-CPU kernel of the matching steps raises, and so do those of the occlusion check and of the
-row-wise filling where the config runs them on the device: the CUDA run computes on the
-device only (the road fit and the rest of the finishing run on the host by design,
-``docs/gpu.md``).
+CPU kernel of the matching steps raises, and so do those of the occlusion check, of the
+speckle filter and of the filling (row-wise and inside surfaces) where the config runs them:
+the CUDA run computes on the device only (the road fit and the smoothing of the finishing
+run on the host by design, ``docs/gpu.md``).
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ _COUNT = textwrap.dedent(
     from d3cli.kernels.sgm import cpu as s1
     from d3cli.kernels.subpixel import cpu as u1
     from d3cli.kernels import cpu_common
-    from d3cli.kernels.finishing import fill as f1, occlusion as f2
+    from d3cli.kernels.finishing import fill as f1, occlusion as f2, speckle as f3
     from d3cli.method import pyramid as method_pyramid
 
     # the simulator runs every thread of a block as a Python thread: small blocks and one lane
@@ -78,8 +78,12 @@ _COUNT = textwrap.dedent(
     # kernels raise during a compute whose settings run them there
     OCCLUSION = {f2: ("_uniqueness_task", "_out_of_view_task", "_drop_occluded_task"),
                  host: ("uniqueness_occluded", "out_of_view_mask", "drop_occluded")}
-    FILL = {f1: ("_usable_task", "_fill_rows_task", "copy_nearest_rows", "_keep_valid_task", "_median_holes_task"),
-            host: ("usable", "fill_rows_smaller_side", "copy_nearest_rows", "keep_valid")}
+    FILL = {f1: ("_usable_task", "_fill_rows_task", "copy_nearest_rows", "_keep_valid_task", "_median_holes_task",
+                 "_nearest_columns_task", "_fill_inside_task"),
+            host: ("usable", "fill_rows_smaller_side", "copy_nearest_rows", "keep_valid", "nearest_along_columns",
+                   "fill_inside")}
+    SPECKLES = {f3: ("_fixed_task", "_fixed_finite_task", "_drop_marked_task", "filter_speckles"),
+                host: ("fixed_point_16", "fixed_point_16_finite", "drop_marked"), cv2: ("filterSpeckles",)}
 
     def forbid(table):
         saved = []
@@ -100,10 +104,11 @@ _COUNT = textwrap.dedent(
         left, right = (synth.left, synth.right) if config == "road" else textured
         stereo = D3Stereo(load_config(config, overrides=["run.backend=cuda"]))
         refine = stereo.cfg.refine
-        fill_inside = refine.fill and refine.fill_inside  # needs the occluded pixels on the host
-        on_device = {"occlusion": refine.occlusion_check and not fill_inside,
-                     "fill": refine.fill and not fill_inside and refine.speckle_size <= 0}
-        saved = (forbid(OCCLUSION) if on_device["occlusion"] else []) + (forbid(FILL) if on_device["fill"] else [])
+        on_device = {"occlusion": refine.occlusion_check, "fill": refine.fill,
+                     "speckles": refine.speckle_size > 0,
+                     "fill_inside": refine.fill and refine.fill_inside and refine.occlusion_check}
+        saved = ((forbid(OCCLUSION) if on_device["occlusion"] else []) + (forbid(FILL) if on_device["fill"] else [])
+                 + (forbid(SPECKLES) if on_device["speckles"] else []))
         with count_cuda_calls() as calls:
             result = stereo.compute(left, right, max_disparity=16)
         for module, name, value in saved:
@@ -158,12 +163,25 @@ def _check(row: dict) -> None:
     assert row["by_kernel"]["_diffuse_level"] <= row["levels"] + (row["config"] == "road")
     assert row["by_kernel"]["_row_prefixes"] == row["by_kernel"]["_column_prefixes"]
     assert row["level0"] == [W, H]
-    expected = {"default": (True, True), "paper": (False, True), "road": (True, True), "kitti": (False, False)}
-    assert (row["on_device"]["occlusion"], row["on_device"]["fill"]) == expected[row["config"]]
-    if row["on_device"]["occlusion"]:
+    # (occlusion check, filling, speckle filter, filling inside surfaces)
+    expected = {"default": (True, True, False, False), "paper": (False, True, False, False),
+                "road": (True, True, False, False), "kitti": (True, True, True, True)}
+    on_device = row["on_device"]
+    assert (on_device["occlusion"], on_device["fill"], on_device["speckles"],
+            on_device["fill_inside"]) == expected[row["config"]]
+    if on_device["occlusion"]:
         assert row["by_kernel"]["_drop_occluded_kernel"] == 1
-    if row["on_device"]["fill"]:
+    if on_device["speckles"]:  # the union-find: four launches whatever the map
+        for kernel in ("_speckle_init_kernel", "_speckle_merge_kernel", "_speckle_size_kernel",
+                       "_drop_speckles_kernel"):
+            assert row["by_kernel"][kernel] == 1, kernel
+    if on_device["fill_inside"]:
+        for kernel in ("_nearest_columns_kernel", "_fill_inside_kernel", "_copy_inside_rows_kernel"):
+            assert row["by_kernel"][kernel] == 1, kernel
+        assert "_fill_rows_kernel" not in row["by_kernel"]
+    elif on_device["fill"]:
         assert row["by_kernel"]["_fill_rows_kernel"] == row["by_kernel"]["_copy_rows_kernel"] == 1
+    if on_device["fill"]:
         assert row["by_kernel"]["_median_holes_kernel"] == 1
     if row["config"] == "road":  # the road model held: the narrow match, restored on the device
         assert row["pt"]["road_like"] and not row["pt"].get("fallback") and row["valid_share"] > 0.5
