@@ -133,3 +133,34 @@ def test_fill_inside_matches_cpu_and_fill_holes(gpu, inside, shape):
         if min(shape) >= 5:
             median = host(gpu, gpu.median_of_holes(filled, use))
             assert median.tobytes() == fill_holes(disp, valid, smooth=True, occluded=occluded).tobytes(), what
+
+
+@pytest.mark.parametrize("config, overrides, shares", [
+    ("kitti", [], ("occluded_share", "speckle_share")),
+    ("kitti", ["refine.smooth_radius=0"], ("occluded_share", "speckle_share")),
+    ("kitti", ["refine.occlusion_check=false", "refine.smooth_radius=0"], ("speckle_share",)),  # the row-wise fill
+    ("default", ["refine.speckle_size=6", "refine.smooth_radius=0"], ("occluded_share", "speckle_share")),
+])
+def test_the_device_finishing_equals_the_hosts(gpu, config, overrides, shares):
+    """``D3Stereo._finish_on_backend`` (occlusion check, speckles, filling on the device)
+    against ``_finish_on_host`` of the same map (what ``--backend cpu`` runs): the same map,
+    validity and shares, on a map with occlusions (random disparities), plateaus (regions
+    of every size) and undecided pixels."""
+    from d3cli import D3Stereo, load_config
+    from d3cli.method.pipeline import _Match
+
+    rng = np.random.default_rng(17)
+    h, w, dmax = 12, 23, 8
+    disp = rng.integers(0, dmax + 1, (h, w)).astype(np.int32)
+    disp[:6, 4:15] = 3  # a plateau, speckles and holes around it
+    disp[rng.random((h, w)) < 0.2] = -1
+    sub = np.where(disp >= 0, disp + rng.uniform(-0.5, 0.5, (h, w)), np.inf).astype(np.float32)
+    stereo = D3Stereo(load_config(config, overrides=["run.backend=cuda", *overrides]))
+    info_gpu, info_cpu = {}, {}
+    match = _Match(disparity=gpu.to_device(disp), cost=None, level_maps=[], per_level=[])
+    got, got_valid = stereo._finish_on_backend(match, gpu.to_device(sub), dmax, info_gpu, None)
+    want, want_valid = stereo._finish_on_host(sub.copy(), disp >= 0, True, dmax, info_cpu, None)
+    np.testing.assert_array_equal(got_valid, want_valid)
+    assert got.tobytes() == want.tobytes()
+    assert info_gpu == info_cpu
+    assert [key for key in ("occluded_share", "speckle_share") if info_cpu.get(key, 0) > 0] == list(shares)
