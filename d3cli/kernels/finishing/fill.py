@@ -127,7 +127,7 @@ def fill_inside(disp, valid, occluded, up, down):
     is not occluded and has one, else with the smaller row neighbour.
 
     The row neighbours are found on the way, in two row buffers that stay in the cache (no
-    left/right maps written and read back).
+    left/right maps written and read back; the row body: ``pixel_fill_inside.fill_inside_row``).
 
     Parameters
     ----------
