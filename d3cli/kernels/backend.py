@@ -417,6 +417,53 @@ class Backend(Protocol):
         """
         ...
 
+    def drop_speckles(self, disparity, valid, max_size, max_diff, out) -> Any:
+        """The speckle filter of the finishing, its holes and the masked map
+        (:func:`d3cli.method.refinement.speckles` says what a speckle is): the regions of
+        ``cv2.filterSpeckles`` on the 1/16 px fixed point of the usable pixels (valid and
+        finite; the others in no region), 4-connected, neighbours within ``max_diff``; the
+        usable pixels of every region of at most ``max_size`` pixels become holes.
+
+        Parameters
+        ----------
+        disparity : ndarray, float32, (H, W)
+        valid : ndarray, bool, (H, W)
+            Updated in place: ``valid &= ~speck``.
+        max_size : int
+            Largest speckle, pixels (0: none).
+        max_diff : float
+            Largest disparity step inside a region, pixels (1/16 px:
+            :func:`d3cli.kernels.finishing.pixel_speckle.fixed_step`).
+        out : ndarray, float32, (H, W)
+            Receives ``np.where(valid, disparity, inf)``; may be ``disparity``.
+
+        Returns
+        -------
+        count : speckle pixels; an ``int`` on the CPU, on CUDA a count left on the device
+            (as :meth:`count_decided`'s).  The CPU labels the regions with a union-find in
+            one thread (``finishing/speckle.py``), CUDA with a union-find over the
+            device's threads in four launches (``finishing/cuda_speckle.py``).
+        """
+        ...
+
+    def fill_inside(self, disparity, valid, occluded) -> Any:
+        """The filling inside surfaces (``refine.fill_inside``, docs/design.md,
+        'Finishing'): a hole that is not occluded and has a usable pixel in one of the four
+        directions takes the median of the nearest usable values (left, right, up, down;
+        the float32 mean of the middle two of an even count), any other hole the smaller of
+        its nearest row neighbours; a row without a usable pixel a copy of the nearest row
+        that has one (the upper on a tie); all inf when nothing is usable
+        (``kernels/finishing/pixel_fill_inside.py``, the values of
+        ``refinement.fill_holes`` with ``occluded``, without its median).
+
+        Returns
+        -------
+        filled : ndarray, float32, (H, W)
+        use : ndarray, bool, (H, W)
+            The usable pixels, ``valid & isfinite(disparity)``: those filled from.
+        """
+        ...
+
     def fill_rows(self, disparity, valid) -> Any:
         """The row-wise hole filling (docs/design.md, 'Finishing'): each hole the smaller of
         the nearest usable values left and right in its row, a row without one a copy of the

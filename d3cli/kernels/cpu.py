@@ -20,9 +20,11 @@ from .cost.cpu import cosine_cost_volume, invalidate_out_of_view, ncc_cost_volum
 from .decisive.cpu_diffusion import diffuse, min_cost
 from .decisive.cpu_inheritance import inherit
 from .decisive.cpu_seeds import decided_mask, decisive_seeds, merge_sparse
+from .finishing.fill import fill_inside_holes as fill_inside
 from .finishing.fill import fill_rows, median_of_holes
 from .finishing.occlusion import count_range_ends, drop_occluded, pt_validity
 from .finishing.smooth import smooth_map
+from .finishing.speckle import drop_speckles
 from .perspective.cpu import pt_restore, pt_warp
 from .pyramid.cpu import pyramid
 from .sgm.cpu import sgm_smooth
@@ -31,10 +33,10 @@ from .volume import dense_index
 
 __all__ = [
     "band_indexes", "bilateral_filter", "cosine_cost_volume", "count_decided", "count_range_ends", "counts_to_host",
-    "decided_mask", "decisive_seeds", "dense_index", "diffuse", "drop_occluded", "fill_rows", "inherit",
-    "invalidate_out_of_view", "median_of_holes", "merge_sparse", "min_cost", "ncc_cost_volume", "outputs_to_host",
-    "pt_restore", "pt_validity", "pt_warp", "pyramid", "rbf_filter", "rbf_weights", "sgm_smooth",
-    "small_ints_to_host", "smooth_map", "subpixel", "to_device", "to_host",
+    "decided_mask", "decisive_seeds", "dense_index", "diffuse", "drop_occluded", "drop_speckles", "fill_inside",
+    "fill_rows", "inherit", "invalidate_out_of_view", "median_of_holes", "merge_sparse", "min_cost",
+    "ncc_cost_volume", "outputs_to_host", "pt_restore", "pt_validity", "pt_warp", "pyramid", "rbf_filter",
+    "rbf_weights", "sgm_smooth", "small_ints_to_host", "smooth_map", "subpixel", "to_device", "to_host",
 ]
 
 

@@ -39,7 +39,9 @@ from .decisive.cuda_seeds import decided_mask, decisive_seeds, merge_sparse
 from .device_counts import count_decided, counts_to_host
 from .device_outputs import outputs_to_host, small_ints_to_host
 from .finishing.cuda import drop_occluded, fill_rows, median_of_holes
+from .finishing.cuda_fill_inside import fill_inside
 from .finishing.cuda_smoothing import smooth_map
+from .finishing.cuda_speckle import drop_speckles
 from .perspective.cuda import count_range_ends, pt_restore, pt_validity, pt_warp
 from .pyramid.cuda import pyramid
 from .sgm.cuda import sgm_smooth
@@ -60,6 +62,8 @@ __all__ = [
     "dense_index",
     "diffuse",
     "drop_occluded",
+    "drop_speckles",
+    "fill_inside",
     "fill_rows",
     "inherit",
     "invalidate_out_of_view",

@@ -11,9 +11,9 @@ for every backend, and are reached through this facade only:
 - the pyramid's halving of a host image (:func:`halve_area`; the pipeline's pyramid:
   ``backend.pyramid``);
 - the finishing (occlusion tests, speckles, hole filling, smoothing: ``finishing/``; the
-  occlusion tests, the row-wise filling and the smoothing also on the backend,
-  ``backend.drop_occluded``, ``backend.fill_rows``, ``backend.median_of_holes``,
-  ``backend.smooth_map``),
+  occlusion tests, the speckles, the filling and the smoothing also on the backend,
+  ``backend.drop_occluded``, ``backend.drop_speckles``, ``backend.fill_rows``,
+  ``backend.fill_inside``, ``backend.median_of_holes``, ``backend.smooth_map``),
   with the road model's rules over a map (:func:`shift_plane_f32`, :func:`restored_validity`,
   :func:`right_image_mask`; the rules themselves: :mod:`d3cli.kernels.road_model`);
 - the road fit's solvers (:func:`solve_weighted`, :func:`ransac_inlier_counts`,

@@ -623,11 +623,9 @@ class D3Stereo:
         on the backend estimates at the ends of the narrow range (the true match probably
         lies outside it: not road) and estimates whose match falls left of the right image
         become holes (``backend.pt_validity``: the map and the validity come back masked).
-        On a device backend the occlusion check, the row-wise filling with its median and
-        the smoothing run there too (:meth:`_finish_on_backend`); the rest of the finishing
-        (speckles, the filling inside surfaces, and the steps after those:
-        ``kernels/finishing/``) runs on the host, after the one download of the map and the
-        validity.
+        On a device backend the occlusion check, the speckle filter, the filling with its
+        median and the smoothing run there too (:meth:`_finish_on_backend`), before the one
+        download of the map, the validity and the counts.
         """
         cfg = self.cfg
         backend = self.backend
@@ -672,15 +670,16 @@ class D3Stereo:
 
     def _finish_on_backend(self, match: "_Match", sub, dmax: int, info: dict, road: RoadModel | None):
         """:meth:`_finish` of a sub-pixel map on a device: the road model's validity, the
-        occlusion check (``backend.drop_occluded``) and, where no host step comes between
-        them, the row-wise filling and its median (``backend.fill_rows``,
-        ``backend.median_of_holes``) run on the device, and so does the smoothing
-        (``backend.smooth_map``, the road plane from its coefficients) where no host step
-        comes before it; then one download of the map, the validity and every count (the
-        levels', the road model's, the occluded pixels) together
-        (``backend.outputs_to_host``).  The occlusion check stays on the host where the
-        filling inside surfaces needs its map there (``refine.fill_inside``)."""
+        occlusion check (``backend.drop_occluded``), the speckle filter
+        (``backend.drop_speckles``), the filling (``backend.fill_rows``, or
+        ``backend.fill_inside`` with the occluded pixels, and the median of the filled
+        pixels, ``backend.median_of_holes``) and the smoothing (``backend.smooth_map``, the
+        road plane from its coefficients) run on the device, in the order and with the
+        values of :meth:`_finish_on_host`; then one download of the map, the validity and
+        every count (the levels', the road model's, the occluded and the speckle pixels)
+        together (``backend.outputs_to_host``)."""
         cfg = self.cfg
+        refine = cfg.refine
         backend = self.backend
         pending = []
         if road is not None:
@@ -689,25 +688,28 @@ class D3Stereo:
             pending += list(pt_counts)
         else:
             valid = backend.decided_mask(match.disparity)
-        fill_inside = cfg.refine.fill and cfg.refine.fill_inside
-        occlusion = cfg.refine.occlusion_check and not fill_inside
-        if occlusion:
+        shares = {}  # info key -> index of its count in pending
+        occluded = None
+        if refine.occlusion_check:
             # sub is this method's own map: masked in place
-            _, count = backend.drop_occluded(sub, valid, 1.0, _border_start(dmax, sub.shape[1]), sub)
+            occluded, count = backend.drop_occluded(sub, valid, 1.0, _border_start(dmax, sub.shape[1]), sub)
+            shares["occluded_share"] = len(pending)
             pending.append(count)
-        filled = cfg.refine.fill and not fill_inside and cfg.refine.speckle_size <= 0
-        if filled:
-            sub, use = backend.fill_rows(sub, valid)
-            if cfg.refine.smooth_filled and min(sub.shape) >= 5:
+        if refine.speckle_size > 0:
+            count = backend.drop_speckles(sub, valid, refine.speckle_size, refine.speckle_range, sub)
+            shares["speckle_share"] = len(pending)
+            pending.append(count)
+        if refine.fill:
+            if refine.fill_inside and occluded is not None:
+                sub, use = backend.fill_inside(sub, valid, occluded)
+            else:
+                sub, use = backend.fill_rows(sub, valid)
+            if refine.smooth_filled and min(sub.shape) >= 5:
                 sub = backend.median_of_holes(sub, use)
-        # the smoothing too, where no host step comes before it (the map is still here)
-        host_before = (cfg.refine.occlusion_check and not occlusion) or cfg.refine.speckle_size > 0 or (
-            cfg.refine.fill and not filled)
-        smoothed = cfg.refine.smooth_radius > 0 and not host_before
-        if smoothed:
+        if refine.smooth_radius > 0:
+            # the range weight compares residuals from the road plane when there is one
             plane = None if road is None else (road.a0, road.b1, road.b2)
-            sub = backend.smooth_map(sub, cfg.refine.smooth_radius, cfg.refine.smooth_sigma, cfg.refine.smooth_kernel,
-                                     plane, True)
+            sub = backend.smooth_map(sub, refine.smooth_radius, refine.smooth_sigma, refine.smooth_kernel, plane, True)
         # one download of whatever map and validity the device steps above leave, with
         # every count not read yet (the levels' too): on CUDA one copy of one packed buffer
         unread = [] if match.counts_read else [s[k] for s, k in _count_keys(match.per_level)]
@@ -718,24 +720,24 @@ class D3Stereo:
             match.counts_read = True
         if road is not None:
             info["pt"].update(restored_shares(values[:3], valid.size))
-        if occlusion:
-            info["occluded_share"] = values[-1] / valid.size
-        return self._finish_on_host(out, valid, True, dmax, info, road, occlusion=not occlusion, fill=not filled,
-                                    smooth=not smoothed)
+        for key, i in shares.items():
+            info[key] = values[i] / valid.size
+        return self._finish_on_host(out, valid, True, dmax, info, road, occlusion=False, speckles=False, fill=False,
+                                    smooth=False)
 
     def _finish_on_host(self, out: np.ndarray, valid: np.ndarray, owned: bool, dmax: int, info: dict,
-                        road: RoadModel | None, *, occlusion: bool = True, fill: bool = True, smooth: bool = True):
-        """The host part of :meth:`_finish`: the occlusion check (unless ``occlusion`` is
-        False: done on the backend), the speckles, the filling (unless ``fill`` is False)
-        and the smoothing (unless ``smooth`` is False) of a host map and its validity
-        (``owned``: ``out`` may be written in place)."""
+                        road: RoadModel | None, *, occlusion: bool = True, speckles: bool = True,
+                        fill: bool = True, smooth: bool = True):
+        """The host part of :meth:`_finish`: the occlusion check, the speckles, the
+        filling and the smoothing (each unless its flag is False: done on the backend) of a
+        host map and its validity (``owned``: ``out`` may be written in place)."""
         cfg = self.cfg
         occluded = None
         if occlusion and cfg.refine.occlusion_check:
             occluded, count, out = drop_occluded(out, valid, max_disparity=dmax, out=out if owned else None)
             owned = True
             info["occluded_share"] = count / valid.size
-        if cfg.refine.speckle_size > 0:
+        if speckles and cfg.refine.speckle_size > 0:
             count, out = drop_speckles(out, valid, max_size=cfg.refine.speckle_size,
                                        max_diff=cfg.refine.speckle_range, out=out if owned else None)
             owned = True

@@ -4,9 +4,10 @@ The occlusion tests, the speckle filter, the filling and the smoothing of this m
 on the host, as numba kernels (:mod:`d3cli.kernels.finishing`) that give the values of a
 NumPy/OpenCV formulation bit for bit (that formulation is the reference in
 ``tests/reference/finishing.py``).  On a device backend ``D3Stereo._finish`` runs the
-occlusion tests and the row-wise filling on the device instead (``backend.drop_occluded``,
-``backend.fill_rows``, ``backend.median_of_holes``: the same row bodies, the same values)
-where no host step comes before them.
+occlusion tests, the speckle filter and the filling on the device instead
+(``backend.drop_occluded``, ``backend.drop_speckles``, ``backend.fill_rows`` or
+``backend.fill_inside``, ``backend.median_of_holes``: the same row bodies, the same
+values; the speckles those of ``cv2.filterSpeckles``).
 """
 
 from __future__ import annotations

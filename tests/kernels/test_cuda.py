@@ -267,3 +267,19 @@ def test_road_pipeline_on_cuda_equals_cpu(gpu):
     assert want.valid.mean() > 0.5
     np.testing.assert_array_equal(np.isinf(got.disparity), np.isinf(want.disparity))
     np.testing.assert_allclose(got.disparity, want.disparity, rtol=0, atol=COST_ATOL)
+
+
+@pytest.mark.parametrize("equiangular", [False, True])
+def test_subpixel_gives_the_cpus_bytes_under_the_simulator(gpu, equiangular):
+    """The offset in float64 from the float32 sums on, on both targets: the simulator's
+    NumPy scalars give the CPU's bytes (a GPU may fuse a multiply-add: within COST_ATOL)."""
+    from numba import config as numba_config
+
+    rng = np.random.default_rng(41)
+    cost = rng.random((H, W, 8)).astype(np.float32)
+    disp = rng.integers(-1, 8, (H, W)).astype(np.int32)
+    want = cpu.subpixel(cost, disp, equiangular)
+    got = host(gpu, gpu.subpixel(cost, disp, equiangular))
+    if numba_config.ENABLE_CUDASIM:
+        assert got.tobytes() == want.tobytes()
+    np.testing.assert_allclose(got, want, rtol=0, atol=COST_ATOL)

@@ -10,9 +10,9 @@ imported) with :func:`d3cli.kernels.cuda_calls.count_cuda_calls`, for the bundle
 on a 64x32 uint8 pair (``scripts/profile_cuda.py --cases tiny`` prints the same figures)
 and, marked ``slow``, for the road config on a 160x96 synthetic road, while every CPU
 kernel of the matching steps raises, and so do those of the occlusion check, of the
-row-wise filling and of the smoothing where the config runs them on the device: the CUDA
-run computes on the device only (the road fit and the rest of the finishing run on the
-host by design, ``docs/gpu.md``).
+speckle filter, of the filling (row-wise and inside surfaces) and of the smoothing where
+the config runs them: the CUDA run computes on the device only (the road fit runs on the
+host by design, on the coarsest level's small map, ``docs/gpu.md``).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ _COUNT = textwrap.dedent(
     from d3cli.kernels.sgm import cpu as s1
     from d3cli.kernels.subpixel import cpu as u1
     from d3cli.kernels import cpu_common
-    from d3cli.kernels.finishing import fill as f1, occlusion as f2, range_box as f3, smoothing as f4
+    from d3cli.kernels.finishing import fill as f1, occlusion as f2, speckle as f3, range_box as f4, smoothing as f5
     from d3cli.method import pyramid as method_pyramid
 
     # the simulator runs every thread of a block as a Python thread: small blocks and one lane
@@ -80,10 +80,14 @@ _COUNT = textwrap.dedent(
     # kernels raise during a compute whose settings run them there
     OCCLUSION = {f2: ("_uniqueness_task", "_out_of_view_task", "_drop_occluded_task"),
                  host: ("uniqueness_occluded", "out_of_view_mask", "drop_occluded")}
-    FILL = {f1: ("_usable_task", "_fill_rows_task", "copy_nearest_rows", "_keep_valid_task", "_median_holes_task"),
-            host: ("usable", "fill_rows_smaller_side", "copy_nearest_rows", "keep_valid")}
-    SMOOTH = {f3: ("_masked_task", "_residual_task", "_smooth_task"),
-              f4: ("_residual_task", "_range_levels_task", "_smooth_group_task", "_combine_task", "_plane_task",
+    FILL = {f1: ("_usable_task", "_fill_rows_task", "copy_nearest_rows", "_keep_valid_task", "_median_holes_task",
+                 "_nearest_columns_task", "_fill_inside_task"),
+            host: ("usable", "fill_rows_smaller_side", "copy_nearest_rows", "keep_valid", "nearest_along_columns",
+                   "fill_inside")}
+    SPECKLES = {f3: ("_fixed_task", "_fixed_finite_task", "_drop_marked_task", "filter_speckles"),
+                host: ("fixed_point_16", "fixed_point_16_finite", "drop_marked"), cv2: ("filterSpeckles",)}
+    SMOOTH = {f4: ("_masked_task", "_residual_task", "_smooth_task"),
+              f5: ("_residual_task", "_range_levels_task", "_smooth_group_task", "_combine_task", "_plane_task",
                    "_clamp_task"),
               host: ("box_smooth_disparity", "gaussian_smooth", "unsmoothed", "shift_plane_f32", "residual_and_range",
                      "range_levels", "smooth_groups", "combine_shares", "clamp_negative")}
@@ -117,14 +121,12 @@ _COUNT = textwrap.dedent(
         left, right = (synth.left, synth.right) if config == "road" else textured
         stereo = D3Stereo(load_config(config, overrides=["run.backend=cuda", *settings]))
         refine = stereo.cfg.refine
-        fill_inside = refine.fill and refine.fill_inside  # needs the occluded pixels on the host
-        on_device = {"occlusion": refine.occlusion_check and not fill_inside,
-                     "fill": refine.fill and not fill_inside and refine.speckle_size <= 0}
-        # the smoothing follows on the device where no host step comes before it
-        on_device["smooth"] = refine.smooth_radius > 0 and refine.speckle_size <= 0 and (
-            on_device["occlusion"] or not refine.occlusion_check) and (on_device["fill"] or not refine.fill)
-        saved = (forbid(OCCLUSION) if on_device["occlusion"] else []) + (forbid(FILL) if on_device["fill"] else [])
-        saved += forbid(SMOOTH) if on_device["smooth"] else []
+        on_device = {"occlusion": refine.occlusion_check, "fill": refine.fill,
+                     "speckles": refine.speckle_size > 0,
+                     "fill_inside": refine.fill and refine.fill_inside and refine.occlusion_check,
+                     "smooth": refine.smooth_radius > 0}
+        saved = ((forbid(OCCLUSION) if on_device["occlusion"] else []) + (forbid(FILL) if on_device["fill"] else [])
+                 + (forbid(SPECKLES) if on_device["speckles"] else []) + (forbid(SMOOTH) if on_device["smooth"] else []))
         t0 = time.perf_counter()
         with count_cuda_calls() as calls:
             result = stereo.compute(left, right, max_disparity=dmax)
@@ -208,14 +210,25 @@ def _check(row: dict, size=(W, H)) -> None:
     assert row["level0"] == [w, h]
     # the map, the validity and the counts packed into one buffer: one launch
     assert row["by_kernel"]["_pack_kernel"] == 1
-    expected = {"default": (True, True, True), "paper": (False, True, False), "road": (True, True, True),
-                "kitti": (False, False, False)}
+    # (occlusion check, filling, speckle filter, filling inside surfaces, smoothing)
+    expected = {"default": (True, True, False, False, True), "paper": (False, True, False, False, False),
+                "road": (True, True, False, False, True), "kitti": (True, True, True, True, True)}
     on_device = row["on_device"]
-    assert (on_device["occlusion"], on_device["fill"], on_device["smooth"]) == expected[row["config"]]
-    if row["on_device"]["occlusion"]:
+    assert (on_device["occlusion"], on_device["fill"], on_device["speckles"], on_device["fill_inside"],
+            on_device["smooth"]) == expected[row["config"]]
+    if on_device["occlusion"]:
         assert row["by_kernel"]["_drop_occluded_kernel"] == 1
-    if row["on_device"]["fill"]:
+    if on_device["speckles"]:  # the union-find: four launches whatever the map
+        for kernel in ("_speckle_init_kernel", "_speckle_merge_kernel", "_speckle_size_kernel",
+                       "_drop_speckles_kernel"):
+            assert row["by_kernel"][kernel] == 1, kernel
+    if on_device["fill_inside"]:
+        for kernel in ("_nearest_columns_kernel", "_fill_inside_kernel", "_copy_inside_rows_kernel"):
+            assert row["by_kernel"][kernel] == 1, kernel
+        assert "_fill_rows_kernel" not in row["by_kernel"]
+    elif on_device["fill"]:
         assert row["by_kernel"]["_fill_rows_kernel"] == row["by_kernel"]["_copy_rows_kernel"] == 1
+    if on_device["fill"]:
         assert row["by_kernel"]["_median_holes_kernel"] == 1
     smooth_launches = {k: v for k, v in row["by_kernel"].items() if k.startswith("_smooth_")}
     if row["config"] == "default":  # the box range kernel: the residual, the sums

@@ -14,18 +14,18 @@ from numba import njit
 
 from ..pool import row_tasks, run_tasks, threads
 from .pixel_fill import build as build_rows
+from .pixel_fill_inside import build as build_inside
 
-_F32_TWO = np.float32(2.0)
-_F32_INF = np.float32(np.inf)
-
-
-# the row bodies, written once for the CPU and CUDA (pixel_fill.py), as globals numba can type
+# the row and column bodies, written once for the CPU and CUDA (pixel_fill.py,
+# pixel_fill_inside.py), as globals numba can type
 _rows = build_rows(njit(cache=True, nogil=True))
-_np_minimum = _rows.np_minimum
 _usable_row = _rows.usable_row
 _fill_row = _rows.fill_row
 _copy_nearest_row = _rows.copy_nearest_row
 _median5_at = _rows.median5_at
+_inside = build_inside(njit(cache=True, nogil=True))
+_nearest_columns = _inside.nearest_columns
+_fill_inside_row = _inside.fill_inside_row
 
 
 @njit(cache=True, nogil=True)
@@ -85,43 +85,22 @@ def fill_rows_smaller_side(disp, valid):
 
 @njit(cache=True, nogil=True)
 def _nearest_columns_task(task, tasks, disp, valid, up, down):
-    h, w = disp.shape
+    w = disp.shape[1]
     u0, u1 = (task * w) // tasks, ((task + 1) * w) // tasks
     if u1 <= u0:
         return
-    last = np.full(u1 - u0, _F32_INF, np.float32)
-    n = u1 - u0
-    for y in range(h):  # top down: the nearest valid value at or above
-        d_row = disp[y, u0:u1]
-        v_row = valid[y, u0:u1]
-        o_row = up[y, u0:u1]
-        for i in range(n):  # selects: vectorised across the columns
-            x = d_row[i]  # both loaded before the select: a load in its arm is a branch
-            prev = last[i]
-            value = x if v_row[i] else prev
-            last[i] = value
-            o_row[i] = value
-    last[:] = _F32_INF
-    for y in range(h - 1, -1, -1):  # bottom up: at or below
-        d_row = disp[y, u0:u1]
-        v_row = valid[y, u0:u1]
-        o_row = down[y, u0:u1]
-        for i in range(n):
-            x = d_row[i]
-            prev = last[i]
-            value = x if v_row[i] else prev
-            last[i] = value
-            o_row[i] = value
+    _nearest_columns(disp, valid, up, down, u0, u1, np.empty(u1 - u0, np.float32))
 
 
 def nearest_along_columns(disp, valid):
-    """Values of the nearest valid pixel above and below in each column, in the map's own
-    (H, W) layout, without transposed copies (tasks over blocks of columns, rows streamed).
+    """Values of the nearest usable pixel (valid and finite) above and below in each
+    column, in the map's own (H, W) layout, without transposed copies (tasks over blocks of
+    columns, rows streamed; the column body: ``pixel_fill_inside.nearest_columns``).
 
     Returns
     -------
     up, down : ndarray, float32, (H, W)
-        The nearest valid value at or above (below) each pixel; inf where there is none.
+        The nearest usable value at or above (below) each pixel; inf where there is none.
     """
     h, w = disp.shape
     up = np.empty((h, w), np.float32)
@@ -132,58 +111,15 @@ def nearest_along_columns(disp, valid):
     return up, down
 
 
-@njit(cache=True, inline="always")
-def _order(a, b):
-    """``(a, b)`` in increasing order, swapped only when ``a > b`` (equal values keep their
-    order: a network of such adjacent exchanges sorts stably, as an insertion sort)."""
-    swap = a > b
-    return (b if swap else a), (a if swap else b)
-
-
-@njit(cache=True, inline="always")
-def _inside_value(l_v, r_v, up_v, down_v, occluded):
-    """The fill of one hole from its four nearest values (see :func:`fill_inside`)."""
-    side = _np_minimum(l_v, r_v)
-    # The nearest values are finite or +inf (none): sorting all four with +inf
-    # last gives the finite ones in the order of the reference's insertion sort
-    # of the finite values alone (left, right, up, down; stable on ties).  Selects
-    # only: the pattern of holes is random, and branches mispredicted.
-    a0, a1 = _order(l_v, r_v)
-    a1, a2 = _order(a1, up_v)
-    a0, a1 = _order(a0, a1)
-    a2, a3 = _order(a2, down_v)
-    a1, a2 = _order(a1, a2)
-    a0, a1 = _order(a0, a1)
-    n = (l_v != _F32_INF) + (r_v != _F32_INF) + (up_v != _F32_INF) + (down_v != _F32_INF)
-    # median of the n finite ones: the middle one, or the float32 mean of the two
-    median = a0 if n == 1 else ((a0 + a1) / _F32_TWO if n == 2 else (a1 if n == 3 else (a1 + a2) / _F32_TWO))
-    return side if (occluded or n == 0) else median
-
-
 @njit(cache=True, nogil=True)
 def _fill_inside_task(task, tasks, disp, valid, occluded, up, down, out):
-    h, w = disp.shape
+    w = disp.shape[1]
     left = np.empty(w, np.float32)  # the task's own row buffers
     right = np.empty(w, np.float32)
+    h = disp.shape[0]
     y0, y1 = (task * h) // tasks, ((task + 1) * h) // tasks
     for y in range(y0, y1):
-        d_row = disp[y]
-        v_row = valid[y]
-        # the nearest valid value at or left of u and at or right of j = w - 1 - u: two
-        # independent chains of selects in one loop (faster than two scans)
-        a = _F32_INF
-        b = _F32_INF
-        for u in range(w):
-            j = w - 1 - u
-            x = d_row[u]  # loaded before the select: a load in its arm compiles to a branch
-            z = d_row[j]
-            a = x if v_row[u] else a
-            b = z if v_row[j] else b
-            left[u] = a
-            right[j] = b
-        for u in range(w):  # no carried value: this loop vectorises
-            fill = _inside_value(left[u], right[u], up[y, u], down[y, u], occluded[y, u])
-            out[y, u] = disp[y, u] if valid[y, u] else fill
+        _fill_inside_row(disp, valid, occluded, up, down, out, left, right, y)
 
 
 def fill_inside(disp, valid, occluded, up, down):
@@ -191,7 +127,7 @@ def fill_inside(disp, valid, occluded, up, down):
     is not occluded and has one, else with the smaller row neighbour.
 
     The row neighbours are found on the way, in two row buffers that stay in the cache (no
-    left/right maps written and read back).
+    left/right maps written and read back; the row body: ``pixel_fill_inside.fill_inside_row``).
 
     Parameters
     ----------
@@ -252,6 +188,23 @@ def fill_rows(disparity, valid):
     disp = np.ascontiguousarray(disparity, dtype=np.float32)
     use, _, _ = usable(disp, np.ascontiguousarray(valid, dtype=np.bool_))
     filled, row_has = fill_rows_smaller_side(disp, use)
+    if not row_has.all():
+        copy_nearest_rows(filled, row_has)
+    return filled, use
+
+
+def fill_inside_holes(disparity, valid, occluded):
+    """The backends' ``fill_inside`` on the CPU: the usable pixels (:func:`usable`), their
+    nearest values along the columns (:func:`nearest_along_columns`), the fill
+    (:func:`fill_inside`), empty rows from the nearest filled row
+    (:func:`copy_nearest_rows`).
+
+    The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.fill_inside`.
+    """
+    disp = np.ascontiguousarray(disparity, dtype=np.float32)
+    use, row_has, _ = usable(disp, np.ascontiguousarray(valid, dtype=np.bool_))
+    up, down = nearest_along_columns(disp, use)
+    filled = fill_inside(disp, use, np.ascontiguousarray(occluded, dtype=np.bool_), up, down)
     if not row_has.all():
         copy_nearest_rows(filled, row_has)
     return filled, use

@@ -30,9 +30,11 @@ def build(jit, shared):
         d = disp[v, u]
         if d < 0:
             return INF
-        c0 = cost_or_inf(cost, index, v, u, d - 1)
-        c1 = cost_or_inf(cost, index, v, u, d)
-        c2 = cost_or_inf(cost, index, v, u, d + 1)
+        # float64 costs: what numba makes of cost_or_inf's float32 cell or float64 inf;
+        # float() says so for NumPy's float32 scalars too (the CUDA simulator)
+        c0 = float(cost_or_inf(cost, index, v, u, d - 1))
+        c1 = float(cost_or_inf(cost, index, v, u, d))
+        c2 = float(cost_or_inf(cost, index, v, u, d + 1))
         if c0 == INF or c1 == INF or c2 == INF:
             return float(d)  # an end of the range or of the band
         if equiangular:

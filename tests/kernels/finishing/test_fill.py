@@ -106,3 +106,20 @@ def test_fill_holes_empty_rows_copy_the_nearest_row_upper_on_a_tie():
     np.testing.assert_array_equal(got[:, 0], [1, 1, 1, 1, 5, 5, 5])  # row 3: tie, upper row 1
     assert_same_bytes(got, ref_fill_holes(disp, valid, smooth=False))
 
+
+@pytest.mark.parametrize("shape", [(1, 1), (6, 1), (7, 13), (23, 31)])
+def test_the_cpu_backends_fill_inside_matches_fill_holes(shape):
+    """The backend contract's ``fill_inside`` (and its median, ``median_of_holes``) against
+    ``refinement.fill_holes`` with the occluded pixels."""
+    rng = np.random.default_rng(hash(shape) % 2**32)
+    for share in (0.0, 0.05, 0.6, 1.0):
+        disp, valid = random_map(rng, shape, valid_share=share)
+        if disp.size > 3:
+            disp.reshape(-1)[1], valid.reshape(-1)[1] = np.nan, True  # valid, not usable
+        occluded = (rng.random(shape) < 0.4) & ~valid
+        filled, use = finishing.fill_inside_holes(disp, valid, occluded)
+        np.testing.assert_array_equal(use, valid & np.isfinite(disp))
+        assert_same_bytes(filled, fill_holes(disp, valid, smooth=False, occluded=occluded), f"{shape} {share}")
+        if min(shape) >= 5:
+            assert_same_bytes(finishing.fill.median_of_holes(filled, use),
+                              fill_holes(disp, valid, smooth=True, occluded=occluded), f"{shape} {share} median")

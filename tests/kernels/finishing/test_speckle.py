@@ -5,6 +5,7 @@ with the masking of the map.
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -46,3 +47,36 @@ def test_drop_speckles_matches_the_speckle_filter_and_the_masking(shape, max_siz
             assert count / disp.size == share_want and (got_out is src) == in_place
             assert_same_bytes(src, disp if not in_place else want_out, "the input map")
 
+
+def test_filter_speckles_on_the_cpu_equals_opencv():
+    """The CPU's union-find (the backend's ``drop_speckles``) against ``cv2.filterSpeckles``
+    on int16 maps of random small values and holes."""
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        h, w = (int(x) for x in rng.integers(1, 30, 2))
+        fixed = rng.integers(-1, int(rng.integers(1, 50)), (h, w)).astype(np.int16)
+        fixed[rng.random((h, w)) < rng.random() * 0.5] = -1
+        max_size, max_diff = int(rng.integers(0, 25)), int(rng.integers(1, 16))
+        want, got = fixed.copy(), fixed.copy()
+        cv2.filterSpeckles(want, -1, max_size, max_diff)
+        finishing.filter_speckles(got, max_size, max_diff)
+        np.testing.assert_array_equal(got, want, err_msg=f"{h}x{w} {max_size} {max_diff}")
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (7, 13), (40, 64)])
+def test_the_cpu_backends_drop_speckles_matches_the_host_path(shape):
+    """The backend contract's ``drop_speckles`` (the union-find) against
+    ``refinement.drop_speckles`` (``cv2.filterSpeckles``): the same validity, map and count."""
+    rng = np.random.default_rng(hash(shape) % 2**32)
+    for share in (0.0, 0.6, 1.0):
+        disp, valid = random_map(rng, shape, valid_share=share, spread=6)
+        disp = np.where(rng.random(shape) < 0.5, np.round(disp), disp).astype(np.float32)
+        valid |= ~np.isfinite(disp) & (rng.random(shape) < 0.3)
+        for max_size, max_diff in ((0, 2.0), (4, 0.5), (30, 2.0)):
+            want_valid = valid.copy()
+            want_count, want_out = drop_speckles(disp, want_valid, max_size=max_size, max_diff=max_diff)
+            got_valid, got_out = valid.copy(), np.empty(shape, np.float32)
+            count = finishing.drop_speckles(disp, got_valid, max_size, max_diff, got_out)
+            np.testing.assert_array_equal(got_valid, want_valid)
+            assert_same_bytes(got_out, want_out, f"{shape} {share} {max_size}")
+            assert count == want_count
