@@ -231,7 +231,7 @@ def _check(row: dict, size=(W, H)) -> None:
     if on_device["fill"]:
         assert row["by_kernel"]["_median_holes_kernel"] == 1
     smooth_launches = {k: v for k, v in row["by_kernel"].items() if k.startswith("_smooth_")}
-    if row["config"] == "default":  # the box range kernel: the residual, the sums
+    if row["config"] in ("default", "kitti"):  # the box range kernel: the residual, the sums
         assert smooth_launches == {"_smooth_box_residual_kernel": 1, "_smooth_box_kernel": 1}
     elif row["config"] == "road":  # the Gaussian: residual, range, levels, one pair for every level, the blend
         assert smooth_launches == {"_smooth_residual_kernel": 1, "_smooth_range_kernel": 1,
