@@ -28,9 +28,9 @@ from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
 from .compiled import back_project, height_colours
 from .pointcloud import Camera
-from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, _grey, rematch
+from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, grey_image, rematch
 from .severity import pothole_severity, survey_summary
-from .threads import Job, helper, map_on_threads
+from .threads import Job, map_on_threads
 
 log = logging.getLogger(__name__)
 
@@ -138,23 +138,32 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         if "pictures" in groups:
             write_image(pair_dir / HEIGHT_COLOR_FILE, height_colour(values, range_mm=road_cfg.colour_range_mm))
 
-    # The height files are written on a second thread while the defects are measured: the
-    # stored map's heights at once (the final ones unless a re-match changes them, then
-    # written again); with one thread once, at the end.
-    writing = Job(write_height, height) if groups & {"height", "pictures"} else None
-    try:
-        return _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, groups, finite, plane,
-                       height, write_height, writing, warnings)
-    finally:
-        if writing is not None:
-            writing.result()
-
-
-def _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, groups, finite, plane, height,
-            write_height, writing, warnings):
-    """The rest of :func:`road_report` once the plane and the stored map's heights are known."""
+    # The height files are written on a second thread while the rest of the report runs
+    # (with one thread: at the end), once, with the final heights: at once where no
+    # re-match can change them, else after the re-match (or after finding no defect).
     pt = (info or {}).get("pt")
     fallback = bool(pt and pt.get("fallback"))
+    writing = []  # the Job writing the height files, once started
+
+    def start_writing(values):
+        if groups & {"height", "pictures"}:
+            writing.append(Job(write_height, values))
+
+    if right is None or fallback:
+        start_writing(height)
+    try:
+        return _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane, height,
+                       pt, fallback, None if writing else start_writing, warnings)
+    finally:
+        for job in writing:
+            job.result()
+
+
+def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane, height, pt,
+            fallback, start_writing, warnings):
+    """The rest of :func:`road_report` once the plane and the stored map's heights are known;
+    ``start_writing(heights)``, unless None (started already), starts writing the height
+    files once the final heights are known."""
     decided_share = float(decided.mean()) if decided.size else 0.0
     notes: list[str] = []
     if fallback:
@@ -170,10 +179,9 @@ def _report(pair_dir, left, disparity, decided, camera, info, road_cfg, right, g
                                         brief=right is not None)
         if right is not None and regions:
             height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
-            if writing is not None:
-                if helper() is not None:
-                    writing.result()  # the stored map's files: written again with these heights
-                writing.restart(write_height, height)
+        if start_writing is not None:
+            start_writing(height)
+        if right is not None and regions:
             stored = list(zip(defects, regions))
             defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
             defects = [with_flags(d, road_cfg, rematch_change=_rematch_change(d, r, stored))
@@ -231,7 +239,7 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     ``NOISE_M`` on the outer ring (:func:`_highpass_noise`); a defect no window measures
     that cleanly keeps the stored map."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
-    grey = (_grey(left), _grey(right))  # the grey images, made once for every region
+    grey = (grey_image(left), grey_image(right))  # the grey images, made once for every region
 
     def zone_disparity(region):
         """(zone, its re-matched disparity, or None where no window matches it cleanly)."""

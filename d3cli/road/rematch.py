@@ -35,7 +35,7 @@ MIN_SCORE = 0.9
 MIN_RELIABLE = 0.5
 
 
-def _grey(image: np.ndarray) -> np.ndarray:
+def grey_image(image: np.ndarray) -> np.ndarray:
     img = np.asarray(image, np.float32)
     return img.mean(axis=2) if img.ndim == 3 else img
 
@@ -82,7 +82,7 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
         return out, done
     shared = {} if shared is None else shared
     if "grey" not in shared:
-        shared["grey"] = (_grey(left), _grey(right))
+        shared["grey"] = (grey_image(left), grey_image(right))
     lg, rg = shared["grey"]
     v, u = np.nonzero(todo)
 
