@@ -50,10 +50,16 @@ _TOY = textwrap.dedent(
 )
 
 
-def test_launches_and_copies_are_counted_under_the_simulator():
-    proc = subprocess.run([sys.executable, "-c", _TOY], cwd=ROOT, env={**os.environ, "NUMBA_ENABLE_CUDASIM": "1"},
+def _simulated(code: str) -> subprocess.CompletedProcess:
+    """``code`` run in a child process with the CUDA simulator on; it must succeed."""
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env={**os.environ, "NUMBA_ENABLE_CUDASIM": "1"},
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc
+
+
+def test_launches_and_copies_are_counted_under_the_simulator():
+    proc = _simulated(_TOY)
     first, second = proc.stdout.strip().splitlines()
     assert first == "4 3 {'double': 3, 'add_one': 1}"
     assert second == "1 4"  # a new block starts from zero; the hooks of the first are gone
@@ -89,9 +95,7 @@ _BYTES = textwrap.dedent(
 
 
 def test_bytes_are_counted_under_the_simulator():
-    proc = subprocess.run([sys.executable, "-c", _BYTES], cwd=ROOT, env={**os.environ, "NUMBA_ENABLE_CUDASIM": "1"},
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    proc = _simulated(_BYTES)
     first, sites = proc.stdout.strip().splitlines()
     assert first == "3 4 912 2 840"
     assert sites == "[('d2h', 40), ('d2h', 800), ('h2d', 32), ('h2d', 40), ('h2d', 40), ('h2d', 800)]"
