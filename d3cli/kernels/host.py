@@ -29,9 +29,9 @@ from __future__ import annotations
 from .cost.band import band_indexes
 from .finishing import (box_smooth_disparity, clamp_negative, combine_shares, copy_nearest_rows, drop_marked,
                         drop_occluded, fill_inside, fill_rows_smaller_side, fixed_point_16, fixed_point_16_finite,
-                        gaussian_smooth, keep_valid, nearest_along_columns, out_of_view_mask, range_levels,
-                        residual_and_range, restored_validity, right_image_mask, shift_plane_f32, smooth_groups,
-                        uniqueness_occluded, unsmoothed, usable)
+                        gaussian_smooth, keep_valid, nearest_along_columns, out_of_view_mask, range_kernel_smooth,
+                        range_levels, residual_and_range, restored_validity, right_image_mask, shift_plane_f32,
+                        smooth_groups, smooth_map, uniqueness_occluded, unsmoothed, usable)
 from .perspective.cpu import pt_restore, pt_warp
 from .perspective.road_fit import irls, ransac_inlier_counts, solve_weighted
 from .pyramid import halve_area
@@ -41,7 +41,7 @@ __all__ = [
     "MAX_CELLS", "Volume", "band_indexes", "box_smooth_disparity", "clamp_negative", "combine_shares",
     "copy_nearest_rows", "dense_index", "drop_marked", "drop_occluded", "fill_inside", "fill_rows_smaller_side",
     "fixed_point_16", "fixed_point_16_finite", "gaussian_smooth", "halve_area", "irls", "keep_valid", "nearest_along_columns",
-    "out_of_view_mask", "pt_restore", "pt_warp", "range_levels", "ransac_inlier_counts", "residual_and_range",
-    "restored_validity", "right_image_mask", "shift_plane_f32", "smooth_groups", "solve_weighted",
+    "out_of_view_mask", "pt_restore", "pt_warp", "range_kernel_smooth", "range_levels", "ransac_inlier_counts", "residual_and_range",
+    "restored_validity", "right_image_mask", "shift_plane_f32", "smooth_groups", "smooth_map", "solve_weighted",
     "uniqueness_occluded", "unsmoothed", "usable",
 ]

@@ -23,7 +23,7 @@ from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
 from .perspective import RoadModel, fit_road_model, restored_shares, restored_validity_counts
 from .pyramid import level_max_disparity, usable_levels
-from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel, smooth_disparity
+from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel
 
 log = logging.getLogger(__name__)
 
@@ -747,15 +747,15 @@ class D3Stereo:
                 out, valid, smooth=cfg.refine.smooth_filled, occluded=occluded if cfg.refine.fill_inside else None
             )
         if smooth and cfg.refine.smooth_radius > 0:
-            # edge-preserving smoothing of the finished map; the range weight compares
-            # residuals from the road plane when there is one (a slanted road is no edge)
-            plane = None if road is None else host.shift_plane_f32(road.a0, road.b1, road.b2, 0.0, out.shape)
-            # averaging residuals to a plane that dips below zero (far road, sky) can end
-            # a hair below 0; disparities are >= 0 by contract (non_negative: set to 0 in
-            # the smoothing's last pass)
-            out = smooth_disparity(out, None, radius=cfg.refine.smooth_radius,  # None: every finite pixel
-                                   sigma=cfg.refine.smooth_sigma, plane=plane,
-                                   kernel=cfg.refine.smooth_kernel, non_negative=True)
+            # edge-preserving smoothing of the finished map, every finite pixel used; the
+            # range weight compares residuals from the road plane when there is one (a
+            # slanted road is no edge).  Averaging residuals to a plane that dips below zero
+            # (far road, sky) can end a hair below 0; disparities are >= 0 by contract
+            # (non_negative: set to 0 in the smoothing's last pass).  The same call as a
+            # device backend's (backend.smooth_map), on the host.
+            plane = None if road is None else (road.a0, road.b1, road.b2)
+            out = host.smooth_map(out, cfg.refine.smooth_radius, cfg.refine.smooth_sigma, cfg.refine.smooth_kernel,
+                                  plane, True)
         info["decided_share"] = int(np.count_nonzero(valid)) / valid.size
         return np.ascontiguousarray(out, dtype=np.float32), valid
 

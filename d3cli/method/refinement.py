@@ -316,13 +316,5 @@ def smooth_disparity(
     valid = None if valid is None else _like(valid, disp, bool)
     if radius <= 0 or disp.size == 0:
         return host.unsmoothed(disp, non_negative)
-    if kernel == "box":
-        # the residual with its masked copy, then the sums with the plane added back: two
-        # passes (see box_smooth_disparity); no plane is a zero plane, still subtracted and
-        # added
-        base = None if plane is None else _like(plane, disp, np.float32)
-        return host.box_smooth_disparity(disp, base, valid, int(radius), float(sigma), non_negative)
-    base = np.zeros(disp.shape, np.float32) if plane is None else _like(plane, disp, np.float32)
-    if kernel != "gaussian":
-        raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
-    return host.gaussian_smooth(disp, valid, base, int(radius), float(sigma), non_negative)
+    base = None if plane is None else _like(plane, disp, np.float32)
+    return host.range_kernel_smooth(disp, valid, base, int(radius), float(sigma), kernel, non_negative)

@@ -52,7 +52,7 @@ from .fill import (copy_nearest_rows, fill_inside, fill_inside_holes, fill_rows_
 from .occlusion import (drop_occluded, out_of_view_mask, restored_validity, right_image_mask,  # noqa: E402
                         uniqueness_occluded)
 from .range_box import box_range_smooth, box_smooth_disparity  # noqa: E402
-from .smooth import gaussian_smooth, smooth_map, unsmoothed  # noqa: E402
+from .smooth import gaussian_smooth, range_kernel_smooth, smooth_map, unsmoothed  # noqa: E402
 from .smoothing import (at_least_zero, clamp_negative, combine_shares, range_levels,  # noqa: E402
                         residual_and_range, shift_plane_f32, smooth_groups)
 from .speckle import drop_marked, drop_speckles, filter_speckles, fixed_point_16, fixed_point_16_finite  # noqa: E402
@@ -66,7 +66,7 @@ __all__ = [
     "copy_nearest_rows", "drop_marked", "drop_occluded", "drop_speckles", "exp", "fill", "fill_inside",
     "fill_inside_holes", "fill_rows_smaller_side", "filter_speckles", "fixed_point_16", "fixed_point_16_finite",
     "gaussian_smooth", "keep_valid", "nearest_along_columns", "numpy_exp", "numpy_expf",
-    "occlusion", "out_of_view_mask", "range_box", "range_levels", "residual_and_range", "restored_validity",
+    "occlusion", "out_of_view_mask", "range_box", "range_kernel_smooth", "range_levels", "residual_and_range", "restored_validity",
     "right_image_mask", "shift_plane_f32", "smooth", "smooth_groups", "smooth_map", "smoothing", "speckle",
     "uniqueness_occluded", "unsmoothed", "usable",
 ]

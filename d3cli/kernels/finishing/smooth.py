@@ -2,8 +2,8 @@
 ``smooth_map`` on the CPU (docs/design.md, 'Finishing').
 
 :func:`gaussian_smooth` runs the steps of :mod:`d3cli.kernels.finishing.smoothing` (the
-residual and its range, the levels, their box-filtered groups, the blend);
-:func:`smooth_map` is the contract's smoothing of a finished map
+residual and its range, the levels, their box-filtered groups, the blend); :func:`range_kernel_smooth`
+picks the range kernel for every caller; :func:`smooth_map` is the contract's smoothing of a finished map
 (:meth:`d3cli.kernels.backend.Backend.smooth_map`): every finite pixel used, the road
 plane from its coefficients (:func:`shift_plane_f32`), the box (:mod:`range_box`) or the
 Gaussian range kernel.
@@ -67,20 +67,50 @@ def gaussian_smooth(disp, valid, base, radius, sigma, non_negative):
     return combine_shares(low, up, base, disp, non_negative)
 
 
+def range_kernel_smooth(disp, valid, base, radius, sigma, kernel, non_negative):
+    """The smoothing of a map with either range kernel, whatever the caller
+    (:func:`d3cli.method.refinement.smooth_disparity`, :func:`smooth_map`): a copy for
+    ``radius <= 0`` or an empty map, else the box (:func:`box_smooth_disparity`) or the
+    Gaussian range kernel (:func:`gaussian_smooth`, a zero plane for ``base`` None).
+
+    Parameters
+    ----------
+    disp : ndarray, float32, (H, W), C-contiguous
+    valid : ndarray, bool, (H, W), or None
+        None: every finite pixel.
+    base : ndarray, float32, (H, W), or None
+        The plane subtracted before and added after the filter; None: none.
+    radius : int
+    sigma : float
+    kernel : {"box", "gaussian"}
+    non_negative : bool
+
+    Raises
+    ------
+    ValueError
+        ``kernel`` is neither (checked where the Gaussian would run).
+    """
+    if radius <= 0 or disp.size == 0:
+        return unsmoothed(disp, non_negative)
+    if kernel == "box":
+        return box_smooth_disparity(disp, base, valid, int(radius), float(sigma), non_negative)
+    if kernel != "gaussian":
+        raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
+    if base is None:
+        base = np.zeros(disp.shape, np.float32)
+    return gaussian_smooth(disp, valid, base, int(radius), float(sigma), non_negative)
+
+
 def smooth_map(disparity, radius, sigma, kernel, plane, non_negative):
     """The backends' ``smooth_map`` on the CPU: the smoothing of a finished map, every finite
-    pixel used.
+    pixel used, the road plane from its coefficients.
 
     The contract (arguments, shapes, results): :meth:`d3cli.kernels.backend.Backend.smooth_map`.
     """
     disp = np.ascontiguousarray(disparity, dtype=np.float32)
-    if kernel not in ("box", "gaussian"):
+    if kernel not in ("box", "gaussian"):  # the contract checks the name whatever the radius
         raise ValueError(f"smoothing kernel must be gaussian or box, got {kernel!r}")
-    if int(radius) <= 0 or disp.size == 0:
-        return unsmoothed(disp, non_negative)
-    base = None if plane is None else shift_plane_f32(plane[0], plane[1], plane[2], 0.0, disp.shape)
-    if kernel == "box":
-        return box_smooth_disparity(disp, base, None, int(radius), float(sigma), non_negative)
-    if base is None:
-        base = np.zeros(disp.shape, np.float32)
-    return gaussian_smooth(disp, None, base, int(radius), float(sigma), non_negative)
+    base = None
+    if plane is not None and int(radius) > 0 and disp.size:
+        base = shift_plane_f32(plane[0], plane[1], plane[2], 0.0, disp.shape)
+    return range_kernel_smooth(disp, None, base, int(radius), float(sigma), kernel, non_negative)
