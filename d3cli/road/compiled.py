@@ -494,8 +494,9 @@ def footprint_grid(h, w, f, f2, cx, cy, normal, offset):  # pragma: no cover - c
 def noise_terms(smooth, f, baseline, cx, cy, normal, offset):  # pragma: no cover - compiled
     """Depth ``Z`` and disparity residual ``h f B / (c max(Z, 1e-6))`` of every pixel of a
     height map whose height is finite, in image order (float64 (N,) each): what
-    :func:`d3cli.road.defects.disparity_noise` takes the medians of, with NumPy's types (the
-    float32 heights times ``f`` and ``B`` stay float32, the division is float64)."""
+    :func:`d3cli.road.defects.prepare_scene` takes the medians of for the disparity noise,
+    with NumPy's types (the float32 heights times ``f`` and ``B`` stay float32, the
+    division is float64)."""
     h, w = smooth.shape
     n = 0
     for v in range(h):

@@ -110,7 +110,7 @@ class DefectTuning:
         Odd median filter size against disparity noise before thresholding (3 or 5).
     noise_k : float
         A defect's peak depth must exceed ``noise_k`` times the height noise expected at
-        its distance (:func:`disparity_noise`).
+        its distance (the disparity noise of :func:`prepare_scene`).
     mean_noise_k, noise_cell_px : float
         A defect's mean depth must exceed ``mean_noise_k`` standard errors of a mean over
         its pixels.  Stereo noise is spatially correlated over the matching support, so a
@@ -283,14 +283,17 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
     kernel_local = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * local_noise_px + 1, 2 * local_noise_px + 1))
     map_decided = float(decided[finite].mean()) if finite.any() else 0.0
-    # Z of every pixel and its disparity residual (disparity_noise), in one compiled pass;
-    # the medians of the two on both threads.
+    # Z of every pixel and its disparity residual, in one compiled pass; the medians of the
+    # two on both threads.  A disparity error dd moves a road point by dh = c Z / (f B) dd
+    # along the normal, so h f B / (c Z) is the residual in disparity pixels; its robust
+    # spread over the map (potholes are a minority; real road relief counts in) is the
+    # disparity noise, 0 with fewer than 10 residuals.
     z, resid = noise_terms(smooth, float(camera.f), float(camera.baseline), float(camera.cx), float(camera.cy),
                            np.asarray(plane.normal, np.float64), float(plane.offset))
     # Saddle depth that splits a region: half the threshold, but not less than the height
     # noise at the median distance (noisy floors would otherwise split into pieces).
     sigma_d, z_med = map_on_threads(lambda task: task(), (
-        lambda: float(1.4826 * median(np.abs(resid - median(resid)))) if resid.size >= 10 else 0.0,
+        lambda: _mad_sigma(resid) if resid.size >= 10 else 0.0,
         lambda: float(median(z)) if z.size else 0.0))
     split_noise = tuning.noise_k * plane.offset * z_med / (camera.f * camera.baseline) * sigma_d
     return _Scene(height=height, decided=decided, camera=camera, plane=plane, road=road, tuning=tuning,
@@ -532,24 +535,14 @@ def _local_sigma_h(s: _Scene, comp: np.ndarray, sigma_h: float) -> float:
     annulus = dilate_near(comp, s.kernel_local) & ~dilate_near(comp, s.kernel_ring) & s.finite
     if annulus.sum() >= 50:
         local = s.height[annulus]
-        sigma_h = max(sigma_h, float(1.4826 * median(np.abs(local - median(local)))))
+        sigma_h = max(sigma_h, _mad_sigma(local))
     return sigma_h
 
 
-def disparity_noise(height: np.ndarray, camera: Camera, plane: RoadPlane, *, depth: np.ndarray | None = None) -> float:
-    """Robust disparity noise (pixels) of a (median-filtered) height map.
-
-    A disparity error dd moves a road point by ``dh = c Z / (f B) dd`` along the normal,
-    so ``h f B / (c Z)`` is the residual in disparity pixels; its 1.4826 MAD over the map
-    (potholes are a minority) is the noise.  Real road relief counts in as noise.
-    ``depth``: the depth Z of every pixel of ``height`` when already computed.
-    """
-    finite = np.isfinite(height)
-    if finite.sum() < 10:
-        return 0.0
-    z = (_depth_grid(height, camera, plane) if depth is None else depth)[finite]
-    resid = height[finite] * camera.f * camera.baseline / (plane.offset * np.maximum(z, 1e-6))
-    return float(1.4826 * median(np.abs(resid - median(resid))))
+def _mad_sigma(values: np.ndarray) -> float:
+    """1.4826 MAD of ``values`` (in their type): their standard deviation were they
+    normal, which a minority of outliers (potholes, mismatches) does not move."""
+    return float(1.4826 * median(np.abs(values - median(values))))
 
 
 def outline(mask: np.ndarray, *, tolerance_px: float = 1.0, offset: tuple = (0, 0)) -> tuple:
@@ -570,17 +563,6 @@ def outline(mask: np.ndarray, *, tolerance_px: float = 1.0, offset: tuple = (0, 
         c = cv2.approxPolyDP(c, tolerance_px, True)
         polys.append(tuple((int(p[0][0]), int(p[0][1])) for p in c))
     return tuple(polys)
-
-
-def _depth_grid(height: np.ndarray, camera: Camera, plane: RoadPlane) -> np.ndarray:
-    """Depth Z (float64 (H, W)) of every pixel's point from its height, as :func:`_points_at`
-    gives it, computed on the pixel grid (no index arrays); inf and nan where ``height``
-    is not finite."""
-    h, w = height.shape
-    n = np.asarray(plane.normal)
-    nr = n[0] * ((np.arange(w) - camera.cx) / camera.f)[None, :] + n[1] * ((np.arange(h) - camera.cy) / camera.f)[:, None] + n[2]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return (height.astype(np.float64) - plane.offset) / nr
 
 
 def _points_at(heights, us, vs, camera: Camera, plane: RoadPlane) -> np.ndarray:
