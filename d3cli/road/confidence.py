@@ -7,19 +7,26 @@ computed from is written beside it (defects.json ``evidence``), so a user can se
 
 Reasons (defects.json ``flags``, in this order):
 
-``specular``
-    Wet or specular surface: the defect's deepest pixels stand more than
+``weak_match``
+    The images barely support the disparity the defect was measured on: the 25 px NCC at
+    that disparity exceeds the better NCC one pixel to either side by less than
+    :attr:`ConfidenceRules.min_match_margin`, in the median over the defect
+    (:func:`d3cli.road.rematch.match_margin`, evidence ``match_margin``).  Dark, smooth
+    and wet floors give flat NCC curves: many depths fit them about equally well, and the
+    one reported may be any of them.  Needs the right image (``d3stereo run
+    --road-report`` always has it).
+``specular``, ``noisy``
+    Raised only where no match margin is known (a report without the right image).
+    ``specular``: the defect's deepest pixels stand more than
     :attr:`ConfidenceRules.max_spikiness` above the deepest pixels of the same depth
-    median-filtered over :attr:`ConfidenceRules.spike_px` pixels.  A wet floor mirrors the
-    sky, and a reflection matched by stereo lies as far below the surface as its source lies
-    above it: isolated, deep spikes on the floor.  A real pothole's deepest part is wider
-    than the filter (a cone's tip loses a few percent).
-``noisy``
-    Dark or noisy: the depth is less than :attr:`ConfidenceRules.min_snr` times the height
-    noise the defect's significance was tested against (the larger of the map's noise at
-    its distance and 1.4826 MAD of the heights in an annulus around it,
-    :func:`d3cli.road.defects.find_defects`).  The deepest pixels of a noisy map read deep
-    by a few noise levels.
+    median-filtered over :attr:`ConfidenceRules.spike_px` pixels (a wet floor mirrors the
+    sky, and a reflection matched by stereo lies as far below the surface as its source
+    lies above it: isolated, deep spikes on the floor).  ``noisy``: the depth is less than
+    :attr:`ConfidenceRules.min_snr` times the height noise its significance was tested
+    against (:func:`d3cli.road.defects.find_defects`).  With the margin known, their
+    numbers (``spikiness``, ``snr``) stay in the evidence but decide nothing: on the
+    tuning pairs they flagged well measured wet and dark potholes far more often than
+    badly measured ones, and every badly measured one had a weak match too.
 ``few_decided``
     Fewer than ``road.min_decided_share`` of the defect's pixels were decided by the method
     itself; the rest is hole filling, an extrapolation.
@@ -31,14 +38,13 @@ Reasons (defects.json ``flags``, in this order):
     The region holds two or more depressions, each standing ``road.split_prominence_mm``
     above the saddle between them, that the splitting did not cut because the map's noise
     is larger (:func:`d3cli.road.splitting.split_parts`): possibly two potholes as one.
-``rematch``
-    The small-window re-match (:mod:`d3cli.road.rematch`) changed the depth by more than
-    :attr:`ConfidenceRules.max_rematch_change` of the stored map's: two measurements of
-    the same floor disagree.
+
+The small-window re-match's change of the depth (evidence ``rematch_change``) is reported
+but raises no flag: where the re-match disagrees with the stored map, the match margin of
+the disparity used already tells whether the images support it.
 
 The thresholds were chosen on synthetic pairs with exact ground truth (docs/road.md, "The
-confidence check"), where every flag marks measurements that are off by more than 20 %
-far more often than the defects left ``ok``.
+confidence check"): on the tuning pairs no defect left ``ok`` was off by more than 20 %.
 
 May import numpy, OpenCV and :mod:`d3cli.road.compiled`.
 """
@@ -54,17 +60,17 @@ from .compiled import h_maxima, window_medians
 
 #: Reason code -> the words a report prints for it.
 REASONS = {
+    "weak_match": "weak match on little texture",
     "specular": "wet or specular surface",
     "noisy": "dark or noisy",
     "few_decided": "few decided pixels",
     "at_border": "at the image border",
     "merged": "possibly merged with a neighbour",
-    "rematch": "re-match unreliable",
 }
 
 #: Short labels for pictures (defects.png).
-SHORT = {"specular": "wet", "noisy": "dark", "few_decided": "filled", "at_border": "edge", "merged": "merged",
-         "rematch": "rematch"}
+SHORT = {"weak_match": "weak", "specular": "wet", "noisy": "dark", "few_decided": "filled", "at_border": "edge",
+         "merged": "merged"}
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,8 @@ class ConfidenceRules:
 
     Attributes
     ----------
+    min_match_margin : float
+        ``weak_match`` below this match margin (NCC units).
     max_spikiness : float
         ``specular`` above this ratio of the peak depth to the peak of the depth
         median-filtered over ``spike_px`` pixels.
@@ -81,14 +89,12 @@ class ConfidenceRules:
         Odd side of that median filter, pixels.
     min_snr : float
         ``noisy`` below this ratio of the depth to the height noise around the defect.
-    max_rematch_change : float
-        ``rematch`` above this relative change of the depth by the re-match.
     """
 
+    min_match_margin: float = 0.020
     max_spikiness: float = 1.10
     spike_px: int = 15
     min_snr: float = 10.0
-    max_rematch_change: float = 0.30
 
 
 def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules | None = None) -> tuple:
@@ -99,10 +105,11 @@ def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules
     Parameters
     ----------
     evidence : dict
-        ``spikiness``, ``snr``, ``decided_share``, ``deep_at_border``, ``depressions``,
-        ``rematch_change`` (absent without a re-match) and ``map_decided_share`` (present
-        when the whole map's decided share is below ``min_decided_share``: every defect
-        is ``few_decided``).
+        ``match_margin`` (absent without the right image; None where it could not be
+        measured: ``weak_match``), ``spikiness``, ``snr``, ``decided_share``,
+        ``deep_at_border``, ``depressions`` and ``map_decided_share`` (present when the
+        whole map's decided share is below ``min_decided_share``: every defect is
+        ``few_decided``).
     min_decided_share : float, keyword-only
         ``road.min_decided_share``.
     rules : ConfidenceRules, optional
@@ -113,14 +120,16 @@ def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules
         Codes of :data:`REASONS`, in its order; empty: ``ok``.
     """
     rules = ConfidenceRules() if rules is None else rules
+    margin_known = "match_margin" in evidence
+    margin = evidence.get("match_margin")
     raised = {
-        "specular": evidence.get("spikiness", 1.0) > rules.max_spikiness,
-        "noisy": evidence.get("snr", np.inf) < rules.min_snr,
+        "weak_match": margin_known and (margin is None or margin < rules.min_match_margin),
+        "specular": not margin_known and evidence.get("spikiness", 1.0) > rules.max_spikiness,
+        "noisy": not margin_known and evidence.get("snr", np.inf) < rules.min_snr,
         "few_decided": min(evidence.get("decided_share", 1.0), evidence.get("map_decided_share", 1.0))
         < min_decided_share,
         "at_border": bool(evidence.get("deep_at_border", False)),
         "merged": evidence.get("depressions", 1) >= 2,
-        "rematch": abs(evidence.get("rematch_change", 0.0)) > rules.max_rematch_change,
     }
     return tuple(code for code in REASONS if raised[code])
 

@@ -28,7 +28,7 @@ from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
 from .compiled import back_project, height_colours
 from .pointcloud import Camera
-from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, grey_image, rematch
+from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, grey_image, match_margin, rematch
 from .severity import pothole_severity, survey_summary
 from .threads import Job, map_on_threads
 
@@ -178,14 +178,19 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
         defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True,
                                         brief=right is not None)
         if right is not None and regions:
-            height = _rematched_height(left, right, disparity, finite, regions, camera, plane, road_cfg)
+            grey = (grey_image(left), grey_image(right))  # made once for every region
+            measured, height = _rematched_height(grey, disparity, finite, regions, camera, plane, road_cfg)
         if start_writing is not None:
             start_writing(height)
         if right is not None and regions:
             stored = list(zip(defects, regions))
             defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
-            defects = [with_flags(d, road_cfg, rematch_change=_rematch_change(d, r, stored))
-                       for d, r in zip(defects, regions)]
+            # How decisively the images support each defect's disparity (the confidence's
+            # weak_match), on the disparity it was measured on; the defects on both threads.
+            margins = map_on_threads(lambda region: match_margin(*grey, measured, region), regions)
+            defects = [with_flags(d, road_cfg, rematch_change=_rematch_change(d, r, stored),
+                                  match_margin=round(m, 4) if np.isfinite(m) else None)
+                       for d, r, m in zip(defects, regions, margins)]
         if decided_share < road_cfg.min_decided_share:
             warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
             defects = [with_flags(d, road_cfg, map_decided_share=round(decided_share, 3)) for d in defects]
@@ -231,15 +236,17 @@ def _rematch_change(defect, region: np.ndarray, stored: list) -> float:
     return round(defect.max_depth_mm / best.max_depth_mm - 1.0, 3)
 
 
-def _rematched_height(left, right, disparity, finite, regions, camera: Camera, plane, road_cfg) -> np.ndarray:
-    """Height map with the disparity inside each defect (grown by two rings: the ring gives
-    the reference height) matched again (:mod:`d3cli.road.rematch`), with the smallest
-    window of :data:`~d3cli.road.rematch.WINDOWS` that re-measures at least
-    ``MIN_RELIABLE`` of the zone and whose re-measured heights scatter by at most
-    ``NOISE_M`` on the outer ring (:func:`_highpass_noise`); a defect no window measures
-    that cleanly keeps the stored map."""
+def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
+                      road_cfg) -> tuple[np.ndarray, np.ndarray]:
+    """(disparity, height map) with the disparity inside each defect (grown by two rings:
+    the ring gives the reference height) matched again (:mod:`d3cli.road.rematch`) on the
+    grey images ``grey`` (left, right), with the smallest window of
+    :data:`~d3cli.road.rematch.WINDOWS` that re-measures at least ``MIN_RELIABLE`` of the
+    zone and whose re-measured heights scatter by at most ``NOISE_M`` on the outer ring
+    (:func:`_highpass_noise`); a defect no window measures that cleanly keeps the stored
+    map."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
-    grey = (grey_image(left), grey_image(right))  # the grey images, made once for every region
+    left, right = grey
 
     def zone_disparity(region):
         """(zone, its re-matched disparity, or None where no window matches it cleanly)."""
@@ -266,7 +273,7 @@ def _rematched_height(left, right, disparity, finite, regions, camera: Camera, p
     for zone, values in map_on_threads(zone_disparity, regions):
         if values is not None:
             out[zone] = values
-    return height_map(out, finite, camera, plane)
+    return out, height_map(out, finite, camera, plane)
 
 
 def _around(mask: np.ndarray, margin: int) -> tuple[slice, slice]:

@@ -135,3 +135,69 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     sub[inside] = new[inside]
     done[v0:v1, u0:u1] = inside
     return out, done
+
+
+#: Window side (pixels) of the match margin (:func:`match_margin`): the road
+#: configuration's own matching window, so the margin says how decisively the map's
+#: matching could tell the disparity from its neighbours.
+MARGIN_WINDOW = 25
+#: Pixels around a defect's bounding box that the margin's windows read.
+MARGIN_PAD = 20
+
+
+def match_margin(left_grey: np.ndarray, right_grey: np.ndarray, disparity: np.ndarray, region: np.ndarray, *,
+                 window: int = MARGIN_WINDOW, pad: int = MARGIN_PAD) -> float:
+    """How decisively the images support ``disparity`` over ``region``: the median over the
+    region of the zero-mean NCC at the disparity minus the better of the NCCs one pixel to
+    either side.
+
+    A textured surface matched at its true disparity scores clearly better there than one
+    pixel off; on a dark, smooth or wet floor the NCC curve is flat, every disparity within
+    a pixel scores about the same, and the depth the map reports there is one of many that
+    fit.  This margin is what separates badly measured defects from good ones on synthetic
+    pairs with exact ground truth (docs/road.md, "Confidence"), far better than the height
+    noise or the spikiness of the floor.
+
+    Parameters
+    ----------
+    left_grey, right_grey : ndarray, float32, (H, W)
+        The grey images (:func:`grey_image`).
+    disparity : ndarray, float32, (H, W)
+        The disparity the defect was measured on (inf: no estimate; those pixels of the box
+        are warped by the box's median disparity).
+    region : ndarray, bool, (H, W)
+        The defect's pixels.
+    window, pad : int, keyword-only
+        Odd NCC window side; pixels read around the region's bounding box.
+
+    Returns
+    -------
+    float
+        The margin (NCC units; nan for an empty region or a box without any disparity).
+    """
+    v, u = np.nonzero(region)
+    if v.size == 0:
+        return float("nan")
+    h, w = left_grey.shape
+    v0, v1 = max(int(v.min()) - pad, 0), min(int(v.max()) + pad + 1, h)
+    u0, u1 = max(int(u.min()) - pad, 0), min(int(u.max()) + pad + 1, w)
+    d = np.asarray(disparity[v0:v1, u0:u1], np.float32)
+    finite = np.isfinite(d)
+    if not finite.any():
+        return float("nan")
+    d = np.where(finite, d, np.float32(np.median(d[finite]))).astype(np.float32)
+    vv, uu = np.mgrid[v0:v1, u0:u1].astype(np.float32)
+    lsub = np.ascontiguousarray(left_grey[v0:v1, u0:u1], np.float32)
+    box = (window, window)
+    l_mean = cv2.blur(lsub, box)
+    l_std = np.sqrt(np.maximum(cv2.blur(lsub * lsub, box) - l_mean * l_mean, 1e-6))
+
+    def ncc(offset):
+        warped = cv2.remap(right_grey, uu - (d + np.float32(offset)), vv, cv2.INTER_CUBIC,
+                           borderMode=cv2.BORDER_REFLECT)
+        r_mean = cv2.blur(warped, box)
+        r_std = np.sqrt(np.maximum(cv2.blur(warped * warped, box) - r_mean * r_mean, 1e-6))
+        return (cv2.blur(lsub * warped, box) - l_mean * r_mean) / (l_std * r_std)
+
+    margin = ncc(0.0) - np.maximum(ncc(1.0), ncc(-1.0))
+    return float(np.median(margin[region[v0:v1, u0:u1]]))

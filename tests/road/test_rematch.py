@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from d3cli.road.rematch import WINDOWS, rematch
+from d3cli.road.rematch import WINDOWS, match_margin, rematch
 from tests.helpers import textured_pair
+from tests.reference.road import ref_match_margin
 
 
 def test_shared_warps_give_the_results_of_separate_calls():
@@ -26,3 +28,45 @@ def test_shared_warps_give_the_results_of_separate_calls():
     for window in WINDOWS:
         np.testing.assert_array_equal(rematch(left, right, holed, zone, window=window)[0],
                                       rematch(left, right, holed, zone, window=window, shared=shared)[0])
+
+
+def _shifted_pair(texture_sigma, shape=(40, 60), d=6, seed=2):
+    """A random texture (blurred by ``texture_sigma`` pixels) seen at a constant disparity."""
+    import cv2
+    rng = np.random.default_rng(seed)
+    right = rng.uniform(0, 255, shape).astype(np.float32)
+    if texture_sigma:
+        right = cv2.GaussianBlur(right, (0, 0), texture_sigma)
+    left = np.empty_like(right)
+    left[:, d:] = right[:, :-d]
+    left[:, :d] = right[:, :1]
+    return left, right, np.full(shape, float(d), np.float32)
+
+
+def test_match_margin_is_the_ncc_lead_of_the_disparity_over_its_neighbours():
+
+    left, right, disp = _shifted_pair(0.0)
+    region = np.zeros(disp.shape, bool)
+    region[15:25, 25:40] = True
+    got = match_margin(left, right, disp, region, window=7, pad=4)
+    assert got == pytest.approx(ref_match_margin(left, right, disp, region, 7, 4), abs=1e-4)
+    assert got > 0.8  # white noise: one pixel off is uncorrelated
+    # A smooth floor (texture blurred over 4 px): one pixel off matches almost as well.
+    left_s, right_s, _ = _shifted_pair(4.0)
+    smooth = match_margin(left_s, right_s, disp, region, window=7, pad=4)
+    assert smooth == pytest.approx(ref_match_margin(left_s, right_s, disp, region, 7, 4), abs=1e-4)
+    assert 0 < smooth < 0.1
+    # At a disparity one pixel off, the neighbour scores best: the margin is negative.
+    assert match_margin(left, right, disp + 1, region, window=7, pad=4) < -0.5
+
+
+def test_match_margin_fills_pixels_without_disparity_and_is_nan_without_any():
+    left, right, disp = _shifted_pair(0.0)
+    region = np.zeros(disp.shape, bool)
+    region[15:25, 25:40] = True
+    holes = disp.copy()
+    holes[18:20, 30:33] = np.inf  # warped by the box's median disparity (6)
+    assert match_margin(left, right, holes, region, window=7, pad=4) == pytest.approx(
+        match_margin(left, right, disp, region, window=7, pad=4), abs=1e-6)
+    assert np.isnan(match_margin(left, right, np.full(disp.shape, np.inf, np.float32), region))
+    assert np.isnan(match_margin(left, right, disp, np.zeros(disp.shape, bool)))
