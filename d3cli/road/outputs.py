@@ -341,7 +341,8 @@ def survey_line(out: Path) -> str | None:
     """One line for the terminal after a ``--road-report`` batch: what the road report found.
 
     ``road: 12 frames, 7 potholes (low 2, medium 4, high 1), 1 bump; deepest 62 mm
-    (synth-0011-wet-cement #2); 3 defects flagged (wet or specular surface 2, dark or noisy 1)``,
+    (synth-0011-wet-cement #2); 3 defects flagged (weak match on little texture 2, at the image
+    border 1)``,
     from ``OUT/defects.csv`` and ``OUT/road_survey.json``; where the frames have positions it
     ends with the map's counts (``; 5 defects on the map (7 sightings merged), 1 frame
     unplaced``, :mod:`d3cli.survey`).  Potholes are counted per ASTM

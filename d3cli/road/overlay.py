@@ -10,7 +10,7 @@ What makes it readable where potholes touch, on white glare and on dark asphalt:
 * Outlines and leader lines are drawn over a dark halo; a label is white text on a dark,
   semi-transparent box framed in its defect's colour.
 * A legend strip below the picture says what the colours, the label, ``?`` and the short
-  reasons after it mean (:mod:`d3cli.road.confidence`).
+  reasons after it mean (those the picture shows, :mod:`d3cli.road.confidence`).
 """
 
 from __future__ import annotations
@@ -27,7 +27,6 @@ POTHOLE_COLOUR = (255, 0, 0)
 BUMP_COLOUR = (255, 220, 0)
 #: Appended to the label of a flagged defect, before its reasons; the legend says what it means.
 LOW_CONFIDENCE_MARK = "?"
-LOW_CONFIDENCE_TEXT = ("? depth not trusted, why: " + ", ".join(f"{SHORT[c]} = {REASONS[c]}" for c in REASONS))
 _BOX_ALPHA = 0.7  # darkening of the picture under a label box
 
 
@@ -147,8 +146,20 @@ def _haloed_line(img, a, b, colour, thick: int) -> None:
     cv2.line(img, a, b, colour, thick, cv2.LINE_AA)
 
 
-def legend_strip(width: int, *, unplaced: Sequence[str] = ()) -> np.ndarray:
-    """The strip below defects.png: the outline colours, what a label says, what ``?`` means.
+def low_confidence_text(flags: Sequence[str]) -> str:
+    """The legend's line for ``?``: what it means and the short reasons of ``flags`` (the
+    codes the picture shows, each once) in words, in the order of
+    :data:`d3cli.road.confidence.REASONS`."""
+    shown = [c for c in REASONS if c in set(flags)] + sorted(set(flags) - set(REASONS))
+    if not shown:
+        return f"{LOW_CONFIDENCE_MARK} after a label: depth not trusted (none here)"
+    return (f"{LOW_CONFIDENCE_MARK} depth not trusted, why: "
+            + ", ".join(f"{SHORT.get(c, c)} = {REASONS.get(c, c)}" for c in shown))
+
+
+def legend_strip(width: int, *, flags: Sequence[str] = (), unplaced: Sequence[str] = ()) -> np.ndarray:
+    """The strip below defects.png: the outline colours, what a label says, what ``?`` and
+    the short reasons of the picture's ``flags`` mean.
 
     Depth and height are those of defects.json (``max_depth_mm``: the deepest point below
     the road around the defect).  ``unplaced``: labels with no room left in the picture,
@@ -157,7 +168,7 @@ def legend_strip(width: int, *, unplaced: Sequence[str] = ()) -> np.ndarray:
     px = text_px(width)
     swatches = swatch_legend(width, [(POTHOLE_COLOUR, "pothole -depth mm"),
                                      (BUMP_COLOUR, "bump +height mm")], px=px)
-    parts = [swatches, text_block(width, LOW_CONFIDENCE_TEXT, px, centre=False)]
+    parts = [swatches, text_block(width, low_confidence_text(flags), px, centre=False)]
     if unplaced:
         parts.append(text_block(width, "no room in the picture for the labels " + ", ".join(unplaced), px,
                                 centre=False))
@@ -227,4 +238,5 @@ def defects_overlay(left: np.ndarray, defects, regions) -> np.ndarray:
         out[y0:y1, x0:x1] = (patch * (1 - _BOX_ALPHA)).astype(np.uint8)
         cv2.rectangle(out, (x0, y0), (x1 - 1, y1 - 1), colours[i], max(1, thick // 2 + 1))
         put_text(out, texts[i], (x0 + pad, y1 - pad), px, WHITE, outline=BLACK)
-    return np.vstack([out, legend_strip(width, unplaced=unplaced)])
+    flags = [code for d in defects if d.low_confidence for code in getattr(d, "flags", ())]
+    return np.vstack([out, legend_strip(width, flags=flags, unplaced=unplaced)])

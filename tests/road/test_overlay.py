@@ -111,3 +111,10 @@ def test_labels_without_room_are_listed_in_the_legend():
         return img.shape[0] - shape[0]
 
     assert legend_height((24, 120)) > legend_height((240, 120))
+
+
+def test_the_legend_explains_the_reasons_the_picture_shows_and_only_those():
+    from d3cli.road.overlay import low_confidence_text
+    assert low_confidence_text(["merged", "weak_match", "weak_match"]) == (
+        "? depth not trusted, why: weak = weak match on little texture, merged = possibly merged with a neighbour")
+    assert low_confidence_text([]) == "? after a label: depth not trusted (none here)"
