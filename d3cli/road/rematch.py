@@ -40,6 +40,22 @@ def grey_image(image: np.ndarray) -> np.ndarray:
     return img.mean(axis=2) if img.ndim == 3 else img
 
 
+def _window_stats(image: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation (at least 1e-3) of every ``window`` x ``window`` window
+    (box filter, mirrored border)."""
+    box = (window, window)
+    mean = cv2.blur(image, box)
+    return mean, np.sqrt(np.maximum(cv2.blur(image * image, box) - mean * mean, 1e-6))
+
+
+def _zncc(left: np.ndarray, left_stats: tuple, warped: np.ndarray, window: int) -> np.ndarray:
+    """Zero-mean NCC of every window of ``left`` (its :func:`_window_stats` given) with the
+    same window of ``warped``."""
+    l_mean, l_std = left_stats
+    r_mean, r_std = _window_stats(warped, window)
+    return (cv2.blur(left * warped, (window, window)) - l_mean * r_mean) / (l_std * r_std)
+
+
 def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np.ndarray, *,
             window: int = WINDOW, reach: float = REACH, step: float = STEP,
             min_score: float = MIN_SCORE, shared: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -96,10 +112,8 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     finite = np.isfinite(sub)
     # Pixels of the box without an estimate are searched around the median, never kept.
     centre = np.where(finite, sub, float(np.median(sub[finite]))).astype(np.float32)
-    box = (window, window)
     lsub = lg[v0:v1, u0:u1]
-    l_mean = cv2.blur(lsub, box)
-    l_std = np.sqrt(np.maximum(cv2.blur(lsub * lsub, box) - l_mean * l_mean, 1e-6))
+    left_stats = _window_stats(lsub, window)
     offsets = np.arange(-reach, reach + 1e-9, step, dtype=np.float32)
     warps = None
     if finite.all():  # the warps of the largest box, made once: a remap is per pixel
@@ -126,9 +140,7 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
             warped = np.ascontiguousarray(warps[k])
         else:
             warped = cv2.remap(rg, uu - (centre + offset), vv, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
-        r_mean = cv2.blur(warped, box)
-        r_std = np.sqrt(np.maximum(cv2.blur(warped * warped, box) - r_mean * r_mean, 1e-6))
-        scores[k] = (cv2.blur(lsub * warped, box) - l_mean * r_mean) / (l_std * r_std)
+        scores[k] = _zncc(lsub, left_stats, warped, window)
     # the best offset, a parabola through its neighbours, reliable or not: compiled
     new, reliable = best_offsets(scores, centre, offsets, float(step), float(min_score))
     inside = todo[v0:v1, u0:u1] & reliable
@@ -188,16 +200,12 @@ def match_margin(left_grey: np.ndarray, right_grey: np.ndarray, disparity: np.nd
     d = np.where(finite, d, np.float32(np.median(d[finite]))).astype(np.float32)
     vv, uu = np.mgrid[v0:v1, u0:u1].astype(np.float32)
     lsub = np.ascontiguousarray(left_grey[v0:v1, u0:u1], np.float32)
-    box = (window, window)
-    l_mean = cv2.blur(lsub, box)
-    l_std = np.sqrt(np.maximum(cv2.blur(lsub * lsub, box) - l_mean * l_mean, 1e-6))
+    left_stats = _window_stats(lsub, window)
 
     def ncc(offset):
         warped = cv2.remap(right_grey, uu - (d + np.float32(offset)), vv, cv2.INTER_CUBIC,
                            borderMode=cv2.BORDER_REFLECT)
-        r_mean = cv2.blur(warped, box)
-        r_std = np.sqrt(np.maximum(cv2.blur(warped * warped, box) - r_mean * r_mean, 1e-6))
-        return (cv2.blur(lsub * warped, box) - l_mean * r_mean) / (l_std * r_std)
+        return _zncc(lsub, left_stats, warped, window)
 
     margin = ncc(0.0) - np.maximum(ncc(1.0), ncc(-1.0))
     return float(np.median(margin[region[v0:v1, u0:u1]]))
