@@ -15,18 +15,20 @@ Reasons (defects.json ``flags``, in this order):
     and wet floors give flat NCC curves: many depths fit them about equally well, and the
     one reported may be any of them.  Needs the right image (``d3stereo run
     --road-report`` always has it).
-``specular``, ``noisy``
-    Raised only where no match margin is known (a report without the right image).
-    ``specular``: the defect's deepest pixels stand more than
-    :attr:`ConfidenceRules.max_spikiness` above the deepest pixels of the same depth
-    median-filtered over :attr:`ConfidenceRules.spike_px` pixels (a wet floor mirrors the
-    sky, and a reflection matched by stereo lies as far below the surface as its source
-    lies above it: isolated, deep spikes on the floor).  ``noisy``: the depth is less than
-    :attr:`ConfidenceRules.min_snr` times the height noise its significance was tested
-    against (:func:`d3cli.road.defects.find_defects`).  With the margin known, their
-    numbers (``spikiness``, ``snr``) stay in the evidence but decide nothing: on the
-    tuning pairs they flagged well measured wet and dark potholes far more often than
-    badly measured ones, and every badly measured one had a weak match too.
+``specular``
+    Raised only where no match margin is known (a report without the right image): the
+    defect's deepest pixels stand more than :attr:`ConfidenceRules.max_spikiness` above
+    the deepest pixels of the same depth median-filtered over
+    :attr:`ConfidenceRules.spike_px` pixels (a wet floor mirrors the sky, and a reflection
+    matched by stereo lies as far below the surface as its source lies above it: isolated,
+    deep spikes on the floor).  With the margin known the spikiness stays in the evidence
+    but decides nothing: on the tuning pairs it flagged well measured wet potholes far
+    more often than badly measured ones.
+``noisy``
+    Dark or noisy: the depth is less than :attr:`ConfidenceRules.min_snr` times the height
+    noise its significance was tested against (:func:`d3cli.road.defects.find_defects`);
+    without the match margin, less than :attr:`ConfidenceRules.min_snr_alone` times.  The
+    deepest pixels of a noisy map read deep by a few noise levels.
 ``few_decided``
     Fewer than ``road.min_decided_share`` of the defect's pixels were decided by the method
     itself; the rest is hole filling, an extrapolation.
@@ -39,12 +41,14 @@ Reasons (defects.json ``flags``, in this order):
     above the saddle between them, that the splitting did not cut because the map's noise
     is larger (:func:`d3cli.road.splitting.split_parts`): possibly two potholes as one.
 
-The small-window re-match's change of the depth (evidence ``rematch_change``) is reported
-but raises no flag: where the re-match disagrees with the stored map, the match margin of
-the disparity used already tells whether the images support it.
+``rematch``
+    The small-window re-match (:mod:`d3cli.road.rematch`) changed the depth by more than
+    :attr:`ConfidenceRules.max_rematch_change` of the stored map's: two measurements of
+    the same floor disagree.
 
 The thresholds were chosen on synthetic pairs with exact ground truth (docs/road.md, "The
-confidence check"): on the tuning pairs no defect left ``ok`` was off by more than 20 %.
+confidence check"): on the pairs they were chosen on, one defect left ``ok`` was off by
+more than 20 % (20.4 %).
 
 May import numpy, OpenCV and :mod:`d3cli.road.compiled`.
 """
@@ -66,11 +70,12 @@ REASONS = {
     "few_decided": "few decided pixels",
     "at_border": "at the image border",
     "merged": "possibly merged with a neighbour",
+    "rematch": "re-match unreliable",
 }
 
 #: Short labels for pictures (defects.png).
 SHORT = {"weak_match": "weak", "specular": "wet", "noisy": "dark", "few_decided": "filled", "at_border": "edge",
-         "merged": "merged"}
+         "merged": "merged", "rematch": "rematch"}
 
 
 @dataclass(frozen=True)
@@ -89,12 +94,18 @@ class ConfidenceRules:
         Odd side of that median filter, pixels.
     min_snr : float
         ``noisy`` below this ratio of the depth to the height noise around the defect.
+    min_snr_alone : float
+        The same where no match margin is known.
+    max_rematch_change : float
+        ``rematch`` above this relative change of the depth by the re-match.
     """
 
     min_match_margin: float = 0.020
     max_spikiness: float = 1.10
     spike_px: int = 15
-    min_snr: float = 10.0
+    min_snr: float = 4.0
+    min_snr_alone: float = 10.0
+    max_rematch_change: float = 0.30
 
 
 def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules | None = None) -> tuple:
@@ -107,9 +118,9 @@ def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules
     evidence : dict
         ``match_margin`` (absent without the right image; None where it could not be
         measured: ``weak_match``), ``spikiness``, ``snr``, ``decided_share``,
-        ``deep_at_border``, ``depressions`` and ``map_decided_share`` (present when the
-        whole map's decided share is below ``min_decided_share``: every defect is
-        ``few_decided``).
+        ``deep_at_border``, ``depressions``, ``rematch_change`` (absent without a re-match)
+        and ``map_decided_share`` (present when the whole map's decided share is below
+        ``min_decided_share``: every defect is ``few_decided``).
     min_decided_share : float, keyword-only
         ``road.min_decided_share``.
     rules : ConfidenceRules, optional
@@ -125,11 +136,12 @@ def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules
     raised = {
         "weak_match": margin_known and (margin is None or margin < rules.min_match_margin),
         "specular": not margin_known and evidence.get("spikiness", 1.0) > rules.max_spikiness,
-        "noisy": not margin_known and evidence.get("snr", np.inf) < rules.min_snr,
+        "noisy": evidence.get("snr", np.inf) < (rules.min_snr if margin_known else rules.min_snr_alone),
         "few_decided": min(evidence.get("decided_share", 1.0), evidence.get("map_decided_share", 1.0))
         < min_decided_share,
         "at_border": bool(evidence.get("deep_at_border", False)),
         "merged": evidence.get("depressions", 1) >= 2,
+        "rematch": abs(evidence.get("rematch_change", 0.0)) > rules.max_rematch_change,
     }
     return tuple(code for code in REASONS if raised[code])
 

@@ -22,7 +22,8 @@ def test_road_report_on_the_bundled_samples_measures_the_pothole(tmp_path):
     assert pothole["volume_l"] == pytest.approx(4.47, rel=0.2)
     assert pothole["severity"] == "medium"
     # SGBM's map is noisy around the pothole (spikes on the floor, a depth 7.5x the height
-    # noise around it: the noisy and specular cues would fire) and reads the depth 13 % deep,
+    # noise around it: without the right image the specular and noisy flags would be
+    # raised) and reads the depth 13 % deep,
     # within the 20 % an ok defect must meet; the sample's texture supports the match
     # clearly (match margin 0.17), so it is ok, with the numbers behind it.
     assert pothole["evidence"]["snr"] < 10 and pothole["evidence"]["spikiness"] > 1.1

@@ -24,12 +24,12 @@ def row(pair, i, kind, depth, severity="", low=False, flags=""):
 
 def test_survey_line_counts_severities_the_deepest_and_the_flagged(tmp_path):
     write_survey(tmp_path, [row("a", 1, "pothole", 30.0, "low"), row("a", 2, "pothole", 62.4, "high"),
-                            row("b", 1, "pothole", 20.0, "medium", low=True, flags="weak_match;specular"),
+                            row("b", 1, "pothole", 20.0, "medium", low=True, flags="weak_match;rematch"),
                             row("b", 2, "bump", 40.0, low=True, flags="specular"),
                             row("b", 3, "pothole", 11.0)], frames=3)
     assert survey_line(tmp_path) == ("road: 3 frames, 4 potholes (low 1, medium 1, high 1, 1 too small to grade), "
-                                     "1 bump; deepest 62 mm (a #2); 2 defects flagged (wet or specular surface 2, "
-                                     "weak match on little texture 1)")
+                                     "1 bump; deepest 62 mm (a #2); 2 defects flagged (weak match on little texture 1, "
+                                     "re-match unreliable 1, wet or specular surface 1)")
 
 
 def test_survey_line_flags_a_low_confidence_deepest_and_says_when_nothing_was_found(tmp_path):
