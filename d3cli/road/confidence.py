@@ -44,7 +44,8 @@ Reasons (defects.json ``flags``, in this order):
 ``rematch``
     The small-window re-match (:mod:`d3cli.road.rematch`) changed the depth by more than
     :attr:`ConfidenceRules.max_rematch_change` of the stored map's: two measurements of
-    the same floor disagree.
+    the same floor disagree.  The window it used is evidence too (``rematch_window``, 0:
+    none was clean and the depth is the stored, smoothed map's); it flags nothing.
 
 The thresholds were chosen on synthetic pairs with exact ground truth (docs/road.md, "The
 confidence check"): on the pairs they were chosen on, one defect left ``ok`` was off by

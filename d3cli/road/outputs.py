@@ -102,8 +102,10 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     road_cfg : RoadConfig
     right : ndarray, optional, keyword-only
         The right image.  Given, the disparity inside each defect (grown by its ring) is
-        matched again with a small window (:mod:`d3cli.road.rematch`) and the defects are
-        measured on that; disp.pfm is not changed.
+        matched again with a small window (:mod:`d3cli.road.rematch`), the defects are
+        measured on that, and how decisively the images support each defect's disparity is
+        part of its confidence (``match_margin``, :mod:`d3cli.road.confidence`); disp.pfm
+        is not changed.
     groups : frozenset, optional, keyword-only
         The optional files of ``run.outputs`` (:data:`d3cli.config.OUTPUT_GROUPS`):
         height.pfm with ``height``, height_color.png and defects.png with ``pictures``;
@@ -179,7 +181,8 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
                                         brief=right is not None)
         if right is not None and regions:
             grey = (grey_image(left), grey_image(right))  # made once for every region
-            measured, height = _rematched_height(grey, disparity, finite, regions, camera, plane, road_cfg)
+            measured, windows, height = _rematched_height(grey, disparity, finite, regions, camera, plane,
+                                                          road_cfg)
         if start_writing is not None:
             start_writing(height)
         if right is not None and regions:
@@ -189,6 +192,7 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
             # weak_match), on the disparity it was measured on; the defects on both threads.
             margins = map_on_threads(lambda region: match_margin(*grey, measured, region), regions)
             defects = [with_flags(d, road_cfg, rematch_change=_rematch_change(d, r, stored),
+                                  rematch_window=int(np.bincount(windows[r]).argmax()),
                                   match_margin=round(m, 4) if np.isfinite(m) else None)
                        for d, r, m in zip(defects, regions, margins)]
         if decided_share < road_cfg.min_decided_share:
@@ -237,19 +241,21 @@ def _rematch_change(defect, region: np.ndarray, stored: list) -> float:
 
 
 def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
-                      road_cfg) -> tuple[np.ndarray, np.ndarray]:
-    """(disparity, height map) with the disparity inside each defect (grown by two rings:
+                      road_cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(disparity, window, height map) with the disparity inside each defect (grown by two rings:
     the ring gives the reference height) matched again (:mod:`d3cli.road.rematch`) on the
     grey images ``grey`` (left, right), with the smallest window of
     :data:`~d3cli.road.rematch.WINDOWS` that re-measures at least ``MIN_RELIABLE`` of the
     zone and whose re-measured heights scatter by at most ``NOISE_M`` on the outer ring
     (:func:`_highpass_noise`); a defect no window measures that cleanly keeps the stored
-    map."""
+    map.  ``window``: uint8 (H, W), the window side used at each pixel, 0 where the stored
+    map was kept."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
     left, right = grey
 
     def zone_disparity(region):
-        """(zone, its re-matched disparity, or None where no window matches it cleanly)."""
+        """(zone, its re-matched disparity and window, or None and 0 where no window matches
+        it cleanly)."""
         inner = dilate_near(region, ring)
         zone = dilate_near(inner, ring) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
@@ -262,18 +268,20 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
             crop = _around(band, int(np.ceil(4 * window)) + 2)
             if _highpass_noise(height_map(new[crop], finite[crop], camera, plane, origin=(crop[0].start, crop[1].start)),
                                (band & got)[crop], window) <= NOISE_M:
-                return zone, new[zone]
+                return zone, new[zone], window
         # no window matches the defect cleanly (a dark, noisy pair): the stored, smoothed
         # map is the better measurement there.
-        return zone, None
+        return zone, None, 0
 
     out = disparity.copy()
+    windows = np.zeros(disparity.shape, np.uint8)
     # The regions are matched on both threads (each reads the stored map only) and their
     # zones written in the regions' order, as one after the other would.
-    for zone, values in map_on_threads(zone_disparity, regions):
+    for zone, values, window in map_on_threads(zone_disparity, regions):
+        windows[zone] = window
         if values is not None:
             out[zone] = values
-    return out, height_map(out, finite, camera, plane)
+    return out, windows, height_map(out, finite, camera, plane)
 
 
 def _around(mask: np.ndarray, margin: int) -> tuple[slice, slice]:

@@ -28,5 +28,7 @@ def test_road_report_on_the_bundled_samples_measures_the_pothole(tmp_path):
     # clearly (match margin 0.17), so it is ok, with the numbers behind it.
     assert pothole["evidence"]["snr"] < 10 and pothole["evidence"]["spikiness"] > 1.1
     assert pothole["evidence"]["match_margin"] > 0.1
+    # No re-match window is clean on SGBM's noisy map: the depth is the stored map's.
+    assert (pothole["evidence"]["rematch_window"], pothole["evidence"]["rematch_change"]) == (0, 0.0)
     assert (pothole["flags"], pothole["confidence"], pothole["low_confidence"]) == ([], "ok", False)
     assert pothole["reasons"] == ""
