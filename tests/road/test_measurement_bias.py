@@ -127,3 +127,27 @@ def test_the_deepest_pixels_are_taken_where_the_disparity_was_decided():
     (d,) = [d for d in find_defects(height, decided, cam, plane, RoadConfig()) if d.kind == "pothole"]
     assert d.max_depth_mm == pytest.approx(80.0, rel=0.08)
     assert d.decided_share < 1.0
+
+
+def test_a_pothole_on_a_floor_without_texture_is_flagged_a_weak_match(tmp_path, smoothed_pair):
+    # The same map measured beside the pair's own images and beside the images blurred
+    # until one pixel of disparity hardly changes the match (a dark, smooth or wet floor):
+    # the first is ok, re-matched; the second keeps its depth but says it is not trusted.
+    pair, cam, smoothed = smoothed_pair
+    finite = np.isfinite(pair.disparity)
+    cfg = RoadConfig(report=True)
+
+    def pothole(left, right):
+        items = road_report(tmp_path, left, smoothed, finite, cam, {}, cfg, right=right)[0]
+        return next(d for d in items if d["kind"] == "pothole")
+
+    sharp = pothole(pair.left, pair.right)  # margin 0.10, re-matched with the 9 px window
+    assert sharp["flags"] == [] and sharp["evidence"]["match_margin"] > 0.08
+    assert sharp["evidence"]["rematch_window"] in (9, 13, 17, 25)
+
+    def blur(image):
+        return cv2.GaussianBlur(image, (0, 0), 6)
+
+    smooth = pothole(blur(pair.left), blur(pair.right))  # margin 0.004, no clean re-match
+    assert smooth["evidence"]["match_margin"] < 0.02 and smooth["evidence"]["rematch_window"] == 0
+    assert smooth["flags"] == ["weak_match"] and smooth["confidence"] == "low"
