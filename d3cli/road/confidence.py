@@ -40,7 +40,6 @@ Reasons (defects.json ``flags``, in this order):
     The region holds two or more depressions, each standing ``road.split_prominence_mm``
     above the saddle between them, that the splitting did not cut because the map's noise
     is larger (:func:`d3cli.road.splitting.split_parts`): possibly two potholes as one.
-
 ``rematch``
     The small-window re-match (:mod:`d3cli.road.rematch`) changed the depth by more than
     :attr:`ConfidenceRules.max_rematch_change` of the stored map's: two measurements of

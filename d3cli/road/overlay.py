@@ -150,7 +150,8 @@ def low_confidence_text(flags: Sequence[str]) -> str:
     """The legend's line for ``?``: what it means and the short reasons of ``flags`` (the
     codes the picture shows, each once) in words, in the order of
     :data:`d3cli.road.confidence.REASONS`."""
-    shown = [c for c in REASONS if c in set(flags)] + sorted(set(flags) - set(REASONS))
+    codes = set(flags)
+    shown = [c for c in REASONS if c in codes] + sorted(codes - set(REASONS))
     if not shown:
         return f"{LOW_CONFIDENCE_MARK} after a label: depth not trusted (none here)"
     return (f"{LOW_CONFIDENCE_MARK} depth not trusted, why: "
