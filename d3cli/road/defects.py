@@ -34,7 +34,6 @@ Definitions (what the numbers in defects.json mean):
 from __future__ import annotations
 
 import logging
-import threading
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -44,7 +43,7 @@ from ..config import RoadConfig
 from .confidence import ConfidenceRules, deep_at_border, depressions, flags_of, spikiness
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
-from .compiled import median, noise_terms
+from .compiled import band_medians, median, noise_terms
 from .morphology import dilate_near, fill_holes
 from .splitting import smoothed_depth, split_component
 from .threads import map_on_threads
@@ -86,14 +85,37 @@ class Defect:
         return out
 
 
-def _median_filled(height: np.ndarray, size: int) -> np.ndarray:
-    """Median filter of a float map with inf holes (holes stay inf)."""
+def _median_filled(height: np.ndarray, size: int, fill: float | None = None) -> tuple[np.ndarray, float]:
+    """(median filter of a float map with inf holes, holes staying inf; the value the holes
+    stood in the filter as: ``fill``, by default the median of the finite heights)."""
     finite = np.isfinite(height)
     if not finite.any():
-        return height.copy()
-    fill = float(median(height[finite]))
+        return height.copy(), 0.0 if fill is None else fill
+    fill = float(median(height[finite])) if fill is None else fill
     med = cv2.medianBlur(np.where(finite, height, fill).astype(np.float32), size)
-    return np.where(finite, med, np.inf).astype(np.float32)
+    return np.where(finite, med, np.inf).astype(np.float32), fill
+
+
+def _median_patched(smooth: np.ndarray, height: np.ndarray, zones: np.ndarray, size: int, fill: float) -> np.ndarray:
+    """``smooth`` (the :func:`_median_filled` of a map) with the pixels whose filter reads a
+    pixel of ``zones`` recomputed from ``height``, a map that differs from that one only
+    inside ``zones``: the same values as filtering all of ``height`` (holes standing as
+    ``fill``), at the cost of the zones' bounding box."""
+    out = smooth.copy()
+    rows, cols = np.flatnonzero(zones.any(axis=1)), np.flatnonzero(zones.any(axis=0))
+    if rows.size == 0:
+        return out
+    r = size // 2
+    h, w = height.shape
+    # the box read (its edge: the map's, or 2 r beyond the zones) and the box written
+    # (r beyond the zones: every pixel whose filter window reaches a zone)
+    y0, y1 = max(int(rows[0]) - 2 * r, 0), min(int(rows[-1]) + 2 * r + 1, h)
+    x0, x1 = max(int(cols[0]) - 2 * r, 0), min(int(cols[-1]) + 2 * r + 1, w)
+    med, _ = _median_filled(height[y0:y1, x0:x1], size, fill)
+    a0, a1 = max(int(rows[0]) - r, 0), min(int(rows[-1]) + r + 1, h)
+    b0, b1 = max(int(cols[0]) - r, 0), min(int(cols[-1]) + r + 1, w)
+    out[a0:a1, b0:b1] = med[a0 - y0:a1 - y0, b0 - x0:b1 - x0]
+    return out
 
 
 @dataclass(frozen=True)
@@ -178,8 +200,18 @@ class _Scene:
     full_shape: tuple = (0, 0)
     origin: tuple = (0, 0)
     rules: ConfidenceRules = ConfidenceRules()
-    #: measure only what tells a defect from none and its depth (:func:`find_defects`' ``brief``)
+    #: the value that stands in for pixels without a height in the median filter of ``smooth``
+    fill: float = 0.0
+    #: measure only what tells a defect from none and its depth, on each candidate component
+    #: as a whole (:func:`candidate_regions`)
     brief: bool = False
+    #: only the components with a pixel in this mask (the whole map's) are measured
+    #: (:func:`remeasure`); None: every one
+    only: np.ndarray | None = None
+    #: the map measured before the re-match (its ``height`` and ``smooth``), where each
+    #: defect's depth is read again for ``rematch_change`` (:func:`remeasure`); None: no such map
+    stored_height: np.ndarray | None = None
+    stored_smooth: np.ndarray | None = None
 
 
 def find_defects(
@@ -192,7 +224,6 @@ def find_defects(
     *,
     return_regions: bool = False,
     rules: ConfidenceRules | None = None,
-    brief: bool = False,
 ):
     """Potholes and bumps of one height map.
 
@@ -223,11 +254,6 @@ def find_defects(
         Also return each defect's pixel mask (bool (H, W)), same order.
     rules : ConfidenceRules, optional, keyword-only
         The thresholds of the confidence flags (:mod:`d3cli.road.confidence`).
-    brief : bool, keyword-only
-        The same defects and regions, each with only ``kind``, ``bbox_px``, ``area_m2``,
-        ``max_depth_mm``, ``decided_share`` and ``at_border`` measured (the centroids, mean
-        depth, volume, outline and evidence left at zero or empty, no flags): what the
-        road report needs of the stored map before the re-match measures the defects again.
 
     Returns
     -------
@@ -235,23 +261,86 @@ def find_defects(
         Potholes first (deepest first), then bumps; ids 1..N in that order.
     """
     road = RoadConfig() if road is None else road
-    rules = ConfidenceRules() if rules is None else rules
     scene = replace(prepare_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
-                    rules=rules, brief=brief)
+                    rules=ConfidenceRules() if rules is None else rules)
+    return _defects_of(scene, return_regions)
+
+
+def candidate_regions(height: np.ndarray, decided: np.ndarray, camera: Camera, plane: RoadPlane,
+                      road: RoadConfig | None = None, tuning: DefectTuning | None = None) -> tuple:
+    """The first pass of a report that measures its defects on a re-matched map: the
+    regions of the stored map that hold a defect, and what they were measured against.
+
+    Each candidate component (pixels below ``-min_depth_mm`` or above ``+min_height_mm``)
+    is tested *whole*, not cut into separate potholes (:func:`d3cli.road.splitting.split_parts`),
+    with the tests of :func:`find_defects` (area, significance, decided share) and only
+    what they need measured: the re-match (:mod:`d3cli.road.rematch`) needs where the
+    defects are, not how many there are, and the cutting is the costliest step of a
+    map with defects.  :func:`remeasure` then finds and measures the defects on the
+    re-matched map.
+
+    Parameters
+    ----------
+    height, decided, camera, plane, road, tuning
+        As :func:`find_defects`.
+
+    Returns
+    -------
+    scene : _Scene
+        The stored map's scene (heights, footprints, the map's noise), for :func:`remeasure`.
+    regions : list of ndarray, bool, (H, W)
+        The regions found, potholes first.
+    """
+    road = RoadConfig() if road is None else road
+    scene = replace(prepare_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
+                    brief=True)
+    regions = [region for kind, sign, thr_mm in _kinds(road) for _, region, _ in _find_kind(scene, kind, sign, thr_mm)]
+    return scene, regions
+
+
+def remeasure(stored, height: np.ndarray, zones: np.ndarray, *, rules: ConfidenceRules | None = None,
+              return_regions: bool = False):
+    """:func:`find_defects` on ``height``, a map that differs from the one of
+    :func:`candidate_regions` (``stored``, its scene) only inside ``zones``.
+
+    Only the candidate components with a pixel in ``zones`` are measured: the others have
+    the heights that the first pass found no defect in.  The map's noise (``sigma_d``),
+    the footprints and the median filter's stand-in for missing heights are the stored
+    map's, and each defect's depth is also read on the stored map, over the same pixels
+    against the same ring: ``evidence["rematch_change"]``, the relative change of the
+    depth by the re-match (:mod:`d3cli.road.confidence`).
+
+    Parameters
+    ----------
+    stored : _Scene
+        The first element of :func:`candidate_regions`' result.
+    height : ndarray, float32, (H, W)
+        The height map after the re-match.
+    zones : ndarray, bool, (H, W)
+        The pixels the re-match may have changed (every re-matched zone).
+    rules, return_regions : keyword-only
+        As :func:`find_defects`.
+    """
+    height = np.where(stored.footprint > 0, height, np.inf).astype(np.float32)
+    smooth = _median_patched(stored.smooth, height, zones, stored.tuning.median_px, stored.fill)
+    scene = replace(stored, height=height, finite=np.isfinite(height), smooth=smooth, brief=False, only=zones,
+                    stored_height=stored.height, stored_smooth=stored.smooth,
+                    rules=ConfidenceRules() if rules is None else rules)
+    return _defects_of(scene, return_regions)
+
+
+def _kinds(road: RoadConfig) -> tuple:
+    """(kind, sign of the height, threshold in mm) of potholes and bumps."""
+    return ("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)
+
+
+def _defects_of(scene: _Scene, return_regions: bool):
+    """The defects of a scene, potholes first (deepest first), then bumps, with their flags."""
     found: list = []
-    blurred: list = []  # the split cue's smoothed height, made once for both kinds (it is odd in the height)
-    lock = threading.Lock()
-
-    def smoothed_height():
-        with lock:
-            if not blurred:
-                blurred.append(smoothed_depth(scene.smooth, scene.tuning.split_smooth_px))
-        return blurred[0]
-
-    for kind, sign, thr_mm in (("pothole", -1.0, road.min_depth_mm), ("bump", 1.0, road.min_height_mm)):
-        found += _find_kind(scene, kind, sign, thr_mm, smoothed_height)
+    for kind, sign, thr_mm in _kinds(scene.road):
+        found += _find_kind(scene, kind, sign, thr_mm)
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
-    defects = [with_flags(Defect(id=i + 1, kind=kind, **d, low_confidence=False), road, rules)
+    defects = [with_flags(Defect(id=i + 1, kind=kind, **d, low_confidence=False), scene.road, scene.rules)
                for i, (kind, _, d) in enumerate(found)]
     return (defects, [r for _, r, _ in found]) if return_regions else defects
 
@@ -274,7 +363,7 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     # horizon inside the image, and regions there have no plane area or pixel size.
     height = np.where(footprint > 0, height, np.inf).astype(np.float32)
     finite = np.isfinite(height)
-    smooth = _median_filled(height, tuning.median_px)
+    smooth, fill = _median_filled(height, tuning.median_px)
     # row and column of every pixel, as read-only views (no two full index arrays per map)
     v_all = np.broadcast_to(np.arange(shape[0])[:, None], shape)
     u_all = np.broadcast_to(np.arange(shape[1])[None, :], shape)
@@ -299,37 +388,34 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     return _Scene(height=height, decided=decided, camera=camera, plane=plane, road=road, tuning=tuning,
                   finite=finite, smooth=smooth, footprint=footprint, v_all=v_all, u_all=u_all,
                   kernel_ring=kernel_ring, kernel_gap=kernel_gap, kernel_local=kernel_local,
-                  map_decided=map_decided, sigma_d=sigma_d, split_noise=split_noise, full_shape=shape)
+                  map_decided=map_decided, sigma_d=sigma_d, split_noise=split_noise, full_shape=shape, fill=fill)
 
 
-def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, smoothed_height=None) -> list:
-    """(kind, region mask, measurements) of every pothole (``sign`` -1) or bump (+1);
-    ``smoothed_height``: a function returning :func:`d3cli.road.splitting.smoothed_depth` of
-    the smoothed height (made once for both kinds)."""
+def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
+    """(kind, region mask, measurements) of every pothole (``sign`` -1) or bump (+1)."""
     road, tuning = s.road, s.tuning
     with np.errstate(invalid="ignore"):
         cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
     other = s.finite & (np.abs(s.smooth) > min(road.min_depth_mm, road.min_height_mm) * 1e-3)
     n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
     level = max(thr_mm * 1e-3, s.split_noise)
-    lock, made = threading.Lock(), []
 
-    def smoothed():  # made once for the kind, by whichever thread needs it first
-        with lock:
-            if not made:
-                made.append(sign * smoothed_height() if smoothed_height is not None
-                            else smoothed_depth(sign * s.smooth, tuning.split_smooth_px))
-        return made[0]
+    def smoothed(box):  # the split cue's smoothed depth, on a component's box only
+        return sign * smoothed_depth(s.smooth, tuning.split_smooth_px, box)
 
     def component(item) -> list:
         lab, box = item
         found = []
-        # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
-        # below it the outline of a noisy map is drawn by the noise.
-        for piece in split_component(labels, lab, box, s.footprint, level=level,
+        if s.brief:  # the component as a whole (:func:`candidate_regions`)
+            pieces = [labels[box] == lab]
+        else:
+            # Necks are measured on the outline at a depth the noise cannot make (noise_k
+            # sigma_h): below it the outline of a noisy map is drawn by the noise.
+            pieces = split_component(labels, lab, box, s.footprint, level=level,
                                      prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
                                      neck=road.split_neck, min_part_m2=road.split_min_area_m2,
-                                     step=level if tuning.split_terrace else np.inf, smoothed=smoothed):
+                                     step=level if tuning.split_terrace else np.inf, smoothed=smoothed)
+        for piece in pieces:
             # Measured in a window around the part that holds everything its measurement
             # reads (its walls, rings and noise annulus): the same pixels, the same results,
             # at the cost of the window instead of the map (a noisy 720p map has hundreds of
@@ -349,8 +435,12 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, smoothed_height
     # (each component's bounding box in one pass over the labels).
     from scipy import ndimage
 
+    wanted = None
+    if s.only is not None:  # only the components that reach into s.only (:func:`remeasure`)
+        wanted = np.zeros(n, bool)
+        wanted[np.unique(labels[s.only])] = True
     components = [(lab, box) for lab, box in enumerate(ndimage.find_objects(labels, max(n - 1, 0)), start=1)
-                  if box is not None]
+                  if box is not None and (wanted is None or wanted[lab])]
     return [f for found in map_on_threads(component, components) for f in found]
 
 
@@ -370,9 +460,11 @@ def _window(s: _Scene, box: tuple, n_px: int) -> tuple:
 
 def _crop(s: _Scene, window: tuple) -> _Scene:
     """The scene's per-pixel arrays cut to ``window`` (the rest as it is)."""
+    stored = {} if s.stored_height is None else dict(stored_height=s.stored_height[window],
+                                                     stored_smooth=s.stored_smooth[window])
     return replace(s, height=s.height[window], decided=s.decided[window], finite=s.finite[window],
                    smooth=s.smooth[window], footprint=s.footprint[window], v_all=s.v_all[window],
-                   u_all=s.u_all[window], origin=(window[0].start, window[1].start))
+                   u_all=s.u_all[window], origin=(window[0].start, window[1].start), only=None, **stored)
 
 
 def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm: float):
@@ -403,7 +495,8 @@ def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, 
     # depth is the hole filling's extrapolation (on wet floors it read potholes up to twice
     # as deep), not a measurement.
     measured = region & s.decided
-    peak = _peak(depth_s[measured if measured.sum() >= tuning.peak_px else region], tuning.peak_px, tuning.peak_share)
+    deepest_of = measured if measured.sum() >= tuning.peak_px else region
+    peak = _peak(depth_s[deepest_of], tuning.peak_px, tuning.peak_share)
     # Significance of the peak, and of the mean depth: a small blob of correlated matching
     # noise can peak above noise_k sigma, but a real depression spans many noise cells.
     # Tested against the map's noise at the region's distance first: the local noise
@@ -441,14 +534,15 @@ def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, 
     pts = _points_at(s.height[region], us, vs, s.camera, s.plane)
     rules = s.rules
     evidence = {
-        "spikiness": round(spikiness(depth_s, measured if measured.sum() >= tuning.peak_px else region,
-                                     peak_px=tuning.peak_px, spike_px=rules.spike_px), 3),
+        "spikiness": round(spikiness(depth_s, deepest_of, peak_px=tuning.peak_px, spike_px=rules.spike_px), 3),
         "snr": round(peak / sigma_local, 1) if sigma_local > 0 else float("inf"),
         "decided_share": round(share, 3),
         "deep_at_border": deep_at_border(depth_s, region, peak, s.origin, s.full_shape),
         "depressions": depressions(depth_s, region, prominence=road.split_prominence_mm * 1e-3,
                                    smooth_px=tuning.split_smooth_px),
     }
+    if s.stored_height is not None:
+        evidence["rematch_change"] = _stored_change(s, ring, deepest_of, sign, peak)
     return region, dict(
         evidence=evidence,
         centroid_px=(float(np.average(us, weights=w)), float(np.average(vs, weights=w))),
@@ -462,6 +556,19 @@ def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, 
         at_border=at_border,
         outline_px=outline(region, offset=s.origin),
     )
+
+
+def _stored_change(s: _Scene, ring: np.ndarray, deepest_of: np.ndarray, sign: float, peak: float) -> float:
+    """Relative change of a defect's depth ``peak`` against its depth on the map before
+    the re-match (``s.stored_height``, ``s.stored_smooth``): the same pixels (``deepest_of``)
+    against the same ``ring``; 0 when the stored map has no depth there to compare with."""
+    ring = ring & np.isfinite(s.stored_height)
+    pixels = deepest_of & np.isfinite(s.stored_smooth)
+    if ring.sum() < 10 or not pixels.any():
+        return 0.0
+    ref = float(np.median(s.stored_height[ring]))
+    before = _peak(sign * (s.stored_smooth[pixels] - ref), s.tuning.peak_px, s.tuning.peak_share)
+    return round(peak / before - 1.0, 3) if before > 0 else 0.0
 
 
 def _peak(depth: np.ndarray, peak_px: int, share: float = 0.0) -> float:
@@ -485,23 +592,17 @@ def _with_walls(s: _Scene, comp: np.ndarray, sign: float, other: np.ndarray, *, 
     The band medians are taken over whole bands, so the stereo noise does not decide
     where the growth stops; out to the first near-minimum, so a neighbouring pothole
     further out does not pull it on."""
-    v, u = np.nonzero(comp)
-    reach = max(4 * s.road.ring_px, int(np.ceil(np.sqrt(v.size / np.pi))))
-    box = (slice(max(v.min() - reach, 0), v.max() + reach + 1), slice(max(u.min() - reach, 0), u.max() + reach + 1))
+    rows, cols = np.flatnonzero(comp.any(axis=1)), np.flatnonzero(comp.any(axis=0))
+    reach = max(4 * s.road.ring_px, int(np.ceil(np.sqrt(np.count_nonzero(comp) / np.pi))))
+    box = (slice(max(rows[0] - reach, 0), rows[-1] + reach + 1), slice(max(cols[0] - reach, 0), cols[-1] + reach + 1))
     inside = comp[box]
     dist = cv2.distanceTransform((~inside).astype(np.uint8), cv2.DIST_L2, 5)
     use = s.finite[box] & ~other[box] & (dist > 0) & (dist <= reach)
     band = np.ceil(dist[use] / step_px).astype(np.int64)
     with np.errstate(invalid="ignore"):
         depth = sign * s.smooth[box][use]
-    medians = np.full(-(-reach // step_px) + 1, np.nan)
-    # the bands' values side by side (one sort), instead of a pass over all of them per band
-    order = np.argsort(band, kind="stable")
-    band, depth = band[order], depth[order]
-    starts = np.flatnonzero(np.r_[True, band[1:] != band[:-1]]) if band.size else np.zeros(0, np.int64)
-    for start, stop in zip(starts, np.r_[starts[1:], band.size].astype(np.int64)):
-        if stop - start >= 10:
-            medians[band[start]] = np.median(depth[start:stop])
+    # the median of each band (of at least 10 pixels), compiled: one pass groups the bands
+    medians = band_medians(band, depth, -(-reach // step_px) + 1, 10)
     out = np.zeros_like(comp)
     out[box] = inside
     if np.isfinite(medians).any():

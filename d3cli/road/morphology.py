@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .compiled import dilate
+from .compiled import dilate, dilate_rows, erode_rows, symmetric_half_widths
 
 
 def dilate_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
@@ -49,6 +49,45 @@ def dilate_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     # compiled (:func:`d3cli.road.compiled.dilate`, the same pixels): OpenCV's dilation by the
     # 161 px disc costs the box's pixels times the disc's, 36 ms a region on a 720p map
     out[y0:y1, x0:x1] = dilate(mask[y0:y1, x0:x1], kernel)
+    return out
+
+
+def opening_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """``cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)`` of a bool mask, as bool, computed on
+    the mask's bounding box grown by the kernel's reach and a pixel, and only as far as
+    needed: when the erosion leaves nothing, the opening is empty and is not dilated.
+
+    The same pixels as the opening of the whole array: a pixel that survives the erosion
+    is a pixel of the mask, and everything its kernel reads lies in the grown box (the
+    pixels beyond it are background either way); the dilation of those pixels reaches no
+    farther.  The terrace cue of :func:`d3cli.road.splitting.split_parts` opens a band
+    of a pothole once per depth level, and most bands hold no shelf at all.
+
+    Parameters
+    ----------
+    mask : ndarray, bool, (H, W)
+    kernel : ndarray, uint8, (kh, kw)
+        A structuring element with odd sides made of centred row runs (an ellipse, a
+        rectangle, a cross: :func:`d3cli.road.compiled.symmetric_half_widths`).
+
+    Returns
+    -------
+    ndarray, bool, (H, W)
+    """
+    half = symmetric_half_widths(kernel)
+    if half is None or kernel.shape[0] % 2 == 0 or kernel.shape[1] % 2 == 0:
+        raise ValueError(f"opening_near needs a kernel of centred row runs with odd sides, got {kernel.shape}")
+    out = np.zeros(mask.shape, bool)
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return out
+    cols = np.flatnonzero(mask.any(axis=0))
+    ry, rx = kernel.shape[0] // 2 + 1, kernel.shape[1] // 2 + 1
+    box = (slice(max(int(rows[0]) - ry, 0), min(int(rows[-1]) + ry + 1, mask.shape[0])),
+           slice(max(int(cols[0]) - rx, 0), min(int(cols[-1]) + rx + 1, mask.shape[1])))
+    eroded = erode_rows(np.ascontiguousarray(mask[box], np.bool_), half)
+    if eroded.any():
+        out[box] = dilate_rows(eroded, half)
     return out
 
 

@@ -22,7 +22,7 @@ from ..data.formats import atomic_write, write_image, write_pfm
 from ..errors import plural
 from ..data.legend import vertical_colour_bar
 from .confidence import REASONS, describe
-from .defects import find_defects, with_flags
+from .defects import candidate_regions, find_defects, remeasure, with_flags
 from .morphology import dilate_near
 from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
@@ -174,30 +174,32 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
         reason = pt.get("reason") or "the perspective transformation fell back"
         notes.append(f"no road surface: {reason}; no defects measured")
         defects, regions = [], []
-    else:
-        # With the right image the defects found here are measured again on the re-matched
-        # map: here only what the re-match and the comparison with it need (brief).
-        defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True,
-                                        brief=right is not None)
-        if right is not None and regions:
-            grey = (grey_image(left), grey_image(right))  # made once for every region
-            measured, windows, height = _rematched_height(grey, disparity, finite, regions, camera, plane,
-                                                          road_cfg)
+    elif right is None:
+        defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
         if start_writing is not None:
             start_writing(height)
-        if right is not None and regions:
-            stored = list(zip(defects, regions))
-            defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
+    else:
+        # With the right image the regions found on the stored map are matched again with
+        # a small window and the defects found and measured on that map (remeasure).
+        stored, regions = candidate_regions(height, decided, camera, plane, road_cfg)
+        defects = []
+        if regions:
+            grey = (grey_image(left), grey_image(right))  # made once for every region
+            measured, windows, zones, height = _rematched_height(grey, disparity, finite, regions, camera, plane,
+                                                                 road_cfg)
+        if start_writing is not None:
+            start_writing(height)
+        if regions:
+            defects, regions = remeasure(stored, height, zones, return_regions=True)
             # How decisively the images support each defect's disparity (the confidence's
             # weak_match), on the disparity it was measured on; the defects on both threads.
             margins = map_on_threads(lambda region: match_margin(*grey, measured, region), regions)
-            defects = [with_flags(d, road_cfg, rematch_change=_rematch_change(d, r, stored),
-                                  rematch_window=int(np.bincount(windows[r]).argmax()),
+            defects = [with_flags(d, road_cfg, rematch_window=int(np.bincount(windows[r]).argmax()),
                                   match_margin=round(m, 4) if np.isfinite(m) else None)
                        for d, r, m in zip(defects, regions, margins)]
-        if decided_share < road_cfg.min_decided_share:
-            warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
-            defects = [with_flags(d, road_cfg, map_decided_share=round(decided_share, 3)) for d in defects]
+    if not fallback and decided_share < road_cfg.min_decided_share:
+        warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
+        defects = [with_flags(d, road_cfg, map_decided_share=round(decided_share, 3)) for d in defects]
     # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
     items = [{**d.to_dict(), "reasons": describe(d.flags) if d.flags else "",
               **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})} for d in defects]
@@ -221,35 +223,16 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
     return items, warnings
 
 
-def _rematch_change(defect, region: np.ndarray, stored: list) -> float:
-    """Relative change of ``defect``'s depth by the re-match: against the defect of the
-    stored map (``stored``: (defect, region) pairs) that overlaps ``region`` most, of the
-    same kind; 0 when none overlaps (nothing to compare)."""
-    best, overlap = None, 0
-    u0, v0, u1, v1 = defect.bbox_px
-    for other, other_region in stored:
-        a0, b0, a1, b1 = other.bbox_px
-        if other.kind != defect.kind or a0 > u1 or a1 < u0 or b0 > v1 or b1 < v0:
-            continue  # no pixel in common: the masks need not be compared
-        box = (slice(max(v0, b0), min(v1, b1) + 1), slice(max(u0, a0), min(u1, a1) + 1))
-        n = int(np.count_nonzero(other_region[box] & region[box]))
-        if n > overlap:
-            best, overlap = other, n
-    if best is None or best.max_depth_mm <= 0:
-        return 0.0
-    return round(defect.max_depth_mm / best.max_depth_mm - 1.0, 3)
-
-
 def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
-                      road_cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(disparity, window, height map) with the disparity inside each defect (grown by two rings:
+                      road_cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(disparity, window, zones, height map) with the disparity inside each defect (grown by two rings:
     the ring gives the reference height) matched again (:mod:`d3cli.road.rematch`) on the
     grey images ``grey`` (left, right), with the smallest window of
     :data:`~d3cli.road.rematch.WINDOWS` that re-measures at least ``MIN_RELIABLE`` of the
     zone and whose re-measured heights scatter by at most ``NOISE_M`` on the outer ring
     (:func:`_highpass_noise`); a defect no window measures that cleanly keeps the stored
     map.  ``window``: uint8 (H, W), the window side used at each pixel, 0 where the stored
-    map was kept."""
+    map was kept; ``zones``: bool (H, W), every pixel of a zone matched again."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
     left, right = grey
 
@@ -275,13 +258,15 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
 
     out = disparity.copy()
     windows = np.zeros(disparity.shape, np.uint8)
+    zones = np.zeros(disparity.shape, bool)
     # The regions are matched on both threads (each reads the stored map only) and their
     # zones written in the regions' order, as one after the other would.
     for zone, values, window in map_on_threads(zone_disparity, regions):
         windows[zone] = window
+        zones |= zone
         if values is not None:
             out[zone] = values
-    return out, windows, height_map(out, finite, camera, plane)
+    return out, windows, zones, height_map(out, finite, camera, plane)
 
 
 def _around(mask: np.ndarray, margin: int) -> tuple[slice, slice]:

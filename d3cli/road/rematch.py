@@ -19,7 +19,7 @@ from .compiled import best_offsets
 
 #: Window side (pixels), search reach either side of the stored disparity (pixels) and
 #: the step of the search (pixels; parabola interpolation between steps).
-WINDOW, REACH, STEP = 9, 3.0, 0.25
+WINDOW, REACH, STEP = 9, 3.0, 0.5
 #: Windows tried, smallest first: a noisy (dark) pair needs a larger one.  The first whose
 #: heights on the road around the defect scatter (1.4826 MAD of the high-pass residual) by
 #: at most ``NOISE_M`` metres is used; none: the stored map is kept.
@@ -93,18 +93,22 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     """
     out = np.array(disparity, np.float32, copy=True)
     done = np.zeros(out.shape, bool)
-    todo = mask & np.isfinite(out)
-    if not todo.any():
+    # The pixels to re-measure, found on the mask's bounding box (not a pass over the image
+    # per call: a zone is tried with several windows).
+    todo, (m0, n0) = _within_box(mask)
+    todo &= np.isfinite(out[m0:m0 + todo.shape[0], n0:n0 + todo.shape[1]])
+    rows, cols = np.flatnonzero(todo.any(axis=1)), np.flatnonzero(todo.any(axis=0))
+    if rows.size == 0:
         return out, done
     shared = {} if shared is None else shared
     if "grey" not in shared:
         shared["grey"] = (grey_image(left), grey_image(right))
     lg, rg = shared["grey"]
-    v, u = np.nonzero(todo)
+    first_v, last_v, first_u, last_u = m0 + int(rows[0]), m0 + int(rows[-1]), n0 + int(cols[0]), n0 + int(cols[-1])
 
     def box_of(pad):
-        return (max(int(v.min()) - pad, 0), min(int(v.max()) + pad + 1, lg.shape[0]),
-                max(int(u.min()) - pad, 0), min(int(u.max()) + pad + 1, lg.shape[1]))
+        return (max(first_v - pad, 0), min(last_v + pad + 1, lg.shape[0]),
+                max(first_u - pad, 0), min(last_u + pad + 1, lg.shape[1]))
 
     pad = window + int(np.ceil(reach)) + 1
     v0, v1, u0, u1 = box_of(pad)
@@ -143,10 +147,22 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
         scores[k] = _zncc(lsub, left_stats, warped, window)
     # the best offset, a parabola through its neighbours, reliable or not: compiled
     new, reliable = best_offsets(scores, centre, offsets, float(step), float(min_score))
-    inside = todo[v0:v1, u0:u1] & reliable
+    inside = np.zeros(reliable.shape, bool)
+    inside[first_v - v0:last_v + 1 - v0, first_u - u0:last_u + 1 - u0] = \
+        todo[first_v - m0:last_v + 1 - m0, first_u - n0:last_u + 1 - n0]
+    inside &= reliable
     sub[inside] = new[inside]
     done[v0:v1, u0:u1] = inside
     return out, done
+
+
+def _within_box(mask: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
+    """(a copy of ``mask`` cut to its bounding box, (row, column) of the box's first pixel);
+    an empty (0, 0) array for an empty mask."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return np.zeros((0, 0), bool), (0, 0)
+    return mask[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1].copy(), (int(rows[0]), int(cols[0]))
 
 
 #: Window side (pixels) of the match margin (:func:`match_margin`): the road

@@ -2,7 +2,8 @@
 (a shelf around a deeper core) or a neck of the outline.
 
 Used by :func:`d3cli.road.defects.find_defects`.  May import numpy, SciPy's ``ndimage``,
-scikit-image, OpenCV, :mod:`d3cli.road.compiled` and the standard library only.
+scikit-image, OpenCV, :mod:`d3cli.road.compiled`, :mod:`d3cli.road.morphology` and the
+standard library only.
 """
 
 from __future__ import annotations
@@ -13,20 +14,19 @@ import cv2
 import numpy as np
 
 from .compiled import dilate, h_maxima, opening
+from .morphology import opening_near
 
 log = logging.getLogger(__name__)
 
 
 def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.ndarray, *, level: float,
            prominence: float, smooth_px: float, neck: float, min_part_m2: float, step: float = np.inf,
-           boxes: bool = False, smoothed=None):
+           boxes: bool = False):
     """Masks of the components of ``labels``, each cut into separate potholes.
 
     ``boxes``: yield ``(mask, box)`` instead, the mask cut to its component's bounding box
     ``box`` (a pair of slices): a full-size mask per part costs a pass over the image,
-    and a noisy map has hundreds of components.  ``smoothed``: a function returning the
-    smoothed depth (the Gaussian of ``depth``, 0 where it is not finite), when the caller
-    has it; called only when a component is large enough to be cut.
+    and a noisy map has hundreds of components.
 
     Three cues, because overlapping potholes join in three ways (applied in the order 1, 3, 2; a part cut by 3 is not cut by 2):
 
@@ -58,12 +58,8 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
     """
     from scipy import ndimage
 
-    made = []  # the smoothed depth, made when a component is large enough to be cut
-
-    def smooth():
-        if not made:
-            made.append(smoothed() if smoothed is not None else smoothed_depth(depth, smooth_px))
-        return made[0]
+    def smooth(box):  # the smoothed depth of a component large enough to be cut
+        return smoothed_depth(depth, smooth_px, box)
 
     # each component's bounding box in one pass over the labels (a mask and a scan of the
     # whole image per component cost more than the splitting itself on a noisy map)
@@ -78,14 +74,14 @@ def split_parts(labels: np.ndarray, n: int, depth: np.ndarray, footprint: np.nda
 def split_component(labels: np.ndarray, lab: int, box: tuple, footprint: np.ndarray, *, level: float,
                     prominence: float, neck: float, min_part_m2: float, step: float, smoothed) -> list:
     """The parts of component ``lab`` of ``labels`` (:func:`split_parts`), as masks of its
-    bounding box ``box``; ``smoothed``: a function returning the smoothed depth of the whole
-    map (called only when the component is large enough to be cut).  Components are cut
-    independently of one another."""
+    bounding box ``box``; ``smoothed(box)``: the smoothed depth (:func:`smoothed_depth`) on
+    ``box`` (called only when the component is large enough to be cut).  Components are
+    cut independently of one another."""
     sub_comp = labels[box] == lab
     if footprint[box][sub_comp].sum() < 2 * min_part_m2:  # too small to hold two parts
         return [sub_comp]
     kernel_open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
-    sub_depth = np.where(sub_comp, smoothed()[box], 0.0)
+    sub_depth = np.where(sub_comp, smoothed(box), 0.0)
     parts = _watershed_parts(-sub_depth, h_maxima(sub_depth, prominence) & sub_comp, sub_comp)
     pieces = []
     for part in parts:
@@ -106,12 +102,25 @@ def split_component(labels: np.ndarray, lab: int, box: tuple, footprint: np.ndar
     return _merge_nested(_merge_small(pieces, footprint[box], min_part_m2), ~sub_comp)
 
 
-def smoothed_depth(depth: np.ndarray, smooth_px: float) -> np.ndarray:
+def smoothed_depth(depth: np.ndarray, smooth_px: float, box: tuple | None = None) -> np.ndarray:
     """The depth of :func:`split_parts`' saddles: float32, 0 where not finite, Gaussian-
     smoothed with ``smooth_px`` (none when 0).  Odd in the depth: the map of ``-depth`` is
-    exactly minus this one."""
-    finite_depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
-    return cv2.GaussianBlur(finite_depth, (0, 0), smooth_px) if smooth_px > 0 else finite_depth
+    exactly minus this one.
+
+    ``box`` (a pair of slices): the values inside it only, computed from the box grown by
+    the kernel's reach (the same values as smoothing the whole map: the filter reads
+    nothing farther, and where the grown box meets the map's edge both reflect the same
+    pixels), at the cost of the box."""
+    if box is None:
+        box = (slice(0, depth.shape[0]), slice(0, depth.shape[1]))
+    if smooth_px <= 0:
+        return np.where(np.isfinite(depth[box]), depth[box], 0.0).astype(np.float32)
+    size = int(round(smooth_px * 8 + 1)) | 1  # OpenCV's own choice for float maps
+    r = size // 2
+    grown = tuple(slice(max(b.start - r, 0), min(b.stop + r, n)) for b, n in zip(box, depth.shape))
+    part = depth[grown]
+    blurred = cv2.GaussianBlur(np.where(np.isfinite(part), part, 0.0).astype(np.float32), (size, size), smooth_px)
+    return blurred[tuple(slice(b.start - g.start, b.stop - g.start) for b, g in zip(box, grown))]
 
 
 def _full(piece: np.ndarray, box: tuple, shape: tuple, boxes: bool):
@@ -182,12 +191,17 @@ def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarr
             break  # no pothole left below a shelf at t
         # The core: the parts deeper than t + step / 2 that hold the pit; a floor that only
         # dips below t + step / 2 (a shelf's middle) is shelf.
-        core_labels, _ = _label(part & (depth > t + 0.5 * step))
-        core = np.isin(core_labels, np.unique(core_labels[pit])) & (core_labels > 0)
-        if np.median(depth[core]) < t + step:
+        core_labels, k = _label(part & (depth > t + 0.5 * step))
+        holds_pit = np.zeros(k + 1, bool)  # a lookup per label: no search per pixel
+        holds_pit[core_labels[pit]] = True
+        holds_pit[0] = False
+        core = holds_pit[core_labels]
+        if _median_below(depth, core, t + step):
             continue  # the rest is a floor with relief (up to ~1 cm on broken floors), not a pit below a shelf
         lost = (part & (depth > t) & ~core).astype(np.uint8)
-        shelf = opening(lost, disc)
+        if footprint[lost.view(bool)].sum() < min_part_m2:
+            continue  # the shelf is a part of the lost band: no opening can make it large enough
+        shelf = opening_near(lost, disc)
         if footprint[shelf].sum() < min_part_m2:
             continue
         # One marker per connected piece of the lost band: the opening can cut one shelf in two.
@@ -205,6 +219,19 @@ def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarr
             candidates.append((sum(float(footprint[b].sum()) for b in blobs), t, core, blobs))
     candidates.sort(key=lambda c: -c[0])
     return candidates
+
+
+def _median_below(values: np.ndarray, mask: np.ndarray, x: float) -> bool:
+    """``np.median(values[mask]) < x``, decided by counting the values below ``x`` (two
+    passes over the arrays, no copy of the selection); the median itself only when the
+    count leaves it open (an even count with exactly half of the values below ``x``)."""
+    n = int(np.count_nonzero(mask))
+    below = int(np.count_nonzero(mask & (values < x)))
+    if 2 * below > n:
+        return True  # the middle value, or both middle values, below x
+    if 2 * below < n or n == 0:
+        return False  # the middle value, or both, at x or above (an empty mask: no median below x)
+    return bool(np.median(values[mask]) < x)
 
 
 def _keep_shelves(basins: np.ndarray, n_blobs: int, part: np.ndarray, cross: np.ndarray, ledge_share: float) -> int:

@@ -60,8 +60,9 @@ class Job:
 
 def map_on_threads(func, items) -> list:
     """``[func(x) for x in items]``, the items taken in turn by this thread and the helper
-    thread; the results in the items' order.  The helper may be busy with a :class:`Job`:
-    this thread then takes every item."""
+    thread; the results in the items' order.  The helper may be busy (a :class:`Job`, or
+    the items of another call): this thread then takes every item, and does not wait for
+    the helper to come round to a call that has nothing left to take."""
     items = list(items)
     pool = helper()
     if pool is None or len(items) < 2:
@@ -79,5 +80,6 @@ def map_on_threads(func, items) -> list:
     try:
         take()
     finally:
-        future.result()
+        if not future.cancel():  # started: wait for the item it is on
+            future.result()
     return results

@@ -261,3 +261,21 @@ def test_best_offsets_are_the_numpy_choice():
     np.testing.assert_array_equal(got, expected)
     np.testing.assert_array_equal(got_reliable, reliable)
     assert got_reliable.any() and not got_reliable.all()
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_band_medians_are_the_medians_of_each_band(dtype):
+    rng = np.random.default_rng(21)
+    n_bands = 30
+    band = rng.integers(0, n_bands - 3, 4000)  # the last bands empty: NaN
+    band[:7] = n_bands - 3  # a band of 7 values: fewer than min_count, NaN
+    band[7:] = np.where(band[7:] == n_bands - 3, 0, band[7:])
+    values = rng.integers(0, 50, band.size).astype(dtype) / 7  # ties, odd and even counts
+    got = compiled.band_medians(band, values, n_bands, 10)
+    want = np.full(n_bands, np.nan)
+    for b in range(n_bands):
+        sel = values[band == b]
+        if sel.size >= 10:
+            want[b] = np.median(sel)
+    np.testing.assert_array_equal(got, want)
+    assert np.isnan(got[n_bands - 3:]).all() and np.isfinite(got[:n_bands - 3]).all()

@@ -54,3 +54,15 @@ def test_fill_holes_is_scipys():
             mask = ndimage.binary_dilation(mask)
         np.testing.assert_array_equal(fill_holes(mask), ndimage.binary_fill_holes(mask))
     assert not fill_holes(np.zeros((4, 4), bool)).any()
+
+
+@pytest.mark.parametrize("k", range(len(KERNELS)))
+def test_opening_near_equals_the_whole_image_opening(k):
+    from d3cli.road.morphology import opening_near
+
+    kernel = KERNELS[k]
+    rng = np.random.default_rng(7)
+    masks = list(_masks()) + [rng.random((120, 170)) < 0.9, np.ones((120, 170), bool)]  # dense: most survive
+    for mask in masks:
+        want = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
+        np.testing.assert_array_equal(opening_near(mask, kernel), want)

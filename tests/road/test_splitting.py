@@ -43,3 +43,30 @@ def test_parts_cut_to_their_boxes_are_the_whole_image_parts():
     assert len(whole) == len(boxed) == 4
     for mask, (piece, box) in zip(whole, boxed):
         assert piece.shape == mask[box].shape and np.array_equal(mask[box], piece) and mask.sum() == piece.sum()
+
+
+def test_the_smoothed_depth_of_a_box_is_the_whole_maps_there():
+    from d3cli.road.splitting import smoothed_depth
+
+    rng = np.random.default_rng(3)
+    depth = rng.normal(0.0, 0.01, (150, 230)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.1] = np.inf  # no estimate: 0 in the smoothing
+    whole = smoothed_depth(depth, 12.0)
+    for box in ((slice(0, 150), slice(0, 230)), (slice(0, 20), slice(0, 30)), (slice(60, 90), slice(100, 160)),
+                (slice(130, 150), slice(200, 230)), (slice(5, 145), slice(70, 71))):
+        np.testing.assert_array_equal(smoothed_depth(depth, 12.0, box), whole[box])  # bit for bit
+    np.testing.assert_array_equal(smoothed_depth(depth, 0.0, (slice(3, 9), slice(4, 8))),
+                                  np.where(np.isfinite(depth), depth, 0.0)[3:9, 4:8])
+
+
+def test_the_median_test_of_the_terrace_cue_is_numpys():
+    from d3cli.road.splitting import _median_below
+
+    rng = np.random.default_rng(5)
+    for _ in range(2000):
+        values = (rng.integers(0, 6, (6, 5)) / 4).astype(np.float32)  # ties at the threshold
+        mask = rng.random(values.shape) < 0.5
+        if not mask.any():
+            continue
+        x = float(rng.integers(0, 6)) / 4 + float(rng.choice([0.0, 0.1, -0.1]))
+        assert _median_below(values, mask, x) == bool(np.median(values[mask]) < x)
