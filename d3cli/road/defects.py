@@ -470,8 +470,8 @@ def _crop(s: _Scene, window: tuple) -> _Scene:
 def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm: float):
     """(region, measurements) of one split component, or None when it is no defect."""
     road, tuning, finite, footprint = s.road, s.tuning, s.finite, s.footprint
-    if footprint[comp].sum() < 0.25 * road.min_area_m2:
-        return None  # cannot pass the area test even with its rim
+    if footprint[comp].sum() < road.min_area_m2:
+        return None  # the region is a part of comp: it cannot pass the area test
     # The reference ring lies beyond the walls: a ring drawn right outside the part deeper
     # than the threshold sits on a gentle wall (a cone's or a bowl's) and takes the
     # reference, and with it depth, area and volume, millimetres too low.
