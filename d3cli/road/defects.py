@@ -303,8 +303,9 @@ def remeasure(stored, height: np.ndarray, zones: np.ndarray, *, rules: Confidenc
     """:func:`find_defects` on ``height``, a map that differs from the one of
     :func:`candidate_regions` (``stored``, its scene) only inside ``zones``.
 
-    Only the candidate components with a pixel in ``zones`` are measured: the others have
-    the heights that the first pass found no defect in.  The map's noise (``sigma_d``),
+    Only the candidate components with a pixel in ``zones`` (or within the median filter's
+    reach of them) are measured: the others have the heights that the first pass found no
+    defect in.  The map's noise (``sigma_d``),
     the footprints and the median filter's stand-in for missing heights are the stored
     map's, and each defect's depth is also read on the stored map, over the same pixels
     against the same ring: ``evidence["rematch_change"]``, the relative change of the
@@ -322,8 +323,11 @@ def remeasure(stored, height: np.ndarray, zones: np.ndarray, *, rules: Confidenc
         As :func:`find_defects`.
     """
     height = np.where(stored.footprint > 0, height, np.inf).astype(np.float32)
-    smooth = _median_patched(stored.smooth, height, zones, stored.tuning.median_px, stored.fill)
-    scene = replace(stored, height=height, finite=np.isfinite(height), smooth=smooth, brief=False, only=zones,
+    size = stored.tuning.median_px
+    smooth = _median_patched(stored.smooth, height, zones, size, stored.fill)
+    # the filtered heights changed within the filter's reach of the zones
+    reach = dilate_near(zones, np.ones((size, size), np.uint8))
+    scene = replace(stored, height=height, finite=np.isfinite(height), smooth=smooth, brief=False, only=reach,
                     stored_height=stored.height, stored_smooth=stored.smooth,
                     rules=ConfidenceRules() if rules is None else rules)
     return _defects_of(scene, return_regions)
