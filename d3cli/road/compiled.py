@@ -569,13 +569,20 @@ def best_offsets(scores, centre, offsets, step, min_score):  # pragma: no cover 
     reliable = np.empty((h, w), np.bool_)
     two, half, zero = np.float32(2.0), np.float32(0.5), np.float32(0.0)
     step32, floor = np.float32(step), np.float32(min_score)
+    # the running argmax offset after offset (each a plane of the scores, read in memory
+    # order), then the parabola per pixel
+    first = np.zeros((h, w), np.int64)
+    top = scores[0].copy()
+    for j in range(1, k):
+        for v in range(h):
+            for u in range(w):
+                s, t = scores[j, v, u], top[v, u]
+                if s > t or (np.isnan(s) and not np.isnan(t)):
+                    first[v, u] = j
+                    top[v, u] = s
     for v in range(h):
         for u in range(w):
-            raw = 0
-            for j in range(1, k):
-                s, top = scores[j, v, u], scores[raw, v, u]
-                if s > top or (np.isnan(s) and not np.isnan(top)):
-                    raw = j
+            raw = first[v, u]
             best = min(max(raw, 1), k - 2)
             a, b, c = scores[best - 1, v, u], scores[best, v, u], scores[best + 1, v, u]
             curvature = (a - two * b) + c

@@ -401,7 +401,8 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
     with np.errstate(invalid="ignore"):
         cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
     other = s.finite & (np.abs(s.smooth) > min(road.min_depth_mm, road.min_height_mm) * 1e-3)
-    n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
+    # the labels and each component's bounding box in one pass
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(cand.astype(np.uint8), connectivity=8)
     level = max(thr_mm * 1e-3, s.split_noise)
 
     def smoothed(box):  # the split cue's smoothed depth, on a component's box only
@@ -420,6 +421,8 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
                                      neck=road.split_neck, min_part_m2=road.split_min_area_m2,
                                      step=level if tuning.split_terrace else np.inf, smoothed=smoothed)
         for piece in pieces:
+            if s.footprint[box][piece].sum() < road.min_area_m2:
+                continue  # its region is a part of it: it cannot pass the area test
             # Measured in a window around the part that holds everything its measurement
             # reads (its walls, rings and noise annulus): the same pixels, the same results,
             # at the cost of the window instead of the map (a noisy 720p map has hundreds of
@@ -435,16 +438,13 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
                 found.append((kind, region, measured[1]))
         return found
 
-    # Components are cut and measured independently: on both threads, in their order
-    # (each component's bounding box in one pass over the labels).
-    from scipy import ndimage
-
-    wanted = None
+    # Components are cut and measured independently: on both threads, in their order.
+    wanted = np.ones(n, bool)
     if s.only is not None:  # only the components that reach into s.only (:func:`remeasure`)
-        wanted = np.zeros(n, bool)
+        wanted[:] = False
         wanted[np.unique(labels[s.only])] = True
-    components = [(lab, box) for lab, box in enumerate(ndimage.find_objects(labels, max(n - 1, 0)), start=1)
-                  if box is not None and (wanted is None or wanted[lab])]
+    components = [(lab, (slice(y, y + h), slice(x, x + w))) for lab, (x, y, w, h, _) in enumerate(stats[1:], start=1)
+                  if wanted[lab]]
     return [f for found in map_on_threads(component, components) for f in found]
 
 
