@@ -17,10 +17,17 @@ meaningful on a shared, noisy machine, where absolute seconds drift between runs
 ``run_batch`` per output set on the first pair gives the bytes a pair's folder holds with
 ``--road-report`` and ``--outputs all`` / ``survey`` / ``survey,height``.
 
+``--stages`` then runs the ``survey`` report of every pair once more with one thread
+(numba's and OpenCV's) under :mod:`cProfile` and prints each stage's share of it: the plane
+fit, the first pass over the stored map (:func:`d3cli.road.defects.candidate_regions`, its
+per-map preparation apart), the re-match, the second pass
+(:func:`d3cli.road.defects.remeasure`, the splitting apart) and the match margin.
+
 Usage::
 
     PYTHONPATH=. python scripts/bench_road_report.py            # 4 pairs of seed 0, 3 reps
     PYTHONPATH=. python scripts/bench_road_report.py --pairs 12 --reps 5
+    PYTHONPATH=. python scripts/bench_road_report.py --pairs 12 --reps 3 --stages
 """
 
 from __future__ import annotations
@@ -52,12 +59,57 @@ def _folder_bytes(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
 
 
+#: (label, module, function) of the stages --stages reports; the shares are of their
+#: cumulative times (a stage's own callees apart where one is listed after it).
+STAGES = (
+    ("plane fit", "d3cli/road/plane.py", "fit_road_plane"),
+    ("first pass", "d3cli/road/defects.py", "candidate_regions"),
+    ("  of which the per-map preparation", "d3cli/road/defects.py", "prepare_scene"),
+    ("re-match", "d3cli/road/outputs.py", "_rematched_height"),
+    ("second pass", "d3cli/road/defects.py", "remeasure"),
+    ("  of which the splitting", "d3cli/road/splitting.py", "split_component"),
+    ("match margin", "d3cli/road/rematch.py", "match_margin"),
+)
+
+
+def _stages(run, names) -> None:
+    """Print each stage's share of ``run(name)`` over ``names``, one thread, under cProfile."""
+    import cProfile
+    import pstats
+
+    import cv2
+    import numba
+
+    threads = numba.get_num_threads(), cv2.getNumThreads()
+    numba.set_num_threads(1)
+    cv2.setNumThreads(1)
+    try:
+        profile = cProfile.Profile()
+        t0 = time.perf_counter()
+        profile.enable()
+        for name in names:
+            run(name)
+        profile.disable()
+        total = time.perf_counter() - t0
+    finally:
+        numba.set_num_threads(threads[0])
+        cv2.setNumThreads(threads[1])
+    stats = pstats.Stats(profile).stats  # {(file, line, function): (cc, nc, tt, ct, callers)}
+    print(f"\nstages of the survey report, one thread, {len(names)} pairs: {1e3 * total / len(names):.0f} ms a pair "
+          "(under cProfile)")
+    for label, path, function in STAGES:
+        spent = sum(v[3] for (file, _, func), v in stats.items() if func == function and file.endswith(path))
+        print(f"  {label:<36} {100 * spent / total:5.1f} %")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--pairs", type=int, default=4, help="synthetic 720p road pairs (default 4)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the synthetic pairs (default 0)")
     parser.add_argument("--reps", type=int, default=3, help="alternating repetitions after the warm-up")
     parser.add_argument("--no-bytes", action="store_true", help="skip the bytes per output set")
+    parser.add_argument("--stages", action="store_true",
+                        help="each stage's share of the survey report, one thread, under cProfile")
     args = parser.parse_args(argv)
 
     from d3cli import load_config
@@ -90,11 +142,14 @@ def main(argv=None) -> int:
         report(name, left, right, camera, result, "all")
     print(f"warm-up {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     times = {name: {"stereo": [], "all": [], "survey": []} for name, *_ in loaded}
+    last = []  # each pair's map of the last repetition, for --stages
     for rep in range(args.reps):
         for name, left, right, camera, dmax in loaded:
             t0 = time.perf_counter()
             result = compute_pair("d3stereo", cfg, left, right, max_disparity=dmax)
             times[name]["stereo"].append(time.perf_counter() - t0)
+            if rep == args.reps - 1:
+                last.append((name, left, right, camera, result))
             for which in ("all", "survey"):
                 t0 = time.perf_counter()
                 report(name, left, right, camera, result, which)
@@ -114,6 +169,10 @@ def main(argv=None) -> int:
     print(f"road report / stereo (median over pairs): {statistics.median(ratios):.2f} with the default files, "
           f"{statistics.median(survey_ratios):.2f} with --outputs survey; most {max(ratios):.2f} / "
           f"{max(survey_ratios):.2f}")
+
+    if args.stages:
+        kept = {name: (left, right, camera, result) for name, left, right, camera, result in last}
+        _stages(lambda name: report(name, *kept[name][:3], kept[name][3], "survey"), list(kept))
 
     if not args.no_bytes:
         print("\nbytes per pair folder with --road-report (first pair):")

@@ -85,7 +85,7 @@ class Defect:
         return out
 
 
-def _median_filled(height: np.ndarray, size: int, fill: float | None = None) -> tuple[np.ndarray, float]:
+def median_filled(height: np.ndarray, size: int, fill: float | None = None) -> tuple[np.ndarray, float]:
     """(median filter of a float map with inf holes, holes staying inf; the value the holes
     stood in the filter as: ``fill``, by default the median of the finite heights)."""
     finite = np.isfinite(height)
@@ -96,8 +96,8 @@ def _median_filled(height: np.ndarray, size: int, fill: float | None = None) -> 
     return np.where(finite, med, np.inf).astype(np.float32), fill
 
 
-def _median_patched(smooth: np.ndarray, height: np.ndarray, zones: np.ndarray, size: int, fill: float) -> np.ndarray:
-    """``smooth`` (the :func:`_median_filled` of a map) with the pixels whose filter reads a
+def median_patched(smooth: np.ndarray, height: np.ndarray, zones: np.ndarray, size: int, fill: float) -> np.ndarray:
+    """``smooth`` (the :func:`median_filled` of a map) with the pixels whose filter reads a
     pixel of ``zones`` recomputed from ``height``, a map that differs from that one only
     inside ``zones``: the same values as filtering all of ``height`` (holes standing as
     ``fill``), at the cost of the zones' bounding box."""
@@ -111,7 +111,7 @@ def _median_patched(smooth: np.ndarray, height: np.ndarray, zones: np.ndarray, s
     # (r beyond the zones: every pixel whose filter window reaches a zone)
     y0, y1 = max(int(rows[0]) - 2 * r, 0), min(int(rows[-1]) + 2 * r + 1, h)
     x0, x1 = max(int(cols[0]) - 2 * r, 0), min(int(cols[-1]) + 2 * r + 1, w)
-    med, _ = _median_filled(height[y0:y1, x0:x1], size, fill)
+    med, _ = median_filled(height[y0:y1, x0:x1], size, fill)
     a0, a1 = max(int(rows[0]) - r, 0), min(int(rows[-1]) + r + 1, h)
     b0, b1 = max(int(cols[0]) - r, 0), min(int(cols[-1]) + r + 1, w)
     out[a0:a1, b0:b1] = med[a0 - y0:a1 - y0, b0 - x0:b1 - x0]
@@ -324,7 +324,7 @@ def remeasure(stored, height: np.ndarray, zones: np.ndarray, *, rules: Confidenc
     """
     height = np.where(stored.footprint > 0, height, np.inf).astype(np.float32)
     size = stored.tuning.median_px
-    smooth = _median_patched(stored.smooth, height, zones, size, stored.fill)
+    smooth = median_patched(stored.smooth, height, zones, size, stored.fill)
     # the filtered heights changed within the filter's reach of the zones
     reach = dilate_near(zones, np.ones((size, size), np.uint8))
     scene = replace(stored, height=height, finite=np.isfinite(height), smooth=smooth, brief=False, only=reach,
@@ -367,7 +367,7 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     # horizon inside the image, and regions there have no plane area or pixel size.
     height = np.where(footprint > 0, height, np.inf).astype(np.float32)
     finite = np.isfinite(height)
-    smooth, fill = _median_filled(height, tuning.median_px)
+    smooth, fill = median_filled(height, tuning.median_px)
     # row and column of every pixel, as read-only views (no two full index arrays per map)
     v_all = np.broadcast_to(np.arange(shape[0])[:, None], shape)
     u_all = np.broadcast_to(np.arange(shape[1])[None, :], shape)

@@ -39,17 +39,23 @@ def dilate_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     if kernel.shape[0] % 2 == 0 or kernel.shape[1] % 2 == 0:
         raise ValueError(f"dilate_near needs a kernel with odd sides, got {kernel.shape}")
     out = np.zeros(mask.shape, bool)
+    box = _grown_box(mask, kernel.shape[0] // 2, kernel.shape[1] // 2)
+    if box is not None:
+        # compiled (:func:`d3cli.road.compiled.dilate`, the same pixels): OpenCV's dilation by
+        # the 161 px disc costs the box's pixels times the disc's, 36 ms a region at 720p
+        out[box] = dilate(mask[box], kernel)
+    return out
+
+
+def _grown_box(mask: np.ndarray, ry: int, rx: int) -> tuple[slice, slice] | None:
+    """Slices of ``mask``'s bounding box grown by ``ry`` rows and ``rx`` columns (cut at the
+    array), or None for an empty mask."""
     rows = np.flatnonzero(mask.any(axis=1))
     if rows.size == 0:
-        return out
+        return None
     cols = np.flatnonzero(mask.any(axis=0))
-    ry, rx = kernel.shape[0] // 2, kernel.shape[1] // 2
-    y0, y1 = max(int(rows[0]) - ry, 0), min(int(rows[-1]) + ry + 1, mask.shape[0])
-    x0, x1 = max(int(cols[0]) - rx, 0), min(int(cols[-1]) + rx + 1, mask.shape[1])
-    # compiled (:func:`d3cli.road.compiled.dilate`, the same pixels): OpenCV's dilation by the
-    # 161 px disc costs the box's pixels times the disc's, 36 ms a region on a 720p map
-    out[y0:y1, x0:x1] = dilate(mask[y0:y1, x0:x1], kernel)
-    return out
+    return (slice(max(int(rows[0]) - ry, 0), min(int(rows[-1]) + ry + 1, mask.shape[0])),
+            slice(max(int(cols[0]) - rx, 0), min(int(cols[-1]) + rx + 1, mask.shape[1])))
 
 
 def opening_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
@@ -78,16 +84,11 @@ def opening_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     if half is None or kernel.shape[0] % 2 == 0 or kernel.shape[1] % 2 == 0:
         raise ValueError(f"opening_near needs a kernel of centred row runs with odd sides, got {kernel.shape}")
     out = np.zeros(mask.shape, bool)
-    rows = np.flatnonzero(mask.any(axis=1))
-    if rows.size == 0:
-        return out
-    cols = np.flatnonzero(mask.any(axis=0))
-    ry, rx = kernel.shape[0] // 2 + 1, kernel.shape[1] // 2 + 1
-    box = (slice(max(int(rows[0]) - ry, 0), min(int(rows[-1]) + ry + 1, mask.shape[0])),
-           slice(max(int(cols[0]) - rx, 0), min(int(cols[-1]) + rx + 1, mask.shape[1])))
-    eroded = erode_rows(np.ascontiguousarray(mask[box], np.bool_), half)
-    if eroded.any():
-        out[box] = dilate_rows(eroded, half)
+    box = _grown_box(mask, kernel.shape[0] // 2 + 1, kernel.shape[1] // 2 + 1)
+    if box is not None:
+        eroded = erode_rows(np.ascontiguousarray(mask[box], np.bool_), half)
+        if eroded.any():
+            out[box] = dilate_rows(eroded, half)
     return out
 
 

@@ -196,7 +196,7 @@ def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarr
         holds_pit[core_labels[pit]] = True
         holds_pit[0] = False
         core = holds_pit[core_labels]
-        if _median_below(depth, core, t + step):
+        if median_below(depth, core, t + step):
             continue  # the rest is a floor with relief (up to ~1 cm on broken floors), not a pit below a shelf
         lost = (part & (depth > t) & ~core).astype(np.uint8)
         if footprint[lost.view(bool)].sum() < min_part_m2:
@@ -221,7 +221,7 @@ def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarr
     return candidates
 
 
-def _median_below(values: np.ndarray, mask: np.ndarray, x: float) -> bool:
+def median_below(values: np.ndarray, mask: np.ndarray, x: float) -> bool:
     """``np.median(values[mask]) < x``, decided by counting the values below ``x`` (two
     passes over the arrays, no copy of the selection); the median itself only when the
     count leaves it open (an even count with exactly half of the values below ``x``)."""

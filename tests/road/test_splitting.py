@@ -60,7 +60,7 @@ def test_the_smoothed_depth_of_a_box_is_the_whole_maps_there():
 
 
 def test_the_median_test_of_the_terrace_cue_is_numpys():
-    from d3cli.road.splitting import _median_below
+    from d3cli.road.splitting import median_below
 
     rng = np.random.default_rng(5)
     for _ in range(2000):
@@ -69,4 +69,4 @@ def test_the_median_test_of_the_terrace_cue_is_numpys():
         if not mask.any():
             continue
         x = float(rng.integers(0, 6)) / 4 + float(rng.choice([0.0, 0.1, -0.1]))
-        assert _median_below(values, mask, x) == bool(np.median(values[mask]) < x)
+        assert median_below(values, mask, x) == bool(np.median(values[mask]) < x)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from d3cli.config import RoadConfig
-from d3cli.road.defects import _median_filled, _median_patched, candidate_regions, find_defects, remeasure
+from d3cli.road.defects import median_filled, median_patched, candidate_regions, find_defects, remeasure
 from d3cli.road.morphology import dilate_near
 from d3cli.road.plane import fit_road_plane, height_map
 from d3cli.road.pointcloud import disparity_to_points
@@ -76,10 +76,10 @@ def test_the_patched_median_is_the_median_of_the_whole_map():
     rng = np.random.default_rng(2)
     old = rng.normal(0, 0.01, (90, 140)).astype(np.float32)
     old[rng.random(old.shape) < 0.1] = np.inf
-    smooth, fill = _median_filled(old, 5)
+    smooth, fill = median_filled(old, 5)
     zones = np.zeros(old.shape, bool)
     zones[30:50, 60:100] = zones[0:6, 0:10] = zones[85:90, 130:140] = True  # at the corners too
     new = np.where(zones & np.isfinite(old), old + rng.normal(0, 0.02, old.shape), old).astype(np.float32)
-    want, _ = _median_filled(new, 5, fill)
-    np.testing.assert_array_equal(_median_patched(smooth, new, zones, 5, fill), want)
-    np.testing.assert_array_equal(_median_patched(smooth, new, np.zeros_like(zones), 5, fill), smooth)
+    want, _ = median_filled(new, 5, fill)
+    np.testing.assert_array_equal(median_patched(smooth, new, zones, 5, fill), want)
+    np.testing.assert_array_equal(median_patched(smooth, new, np.zeros_like(zones), 5, fill), smooth)
