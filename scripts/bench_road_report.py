@@ -18,7 +18,8 @@ meaningful on a shared, noisy machine, where absolute seconds drift between runs
 ``--road-report`` and ``--outputs all`` / ``survey`` / ``survey,height``.
 
 ``--stages`` then runs the ``survey`` report of every pair once more with one thread
-(numba's and OpenCV's) under :mod:`cProfile` and prints each stage's share of it: the plane
+(numba's and OpenCV's), prints its median time a pair (against the medians above: what the
+second thread gains), and again under :mod:`cProfile`, printing each stage's share: the plane
 fit, the first pass over the stored map (:func:`d3cli.road.defects.candidate_regions`, its
 per-map preparation apart), the re-match, the second pass
 (:func:`d3cli.road.defects.remeasure`, the splitting apart) and the match margin.
@@ -72,8 +73,10 @@ STAGES = (
 )
 
 
-def _stages(run, names) -> None:
-    """Print each stage's share of ``run(name)`` over ``names``, one thread, under cProfile."""
+def _stages(run, names, threaded_ms: float) -> None:
+    """Print the one-thread time of ``run(name)`` over ``names`` against ``threaded_ms`` (the
+    median of the pairs' medians with the threads of the run) and each stage's share of it
+    under cProfile."""
     import cProfile
     import pstats
 
@@ -84,6 +87,11 @@ def _stages(run, names) -> None:
     numba.set_num_threads(1)
     cv2.setNumThreads(1)
     try:
+        plain = []  # the same reports without the profiler: the one-thread time
+        for name in names:
+            t0 = time.perf_counter()
+            run(name)
+            plain.append(time.perf_counter() - t0)
         profile = cProfile.Profile()
         t0 = time.perf_counter()
         profile.enable()
@@ -95,8 +103,9 @@ def _stages(run, names) -> None:
         numba.set_num_threads(threads[0])
         cv2.setNumThreads(threads[1])
     stats = pstats.Stats(profile).stats  # {(file, line, function): (cc, nc, tt, ct, callers)}
-    print(f"\nstages of the survey report, one thread, {len(names)} pairs: {1e3 * total / len(names):.0f} ms a pair "
-          "(under cProfile)")
+    print(f"\nthe survey report with one thread: median {1e3 * statistics.median(plain):.0f} ms a pair "
+          f"({threaded_ms:.0f} ms with {os.cpu_count()} CPUs above); its stages ({len(names)} pairs under cProfile, "
+          f"{1e3 * total / len(names):.0f} ms a pair):")
     for label, path, function in STAGES:
         spent = sum(v[3] for (file, _, func), v in stats.items() if func == function and file.endswith(path))
         print(f"  {label:<36} {100 * spent / total:5.1f} %")
@@ -172,7 +181,8 @@ def main(argv=None) -> int:
 
     if args.stages:
         kept = {name: (left, right, camera, result) for name, left, right, camera, result in last}
-        _stages(lambda name: report(name, *kept[name][:3], kept[name][3], "survey"), list(kept))
+        _stages(lambda name: report(name, *kept[name][:3], kept[name][3], "survey"), list(kept),
+                1e3 * statistics.median(statistics.median(t["survey"]) for t in times.values()))
 
     if not args.no_bytes:
         print("\nbytes per pair folder with --road-report (first pair):")
