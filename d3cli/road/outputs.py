@@ -194,7 +194,7 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
             # How decisively the images support each defect's disparity (the confidence's
             # weak_match), on the disparity it was measured on; the defects on both threads.
             margins = map_on_threads(lambda region: match_margin(*grey, measured, region), regions)
-            defects = [with_flags(d, road_cfg, rematch_window=int(np.bincount(windows[r]).argmax()),
+            defects = [with_flags(d, road_cfg, rematch_window=_window_of(d, r, windows),
                                   match_margin=round(m, 4) if np.isfinite(m) else None)
                        for d, r, m in zip(defects, regions, margins)]
     if not fallback and decided_share < road_cfg.min_decided_share:
@@ -221,6 +221,14 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
     else:
         log.info("%s: road plane %.3f m below the camera, %d defects", pair_dir.name, plane.offset, len(items))
     return items, warnings
+
+
+def _window_of(defect, region: np.ndarray, windows: np.ndarray) -> int:
+    """The re-match window most of ``defect``'s pixels were measured with (0: the stored map),
+    read in its bounding box."""
+    u0, v0, u1, v1 = defect.bbox_px
+    box = (slice(v0, v1 + 1), slice(u0, u1 + 1))
+    return int(np.bincount(windows[box][region[box]]).argmax())
 
 
 def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,

@@ -203,12 +203,12 @@ def match_margin(left_grey: np.ndarray, right_grey: np.ndarray, disparity: np.nd
     float
         The margin (NCC units; nan for an empty region or a box without any disparity).
     """
-    v, u = np.nonzero(region)
-    if v.size == 0:
+    rows, cols = np.flatnonzero(region.any(axis=1)), np.flatnonzero(region.any(axis=0))
+    if rows.size == 0:
         return float("nan")
     h, w = left_grey.shape
-    v0, v1 = max(int(v.min()) - pad, 0), min(int(v.max()) + pad + 1, h)
-    u0, u1 = max(int(u.min()) - pad, 0), min(int(u.max()) + pad + 1, w)
+    v0, v1 = max(int(rows[0]) - pad, 0), min(int(rows[-1]) + pad + 1, h)
+    u0, u1 = max(int(cols[0]) - pad, 0), min(int(cols[-1]) + pad + 1, w)
     d = np.asarray(disparity[v0:v1, u0:u1], np.float32)
     finite = np.isfinite(d)
     if not finite.any():
