@@ -202,16 +202,11 @@ class _Scene:
     rules: ConfidenceRules = ConfidenceRules()
     #: the value that stands in for pixels without a height in the median filter of ``smooth``
     fill: float = 0.0
-    #: measure only what tells a defect from none and its depth, on each candidate component
-    #: as a whole (:func:`candidate_regions`)
+    #: measure only what tells a defect from none and its depth (:func:`candidate_regions`)
     brief: bool = False
     #: only the components with a pixel in this mask (the whole map's) are measured
     #: (:func:`remeasure`); None: every one
     only: np.ndarray | None = None
-    #: the map measured before the re-match (its ``height`` and ``smooth``), where each
-    #: defect's depth is read again for ``rematch_change`` (:func:`remeasure`); None: no such map
-    stored_height: np.ndarray | None = None
-    stored_smooth: np.ndarray | None = None
 
 
 def find_defects(
@@ -266,18 +261,24 @@ def find_defects(
     return _defects_of(scene, return_regions)
 
 
-def candidate_regions(height: np.ndarray, decided: np.ndarray, camera: Camera, plane: RoadPlane,
-                      road: RoadConfig | None = None, tuning: DefectTuning | None = None) -> tuple:
-    """The first pass of a report that measures its defects on a re-matched map: the
-    regions of the stored map that hold a defect, and what they were measured against.
+@dataclass(frozen=True)
+class Candidates:
+    """The first pass of a report that measures its defects on a re-matched map
+    (:func:`candidate_regions`): the stored map's scene and its defects, briefly measured."""
 
-    Each candidate component (pixels below ``-min_depth_mm`` or above ``+min_height_mm``)
-    is tested *whole*, not cut into separate potholes (:func:`d3cli.road.splitting.split_parts`),
-    with the tests of :func:`find_defects` (area, significance, decided share) and only
-    what they need measured: the re-match (:mod:`d3cli.road.rematch`) needs where the
-    defects are, not how many there are, and the cutting is the costliest step of a
-    map with defects.  :func:`remeasure` then finds and measures the defects on the
-    re-matched map.
+    scene: _Scene
+    defects: list  # of Defect: kind, bbox_px, area_m2, max_depth_mm, decided_share, at_border
+    regions: list  # of bool (H, W) masks, the defects' order
+
+
+def candidate_regions(height: np.ndarray, decided: np.ndarray, camera: Camera, plane: RoadPlane,
+                      road: RoadConfig | None = None, tuning: DefectTuning | None = None) -> Candidates:
+    """The first pass of a report that measures its defects on a re-matched map: the
+    defects of the stored map, found and split as by :func:`find_defects` but measured only
+    as far as telling a defect from none and its depth go (``kind``, ``bbox_px``,
+    ``area_m2``, ``max_depth_mm``, ``decided_share`` and ``at_border``; the centroids, mean
+    depth, volume, outline and evidence left at zero or empty): the re-match
+    (:mod:`d3cli.road.rematch`) needs where they are, and :func:`remeasure` their depths.
 
     Parameters
     ----------
@@ -286,35 +287,35 @@ def candidate_regions(height: np.ndarray, decided: np.ndarray, camera: Camera, p
 
     Returns
     -------
-    scene : _Scene
-        The stored map's scene (heights, footprints, the map's noise), for :func:`remeasure`.
-    regions : list of ndarray, bool, (H, W)
-        The regions found, potholes first.
+    Candidates
+        The stored map's scene (heights, footprints, the map's noise), its defects and
+        their regions (bool (H, W) each).
     """
     road = RoadConfig() if road is None else road
     scene = replace(prepare_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
                     brief=True)
-    regions = [region for kind, sign, thr_mm in _kinds(road) for _, region, _ in _find_kind(scene, kind, sign, thr_mm)]
-    return scene, regions
+    defects, regions = _defects_of(scene, True)
+    return Candidates(scene, defects, regions)
 
 
-def remeasure(stored, height: np.ndarray, zones: np.ndarray, *, rules: ConfidenceRules | None = None,
+def remeasure(stored: Candidates, height: np.ndarray, zones: np.ndarray, *, rules: ConfidenceRules | None = None,
               return_regions: bool = False):
     """:func:`find_defects` on ``height``, a map that differs from the one of
-    :func:`candidate_regions` (``stored``, its scene) only inside ``zones``.
+    :func:`candidate_regions` (``stored``) only inside ``zones``.
 
     Only the candidate components with a pixel in ``zones`` (or within the median filter's
     reach of them) are measured: the others have the heights that the first pass found no
-    defect in.  The map's noise (``sigma_d``),
-    the footprints and the median filter's stand-in for missing heights are the stored
-    map's, and each defect's depth is also read on the stored map, over the same pixels
-    against the same ring: ``evidence["rematch_change"]``, the relative change of the
-    depth by the re-match (:mod:`d3cli.road.confidence`).
+    defect in.  The map's noise (``sigma_d``), the footprints and the median filter's
+    stand-in for missing heights are the stored map's.  Each defect's
+    ``evidence["rematch_change"]`` is the relative change of its depth against the stored
+    defect of its kind that overlaps it most (0 where none does; :mod:`d3cli.road.confidence`):
+    a piece that reads far shallower than the stored defect it lies in is often a shelf or
+    a fragment of a deeper pothole, one far deeper a floor the re-match misread.
 
     Parameters
     ----------
-    stored : _Scene
-        The first element of :func:`candidate_regions`' result.
+    stored : Candidates
+        :func:`candidate_regions`' result.
     height : ndarray, float32, (H, W)
         The height map after the re-match.
     zones : ndarray, bool, (H, W)
@@ -322,15 +323,38 @@ def remeasure(stored, height: np.ndarray, zones: np.ndarray, *, rules: Confidenc
     rules, return_regions : keyword-only
         As :func:`find_defects`.
     """
-    height = np.where(stored.footprint > 0, height, np.inf).astype(np.float32)
-    size = stored.tuning.median_px
-    smooth = median_patched(stored.smooth, height, zones, size, stored.fill)
+    first = stored.scene
+    height = np.where(first.footprint > 0, height, np.inf).astype(np.float32)
+    size = first.tuning.median_px
+    smooth = median_patched(first.smooth, height, zones, size, first.fill)
     # the filtered heights changed within the filter's reach of the zones
     reach = dilate_near(zones, np.ones((size, size), np.uint8))
-    scene = replace(stored, height=height, finite=np.isfinite(height), smooth=smooth, brief=False, only=reach,
-                    stored_height=stored.height, stored_smooth=stored.smooth,
+    scene = replace(first, height=height, finite=np.isfinite(height), smooth=smooth, brief=False, only=reach,
                     rules=ConfidenceRules() if rules is None else rules)
-    return _defects_of(scene, return_regions)
+    defects, regions = _defects_of(scene, True)
+    pairs = list(zip(stored.defects, stored.regions))
+    defects = [with_flags(d, scene.road, scene.rules, rematch_change=_rematch_change(d, r, pairs))
+               for d, r in zip(defects, regions)]
+    return (defects, regions) if return_regions else defects
+
+
+def _rematch_change(defect: Defect, region: np.ndarray, stored: list) -> float:
+    """Relative change of ``defect``'s depth by the re-match: against the defect of the
+    stored map (``stored``: (defect, region) pairs) that overlaps ``region`` most, of the
+    same kind; 0 when none overlaps (nothing to compare)."""
+    best, overlap = None, 0
+    u0, v0, u1, v1 = defect.bbox_px
+    for other, other_region in stored:
+        a0, b0, a1, b1 = other.bbox_px
+        if other.kind != defect.kind or a0 > u1 or a1 < u0 or b0 > v1 or b1 < v0:
+            continue  # no pixel in common: the masks need not be compared
+        box = (slice(max(v0, b0), min(v1, b1) + 1), slice(max(u0, a0), min(u1, a1) + 1))
+        n = int(np.count_nonzero(other_region[box] & region[box]))
+        if n > overlap:
+            best, overlap = other, n
+    if best is None or best.max_depth_mm <= 0:
+        return 0.0
+    return round(defect.max_depth_mm / best.max_depth_mm - 1.0, 3)
 
 
 def _kinds(road: RoadConfig) -> tuple:
@@ -411,16 +435,12 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
     def component(item) -> list:
         lab, box = item
         found = []
-        if s.brief:  # the component as a whole (:func:`candidate_regions`)
-            pieces = [labels[box] == lab]
-        else:
-            # Necks are measured on the outline at a depth the noise cannot make (noise_k
-            # sigma_h): below it the outline of a noisy map is drawn by the noise.
-            pieces = split_component(labels, lab, box, s.footprint, level=level,
+        # Necks are measured on the outline at a depth the noise cannot make (noise_k sigma_h):
+        # below it the outline of a noisy map is drawn by the noise.
+        for piece in split_component(labels, lab, box, s.footprint, level=level,
                                      prominence=max(road.split_prominence_mm * 1e-3, s.split_noise),
                                      neck=road.split_neck, min_part_m2=road.split_min_area_m2,
-                                     step=level if tuning.split_terrace else np.inf, smoothed=smoothed)
-        for piece in pieces:
+                                     step=level if tuning.split_terrace else np.inf, smoothed=smoothed):
             if s.footprint[box][piece].sum() < road.min_area_m2:
                 continue  # its region is a part of it: it cannot pass the area test
             # Measured in a window around the part that holds everything its measurement
@@ -464,11 +484,9 @@ def _window(s: _Scene, box: tuple, n_px: int) -> tuple:
 
 def _crop(s: _Scene, window: tuple) -> _Scene:
     """The scene's per-pixel arrays cut to ``window`` (the rest as it is)."""
-    stored = {} if s.stored_height is None else dict(stored_height=s.stored_height[window],
-                                                     stored_smooth=s.stored_smooth[window])
     return replace(s, height=s.height[window], decided=s.decided[window], finite=s.finite[window],
                    smooth=s.smooth[window], footprint=s.footprint[window], v_all=s.v_all[window],
-                   u_all=s.u_all[window], origin=(window[0].start, window[1].start), only=None, **stored)
+                   u_all=s.u_all[window], origin=(window[0].start, window[1].start), only=None)
 
 
 def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, thr_mm: float):
@@ -545,8 +563,6 @@ def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, 
         "depressions": depressions(depth_s, region, prominence=road.split_prominence_mm * 1e-3,
                                    smooth_px=tuning.split_smooth_px),
     }
-    if s.stored_height is not None:
-        evidence["rematch_change"] = _stored_change(s, ring, deepest_of, sign, peak)
     return region, dict(
         evidence=evidence,
         centroid_px=(float(np.average(us, weights=w)), float(np.average(vs, weights=w))),
@@ -560,19 +576,6 @@ def measure_region(s: _Scene, comp: np.ndarray, other: np.ndarray, sign: float, 
         at_border=at_border,
         outline_px=outline(region, offset=s.origin),
     )
-
-
-def _stored_change(s: _Scene, ring: np.ndarray, deepest_of: np.ndarray, sign: float, peak: float) -> float:
-    """Relative change of a defect's depth ``peak`` against its depth on the map before
-    the re-match (``s.stored_height``, ``s.stored_smooth``): the same pixels (``deepest_of``)
-    against the same ``ring``; 0 when the stored map has no depth there to compare with."""
-    ring = ring & np.isfinite(s.stored_height)
-    pixels = deepest_of & np.isfinite(s.stored_smooth)
-    if ring.sum() < 10 or not pixels.any():
-        return 0.0
-    ref = float(np.median(s.stored_height[ring]))
-    before = _peak(sign * (s.stored_smooth[pixels] - ref), s.tuning.peak_px, s.tuning.peak_share)
-    return round(peak / before - 1.0, 3) if before > 0 else 0.0
 
 
 def _peak(depth: np.ndarray, peak_px: int, share: float = 0.0) -> float:

@@ -179,10 +179,10 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
         if start_writing is not None:
             start_writing(height)
     else:
-        # With the right image the regions found on the stored map are matched again with
-        # a small window and the defects found and measured on that map (remeasure).
-        stored, regions = candidate_regions(height, decided, camera, plane, road_cfg)
-        defects = []
+        # With the right image the defects found on the stored map are matched again with a
+        # small window, then found and measured on that map (remeasure).
+        stored = candidate_regions(height, decided, camera, plane, road_cfg)
+        defects, regions = [], stored.regions
         if regions:
             grey = (grey_image(left), grey_image(right))  # made once for every region
             measured, windows, zones, height = _rematched_height(grey, disparity, finite, regions, camera, plane,

@@ -1,6 +1,6 @@
 """The road report's two passes over a map (d3cli.road.defects.candidate_regions, remeasure):
-whole candidate regions first, then the defects of the re-matched map, measured only where
-it changed and compared with the stored map over the same pixels."""
+the stored map's defects briefly measured first, then the defects of the re-matched map,
+measured only where it changed and compared with the stored defects they lie in."""
 
 import numpy as np
 import pytest
@@ -26,19 +26,21 @@ def joined():
     return height_map(disp, valid, cam, plane), valid, cam, plane
 
 
-def test_the_first_pass_keeps_joined_potholes_whole(joined):
+def test_the_first_pass_finds_the_defects_of_find_defects_briefly(joined):
     height, valid, cam, plane = joined
-    assert [round(d.max_depth_mm) for d in find_defects(height, valid, cam, plane, ROAD)] == [79, 59]
-    _, regions = candidate_regions(height, valid, cam, plane, ROAD)
-    assert len(regions) == 1  # one region holds both: the re-match needs where, not how many
-    _, split = find_defects(height, valid, cam, plane, ROAD, return_regions=True)
-    assert np.array_equal(regions[0], split[0] | split[1])
+    stored = candidate_regions(height, valid, cam, plane, ROAD)
+    once, regions = find_defects(height, valid, cam, plane, ROAD, return_regions=True)
+    assert [round(d.max_depth_mm) for d in once] == [79, 59]  # the joined potholes cut apart
+    assert [(d.kind, d.bbox_px, d.max_depth_mm, d.area_m2) for d in stored.defects] == \
+        [(d.kind, d.bbox_px, d.max_depth_mm, d.area_m2) for d in once]
+    assert all(np.array_equal(a, b) for a, b in zip(stored.regions, regions))
+    assert [d.volume_l for d in stored.defects] == [0.0, 0.0]  # not measured: the re-match needs no volume
 
 
 def test_the_second_pass_on_an_unchanged_map_is_find_defects(joined):
     height, valid, cam, plane = joined
-    stored, regions = candidate_regions(height, valid, cam, plane, ROAD)
-    zones = dilate_near(regions[0], np.ones((61, 61), np.uint8))
+    stored = candidate_regions(height, valid, cam, plane, ROAD)
+    zones = dilate_near(stored.regions[0] | stored.regions[1], np.ones((61, 61), np.uint8))
     again, again_regions = remeasure(stored, height, zones, return_regions=True)
     once, once_regions = find_defects(height, valid, cam, plane, ROAD, return_regions=True)
     assert [d.evidence.pop("rematch_change") for d in again] == [0.0, 0.0]  # nothing re-matched
@@ -48,28 +50,33 @@ def test_the_second_pass_on_an_unchanged_map_is_find_defects(joined):
 
 def test_the_second_pass_measures_only_where_the_map_changed(joined):
     height, valid, cam, plane = joined
-    stored, regions = candidate_regions(height, valid, cam, plane, ROAD)
+    stored = candidate_regions(height, valid, cam, plane, ROAD)
     # A pothole appears outside the zones: the first pass saw none there, so the second
     # does not look (its map there is the stored one by contract).
     v, u = np.mgrid[0:height.shape[0], 0:height.shape[1]]
     far = np.hypot(v - 25, u - 280) < 18
-    assert not (far & regions[0]).any()
+    joined_pits = stored.regions[0] | stored.regions[1]
+    assert not (far & joined_pits).any()
     changed = np.where(far, height - 0.05, height).astype(np.float32)
-    zones = dilate_near(regions[0], np.ones((61, 61), np.uint8))
+    zones = dilate_near(joined_pits, np.ones((61, 61), np.uint8))
     assert len(remeasure(stored, changed, zones)) == 2
     assert len(remeasure(stored, changed, zones | far)) == 3
 
 
-def test_the_re_match_change_compares_the_same_pixels_on_both_maps(joined):
+def test_the_re_match_change_compares_each_defect_with_the_stored_one_it_lies_in(joined):
     height, valid, cam, plane = joined
-    stored, regions = candidate_regions(height, valid, cam, plane, ROAD)
-    zones = dilate_near(regions[0], np.ones((61, 61), np.uint8))
+    stored = candidate_regions(height, valid, cam, plane, ROAD)
+    zones = dilate_near(stored.regions[0] | stored.regions[1], np.ones((61, 61), np.uint8))
     deeper = np.where(zones & (height < -0.002), 1.5 * height, height).astype(np.float32)  # the floors 1.5x deeper
     found = remeasure(stored, deeper, zones)
     once = find_defects(height, valid, cam, plane, ROAD)
     assert [d.max_depth_mm for d in found] == [pytest.approx(1.5 * d.max_depth_mm, rel=0.01) for d in once]
     assert [d.evidence["rematch_change"] for d in found] == [pytest.approx(0.5, abs=0.01)] * 2
     assert [d.flags for d in found] == [("rematch",)] * 2  # above ConfidenceRules.max_rematch_change
+    # a shelf of the deep pothole alone, re-matched shallow: far below the stored defect it lies in
+    shelf = np.where(zones & (height < -0.002), 0.3 * height, height).astype(np.float32)
+    (shallow, *_) = remeasure(stored, shelf, zones)
+    assert shallow.evidence["rematch_change"] == pytest.approx(-0.7, abs=0.01)
 
 
 def test_the_patched_median_is_the_median_of_the_whole_map():
