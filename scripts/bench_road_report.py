@@ -20,9 +20,9 @@ meaningful on a shared, noisy machine, where absolute seconds drift between runs
 ``--stages`` then runs the ``survey`` report of every pair once more with one thread
 (numba's and OpenCV's), prints its median time a pair (against the medians above: what the
 second thread gains), and again under :mod:`cProfile`, printing each stage's share: the plane
-fit, the first pass over the stored map (:func:`d3cli.road.defects.candidate_regions`, its
-per-map preparation apart), the re-match, the second pass
-(:func:`d3cli.road.defects.remeasure`, the splitting apart) and the match margin.
+fit, the first pass over the stored map (:func:`d3cli.road.defects.candidate_regions`, and
+its per-map preparation), the re-match, the second pass (:func:`d3cli.road.defects.remeasure`),
+the splitting of both passes and the match margin.
 
 Usage::
 
@@ -60,15 +60,16 @@ def _folder_bytes(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
 
 
-#: (label, module, function) of the stages --stages reports; the shares are of their
-#: cumulative times (a stage's own callees apart where one is listed after it).
+#: (label, module, function) of the stages --stages reports: each one's cumulative time
+#: (its callees included) as a share of the whole; an indented one is a part of the one
+#: above, the splitting a part of both passes.
 STAGES = (
     ("plane fit", "d3cli/road/plane.py", "fit_road_plane"),
     ("first pass", "d3cli/road/defects.py", "candidate_regions"),
     ("  of which the per-map preparation", "d3cli/road/defects.py", "prepare_scene"),
     ("re-match", "d3cli/road/outputs.py", "_rematched_height"),
     ("second pass", "d3cli/road/defects.py", "remeasure"),
-    ("  of which the splitting", "d3cli/road/splitting.py", "split_component"),
+    ("the splitting, in both passes", "d3cli/road/splitting.py", "split_component"),
     ("match margin", "d3cli/road/rematch.py", "match_margin"),
 )
 
