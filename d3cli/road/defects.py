@@ -44,7 +44,7 @@ from .confidence import ConfidenceRules, deep_at_border, depressions, flags_of, 
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
 from .compiled import band_medians, median, noise_terms
-from .morphology import dilate_near, fill_holes
+from .morphology import dilate_near, fill_holes, grown_box
 from .splitting import smoothed_depth, split_component
 from .threads import map_on_threads
 
@@ -102,19 +102,14 @@ def median_patched(smooth: np.ndarray, height: np.ndarray, zones: np.ndarray, si
     inside ``zones``: the same values as filtering all of ``height`` (holes standing as
     ``fill``), at the cost of the zones' bounding box."""
     out = smooth.copy()
-    rows, cols = np.flatnonzero(zones.any(axis=1)), np.flatnonzero(zones.any(axis=0))
-    if rows.size == 0:
-        return out
     r = size // 2
-    h, w = height.shape
     # the box read (its edge: the map's, or 2 r beyond the zones) and the box written
     # (r beyond the zones: every pixel whose filter window reaches a zone)
-    y0, y1 = max(int(rows[0]) - 2 * r, 0), min(int(rows[-1]) + 2 * r + 1, h)
-    x0, x1 = max(int(cols[0]) - 2 * r, 0), min(int(cols[-1]) + 2 * r + 1, w)
-    med, _ = median_filled(height[y0:y1, x0:x1], size, fill)
-    a0, a1 = max(int(rows[0]) - r, 0), min(int(rows[-1]) + r + 1, h)
-    b0, b1 = max(int(cols[0]) - r, 0), min(int(cols[-1]) + r + 1, w)
-    out[a0:a1, b0:b1] = med[a0 - y0:a1 - y0, b0 - x0:b1 - x0]
+    read, written = grown_box(zones, 2 * r, 2 * r), grown_box(zones, r, r)
+    if read is None:
+        return out
+    med, _ = median_filled(height[read], size, fill)
+    out[written] = med[tuple(slice(w.start - b.start, w.stop - b.start) for w, b in zip(written, read))]
     return out
 
 
@@ -599,9 +594,8 @@ def _with_walls(s: _Scene, comp: np.ndarray, sign: float, other: np.ndarray, *, 
     The band medians are taken over whole bands, so the stereo noise does not decide
     where the growth stops; out to the first near-minimum, so a neighbouring pothole
     further out does not pull it on."""
-    rows, cols = np.flatnonzero(comp.any(axis=1)), np.flatnonzero(comp.any(axis=0))
     reach = max(4 * s.road.ring_px, int(np.ceil(np.sqrt(np.count_nonzero(comp) / np.pi))))
-    box = (slice(max(rows[0] - reach, 0), rows[-1] + reach + 1), slice(max(cols[0] - reach, 0), cols[-1] + reach + 1))
+    box = grown_box(comp, reach, reach)
     inside = comp[box]
     dist = cv2.distanceTransform((~inside).astype(np.uint8), cv2.DIST_L2, 5)
     use = s.finite[box] & ~other[box] & (dist > 0) & (dist <= reach)

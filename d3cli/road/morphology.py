@@ -39,7 +39,7 @@ def dilate_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     if kernel.shape[0] % 2 == 0 or kernel.shape[1] % 2 == 0:
         raise ValueError(f"dilate_near needs a kernel with odd sides, got {kernel.shape}")
     out = np.zeros(mask.shape, bool)
-    box = _grown_box(mask, kernel.shape[0] // 2, kernel.shape[1] // 2)
+    box = grown_box(mask, kernel.shape[0] // 2, kernel.shape[1] // 2)
     if box is not None:
         # compiled (:func:`d3cli.road.compiled.dilate`, the same pixels): OpenCV's dilation by
         # the 161 px disc costs the box's pixels times the disc's, 36 ms a region at 720p
@@ -47,9 +47,9 @@ def dilate_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return out
 
 
-def _grown_box(mask: np.ndarray, ry: int, rx: int) -> tuple[slice, slice] | None:
+def grown_box(mask: np.ndarray, ry: int, rx: int) -> tuple[slice, slice] | None:
     """Slices of ``mask``'s bounding box grown by ``ry`` rows and ``rx`` columns (cut at the
-    array), or None for an empty mask."""
+    array), or None for an empty mask: where the road report's per-region work reads."""
     rows = np.flatnonzero(mask.any(axis=1))
     if rows.size == 0:
         return None
@@ -84,7 +84,7 @@ def opening_near(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     if half is None or kernel.shape[0] % 2 == 0 or kernel.shape[1] % 2 == 0:
         raise ValueError(f"opening_near needs a kernel of centred row runs with odd sides, got {kernel.shape}")
     out = np.zeros(mask.shape, bool)
-    box = _grown_box(mask, kernel.shape[0] // 2 + 1, kernel.shape[1] // 2 + 1)
+    box = grown_box(mask, kernel.shape[0] // 2 + 1, kernel.shape[1] // 2 + 1)
     if box is not None:
         eroded = erode_rows(np.ascontiguousarray(mask[box], np.bool_), half)
         if eroded.any():

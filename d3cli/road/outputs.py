@@ -23,7 +23,7 @@ from ..errors import plural
 from ..data.legend import vertical_colour_bar
 from .confidence import REASONS, describe
 from .defects import candidate_regions, find_defects, remeasure, with_flags
-from .morphology import dilate_near
+from .morphology import dilate_near, grown_box
 from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
 from .compiled import back_project, height_colours
@@ -256,7 +256,8 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
             if got[zone].mean() < MIN_RELIABLE:
                 continue
             # Heights only in a window around the band that holds the smoothing's support.
-            crop = _around(band, int(np.ceil(4 * window)) + 2)
+            reach = int(np.ceil(4 * window)) + 2
+            crop = grown_box(band, reach, reach) or (slice(0, 0), slice(0, 0))
             if _highpass_noise(height_map(new[crop], finite[crop], camera, plane, origin=(crop[0].start, crop[1].start)),
                                (band & got)[crop], window) <= NOISE_M:
                 return zone, new[zone], window
@@ -275,16 +276,6 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
         if values is not None:
             out[zone] = values
     return out, windows, zones, height_map(out, finite, camera, plane)
-
-
-def _around(mask: np.ndarray, margin: int) -> tuple[slice, slice]:
-    """Slices of ``mask``'s bounding box grown by ``margin`` pixels (cut at the image)."""
-    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-    if rows.size == 0:
-        return slice(0, 0), slice(0, 0)
-    h, w = mask.shape
-    return (slice(max(int(rows[0]) - margin, 0), min(int(rows[-1]) + margin + 1, h)),
-            slice(max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, w)))
 
 
 def _highpass_noise(height: np.ndarray, zone: np.ndarray, window: int) -> float:

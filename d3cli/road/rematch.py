@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from .compiled import best_offsets
+from .morphology import grown_box
 
 #: Window side (pixels), search reach either side of the stored disparity (pixels) and
 #: the step of the search (pixels; parabola interpolation between steps).
@@ -95,8 +96,10 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     done = np.zeros(out.shape, bool)
     # The pixels to re-measure, found on the mask's bounding box (not a pass over the image
     # per call: a zone is tried with several windows).
-    todo, (m0, n0) = _within_box(mask)
-    todo &= np.isfinite(out[m0:m0 + todo.shape[0], n0:n0 + todo.shape[1]])
+    within = grown_box(mask, 0, 0)
+    if within is None:
+        return out, done
+    todo, (m0, n0) = mask[within] & np.isfinite(out[within]), (within[0].start, within[1].start)
     rows, cols = np.flatnonzero(todo.any(axis=1)), np.flatnonzero(todo.any(axis=0))
     if rows.size == 0:
         return out, done
@@ -156,15 +159,6 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     return out, done
 
 
-def _within_box(mask: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
-    """(a copy of ``mask`` cut to its bounding box, (row, column) of the box's first pixel);
-    an empty (0, 0) array for an empty mask."""
-    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-    if rows.size == 0:
-        return np.zeros((0, 0), bool), (0, 0)
-    return mask[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1].copy(), (int(rows[0]), int(cols[0]))
-
-
 #: Window side (pixels) of the match margin (:func:`match_margin`): the road
 #: configuration's own matching window, so the margin says how decisively the map's
 #: matching could tell the disparity from its neighbours.
@@ -203,12 +197,10 @@ def match_margin(left_grey: np.ndarray, right_grey: np.ndarray, disparity: np.nd
     float
         The margin (NCC units; nan for an empty region or a box without any disparity).
     """
-    rows, cols = np.flatnonzero(region.any(axis=1)), np.flatnonzero(region.any(axis=0))
-    if rows.size == 0:
+    box = grown_box(region, pad, pad)
+    if box is None:
         return float("nan")
-    h, w = left_grey.shape
-    v0, v1 = max(int(rows[0]) - pad, 0), min(int(rows[-1]) + pad + 1, h)
-    u0, u1 = max(int(cols[0]) - pad, 0), min(int(cols[-1]) + pad + 1, w)
+    (v0, v1), (u0, u1) = (box[0].start, box[0].stop), (box[1].start, box[1].stop)
     d = np.asarray(disparity[v0:v1, u0:u1], np.float32)
     finite = np.isfinite(d)
     if not finite.any():
