@@ -193,6 +193,99 @@ def _reconstruct_by_dilation(seed, mask):  # pragma: no cover - compiled
     return rec
 
 
+@njit(cache=True, nogil=True)
+def terrace_level(part, depth, footprint, t, step, core, lost, stack, box):  # pragma: no cover - compiled
+    """One level ``t`` of the terrace search of :func:`d3cli.road.splitting._terrace_candidates`,
+    in one flood fill and two passes over a box instead of a labelling and eight array
+    expressions.
+
+    Fills ``core`` (bool) with ``part & (depth > t + step / 2)`` where it is 8-connected to
+    the pit ``part & (depth > t + step)`` (the labels of that mask holding a pit pixel) and
+    ``lost`` (uint8) with ``part & (depth > t) & ~core``; ``stack``: int32 work space of
+    shape ``(2, part.size)``.  Only the rows ``box[0]:box[1]`` and columns ``box[2]:box[3]`` are
+    read and written: they must hold every pixel of ``part & (depth > t)``, and ``core``
+    and ``lost`` must be 0 outside them.  ``box`` is then set to the bounding box of
+    ``part & (depth > t)`` (empty: ``box[0] == box[1]``), which holds the pixels of every
+    deeper level.  Returns ``(pit_area, n_core, n_core_below, lost_area)``: the areas
+    (float64 sums of ``footprint``) of the pit and of ``lost``, the pixels of ``core`` and
+    those of them with ``depth < t + step``."""
+    v0, v1, u0, u1 = box[0], box[1], box[2], box[3]
+    high = t + step
+    mid = t + 0.5 * step
+    pit_area = 0.0
+    n = 0
+    for v in range(v0, v1):
+        for u in range(u0, u1):
+            core[v, u] = False
+            if part[v, u] and depth[v, u] > high:
+                pit_area += footprint[v, u]
+                core[v, u] = True
+                stack[0, n] = v
+                stack[1, n] = u
+                n += 1
+    while n > 0:  # rows and columns on the stack: no division per pixel
+        n -= 1
+        v, u = stack[0, n], stack[1, n]
+        for y in range(max(v - 1, v0), min(v + 2, v1)):
+            for x in range(max(u - 1, u0), min(u + 2, u1)):
+                if not core[y, x] and part[y, x] and depth[y, x] > mid:
+                    core[y, x] = True
+                    stack[0, n] = y
+                    stack[1, n] = x
+                    n += 1
+    n_core = 0
+    below = 0
+    lost_area = 0.0
+    b0, b1, b2, b3 = v1, v0, u1, u0
+    for v in range(v0, v1):
+        for u in range(u0, u1):
+            lost[v, u] = 0
+            inside = False
+            if core[v, u]:
+                inside = True
+                n_core += 1
+                if depth[v, u] < high:
+                    below += 1
+            elif part[v, u] and depth[v, u] > t:
+                inside = True
+                lost[v, u] = 1
+                lost_area += footprint[v, u]
+            if inside:
+                b0, b1, b2, b3 = min(b0, v), max(b1, v + 1), min(b2, u), max(b3, u + 1)
+    if b0 >= b1:
+        b0, b1, b2, b3 = v0, v0, u0, u0
+    box[0], box[1], box[2], box[3] = b0, b1, b2, b3
+    return pit_area, n_core, below, lost_area
+
+
+@njit(cache=True, nogil=True)
+def label_boxes(labels, n):  # pragma: no cover - compiled
+    """Bounding box ``(x, y, width, height)`` of each label ``0 .. n - 1`` of ``labels``, as
+    the first four columns of OpenCV's ``connectedComponentsWithStats`` (whose other
+    statistics, the areas and the centroids, cost more than the labelling)."""
+    h, w = labels.shape
+    lo_x = np.full(n, w, np.int64)
+    lo_y = np.full(n, h, np.int64)
+    hi_x = np.full(n, -1, np.int64)
+    hi_y = np.full(n, -1, np.int64)
+    for v in range(h):
+        for u in range(w):
+            k = labels[v, u]
+            if u < lo_x[k]:
+                lo_x[k] = u
+            if u > hi_x[k]:
+                hi_x[k] = u
+            if v < lo_y[k]:
+                lo_y[k] = v
+            hi_y[k] = v
+    boxes = np.zeros((n, 4), np.int64)
+    for k in range(n):
+        if hi_x[k] >= 0:
+            boxes[k, 0], boxes[k, 1] = lo_x[k], lo_y[k]
+            boxes[k, 2], boxes[k, 3] = hi_x[k] - lo_x[k] + 1, hi_y[k] - lo_y[k] + 1
+    return boxes
+
+
 def h_maxima(image: np.ndarray, h: float) -> np.ndarray:
     """``skimage.morphology.h_maxima(image, h)`` of a float image (8-connected), the same
     uint8 result: the regional maxima of height at least ``h``, found by a compiled grey

@@ -43,7 +43,7 @@ from ..config import RoadConfig
 from .confidence import ConfidenceRules, deep_at_border, depressions, flags_of, spikiness
 from .plane import RoadPlane, plane_footprint
 from .pointcloud import Camera
-from .compiled import band_medians, median, noise_terms
+from .compiled import band_medians, label_boxes, median, noise_terms
 from .morphology import dilate_near, fill_holes, grown_box
 from .splitting import smoothed_depth, split_component
 from .threads import map_on_threads
@@ -420,8 +420,9 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
     with np.errstate(invalid="ignore"):
         cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
     other = s.finite & (np.abs(s.smooth) > min(road.min_depth_mm, road.min_height_mm) * 1e-3)
-    # the labels and each component's bounding box in one pass
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(cand.astype(np.uint8), connectivity=8)
+    # the labels, then each component's bounding box in one compiled pass
+    n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
+    stats = label_boxes(labels, n)
     level = max(thr_mm * 1e-3, s.split_noise)
 
     def smoothed(box):  # the split cue's smoothed depth, on a component's box only
@@ -458,7 +459,7 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
     if s.only is not None:  # only the components that reach into s.only (:func:`remeasure`)
         wanted[:] = False
         wanted[np.unique(labels[s.only])] = True
-    components = [(lab, (slice(y, y + h), slice(x, x + w))) for lab, (x, y, w, h, _) in enumerate(stats[1:], start=1)
+    components = [(lab, (slice(y, y + h), slice(x, x + w))) for lab, (x, y, w, h) in enumerate(stats[1:], start=1)
                   if wanted[lab]]
     return [f for found in map_on_threads(component, components) for f in found]
 

@@ -13,7 +13,7 @@ import logging
 import cv2
 import numpy as np
 
-from .compiled import dilate, h_maxima, opening
+from .compiled import dilate, h_maxima, opening, terrace_level
 from .morphology import opening_near
 
 log = logging.getLogger(__name__)
@@ -185,21 +185,25 @@ def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarr
     # too); the level with the largest shelf is tried first.
     deepest_at = np.unravel_index(np.argmax(np.where(part, depth, -np.inf)), part.shape)
     candidates = []
+    part = np.ascontiguousarray(part, bool)
+    depth = np.ascontiguousarray(depth)
+    footprint = np.ascontiguousarray(footprint, np.float64)
+    stack = np.empty((2, part.size), np.int32)
+    box = np.array([0, part.shape[0], 0, part.shape[1]], np.int64)  # shrinks with the level
+    # One pair of masks for all levels: a level rewrites the box of the one before, outside
+    # which both are 0 (fresh masks per level cost more in page faults than the level).
+    core, lost = np.zeros(part.shape, bool), np.zeros(part.shape, np.uint8)
     for t in np.arange(level, deepest - step + 1e-9, level_step):
-        pit = part & (depth > t + step)
-        if footprint[pit].sum() < min_part_m2:
+        # The core: the parts deeper than t + step / 2 that hold the pit (the part deeper
+        # than t + step); a floor that only dips below t + step / 2 (a shelf's middle) is
+        # shelf.  The lost band: deeper than t, outside the core.
+        pit_area, n_core, n_below, lost_area = terrace_level(part, depth, footprint, float(t), float(step), core,
+                                                             lost, stack, box)
+        if pit_area < min_part_m2:
             break  # no pothole left below a shelf at t
-        # The core: the parts deeper than t + step / 2 that hold the pit; a floor that only
-        # dips below t + step / 2 (a shelf's middle) is shelf.
-        core_labels, k = _label(part & (depth > t + 0.5 * step))
-        holds_pit = np.zeros(k + 1, bool)  # a lookup per label: no search per pixel
-        holds_pit[core_labels[pit]] = True
-        holds_pit[0] = False
-        core = holds_pit[core_labels]
-        if median_below(depth, core, t + step):
+        if median_below(depth, core, t + step, counts=(n_core, n_below)):
             continue  # the rest is a floor with relief (up to ~1 cm on broken floors), not a pit below a shelf
-        lost = (part & (depth > t) & ~core).astype(np.uint8)
-        if footprint[lost.view(bool)].sum() < min_part_m2:
+        if lost_area < min_part_m2:
             continue  # the shelf is a part of the lost band: no opening can make it large enough
         shelf = opening_near(lost, disc)
         if footprint[shelf].sum() < min_part_m2:
@@ -216,17 +220,20 @@ def _terrace_candidates(part: np.ndarray, depth: np.ndarray, footprint: np.ndarr
                 continue  # a ledge around the pit: the same pothole
             blobs.append(blob)
         if blobs:
-            candidates.append((sum(float(footprint[b].sum()) for b in blobs), t, core, blobs))
+            candidates.append((sum(float(footprint[b].sum()) for b in blobs), t, core.copy(), blobs))
     candidates.sort(key=lambda c: -c[0])
     return candidates
 
 
-def median_below(values: np.ndarray, mask: np.ndarray, x: float) -> bool:
+def median_below(values: np.ndarray, mask: np.ndarray, x: float, *, counts: tuple | None = None) -> bool:
     """``np.median(values[mask]) < x``, decided by counting the values below ``x`` (two
     passes over the arrays, no copy of the selection); the median itself only when the
-    count leaves it open (an even count with exactly half of the values below ``x``)."""
-    n = int(np.count_nonzero(mask))
-    below = int(np.count_nonzero(mask & (values < x)))
+    count leaves it open (an even count with exactly half of the values below ``x``).
+    ``counts``: ``(n, below)``, the pixels of ``mask`` and those below ``x``, where the
+    caller has counted them."""
+    if counts is None:
+        counts = int(np.count_nonzero(mask)), int(np.count_nonzero(mask & (values < x)))
+    n, below = counts
     if 2 * below > n:
         return True  # the middle value, or both middle values, below x
     if 2 * below < n or n == 0:

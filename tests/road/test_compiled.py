@@ -279,3 +279,65 @@ def test_band_medians_are_the_medians_of_each_band(dtype):
             want[b] = np.median(sel)
     np.testing.assert_array_equal(got, want)
     assert np.isnan(got[n_bands - 3:]).all() and np.isfinite(got[:n_bands - 3]).all()
+
+
+def _terrace_level_reference(part, depth, footprint, t, step):
+    """The terrace cue's level in NumPy and OpenCV: a labelling of the core's mask, the
+    labels that hold a pit pixel, then the lost band."""
+    import cv2
+
+    pit = part & (depth > t + step)
+    n, labels = cv2.connectedComponents((part & (depth > t + 0.5 * step)).astype(np.uint8), connectivity=8)
+    holds_pit = np.zeros(n, bool)
+    holds_pit[labels[pit]] = True
+    holds_pit[0] = False
+    core = holds_pit[labels]
+    lost = part & (depth > t) & ~core
+    return core, lost, footprint[pit].sum(), int(core.sum()), int((core & (depth < t + step)).sum()), footprint[lost].sum()
+
+
+def test_terrace_level_is_the_labelling_of_the_pit_and_its_band():
+    rng = np.random.default_rng(11)
+    for _ in range(60):
+        shape = tuple(int(x) for x in rng.integers(1, 40, 2))
+        # a rough floor: shelves, pits and isolated dips, with ties at the levels
+        depth = (np.round(_rough_floor(rng, shape), 2) * 0.01).astype(np.float32)
+        part = rng.random(shape) < 0.9
+        footprint = rng.uniform(1e-5, 2e-5, shape)
+        # float64 levels, as np.arange gives them: NumPy compares the float32 depth in float64 then
+        t, step = np.float64(rng.choice([0.0, 0.002, 0.004])), 0.004
+        # the box of the level below (the whole part) or of any level below: a box holding the band
+        above = part & (depth > t - 0.002)
+        box = np.array(_bbox(above) if rng.random() < 0.5 else (0, shape[0], 0, shape[1]), np.int64)
+        core, lost = np.zeros(shape, bool), np.zeros(shape, np.uint8)
+        got = compiled.terrace_level(part, depth, footprint, float(t), step, core, lost,
+                                     np.empty((2, part.size), np.int32), box)
+        want = _terrace_level_reference(part, depth, footprint, t, step)
+        np.testing.assert_array_equal(core, want[0])
+        np.testing.assert_array_equal(lost.view(bool), want[1])
+        assert got[1:3] == want[3:5]
+        assert got[0] == pytest.approx(want[2], rel=1e-12) and got[3] == pytest.approx(want[5], rel=1e-12)
+        band = part & (depth > t)
+        assert tuple(box) == (_bbox(band) if band.any() else (box[0], box[0], box[2], box[2]))
+
+
+def _bbox(mask):
+    """(row start, row stop, column start, column stop) of a mask's pixels."""
+    v, u = np.nonzero(mask)
+    return (int(v.min()), int(v.max()) + 1, int(u.min()), int(u.max()) + 1) if v.size else (0, 0, 0, 0)
+
+
+def _rough_floor(rng, shape):
+    """Depths 0..1.2 (cm once scaled) with spatial structure: a random walk along both axes."""
+    return np.clip(np.cumsum(np.cumsum(rng.normal(0, 0.3, shape), 0), 1) / 3 + 0.6, 0, 1.2)
+
+
+def test_label_boxes_are_opencvs_statistics():
+    import cv2
+
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        shape = tuple(int(x) for x in rng.integers(1, 60, 2))
+        mask = (rng.random(shape) < rng.uniform(0.1, 0.7)).astype(np.uint8)
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        np.testing.assert_array_equal(compiled.label_boxes(labels, n), stats[:, :4])
