@@ -41,9 +41,15 @@ Reasons (defects.json ``flags``, in this order):
     above the saddle between them, that the splitting did not cut because the map's noise
     is larger (:func:`d3cli.road.splitting.split_parts`): possibly two potholes as one.
 ``rematch``
-    The small-window re-match (:mod:`d3cli.road.rematch`) changed the depth by more than
-    :attr:`ConfidenceRules.max_rematch_change` of the stored map's: two measurements of
-    the same floor disagree.  The window it used is evidence too (``rematch_window``, 0:
+    The small-window re-match (:mod:`d3cli.road.rematch`) and the stored map disagree in
+    a way the stored map's bias cannot explain.  The stored map averages a pothole's floor
+    with its shallower walls (the 25 px matching window and the smoothing of
+    configs/road.yaml), so it reads a pothole shallower, never deeper, by up to about half
+    its depth for one a window across: a re-match that makes the depth shallower by more
+    than :attr:`ConfidenceRules.min_rematch_change`, or deeper by more than
+    :attr:`ConfidenceRules.max_rematch_change` (more than twice as deep), measured
+    something else than the floor the stored map saw (a shelf of a deeper pothole, a
+    reflection).  The window it used is evidence too (``rematch_window``, 0:
     none was clean and the depth is the stored, smoothed map's); it flags nothing.
 
 The thresholds were chosen on synthetic pairs with exact ground truth (docs/road.md, "The
@@ -96,8 +102,9 @@ class ConfidenceRules:
         ``noisy`` below this ratio of the depth to the height noise around the defect.
     min_snr_alone : float
         The same where no match margin is known.
-    max_rematch_change : float
-        ``rematch`` above this relative change of the depth by the re-match.
+    min_rematch_change, max_rematch_change : float
+        ``rematch`` below the first or above the second relative change of the depth by
+        the re-match (the re-matched depth over the stored one, minus 1).
     """
 
     min_match_margin: float = 0.020
@@ -105,7 +112,8 @@ class ConfidenceRules:
     spike_px: int = 15
     min_snr: float = 4.0
     min_snr_alone: float = 10.0
-    max_rematch_change: float = 0.30
+    min_rematch_change: float = -0.15
+    max_rematch_change: float = 1.0
 
 
 def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules | None = None) -> tuple:
@@ -141,7 +149,7 @@ def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules
         < min_decided_share,
         "at_border": bool(evidence.get("deep_at_border", False)),
         "merged": evidence.get("depressions", 1) >= 2,
-        "rematch": abs(evidence.get("rematch_change", 0.0)) > rules.max_rematch_change,
+        "rematch": not rules.min_rematch_change <= evidence.get("rematch_change", 0.0) <= rules.max_rematch_change,
     }
     return tuple(code for code in REASONS if raised[code])
 
