@@ -333,6 +333,65 @@ def fit_road_model(
     return RoadModel(a0, b1, b2, a1, theta, share, n, not reason, reason)
 
 
+#: Inlier threshold of :func:`refit_on_band`, full-resolution pixels: the restored
+#: disparities of a narrow match scatter by a fraction of a pixel about a planar road, so
+#: a pothole floor or a kerb a few pixels off the plane is an outlier there (the coarse
+#: fit's threshold, one coarse pixel, counts up to 8 px as the road).
+REFIT_THRESHOLD_PX = 1.0
+
+
+def refit_on_band(narrow: np.ndarray, model: RoadModel, *, margin: float, narrow_range: int, scale: int,
+                  iterations: int = 10, min_inlier_share: float = 0.5) -> RoadModel:
+    """The road model fitted again to the full-resolution match against the road band.
+
+    The coarse fit of :func:`fit_road_model` reads disparities in steps of ``scale``
+    pixels: on a dark pair it can tilt the plane by several pixels at the far rows, and on
+    a pair whose nearest potholes lie several pixels below the plane they pull it (within
+    the coarse fit's inlier band).  The narrow match then puts the road near an end of
+    its band, and :meth:`RoadModel.off_band` would take a road for another scene.  Its
+    estimates inside the band are full-resolution disparities of the road, so the plane
+    fitted to them is the road's, whatever the coarse fit's error was.
+
+    The estimates away from the band's ends (``0 < d' < narrow_range``), restored to the
+    full range (``d' (1 - b2) + s(u, v)``, :mod:`d3cli.kernels.road_model`), are averaged
+    over blocks of ``scale`` x ``scale`` pixels (a block with fewer than half of its pixels
+    estimated is left out) and fitted as a coarse map (:func:`fit_road_model`) with an
+    inlier threshold of :data:`REFIT_THRESHOLD_PX`.
+
+    Parameters
+    ----------
+    narrow : ndarray, int, (H, W)
+        Narrow-range disparities d' of a match against the right image warped by ``model``
+        (``-1`` undecided).
+    model : RoadModel
+        The model the right image was warped with.
+    margin : float, keyword-only
+        ``pt.margin``.
+    narrow_range : int, keyword-only
+        ``pt.narrow_range``.
+    scale : int, keyword-only
+        Block side, pixels (the coarse fit's level scale).
+    iterations, min_inlier_share : keyword-only
+        As :func:`fit_road_model`.
+
+    Returns
+    -------
+    RoadModel
+    """
+    narrow = np.asarray(narrow)
+    h, w = (narrow.shape[0] // scale) * scale, (narrow.shape[1] // scale) * scale
+    d_prime = narrow[:h, :w].astype(np.float64)
+    inside = (d_prime > 0) & (d_prime < narrow_range)
+    v, u = np.mgrid[0:h, 0:w]
+    restored = d_prime * (1.0 - model.b2) + (model.a0 + model.b1 * v + model.b2 * u - margin)
+    blocks = (h // scale, scale, w // scale, scale)
+    count = inside.reshape(blocks).sum(axis=(1, 3))
+    total = np.where(inside, restored, 0.0).reshape(blocks).sum(axis=(1, 3))
+    coarse = np.where(count >= scale * scale / 2, total / np.maximum(count, 1) / scale, np.nan)
+    return fit_road_model(coarse, scale=scale, inlier_threshold=REFIT_THRESHOLD_PX / scale, iterations=iterations,
+                          min_inlier_share=min_inlier_share)
+
+
 def restored_validity(valid: np.ndarray, narrow: np.ndarray, restored: np.ndarray, *,
                       narrow_range: float) -> tuple[np.ndarray, dict]:
     """Which estimates survive the restore of step 6 (PT-D3Stereo and PT-SGM alike).

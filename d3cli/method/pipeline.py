@@ -21,7 +21,7 @@ from ..kernels.backend import Backend
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
-from .perspective import RoadModel, fit_road_model, restored_shares, restored_validity_counts
+from .perspective import RoadModel, fit_road_model, refit_on_band, restored_shares, restored_validity_counts
 from .pyramid import level_max_disparity, usable_levels
 from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel
 
@@ -271,6 +271,12 @@ class D3Stereo:
         # check needs them first
         match = self._match(pyr_l, pyr_r, search, timings, features=features,
                             range_ends=None if road is None else cfg.pt.narrow_range, read_counts=road is not None)
+        if road is not None and self._off_band_share(match, road) is not None:
+            # Many pixels at the band's ends: first the plane fitted again to the match
+            # inside the band (the coarse fit may have tilted it), and the pair matched
+            # again against it (refit_on_band).
+            road, pyr_r, match, features = self._refit(road, match, (pyr_l, pyr_r, plain_r), features, search,
+                                                       (left, right, grey_l.shape), pair_dir, timings, info)
         if road is not None and not self._on_road_band(match, road, dmax, info, warnings):
             # Not a road after all: the pair is matched again over the full range, unwarped.
             road, search, match, features = None, dmax, None, None
@@ -352,6 +358,50 @@ class D3Stereo:
         result.timings["total"] = time.perf_counter() - t_start  # the road attempt included
         return result
 
+    def _off_band_share(self, match: "_Match", road: RoadModel) -> float | None:
+        """The share of pixels matched at an end of the narrow range when it is more than
+        ``pt.max_band_end_share`` (:meth:`RoadModel.off_band`), else None.
+
+        :func:`~d3cli.method.perspective.band_end_share` of the map, from the count the
+        match read with its others."""
+        h, w = match.disparity.shape
+        share = float(match.range_ends) / max(h * w, 1)
+        return None if road.off_band(share, limit=self.cfg.pt.max_band_end_share, margin=self.cfg.pt.margin).road_like \
+            else share
+
+    def _refit(self, road: RoadModel, match: "_Match", pyramids: tuple, features, search: int, images: tuple,
+               pair_dir, timings: dict, info: dict):
+        """The road model fitted again to ``match`` (:func:`~d3cli.method.perspective.refit_on_band`)
+        and the pair matched against it; ``(road, pyr_r, match, features)``, the given ones
+        where the refit is not road-like (the band test then decides on the first match).
+
+        ``pyramids``: the left pyramid, the right one warped by ``road`` and the unwarped
+        right one; ``images``: the left and right images and the grey shape (features).
+
+        ``info['pt']`` records the first model's band-end share (``first_band_end_share``)
+        and ``refit`` True, its model the refitted one."""
+        pt = self.cfg.pt
+        t0 = time.perf_counter()
+        first_share = self._off_band_share(match, road)
+        pyr_l, pyr_r, plain_r = pyramids
+        levels = len(pyr_l)
+        refit = refit_on_band(self.backend.to_host(match.disparity), road, margin=float(pt.margin),
+                              narrow_range=pt.narrow_range, scale=2 ** (levels - 1), iterations=pt.iterations,
+                              min_inlier_share=pt.min_inlier_share)
+        if not refit.road_like:
+            return road, pyr_r, match, features
+        log.info("PT: %.1f%% of the pixels at the band's ends; plane fitted again to the band: d = %.3f + %.5f v + "
+                 "%.5f u", 100 * first_share, refit.a0, refit.b1, refit.b2)
+        pyr_r = self.backend.pyramid(self.backend.pt_warp(plain_r[0], refit.a0, refit.b1, refit.b2, float(pt.margin)),
+                                     levels)
+        left, right, shape = images
+        features = self._pair_features(left, right, shape, pyr_l, pair_dir, refit, timings, info)
+        timings["pt_refit"] = time.perf_counter() - t0
+        match = self._match(pyr_l, pyr_r, search, timings, features=features, range_ends=pt.narrow_range,
+                            read_counts=True)
+        info["pt"] = refit.to_info(narrow_range=pt.narrow_range) | {"refit": True, "first_band_end_share": first_share}
+        return refit, pyr_r, match, features
+
     def _on_road_band(self, match: "_Match", road: RoadModel, dmax: int, info: dict, warnings: list) -> bool:
         """Whether the narrow-range match keeps the road model (:meth:`RoadModel.off_band`).
 
@@ -360,13 +410,11 @@ class D3Stereo:
         pixels are matched at an end of the narrow range.
         """
         pt = self.cfg.pt
-        # perspective.band_end_share of the map, from the count the match read with its others
-        h, w = match.disparity.shape
-        share = float(match.range_ends) / max(h * w, 1)
-        checked = road.off_band(share, limit=pt.max_band_end_share, margin=pt.margin)
-        if checked.road_like:  # the share is recorded as range_end_share by _pt_valid
+        share = self._off_band_share(match, road)
+        if share is None:  # the share is recorded as range_end_share by _pt_valid
             return True
-        info["pt"] = checked.to_info(narrow_range=pt.narrow_range) | {"band_end_share": share}
+        checked = road.off_band(share, limit=pt.max_band_end_share, margin=pt.margin)
+        info["pt"] = info["pt"] | checked.to_info(narrow_range=pt.narrow_range) | {"band_end_share": share}
         msg = checked.fallback_warning(dmax, settings=pt.fallback_config)
         log.debug(msg)  # returned in result.warnings; the batch logs those once
         warnings.append(msg)

@@ -400,3 +400,25 @@ def test_solve_weighted_equals_the_numpy_normal_equations():
     assert ok
     np.testing.assert_allclose([a0, b1, b2], numpy_solve(u, v, d, w), rtol=1e-12, atol=1e-13)
     np.testing.assert_array_equal(perspective.solve_road_model(u, v, d, w), [a0, b1, b2])  # one solver
+
+
+def test_the_refit_on_the_band_finds_the_plane_the_coarse_fit_missed():
+    """A narrow map made against a model 9 px off at the top row and tilted, with a pothole
+    10 px below the road and the far rows at the band's low end: the plane fitted to the
+    restored estimates inside the band is the road's."""
+    from d3cli.method.perspective import refit_on_band
+
+    h, w, margin, narrow_range = 240, 320, 8.0, 18
+    v, u = np.mgrid[0:h, 0:w]
+    truth = 40.0 + 0.12 * v + 0.004 * u
+    truth[150:200, 100:180] -= 10.0  # a pothole floor
+    b1, b2 = 0.09, 0.004
+    off = RoadModel(49.0, b1, b2, float(np.hypot(b1, b2)), float(np.arctan(-b2 / b1)), 0.9, 1000)
+    shift = off.a0 + off.b1 * v + off.b2 * u - margin
+    narrow = np.clip(np.round((truth - shift) / (1 - off.b2)), 0, narrow_range).astype(np.int32)
+    narrow[::7, ::5] = -1  # undecided pixels
+    assert (narrow[:20] == 0).mean() > 0.5 and (narrow == 0).mean() > 0.03  # the map that rejects the first model
+    refit = refit_on_band(narrow, off, margin=margin, narrow_range=narrow_range, scale=8)
+    assert refit.road_like
+    plane = 40.0 + 0.12 * v + 0.004 * u
+    assert np.abs(refit.predict(u, v) - plane).max() < 0.15

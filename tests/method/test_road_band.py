@@ -3,6 +3,8 @@ narrow-range match (``pt.max_band_end_share``) and matched over the full range."
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -91,3 +93,39 @@ def test_off_band_rejects_above_the_limit_only():
 def test_the_new_keys_are_range_checked(key, value):
     with pytest.raises(ConfigError, match="number in \\[0, 1\\]|bundled config"):
         load_config(None, [f"{key}={value}"])
+
+
+def tilted(model: RoadModel, *, top: float, slope: float) -> RoadModel:
+    """``model`` moved by ``top`` px at the top row and tilted by ``slope`` px per row."""
+    b1 = model.b1 + slope
+    return dataclasses.replace(model, a0=model.a0 + top, b1=b1, a1=float(np.copysign(np.hypot(b1, model.b2), b1)))
+
+
+def test_a_road_whose_coarse_fit_is_tilted_keeps_the_model_fitted_again_to_the_band(monkeypatch):
+    """The coarse fit of a dark pair can be several pixels off at the far rows (a 1280x720
+    dusk pair: +7 px at the top, 10 % of its pixels at the band's ends): the plane fitted
+    again to the full-resolution match inside the band is the road's, and the pair keeps
+    the road settings instead of falling back as if it were no road."""
+    from d3cli.method import pipeline
+
+    fit = pipeline.fit_road_model
+    monkeypatch.setattr(pipeline, "fit_road_model", lambda *a, **k: tilted(fit(*a, **k), top=9.0, slope=-0.1))
+    result, truth = compute(False)
+    pt = result.info["pt"]
+    assert pt["refit"] is True and pt["first_band_end_share"] > 0.05
+    assert pt["fallback"] is False and pt["range_end_share"] <= 0.03 and result.warnings == []
+    assert pt["b1"] == pytest.approx(12 / 96, abs=0.01)  # the staircase's own gradient, not the tilted one
+    inner = (slice(8, -8), slice(24, -8))
+    assert np.median(np.abs(result.disparity[inner] - truth[inner])) < 0.5
+
+
+def test_a_scene_off_the_band_after_the_refit_still_falls_back(monkeypatch):
+    from d3cli.method import pipeline
+
+    fit = pipeline.fit_road_model
+    monkeypatch.setattr(pipeline, "fit_road_model", lambda *a, **k: tilted(fit(*a, **k), top=9.0, slope=-0.1))
+    result, _ = compute(True)
+    pt = result.info["pt"]
+    assert pt["refit"] is True and pt["fallback"] is True and pt["band_end_share"] > 0.1
+    (warning,) = result.warnings
+    assert warning.startswith("perspective transformation skipped: ") and "off the fitted plane" in warning
