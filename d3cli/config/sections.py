@@ -323,7 +323,7 @@ class PTConfig:
         lambda v: 1 <= v <= 100, "an integer in [1, 100]")
     max_band_end_share: float = setting(
         0.03,
-        "above this share of pixels at the narrow range's ends: plane refitted to the band; again: not a road, full range",
+        "above this share of pixels at the narrow range's ends (half: plane refitted to the band first): not a road, full range",
         lambda v: 0 <= v <= 1, "a number in [0, 1]")
     fallback_config: str = setting(
         "",

@@ -21,7 +21,7 @@ from ..kernels.backend import Backend
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
-from .perspective import RoadModel, fit_road_model, refit_on_band, restored_shares, restored_validity_counts
+from .perspective import REFIT_SHARE, RoadModel, fit_road_model, refit_on_band, restored_shares, restored_validity_counts
 from .pyramid import level_max_disparity, usable_levels
 from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel
 
@@ -271,7 +271,7 @@ class D3Stereo:
         # check needs them first
         match = self._match(pyr_l, pyr_r, search, timings, features=features,
                             range_ends=None if road is None else cfg.pt.narrow_range, read_counts=road is not None)
-        if road is not None and self._off_band_share(match, road) is not None:
+        if road is not None and self._band_share(match) > REFIT_SHARE * cfg.pt.max_band_end_share:
             # Many pixels at the band's ends: first the plane fitted again to the match
             # inside the band (the coarse fit may have tilted it), and the pair matched
             # again against it (refit_on_band).
@@ -358,31 +358,28 @@ class D3Stereo:
         result.timings["total"] = time.perf_counter() - t_start  # the road attempt included
         return result
 
-    def _off_band_share(self, match: "_Match", road: RoadModel) -> float | None:
-        """The share of pixels matched at an end of the narrow range when it is more than
-        ``pt.max_band_end_share`` (:meth:`RoadModel.off_band`), else None.
-
-        :func:`~d3cli.method.perspective.band_end_share` of the map, from the count the
-        match read with its others."""
+    def _band_share(self, match: "_Match") -> float:
+        """The share of all pixels matched at an end of the narrow range
+        (:func:`~d3cli.method.perspective.band_end_share`), from the count the match read
+        with its others."""
         h, w = match.disparity.shape
-        share = float(match.range_ends) / max(h * w, 1)
-        return None if road.off_band(share, limit=self.cfg.pt.max_band_end_share, margin=self.cfg.pt.margin).road_like \
-            else share
+        return float(match.range_ends) / max(h * w, 1)
 
     def _refit(self, road: RoadModel, match: "_Match", pyramids: tuple, features, search: int, images: tuple,
                pair_dir, timings: dict, info: dict):
         """The road model fitted again to ``match`` (:func:`~d3cli.method.perspective.refit_on_band`)
-        and the pair matched against it; ``(road, pyr_r, match, features)``, the given ones
-        where the refit is not road-like (the band test then decides on the first match).
+        and the pair matched against it; ``(road, pyr_r, match, features)``: the refitted
+        ones where their match puts fewer pixels at the band's ends, else the given ones
+        (the band test then decides on the first match).
 
         ``pyramids``: the left pyramid, the right one warped by ``road`` and the unwarped
         right one; ``images``: the left and right images and the grey shape (features).
 
-        ``info['pt']`` records the first model's band-end share (``first_band_end_share``)
-        and ``refit`` True, its model the refitted one."""
+        Where the refit is kept, ``info['pt']`` holds its model, ``refit`` True and the first
+        model's band-end share (``first_band_end_share``)."""
         pt = self.cfg.pt
         t0 = time.perf_counter()
-        first_share = self._off_band_share(match, road)
+        first_share = self._band_share(match)
         pyr_l, pyr_r, plain_r = pyramids
         levels = len(pyr_l)
         refit = refit_on_band(self.backend.to_host(match.disparity), road, margin=float(pt.margin),
@@ -392,15 +389,19 @@ class D3Stereo:
             return road, pyr_r, match, features
         log.info("PT: %.1f%% of the pixels at the band's ends; plane fitted again to the band: d = %.3f + %.5f v + "
                  "%.5f u", 100 * first_share, refit.a0, refit.b1, refit.b2)
-        pyr_r = self.backend.pyramid(self.backend.pt_warp(plain_r[0], refit.a0, refit.b1, refit.b2, float(pt.margin)),
-                                     levels)
+        refit_r = self.backend.pyramid(self.backend.pt_warp(plain_r[0], refit.a0, refit.b1, refit.b2, float(pt.margin)),
+                                       levels)
         left, right, shape = images
-        features = self._pair_features(left, right, shape, pyr_l, pair_dir, refit, timings, info)
+        refit_features = self._pair_features(left, right, shape, pyr_l, pair_dir, refit, timings, info)
         timings["pt_refit"] = time.perf_counter() - t0
-        match = self._match(pyr_l, pyr_r, search, timings, features=features, range_ends=pt.narrow_range,
+        again = self._match(pyr_l, refit_r, search, timings, features=refit_features, range_ends=pt.narrow_range,
                             read_counts=True)
+        if self._band_share(again) >= first_share:
+            log.info("PT: the refitted plane puts %.1f%% at the band's ends; the first one kept",
+                     100 * self._band_share(again))
+            return road, pyr_r, match, features
         info["pt"] = refit.to_info(narrow_range=pt.narrow_range) | {"refit": True, "first_band_end_share": first_share}
-        return refit, pyr_r, match, features
+        return refit, refit_r, again, refit_features
 
     def _on_road_band(self, match: "_Match", road: RoadModel, dmax: int, info: dict, warnings: list) -> bool:
         """Whether the narrow-range match keeps the road model (:meth:`RoadModel.off_band`).
@@ -410,10 +411,10 @@ class D3Stereo:
         pixels are matched at an end of the narrow range.
         """
         pt = self.cfg.pt
-        share = self._off_band_share(match, road)
-        if share is None:  # the share is recorded as range_end_share by _pt_valid
-            return True
+        share = self._band_share(match)
         checked = road.off_band(share, limit=pt.max_band_end_share, margin=pt.margin)
+        if checked.road_like:  # the share is recorded as range_end_share by _pt_valid
+            return True
         info["pt"] = info["pt"] | checked.to_info(narrow_range=pt.narrow_range) | {"band_end_share": share}
         msg = checked.fallback_warning(dmax, settings=pt.fallback_config)
         log.debug(msg)  # returned in result.warnings; the batch logs those once
