@@ -28,7 +28,7 @@ from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
 from .compiled import back_project, height_colours
 from .pointcloud import Camera
-from .rematch import MIN_RELIABLE, NOISE_M, WINDOWS, grey_image, match_margin, rematch
+from .rematch import MIN_RELIABLE, WINDOWS, grey_image, match_margin, noise_limit, rematch
 from .severity import pothole_severity, survey_summary
 from .threads import Job, map_on_threads
 
@@ -186,7 +186,7 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
         if regions:
             grey = (grey_image(left), grey_image(right))  # made once for every region
             measured, windows, zones, height = _rematched_height(grey, disparity, finite, regions, camera, plane,
-                                                                 road_cfg)
+                                                                 road_cfg, [d.max_depth_mm * 1e-3 for d in stored.defects])
         if start_writing is not None:
             start_writing(height)
         if regions:
@@ -232,21 +232,24 @@ def _window_of(defect, region: np.ndarray, windows: np.ndarray) -> int:
 
 
 def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
-                      road_cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                      road_cfg, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(disparity, window, zones, height map) with the disparity inside each defect (grown by two rings:
     the ring gives the reference height) matched again (:mod:`d3cli.road.rematch`) on the
     grey images ``grey`` (left, right), with the smallest window of
     :data:`~d3cli.road.rematch.WINDOWS` that re-measures at least ``MIN_RELIABLE`` of the
-    zone and whose re-measured heights scatter by at most ``NOISE_M`` on the outer ring
-    (:func:`_highpass_noise`); a defect no window measures that cleanly keeps the stored
-    map.  ``window``: uint8 (H, W), the window side used at each pixel, 0 where the stored
+    zone and whose re-measured heights scatter on the outer ring (:func:`_highpass_noise`)
+    by at most :func:`~d3cli.road.rematch.noise_limit` of the defect's stored depth
+    (``depths``, metres, the regions' order); a defect no window measures that cleanly
+    keeps the stored map.  ``window``: uint8 (H, W), the window side used at each pixel, 0 where the stored
     map was kept; ``zones``: bool (H, W), every pixel of a zone matched again."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
     left, right = grey
 
-    def zone_disparity(region):
+    def zone_disparity(item):
         """(zone, its re-matched disparity and window, or None and 0 where no window matches
         it cleanly)."""
+        region, depth = item
+        limit = noise_limit(depth)
         inner = dilate_near(region, ring)
         zone = dilate_near(inner, ring) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
@@ -259,7 +262,7 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
             reach = int(np.ceil(4 * window)) + 2
             crop = grown_box(band, reach, reach) or (slice(0, 0), slice(0, 0))
             if _highpass_noise(height_map(new[crop], finite[crop], camera, plane, origin=(crop[0].start, crop[1].start)),
-                               (band & got)[crop], window) <= NOISE_M:
+                               (band & got)[crop], window) <= limit:
                 return zone, new[zone], window
         # no window matches the defect cleanly (a dark, noisy pair): the stored, smoothed
         # map is the better measurement there.
@@ -270,7 +273,7 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
     zones = np.zeros(disparity.shape, bool)
     # The regions are matched on both threads (each reads the stored map only) and their
     # zones written in the regions' order, as one after the other would.
-    for zone, values, window in map_on_threads(zone_disparity, regions):
+    for zone, values, window in map_on_threads(zone_disparity, list(zip(regions, depths))):
         windows[zone] = window
         zones |= zone
         if values is not None:

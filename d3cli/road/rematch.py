@@ -23,8 +23,24 @@ from .morphology import grown_box
 WINDOW, REACH, STEP = 9, 3.0, 0.5
 #: Windows tried, smallest first: a noisy (dark) pair needs a larger one.  The first whose
 #: heights on the road around the defect scatter (1.4826 MAD of the high-pass residual) by
-#: at most ``NOISE_M`` metres is used; none: the stored map is kept.
-WINDOWS, NOISE_M = (9, 13, 17, 25), 1.5e-3
+#: at most :func:`noise_limit` of the defect's depth is used; none: the stored map is kept.
+WINDOWS, NOISE_M, REL_NOISE = (9, 13, 17, 25), 1.5e-3, 0.05
+
+
+def noise_limit(depth: float) -> float:
+    """The largest scatter (metres) of the re-matched road around a defect of ``depth``
+    metres (as the stored map reads it) for which the re-match is used: ``NOISE_M``, or
+    ``REL_NOISE`` of the depth where that is more.
+
+    A scatter that does not fall with the window is the road's own relief, not matching
+    noise: the synthetic wet asphalt scatters by 1.9-2.1 mm at every window, and its
+    potholes, 40-60 mm deep, kept the stored map, which reads cones and narrow potholes
+    20-35 % shallow (the averaging the re-match is there to undo).  Against a depth 20
+    times larger that scatter moves the depth little: on the 252 stored maps of twelve spent
+    check seeds (docs/road.md), 2 fewer potholes reported ``ok`` are more than 20 % off and
+    those re-matched read closer to the truth.
+    """
+    return max(NOISE_M, REL_NOISE * float(depth))
 #: A re-matched pixel whose best ZNCC score is below this, or whose best offset is an end
 #: of the search, keeps the stored disparity: on wet and dark pairs such pixels (specular
 #: highlights, untextured floors) are 0.5-4 px off the true disparity (median), and their

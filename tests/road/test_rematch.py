@@ -70,3 +70,11 @@ def test_match_margin_fills_pixels_without_disparity_and_is_nan_without_any():
         match_margin(left, right, disp, region, window=7, pad=4), abs=1e-6)
     assert np.isnan(match_margin(left, right, np.full(disp.shape, np.inf, np.float32), region))
     assert np.isnan(match_margin(left, right, disp, np.zeros(disp.shape, bool)))
+
+
+def test_the_noise_limit_grows_with_the_depth_past_the_absolute_one():
+    from d3cli.road.rematch import NOISE_M, REL_NOISE, noise_limit
+
+    assert noise_limit(0.0) == noise_limit(0.02) == NOISE_M  # shallow: 1.5 mm
+    assert noise_limit(0.06) == pytest.approx(REL_NOISE * 0.06) == pytest.approx(0.003)
+    assert noise_limit(NOISE_M / REL_NOISE) == pytest.approx(NOISE_M)
