@@ -17,6 +17,11 @@ meaningful on a shared, noisy machine, where absolute seconds drift between runs
 ``run_batch`` per output set on the first pair gives the bytes a pair's folder holds with
 ``--road-report`` and ``--outputs all`` / ``survey`` / ``survey,height``.
 
+``--memory`` then runs ``d3stereo run -c road --outputs survey`` over the pairs (``run_batch``)
+in a fresh process, once without and once with the road report, and prints each process's
+peak resident set size (``VmHWM`` of ``/proc/self/status``, as ``scripts/bench_speed.py``
+reads it): what ``--road-report`` adds to a survey's memory.
+
 ``--stages`` then runs the ``survey`` report of every pair once more with one thread
 (numba's and OpenCV's), prints its median time a pair (against the medians above: what the
 second thread gains), and again under :mod:`cProfile`, printing each stage's share: the plane
@@ -29,6 +34,7 @@ Usage::
     PYTHONPATH=. python scripts/bench_road_report.py            # 4 pairs of seed 0, 3 reps
     PYTHONPATH=. python scripts/bench_road_report.py --pairs 12 --reps 5
     PYTHONPATH=. python scripts/bench_road_report.py --pairs 12 --reps 3 --stages
+    PYTHONPATH=. python scripts/bench_road_report.py --pairs 12 --reps 1 --no-bytes --memory
 """
 
 from __future__ import annotations
@@ -58,6 +64,42 @@ def _pairs(seed: int, n: int):
 
 def _folder_bytes(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
+
+
+def _vmhwm_mb() -> float:
+    """Peak resident set size of this process (VmHWM), MB."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def _child_run(seed: int, n: int, report: bool) -> None:
+    """``d3stereo run -c road --outputs survey [--road-report]`` over the pairs, in this
+    (fresh) process; prints its VmHWM."""
+    from d3cli import load_config
+    from d3cli.batch import run_batch
+
+    cfg = load_config("road", ["run.backend=cpu", f"road.report={str(report).lower()}", "run.outputs=survey"])
+    with tempfile.TemporaryDirectory() as out:
+        run_batch(_pairs(seed, n), Path(out), cfg=cfg, method="d3stereo", progress=False)
+    print(f"{_vmhwm_mb():.1f}")
+
+
+def _memory(seed: int, n: int) -> None:
+    """Peak MB of a fresh process running the batch without and with the road report."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    peaks = {}
+    for report in (False, True):
+        proc = subprocess.run([sys.executable, __file__, "--pairs", str(n), "--seed", str(seed), "--child-run",
+                               "report" if report else "stereo"], capture_output=True, text=True, check=True, env=env)
+        peaks[report] = float(proc.stdout.strip().splitlines()[-1])
+    print(f"\npeak memory of a fresh `run -c road --outputs survey` process over the {n} pairs (VmHWM): "
+          f"{peaks[False]:.0f} MB without the road report, {peaks[True]:.0f} MB with it "
+          f"({peaks[True] - peaks[False]:+.0f} MB)")
 
 
 #: (label, module, function) of the stages --stages reports: each one's cumulative time
@@ -120,7 +162,13 @@ def main(argv=None) -> int:
     parser.add_argument("--no-bytes", action="store_true", help="skip the bytes per output set")
     parser.add_argument("--stages", action="store_true",
                         help="each stage's share of the survey report, one thread, under cProfile")
+    parser.add_argument("--memory", action="store_true",
+                        help="peak memory of a fresh batch process without and with the road report")
+    parser.add_argument("--child-run", choices=("stereo", "report"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.child_run:
+        _child_run(args.seed, args.pairs, args.child_run == "report")
+        return 0
 
     from d3cli import load_config
     from d3cli.batch import compute_pair, run_batch
@@ -194,6 +242,8 @@ def main(argv=None) -> int:
             folder = out / pairs[0].name
             names = sorted(p.name for p in folder.iterdir() if p.is_file())
             print(f"  {outputs:<14} {_folder_bytes(folder) / 1e6:6.2f} MB  ({', '.join(names)})")
+    if args.memory:
+        _memory(args.seed, args.pairs)
     return 0
 
 
