@@ -21,7 +21,8 @@ from ..kernels.backend import Backend
 from .cost import aggregation_halo, level_cost
 from .decisive import decisive_seeds, diffuse, inherit
 from .features import feature_pyramid, load_feature_npz, npz_path
-from .perspective import REFIT_SHARE, RoadModel, fit_road_model, refit_on_band, restored_shares, restored_validity_counts
+from .perspective import (REFIT_SHARE, RoadModel, fit_road_model, refit_on_band, restored_shares,
+                          restored_validity_counts)
 from .pyramid import level_max_disparity, usable_levels
 from .refinement import drop_occluded, drop_speckles, fill_holes, refine_subpixel
 
@@ -389,8 +390,8 @@ class D3Stereo:
             return road, pyr_r, match, features
         log.info("PT: %.1f%% of the pixels at the band's ends; plane fitted again to the band: d = %.3f + %.5f v + "
                  "%.5f u", 100 * first_share, refit.a0, refit.b1, refit.b2)
-        refit_r = self.backend.pyramid(self.backend.pt_warp(plain_r[0], refit.a0, refit.b1, refit.b2, float(pt.margin)),
-                                       levels)
+        warped = self.backend.pt_warp(plain_r[0], refit.a0, refit.b1, refit.b2, float(pt.margin))
+        refit_r = self.backend.pyramid(warped, levels)
         left, right, shape = images
         refit_features = self._pair_features(left, right, shape, pyr_l, pair_dir, refit, timings, info)
         timings["pt_refit"] = time.perf_counter() - t0

@@ -185,8 +185,9 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
         defects, regions = [], stored.regions
         if regions:
             grey = (grey_image(left), grey_image(right))  # made once for every region
+            depths = [d.max_depth_mm * 1e-3 for d in stored.defects]  # as the stored map reads them
             measured, windows, zones, height = _rematched_height(grey, disparity, finite, regions, camera, plane,
-                                                                 road_cfg, [d.max_depth_mm * 1e-3 for d in stored.defects])
+                                                                 road_cfg, depths)
         if start_writing is not None:
             start_writing(height)
         if regions:
@@ -240,8 +241,9 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
     zone and whose re-measured heights scatter on the outer ring (:func:`_highpass_noise`)
     by at most :func:`~d3cli.road.rematch.noise_limit` of the defect's stored depth
     (``depths``, metres, the regions' order); a defect no window measures that cleanly
-    keeps the stored map.  ``window``: uint8 (H, W), the window side used at each pixel, 0 where the stored
-    map was kept; ``zones``: bool (H, W), every pixel of a zone matched again."""
+    keeps the stored map.  ``window``: uint8 (H, W), the window side used at each pixel, 0
+    where the stored map was kept; ``zones``: bool (H, W), every pixel of a zone matched
+    again."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
     left, right = grey
 

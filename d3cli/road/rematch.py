@@ -41,6 +41,8 @@ def noise_limit(depth: float) -> float:
     those re-matched read closer to the truth.
     """
     return max(NOISE_M, REL_NOISE * float(depth))
+
+
 #: A re-matched pixel whose best ZNCC score is below this, or whose best offset is an end
 #: of the search, keeps the stored disparity: on wet and dark pairs such pixels (specular
 #: highlights, untextured floors) are 0.5-4 px off the true disparity (median), and their
