@@ -397,9 +397,9 @@ class D3Stereo:
         timings["pt_refit"] = time.perf_counter() - t0
         again = self._match(pyr_l, refit_r, search, timings, features=refit_features, range_ends=pt.narrow_range,
                             read_counts=True)
-        if self._band_share(again) >= first_share:
-            log.info("PT: the refitted plane puts %.1f%% at the band's ends; the first one kept",
-                     100 * self._band_share(again))
+        again_share = self._band_share(again)
+        if again_share >= first_share:
+            log.info("PT: the refitted plane puts %.1f%% at the band's ends; the first one kept", 100 * again_share)
             return road, pyr_r, match, features
         info["pt"] = refit.to_info(narrow_range=pt.narrow_range) | {"refit": True, "first_band_end_share": first_share}
         return refit, refit_r, again, refit_features

@@ -360,8 +360,11 @@ def _kinds(road: RoadConfig) -> tuple:
 def _defects_of(scene: _Scene, return_regions: bool):
     """The defects of a scene, potholes first (deepest first), then bumps, with their flags."""
     found: list = []
-    for kind, sign, thr_mm in _kinds(scene.road):
-        found += _find_kind(scene, kind, sign, thr_mm)
+    # pixels of any defect of either kind: what the rings and the wall growth leave out
+    road = scene.road
+    other = scene.finite & (np.abs(scene.smooth) > min(road.min_depth_mm, road.min_height_mm) * 1e-3)
+    for kind, sign, thr_mm in _kinds(road):
+        found += _find_kind(scene, kind, sign, thr_mm, other)
     found.sort(key=lambda kd: (kd[0] != "pothole", -kd[2]["max_depth_mm"]))
     defects = [with_flags(Defect(id=i + 1, kind=kind, **d, low_confidence=False), scene.road, scene.rules)
                for i, (kind, _, d) in enumerate(found)]
@@ -414,12 +417,12 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
                   map_decided=map_decided, sigma_d=sigma_d, split_noise=split_noise, full_shape=shape, fill=fill)
 
 
-def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float) -> list:
-    """(kind, region mask, measurements) of every pothole (``sign`` -1) or bump (+1)."""
+def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, other: np.ndarray) -> list:
+    """(kind, region mask, measurements) of every pothole (``sign`` -1) or bump (+1);
+    ``other``: the pixels of any defect of either kind (:func:`_defects_of`)."""
     road, tuning = s.road, s.tuning
     with np.errstate(invalid="ignore"):
         cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
-    other = s.finite & (np.abs(s.smooth) > min(road.min_depth_mm, road.min_height_mm) * 1e-3)
     # the labels, then each component's bounding box in one compiled pass
     n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
     stats = label_boxes(labels, n)
