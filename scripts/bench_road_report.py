@@ -66,19 +66,14 @@ def _folder_bytes(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
 
 
-def _vmhwm_mb() -> float:
-    """Peak resident set size of this process (VmHWM), MB."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
-
-
 def _child_run(seed: int, n: int, report: bool) -> None:
     """``d3stereo run -c road --outputs survey [--road-report]`` over the pairs, in this
     (fresh) process; prints its VmHWM."""
     from d3cli import load_config
     from d3cli.batch import run_batch
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_speed import _vmhwm_mb  # the speed benchmark's reading of VmHWM
 
     cfg = load_config("road", ["run.backend=cpu", f"road.report={str(report).lower()}", "run.outputs=survey"])
     with tempfile.TemporaryDirectory() as out:
