@@ -1,10 +1,10 @@
 """Compiled loops of the road report (numba, cached beside this file like the kernels').
 
 Each function computes what a NumPy, OpenCV or scikit-image expression of
-:mod:`d3cli.road.plane`, :mod:`d3cli.road.defects`, :mod:`d3cli.road.morphology`,
-:mod:`d3cli.road.confidence`, :mod:`d3cli.road.rematch` or :mod:`d3cli.road.outputs`
-computes, the same numbers, in one pass over the pixels or points instead of a chain of
-whole-array temporaries: on a 1280x720 map the NumPy versions took most of the road
+:mod:`d3cli.road.plane`, :mod:`d3cli.road.defects`, :mod:`d3cli.road.splitting`,
+:mod:`d3cli.road.morphology`, :mod:`d3cli.road.confidence`, :mod:`d3cli.road.rematch` or
+:mod:`d3cli.road.outputs` computes, the same numbers, in one pass over the pixels or points
+instead of a chain of whole-array temporaries: on a 1280x720 map the NumPy versions took most of the road
 report's time (tests/road/test_compiled.py holds each against its reference).  The loops
 release the interpreter lock, so the report's second thread (:mod:`d3cli.road.threads`)
 runs beside them.  May import numpy, numba and the standard library only.
