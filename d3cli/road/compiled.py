@@ -683,3 +683,83 @@ def best_offsets(scores, centre, offsets, step, min_score):  # pragma: no cover 
             new[v, u] = (centre[v, u] + offsets[best]) + shift * step32
             reliable[v, u] = b >= floor and raw > 0 and raw < k - 1
     return new, reliable
+
+
+@njit(cache=True, nogil=True)
+def cell_means(values, decided, step):  # pragma: no cover - compiled
+    """(mean, decided) of the cells of ``step x step`` pixels of a float32 map ``values`` (inf:
+    no value) for :meth:`d3cli.road.grid.Grid.disparities` (the cells of the last row and
+    column hold what is left of the map): a cell has a value where at least half of its
+    pixels have a finite one (their mean, accumulated in float64; inf elsewhere) and is
+    decided where at least half of those are ``decided``."""
+    h, w = values.shape
+    rows, cols = (h + step - 1) // step, (w + step - 1) // step
+    out = np.empty((rows, cols), np.float32)
+    out_decided = np.zeros((rows, cols), np.bool_)
+    for i in range(rows):
+        for j in range(cols):
+            total = 0.0
+            n = 0
+            n_decided = 0
+            pixels = 0
+            for v in range(i * step, min((i + 1) * step, h)):
+                for u in range(j * step, min((j + 1) * step, w)):
+                    pixels += 1
+                    x = values[v, u]
+                    if np.isfinite(x):
+                        total += x
+                        n += 1
+                        if decided[v, u]:
+                            n_decided += 1
+            if 2 * n >= pixels and n > 0:
+                out[i, j] = total / n
+                out_decided[i, j] = 2 * n_decided >= n
+            else:
+                out[i, j] = np.inf
+    return out, out_decided
+
+
+@njit(cache=True, nogil=True)
+def _reflect(i, n):  # pragma: no cover - compiled
+    """Index ``i`` mirrored into ``0 .. n - 1`` (OpenCV's BORDER_REFLECT: ``fedcba|abcdef``)."""
+    while i < 0 or i >= n:
+        i = -i - 1 if i < 0 else 2 * n - 1 - i
+    return i
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def shifted_rows(image, v0, u0, disparity, offsets):  # pragma: no cover - compiled
+    """The right image warped onto the left's box at rows ``v0 ..`` and columns ``u0 ..``
+    for each offset: ``out[k, y, x] = image(v0 + y, u0 + x - disparity[y, x] - offsets[k])``,
+    float32 (K, h, w) for ``disparity`` (h, w), interpolated along the row with OpenCV's
+    bicubic kernel (``A = -0.75``) and mirrored at the image's edges (BORDER_REFLECT).
+
+    What ``cv2.remap(image, u - (d + o), v, INTER_CUBIC, borderMode=BORDER_REFLECT)``
+    computes, for a shift along rows only: four taps instead of sixteen, and the exact
+    position instead of OpenCV's 1/32-pixel table (the same values on the table's
+    positions, float32 rounding aside)."""
+    h, w = disparity.shape
+    cols = image.shape[1]
+    k_n = offsets.shape[0]
+    out = np.empty((k_n, h, w), np.float32)
+    a = np.float32(-0.75)
+    one, two, three = np.float32(1.0), np.float32(2.0), np.float32(3.0)
+    for k in range(k_n):
+        for y in range(h):
+            row = image[v0 + y]
+            for x in range(w):
+                pos = np.float32(u0 + x) - (disparity[y, x] + offsets[k])
+                i = int(np.floor(pos))
+                t = pos - np.float32(i)
+                t1 = t + one
+                c0 = ((a * t1 - np.float32(5.0) * a) * t1 + np.float32(8.0) * a) * t1 - np.float32(4.0) * a
+                c1 = ((a + two) * t - (a + three)) * t * t + one
+                s = one - t
+                c2 = ((a + two) * s - (a + three)) * s * s + one
+                c3 = one - c0 - c1 - c2
+                if i >= 1 and i + 2 < cols:
+                    out[k, y, x] = c0 * row[i - 1] + c1 * row[i] + c2 * row[i + 1] + c3 * row[i + 2]
+                else:
+                    out[k, y, x] = (c0 * row[_reflect(i - 1, cols)] + c1 * row[_reflect(i, cols)]
+                                    + c2 * row[_reflect(i + 1, cols)] + c3 * row[_reflect(i + 2, cols)])
+    return out

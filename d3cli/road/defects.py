@@ -156,6 +156,11 @@ class DefectTuning:
         deepest read wet potholes 13 % deep in the median and 44 % of them more than 20 %
         off; 2 % of the region: 1 %, 14 %; dusk 7 % -> 2 %, sun unchanged within 20 %).
         Pointed floors pay for it: a cone reads about 6 % shallow.
+    gap_px : int
+        Radius of the disc a region is grown by before its reference ring starts (the ring
+        keeps off the wall's last pixels).
+    wall_step_px : int
+        Width of the bands :func:`_with_walls` follows a wall down in.
     """
 
     median_px: int = 5
@@ -167,6 +172,8 @@ class DefectTuning:
     local_noise_px: int = 80
     peak_px: int = 9
     peak_share: float = 0.02
+    gap_px: int = 2
+    wall_step_px: int = 2
 
 
 @dataclass(frozen=True)
@@ -267,7 +274,8 @@ class Candidates:
 
 
 def candidate_regions(height: np.ndarray, decided: np.ndarray, camera: Camera, plane: RoadPlane,
-                      road: RoadConfig | None = None, tuning: DefectTuning | None = None) -> Candidates:
+                      road: RoadConfig | None = None, tuning: DefectTuning | None = None, *,
+                      rules: ConfidenceRules | None = None) -> Candidates:
     """The first pass of a report that measures its defects on a re-matched map: the
     defects of the stored map, found and split as by :func:`find_defects` but measured only
     as far as telling a defect from none and its depth go (``kind``, ``bbox_px``,
@@ -279,6 +287,8 @@ def candidate_regions(height: np.ndarray, decided: np.ndarray, camera: Camera, p
     ----------
     height, decided, camera, plane, road, tuning
         As :func:`find_defects`.
+    rules : ConfidenceRules, optional, keyword-only
+        As :func:`find_defects`; :func:`remeasure` keeps them unless given others.
 
     Returns
     -------
@@ -288,7 +298,7 @@ def candidate_regions(height: np.ndarray, decided: np.ndarray, camera: Camera, p
     """
     road = RoadConfig() if road is None else road
     scene = replace(prepare_scene(height, decided, camera, plane, road, DefectTuning() if tuning is None else tuning),
-                    brief=True)
+                    brief=True, rules=ConfidenceRules() if rules is None else rules)
     defects, regions = _defects_of(scene, True)
     return Candidates(scene, defects, regions)
 
@@ -315,7 +325,9 @@ def remeasure(stored: Candidates, height: np.ndarray, zones: np.ndarray, *, rule
         The height map after the re-match.
     zones : ndarray, bool, (H, W)
         The pixels the re-match may have changed (every re-matched zone).
-    rules, return_regions : keyword-only
+    rules : ConfidenceRules, optional, keyword-only
+        As :func:`find_defects`; by default the first pass's.
+    return_regions : bool, keyword-only
         As :func:`find_defects`.
     """
     first = stored.scene
@@ -325,7 +337,7 @@ def remeasure(stored: Candidates, height: np.ndarray, zones: np.ndarray, *, rule
     # the filtered heights changed within the filter's reach of the zones
     reach = dilate_near(zones, np.ones((size, size), np.uint8))
     scene = replace(first, height=height, finite=np.isfinite(height), smooth=smooth, brief=False, only=reach,
-                    rules=ConfidenceRules() if rules is None else rules)
+                    rules=first.rules if rules is None else rules)
     defects, regions = _defects_of(scene, True)
     pairs = list(zip(stored.defects, stored.regions))
     defects = [with_flags(d, scene.road, scene.rules, rematch_change=_rematch_change(d, r, pairs))
@@ -395,7 +407,7 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     u_all = np.broadcast_to(np.arange(shape[1])[None, :], shape)
     ring_px, local_noise_px = road.ring_px, tuning.local_noise_px
     kernel_ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
-    kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    kernel_gap = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * tuning.gap_px + 1, 2 * tuning.gap_px + 1))
     kernel_local = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * local_noise_px + 1, 2 * local_noise_px + 1))
     map_decided = float(decided[finite].mean()) if finite.any() else 0.0
     # Z of every pixel and its disparity residual, in one compiled pass; the medians of the
@@ -584,11 +596,11 @@ def _peak(depth: np.ndarray, peak_px: int, share: float = 0.0) -> float:
     return float(np.mean(np.partition(depth, depth.size - k)[depth.size - k:]))
 
 
-def _with_walls(s: _Scene, comp: np.ndarray, sign: float, other: np.ndarray, *, step_px: int = 2,
-                tolerance_m: float = 5e-4) -> np.ndarray:
+def _with_walls(s: _Scene, comp: np.ndarray, sign: float, other: np.ndarray, *, tolerance_m: float = 5e-4) -> np.ndarray:
     """``comp`` grown down its walls to their foot: every pixel within ``r`` of it, where
     ``r`` is the first distance at which the median depth of the band of pixels
-    ``(r - step_px, r]`` away (other defects left out) comes within ``tolerance_m`` of its
+    ``(r - step_px, r]`` away (other defects left out; ``step_px``: the tuning's
+    ``wall_step_px``) comes within ``tolerance_m`` of its
     lowest value out to ``4 ring_px`` or the radius of a disc of ``comp``'s area, whichever
     is more (a cone twice as deep as the threshold has a wall as wide as that radius).
 
@@ -599,6 +611,7 @@ def _with_walls(s: _Scene, comp: np.ndarray, sign: float, other: np.ndarray, *, 
     where the growth stops; out to the first near-minimum, so a neighbouring pothole
     further out does not pull it on."""
     reach = max(4 * s.road.ring_px, int(np.ceil(np.sqrt(np.count_nonzero(comp) / np.pi))))
+    step_px = s.tuning.wall_step_px
     box = grown_box(comp, reach, reach)
     inside = comp[box]
     dist = cv2.distanceTransform((~inside).astype(np.uint8), cv2.DIST_L2, 5)

@@ -22,13 +22,14 @@ from ..data.formats import atomic_write, write_image, write_pfm
 from ..errors import plural
 from ..data.legend import vertical_colour_bar
 from .confidence import REASONS, describe
-from .defects import candidate_regions, find_defects, remeasure, with_flags
+from .defects import DefectTuning, candidate_regions, find_defects, remeasure, with_flags
+from .grid import Grid
 from .morphology import dilate_near, grown_box
 from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
 from .compiled import back_project, height_colours
 from .pointcloud import Camera
-from .rematch import MIN_RELIABLE, WINDOWS, grey_image, match_margin, noise_limit, rematch
+from .rematch import MIN_RELIABLE, WINDOWS, grey_image, hopeless, match_margin, noise_limit, rematch
 from .severity import pothole_severity, survey_summary
 from .threads import Job, map_on_threads
 
@@ -126,15 +127,21 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     # Only pixels the right camera sees too are measurements (the left-border strip is
     # extrapolated by the hole filling): they are "no estimate" in every road output.
     finite = seen_by_both(disparity)
-    points = back_project(np.asarray(disparity, np.float32), finite, float(camera.f), float(camera.baseline),
-                          float(camera.cx), float(camera.cy), float(camera.doffs))  # disparity_to_points' points
-    plane = fit_road_plane(points, camera, sigma_disparity=road_cfg.sigma_disparity)
+    # The plane and the defects on the measuring grid (d3cli.road.grid): its cells'
+    # disparities and their 3-D points (disparity_to_points' points of the cells' centres).
+    grid = Grid.for_shape(disparity.shape)
+    cells, cells_decided = grid.disparities(disparity, finite, decided)
+    on_grid = grid.camera(camera)
+    points = back_project(cells, np.isfinite(cells), float(on_grid.f), float(on_grid.baseline), float(on_grid.cx),
+                          float(on_grid.cy), float(on_grid.doffs))
+    plane = fit_road_plane(points, camera, sigma_disparity=road_cfg.sigma_disparity,
+                           decimate=grid.decimate(16), fine_decimate=grid.decimate(4))
     if plane is None:
         return [], ["no road report: too few points for a road plane"]
-    height = height_map(disparity, finite, camera, plane)
     groups = frozenset(("height", "pictures")) if groups is None else groups
 
-    def write_height(values):
+    def write_height(disparity_map):  # the height files, in the image's pixels
+        values = height_map(disparity_map, finite, camera, plane)
         if "height" in groups:
             write_pfm(pair_dir / HEIGHT_FILE, values)
         if "pictures" in groups:
@@ -152,21 +159,32 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
             writing.append(Job(write_height, values))
 
     if right is None or fallback:
-        start_writing(height)
+        start_writing(disparity)
     try:
-        return _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane, height,
-                       pt, fallback, None if writing else start_writing, warnings)
+        return _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane,
+                       (grid, cells, cells_decided), pt, fallback, None if writing else start_writing, warnings)
     finally:
         for job in writing:
             job.result()
 
 
-def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane, height, pt,
+def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane, on_grid, pt,
             fallback, start_writing, warnings):
-    """The rest of :func:`road_report` once the plane and the stored map's heights are known;
-    ``start_writing(heights)``, unless None (started already), starts writing the height
-    files once the final heights are known."""
+    """The rest of :func:`road_report` once the plane is known; ``start_writing(disparity)``,
+    unless None (started already), starts writing the height files once the final
+    disparities are known.  The defects are found and measured on the measuring grid
+    (``on_grid``: the :class:`~d3cli.road.grid.Grid`, its cells' disparities and decided
+    cells), re-matched and drawn in the image's pixels."""
     decided_share = float(decided.mean()) if decided.size else 0.0
+    grid, cell_disparities, cells_decided = on_grid
+    g_camera = grid.camera(camera)
+    cells = height_map(cell_disparities, np.isfinite(cell_disparities), g_camera, plane)  # the cells' heights
+    on_grid = dict(camera=g_camera, plane=plane, road=grid.road(road_cfg), tuning=grid.tuning(DefectTuning()))
+    rules = grid.rules()
+
+    def in_pixels(defects, masks):  # the defects of the grid and their masks, in the image's pixels
+        both = [grid.defect(d, m) for d, m in zip(defects, masks)]
+        return [d for d, _ in both], [m for _, m in both]
     notes: list[str] = []
     if fallback:
         # No road plane to measure against: no defects.  Said in defects.json (report.html
@@ -175,23 +193,25 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
         notes.append(f"no road surface: {reason}; no defects measured")
         defects, regions = [], []
     elif right is None:
-        defects, regions = find_defects(height, decided, camera, plane, road_cfg, return_regions=True)
+        defects, regions = in_pixels(*find_defects(cells, cells_decided, **on_grid, return_regions=True, rules=rules))
         if start_writing is not None:
-            start_writing(height)
+            start_writing(disparity)
     else:
         # With the right image the defects found on the stored map are matched again with a
         # small window, then found and measured on that map (remeasure).
-        stored = candidate_regions(height, decided, camera, plane, road_cfg)
+        stored = candidate_regions(cells, cells_decided, **on_grid, rules=rules)
         defects, regions = [], stored.regions
         if regions:
             grey = (grey_image(left), grey_image(right))  # made once for every region
             depths = [d.max_depth_mm * 1e-3 for d in stored.defects]  # as the stored map reads them
-            measured, windows, zones, height = _rematched_height(grey, disparity, finite, regions, camera, plane,
-                                                                 road_cfg, depths)
+            measured, windows, zones = _rematched_height(grey, disparity, finite, in_pixels(stored.defects, regions)[1],
+                                                         camera, plane, road_cfg, depths)
         if start_writing is not None:
-            start_writing(height)
+            start_writing(measured if regions else disparity)
         if regions:
-            defects, regions = remeasure(stored, height, zones, return_regions=True)
+            remeasured = grid.patched(cell_disparities, measured, finite, zones)  # the zones' cells again
+            remeasured = height_map(remeasured, np.isfinite(remeasured), g_camera, plane)
+            defects, regions = in_pixels(*remeasure(stored, remeasured, grid.any_of(zones), return_regions=True))
             # How decisively the images support each defect's disparity (the confidence's
             # weak_match), on the disparity it was measured on; the defects on both threads.
             margins = map_on_threads(lambda region: match_margin(*grey, measured, region), regions)
@@ -233,15 +253,16 @@ def _window_of(defect, region: np.ndarray, windows: np.ndarray) -> int:
 
 
 def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
-                      road_cfg, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(disparity, window, zones, height map) with the disparity inside each defect (grown by two rings:
+                      road_cfg, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(disparity, window, zones) with the disparity inside each defect (grown by two rings:
     the ring gives the reference height) matched again (:mod:`d3cli.road.rematch`) on the
     grey images ``grey`` (left, right), with the smallest window of
     :data:`~d3cli.road.rematch.WINDOWS` that re-measures at least ``MIN_RELIABLE`` of the
     zone and whose re-measured heights scatter on the outer ring (:func:`_highpass_noise`)
     by at most :func:`~d3cli.road.rematch.noise_limit` of the defect's stored depth
     (``depths``, metres, the regions' order); a defect no window measures that cleanly
-    keeps the stored map.  ``window``: uint8 (H, W), the window side used at each pixel, 0
+    keeps the stored map (the larger windows are not tried once none of them can match
+    ``MIN_RELIABLE`` of the zone, :func:`~d3cli.road.rematch.hopeless`).  ``window``: uint8 (H, W), the window side used at each pixel, 0
     where the stored map was kept; ``zones``: bool (H, W), every pixel of a zone matched
     again."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
@@ -255,10 +276,15 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
         inner = dilate_near(region, ring)
         zone = dilate_near(inner, ring) & finite
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
-        shared = {"pad_window": max(WINDOWS), "grey": grey}  # the warps, made once for the zone
-        for window in WINDOWS:
+        # The warps of the first window's box, made once for the zone: most zones stop there
+        # (a larger window warps its own, larger box).
+        shared = {"grey": grey}
+        for i, window in enumerate(WINDOWS):
             new, got = rematch(left, right, disparity, zone, window=window, shared=shared)
-            if got[zone].mean() < MIN_RELIABLE:
+            share = float(got[zone].mean())
+            if share < MIN_RELIABLE:
+                if hopeless(share, len(WINDOWS) - 1 - i):
+                    break  # no larger window matches half of the zone: the stored map
                 continue
             # Heights only in a window around the band that holds the smoothing's support.
             reach = int(np.ceil(4 * window)) + 2
@@ -280,7 +306,7 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
         zones |= zone
         if values is not None:
             out[zone] = values
-    return out, windows, zones, height_map(out, finite, camera, plane)
+    return out, windows, zones
 
 
 def _highpass_noise(height: np.ndarray, zone: np.ndarray, window: int) -> float:

@@ -22,6 +22,7 @@ import numpy as np
 from ..method.perspective import match_in_right_image
 from .compiled import footprint_grid, height_grid, inlier_count, ransac_scores, weighted_scatter
 from .pointcloud import Camera
+from .threads import map_on_threads
 
 log = logging.getLogger(__name__)
 
@@ -116,10 +117,14 @@ def fit_road_plane(
         return np.maximum(min_tolerance_m, p[:, 2] ** 2 / (camera.f * camera.baseline) * sigma_disparity * 2.0)
 
     tol_sub = tolerance(sub)
-    # The hypotheses drawn first (the same draws, in the same order, as one at a time),
-    # then scored in one compiled pass each; the first of the best scores wins.
-    triples = np.array([rng.choice(len(sub), 3, replace=False) for _ in range(iterations)], np.int64).reshape(-1, 3)
-    scores, normals, offsets = ransac_scores(sub, triples, tol_sub)
+    # The hypotheses drawn at once (a triple that repeats a point is degenerate and scores
+    # -1, as a collinear one does), then scored in compiled passes, each half of them on
+    # one of the report's threads; the first of the best scores wins.
+    triples = rng.integers(0, len(sub), (iterations, 3), dtype=np.int64)
+    half = (iterations + 1) // 2
+    parts = map_on_threads(lambda part: ransac_scores(sub, triples[part], tol_sub),
+                           (slice(0, half), slice(half, iterations)))
+    scores, normals, offsets = (np.concatenate([p[i] for p in parts]) for i in range(3))
     if not len(scores) or scores.max() < 0:
         return None
     best = int(np.argmax(scores))

@@ -263,6 +263,29 @@ def test_best_offsets_are_the_numpy_choice():
     assert got_reliable.any() and not got_reliable.all()
 
 
+def test_shifted_rows_are_opencvs_bicubic_remap_along_rows():
+    """On OpenCV's 1/32-pixel positions the same values, beyond the edges too (BORDER_REFLECT);
+    elsewhere within that table's rounding."""
+    import cv2
+
+    rng = np.random.default_rng(17)
+    image = cv2.GaussianBlur(rng.uniform(0, 255, (50, 70)).astype(np.float32), (0, 0), 1.2)
+    v0, u0, h, w = 6, 0, 30, 70
+    offsets = np.arange(-3.0, 3.0 + 1e-9, 0.5, dtype=np.float32)
+    vv, uu = np.mgrid[v0:v0 + h, u0:u0 + w].astype(np.float32)
+
+    def remap(d):
+        return np.stack([cv2.remap(image, uu - (d + o), vv, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+                         for o in offsets])
+
+    on_table = (np.round(rng.uniform(-5, 30, (h, w)) * 32) / 32).astype(np.float32)
+    on_table[:, :3] = -70.0  # beyond the right edge
+    np.testing.assert_allclose(compiled.shifted_rows(image, v0, u0, on_table, offsets), remap(on_table), atol=1e-3)
+    anywhere = rng.uniform(-5, 30, (h, w)).astype(np.float32)
+    slope = float(np.abs(np.diff(image, axis=1)).max())
+    assert np.abs(compiled.shifted_rows(image, v0, u0, anywhere, offsets) - remap(anywhere)).max() <= slope / 32
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_band_medians_are_the_medians_of_each_band(dtype):
     rng = np.random.default_rng(21)

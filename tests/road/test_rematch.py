@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from d3cli.road.rematch import WINDOWS, match_margin, rematch
+from d3cli.road.rematch import MIN_RELIABLE, SHARE_GROWTH, WINDOWS, hopeless, match_margin, rematch
 from tests.helpers import textured_pair
 from tests.reference.road import ref_match_margin
 
@@ -22,6 +22,10 @@ def test_shared_warps_give_the_results_of_separate_calls():
         np.testing.assert_array_equal(alone[0], together[0])
         np.testing.assert_array_equal(alone[1], together[1])
     assert shared["warps"] is not None  # the shared path was taken
+    shared = {}  # the first window's warps, smallest first: the larger windows warp their own box
+    for window in WINDOWS:
+        np.testing.assert_array_equal(rematch(left, right, disp, zone, window=window)[0],
+                                      rematch(left, right, disp, zone, window=window, shared=shared)[0])
     holed = disp.copy()
     holed[50, 70] = np.inf  # a pixel without an estimate: each call on its own
     shared = {"pad_window": max(WINDOWS)}
@@ -78,3 +82,35 @@ def test_the_noise_limit_grows_with_the_depth_past_the_absolute_one():
     assert noise_limit(0.0) == noise_limit(0.02) == NOISE_M  # shallow: 1.5 mm
     assert noise_limit(0.06) == pytest.approx(REL_NOISE * 0.06) == pytest.approx(0.003)
     assert noise_limit(NOISE_M / REL_NOISE) == pytest.approx(NOISE_M)
+
+
+def test_a_zone_too_few_of_whose_pixels_match_tries_no_larger_window():
+    """Below MIN_RELIABLE / SHARE_GROWTH^(windows left) no larger window is tried; a share
+    that could still grow to MIN_RELIABLE tries the next."""
+    left_over = len(WINDOWS) - 1
+    limit = MIN_RELIABLE / SHARE_GROWTH ** left_over
+    assert hopeless(0.99 * limit, left_over) and not hopeless(1.01 * limit, left_over)
+    assert hopeless(0.0, 1) and not hopeless(MIN_RELIABLE, 0)
+
+
+def test_an_untextured_zone_is_matched_with_the_first_window_only(monkeypatch, tmp_path):
+    from d3cli.config import RoadConfig
+    from d3cli.road import outputs
+
+    from .scene import pothole_scene
+
+    disparity, camera, _ = pothole_scene(depth=0.08, radius=0.3)
+    flat = np.full(disparity.shape, 100, np.uint8)  # no texture: no pixel matches reliably
+    tried = []
+    real = outputs.rematch
+
+    def counting(*args, window, **kwargs):
+        tried.append(window)
+        return real(*args, window=window, **kwargs)
+
+    monkeypatch.setattr(outputs, "rematch", counting)
+    items = outputs.road_report(tmp_path, flat, disparity, np.isfinite(disparity), camera, {}, RoadConfig(),
+                                right=flat, groups=frozenset())[0]
+    assert [d["kind"] for d in items] == ["pothole"]
+    assert tried == [WINDOWS[0]]
+    assert items[0]["evidence"]["rematch_window"] == 0  # the stored map kept
