@@ -101,10 +101,11 @@ def _memory(seed: int, n: int) -> None:
 #: (its callees included) as a share of the whole; an indented one is a part of the one
 #: above, the splitting a part of both passes.
 STAGES = (
+    ("the grid's cells", "d3cli/road/grid.py", "disparities"),
     ("plane fit", "d3cli/road/plane.py", "fit_road_plane"),
     ("first pass", "d3cli/road/defects.py", "candidate_regions"),
     ("  of which the per-map preparation", "d3cli/road/defects.py", "prepare_scene"),
-    ("re-match", "d3cli/road/outputs.py", "_rematched_height"),
+    ("re-match", "d3cli/road/outputs.py", "_rematched"),
     ("second pass", "d3cli/road/defects.py", "remeasure"),
     ("the splitting, in both passes", "d3cli/road/splitting.py", "split_component"),
     ("match margin", "d3cli/road/rematch.py", "match_margin"),

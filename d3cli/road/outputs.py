@@ -131,9 +131,9 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
     # disparities and their 3-D points (disparity_to_points' points of the cells' centres).
     grid = Grid.for_shape(disparity.shape)
     cells, cells_decided = grid.disparities(disparity, finite, decided)
-    on_grid = grid.camera(camera)
-    points = back_project(cells, np.isfinite(cells), float(on_grid.f), float(on_grid.baseline), float(on_grid.cx),
-                          float(on_grid.cy), float(on_grid.doffs))
+    g_camera = grid.camera(camera)
+    points = back_project(cells, np.isfinite(cells), float(g_camera.f), float(g_camera.baseline), float(g_camera.cx),
+                          float(g_camera.cy), float(g_camera.doffs))
     plane = fit_road_plane(points, camera, sigma_disparity=road_cfg.sigma_disparity,
                            decimate=grid.decimate(16), fine_decimate=grid.decimate(4))
     if plane is None:
@@ -168,19 +168,19 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
             job.result()
 
 
-def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane, on_grid, pt,
+def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane, grid_maps, pt,
             fallback, start_writing, warnings):
     """The rest of :func:`road_report` once the plane is known; ``start_writing(disparity)``,
     unless None (started already), starts writing the height files once the final
     disparities are known.  The defects are found and measured on the measuring grid
-    (``on_grid``: the :class:`~d3cli.road.grid.Grid`, its cells' disparities and decided
+    (``grid_maps``: the :class:`~d3cli.road.grid.Grid`, its cells' disparities and decided
     cells), re-matched and drawn in the image's pixels."""
     decided_share = float(decided.mean()) if decided.size else 0.0
-    grid, cell_disparities, cells_decided = on_grid
+    grid, cell_disparities, cells_decided = grid_maps
     g_camera = grid.camera(camera)
     cells = height_map(cell_disparities, np.isfinite(cell_disparities), g_camera, plane)  # the cells' heights
     on_grid = dict(camera=g_camera, plane=plane, road=grid.road(road_cfg), tuning=grid.tuning(DefectTuning()))
-    rules = grid.rules()
+    rules = grid.rules()  # the confidence's rules, their widths in cells
 
     def in_pixels(defects, masks):  # the defects of the grid and their masks, in the image's pixels
         both = [grid.defect(d, m) for d, m in zip(defects, masks)]
@@ -204,8 +204,8 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
         if regions:
             grey = (grey_image(left), grey_image(right))  # made once for every region
             depths = [d.max_depth_mm * 1e-3 for d in stored.defects]  # as the stored map reads them
-            measured, windows, zones = _rematched_height(grey, disparity, finite, in_pixels(stored.defects, regions)[1],
-                                                         camera, plane, road_cfg, depths)
+            measured, windows, zones = _rematched(grey, disparity, finite, in_pixels(stored.defects, regions)[1],
+                                                  camera, plane, road_cfg, depths)
         if start_writing is not None:
             start_writing(measured if regions else disparity)
         if regions:
@@ -252,8 +252,8 @@ def _window_of(defect, region: np.ndarray, windows: np.ndarray) -> int:
     return int(np.bincount(windows[box][region[box]]).argmax())
 
 
-def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
-                      road_cfg, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _rematched(grey, disparity, finite, regions, camera: Camera, plane, road_cfg,
+               depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(disparity, window, zones) with the disparity inside each defect (grown by two rings:
     the ring gives the reference height) matched again (:mod:`d3cli.road.rematch`) on the
     grey images ``grey`` (left, right), with the smallest window of
@@ -262,9 +262,10 @@ def _rematched_height(grey, disparity, finite, regions, camera: Camera, plane,
     by at most :func:`~d3cli.road.rematch.noise_limit` of the defect's stored depth
     (``depths``, metres, the regions' order); a defect no window measures that cleanly
     keeps the stored map (the larger windows are not tried once none of them can match
-    ``MIN_RELIABLE`` of the zone, :func:`~d3cli.road.rematch.hopeless`).  ``window``: uint8 (H, W), the window side used at each pixel, 0
-    where the stored map was kept; ``zones``: bool (H, W), every pixel of a zone matched
-    again."""
+    ``MIN_RELIABLE`` of the zone, :func:`~d3cli.road.rematch.hopeless`).  ``regions``: bool
+    (H, W) masks in the image's pixels; ``window``: uint8 (H, W), the window side used at
+    each pixel, 0 where the stored map was kept; ``zones``: bool (H, W), every pixel of a
+    zone matched again."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
     left, right = grey
 
