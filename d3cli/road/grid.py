@@ -1,8 +1,8 @@
 """The measuring grid: the resolution potholes and bumps are found and measured at.
 
-A map wider than :data:`GRID_COLUMNS` pixels is measured on cells of ``step x step``
-pixels (``step = width // GRID_COLUMNS``: 2 for 720p and 1080p-wide crops, 3 for 1920
-columns), each holding the mean height of its pixels.  The disparity of a road pair is
+A map at least twice :data:`GRID_COLUMNS` pixels wide is measured on cells of ``step x
+step`` pixels (``step = width // GRID_COLUMNS``: 2 for 1280 columns, 3 for 1920), each
+holding the mean disparity of its pixels.  The disparity of a road pair is
 matched with a 25-pixel window and smoothed over a radius of 15 (``configs/road.yaml``),
 so its errors are correlated over about 30 pixels (``noise_cell_px``) and a 2x2 cell
 holds no detail the map has: the depths, areas and volumes read the same, and every
@@ -14,7 +14,7 @@ brought to the grid after matching.
 :class:`Grid` owns the correspondence: the camera of the grid (a cell is a pixel of an
 image ``step`` times smaller), the per-pixel settings in grid cells, the maps down to the
 grid and the defects (their boxes, centroids, outlines and masks) back to the image's
-pixels.  May import numpy, OpenCV, the road package's own modules and the standard library.
+pixels.  May import numpy, the road package's own modules and the standard library.
 """
 
 from __future__ import annotations
@@ -151,13 +151,6 @@ class Grid:
         return out
 
     # -- back to the image's pixels -------------------------------------------------------
-
-    def pixels(self, cells: np.ndarray) -> np.ndarray:
-        """bool (H, W): the pixels of the cells ``cells``."""
-        if self.step == 1:
-            return cells
-        s, (h, w) = self.step, self.shape
-        return np.repeat(np.repeat(cells, s, axis=0), s, axis=1)[:h, :w]
 
     def defect(self, defect, cells: np.ndarray):
         """(defect, mask) in the image's pixels of a defect measured on the grid: its mask

@@ -124,10 +124,10 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
         (the true disparity may lie beyond it), keeps its stored disparity.
     shared : dict, optional, keyword-only
         What calls for one ``mask`` with several windows share (the caller passes the same
-        empty dict to each, largest window first or ``{"pad_window": largest}``): the
-        grey images and the right image warped by every offset, computed once on the box
-        of the largest window; each call reads its own box out of it, so the results are
-        those of separate calls.  Used only where the box's disparities are all finite
+        dict to each): the grey images and the right image warped by every offset,
+        computed once on the box of the first call's window, or of ``"pad_window"`` where
+        the dict gives one; a call whose box that holds reads its own box out of it, one
+        with a larger window warps its own, so the results are those of separate calls.  Used only where the box's disparities are all finite
         (else a pixel without one is searched around the box's own median).
 
     Returns
