@@ -763,3 +763,133 @@ def shifted_rows(image, v0, u0, disparity, offsets):  # pragma: no cover - compi
                     out[k, y, x] = (c0 * row[_reflect(i - 1, cols)] + c1 * row[_reflect(i, cols)]
                                     + c2 * row[_reflect(i + 1, cols)] + c3 * row[_reflect(i + 2, cols)])
     return out
+
+
+@njit(cache=True, nogil=True)
+def _reflect_101(i, n):  # pragma: no cover - compiled
+    """Index ``i`` mirrored into ``0 .. n - 1`` without repeating the edge (OpenCV's
+    BORDER_REFLECT_101, cv2.blur's default: ``dcb|abcd|cba``)."""
+    if n == 1:
+        return 0
+    while i < 0 or i >= n:
+        i = -i if i < 0 else 2 * n - 2 - i
+    return i
+
+
+@njit(cache=True, nogil=True)
+def zncc_scores(left, warps, r0, r1, c0, c1, window):  # pragma: no cover - compiled
+    """Zero-mean NCC of ``left`` (h, w) with each of ``warps`` (K, h, w) over ``window x
+    window`` windows centred on the pixels of rows ``r0:r1`` and columns ``c0:c1``:
+    float32 (K, r1 - r0, c1 - c0).  The window sums run along the rows and then down the
+    columns, in float64; a window reaching past the arrays' edge reads them mirrored
+    (BORDER_REFLECT_101, as ``cv2.blur``).  A window's standard deviations are at least
+    1e-3 (variance 1e-6).
+
+    What ``cv2.blur`` box filters of the images, their squares and their product and a
+    chain of whole-array expressions compute per offset, on the pixels asked for only."""
+    h, w = left.shape
+    k_n = warps.shape[0]
+    half = window // 2
+    area = float(window * window)
+    rows, cols = r1 - r0, c1 - c0
+    n_rows, n_cols = rows + 2 * half, cols + 2 * half
+    out = np.empty((k_n, rows, cols), np.float32)
+    # the rows and columns each window reads, mirrored at the edges
+    ys = np.empty(n_rows, np.int64)
+    xs = np.empty(n_cols, np.int64)
+    for y in range(n_rows):
+        ys[y] = _reflect_101(r0 - half + y, h)
+    for x in range(n_cols):
+        xs[x] = _reflect_101(c0 - half + x, w)
+    lp = np.empty((n_rows, n_cols))
+    for y in range(n_rows):
+        for x in range(n_cols):
+            lp[y, x] = left[ys[y], xs[x]]
+    # sums along the rows (a running sum over ``window`` columns), then down the columns
+    row_a = np.empty((n_rows, cols))
+    row_b = np.empty((n_rows, cols))
+    row_c = np.empty((n_rows, cols))
+    l_mean = np.empty((rows, cols))
+    l_std = np.empty((rows, cols))
+    for y in range(n_rows):
+        s = 0.0
+        ss = 0.0
+        for x in range(window - 1):
+            v = lp[y, x]
+            s += v
+            ss += v * v
+        for x in range(cols):
+            v = lp[y, x + window - 1]
+            s += v
+            ss += v * v
+            row_a[y, x] = s
+            row_b[y, x] = ss
+            v = lp[y, x]
+            s -= v
+            ss -= v * v
+    for x in range(cols):
+        s = 0.0
+        ss = 0.0
+        for y in range(window - 1):
+            s += row_a[y, x]
+            ss += row_b[y, x]
+        for y in range(rows):
+            s += row_a[y + window - 1, x]
+            ss += row_b[y + window - 1, x]
+            m = s / area
+            l_mean[y, x] = m
+            l_std[y, x] = np.sqrt(max(ss / area - m * m, 1e-6))
+            s -= row_a[y, x]
+            ss -= row_b[y, x]
+    wp = np.empty(n_cols)
+    inv_area = 1.0 / area
+    inv_l_std = 1.0 / l_std
+    col_a = np.empty(cols)
+    col_b = np.empty(cols)
+    col_c = np.empty(cols)
+    for k in range(k_n):
+        for y in range(n_rows):
+            yy = ys[y]
+            for x in range(n_cols):
+                wp[x] = warps[k, yy, xs[x]]
+            s = 0.0
+            ss = 0.0
+            sl = 0.0
+            for x in range(window - 1):
+                v = wp[x]
+                s += v
+                ss += v * v
+                sl += v * lp[y, x]
+            for x in range(cols):
+                v = wp[x + window - 1]
+                s += v
+                ss += v * v
+                sl += v * lp[y, x + window - 1]
+                row_a[y, x] = s
+                row_b[y, x] = ss
+                row_c[y, x] = sl
+                v = wp[x]
+                s -= v
+                ss -= v * v
+                sl -= v * lp[y, x]
+        # down the columns: every column's running sums side by side (one row at a time)
+        col_a[:] = 0.0
+        col_b[:] = 0.0
+        col_c[:] = 0.0
+        for y in range(window - 1):
+            for x in range(cols):
+                col_a[x] += row_a[y, x]
+                col_b[x] += row_b[y, x]
+                col_c[x] += row_c[y, x]
+        for y in range(rows):
+            for x in range(cols):
+                a = col_a[x] + row_a[y + window - 1, x]
+                b = col_b[x] + row_b[y + window - 1, x]
+                c = col_c[x] + row_c[y + window - 1, x]
+                m = a * inv_area
+                out[k, y, x] = (c * inv_area - l_mean[y, x] * m) * inv_l_std[y, x] / np.sqrt(
+                    max(b * inv_area - m * m, 1e-6))
+                col_a[x] = a - row_a[y, x]
+                col_b[x] = b - row_b[y, x]
+                col_c[x] = c - row_c[y, x]
+    return out

@@ -69,6 +69,25 @@ def _plane_of_scatter(centre: np.ndarray, scatter: np.ndarray) -> tuple[np.ndarr
     return n, c
 
 
+def _halves(points: np.ndarray) -> tuple:
+    """The first and the second half of ``points`` (views)."""
+    half = len(points) // 2
+    return points[:half], points[half:]
+
+
+def _scatter_on_threads(points, normal, offset, min_tolerance, depth_factor) -> tuple:
+    """:func:`~d3cli.road.compiled.weighted_scatter` of ``points`` (limit 2), each half on
+    one of the report's threads, the halves' moments joined about their common centre."""
+    parts = map_on_threads(lambda part: weighted_scatter(part, normal, offset, min_tolerance, depth_factor, 2.0),
+                           _halves(points))
+    total = sum(p[0] for p in parts)
+    if total <= 0.0:
+        return total, np.zeros(3), np.zeros((3, 3))
+    centre = sum(p[0] * p[1] for p in parts) / total
+    scatter = sum(p[2] + p[0] * np.outer(p[1] - centre, p[1] - centre) for p in parts)
+    return total, centre, scatter
+
+
 def fit_road_plane(
     points: np.ndarray,
     camera: Camera,
@@ -143,11 +162,12 @@ def fit_road_plane(
     for round_ in range(irls_rounds):
         # Tukey biweight: points beyond 2 tolerances (potholes, kerbs) get weight 0.
         use = coarse if round_ < irls_rounds - fine_rounds else fine
-        total, centre, scatter = weighted_scatter(use, n, c, min_tolerance_m, factor, 2.0)
+        total, centre, scatter = _scatter_on_threads(use, n, c, min_tolerance_m, factor)
         if total < 3:
             break
         n, c = _plane_of_scatter(centre, scatter)
-    share = inlier_count(fine, n, c, min_tolerance_m, factor) / len(fine)
+    share = sum(map_on_threads(lambda part: inlier_count(part, n, c, min_tolerance_m, factor), _halves(fine)))
+    share /= len(fine)
     return RoadPlane(normal=tuple(float(v) for v in n), offset=float(c), inlier_share=share)
 
 

@@ -12,10 +12,9 @@ stored disp.pfm is not changed) and gives the detector the floor's own depth.
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
-from .compiled import best_offsets, shifted_rows
+from .compiled import best_offsets, shifted_rows, zncc_scores
 from .morphology import grown_box
 from .threads import map_on_threads
 
@@ -87,20 +86,18 @@ def warped_right(right_grey: np.ndarray, v0: int, u0: int, disparity: np.ndarray
     return np.concatenate(parts)
 
 
-def _window_stats(image: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and standard deviation (at least 1e-3) of every ``window`` x ``window`` window
-    (box filter, mirrored border)."""
-    box = (window, window)
-    mean = cv2.blur(image, box)
-    return mean, np.sqrt(np.maximum(cv2.blur(image * image, box) - mean * mean, 1e-6))
-
-
-def _zncc(left: np.ndarray, left_stats: tuple, warped: np.ndarray, window: int) -> np.ndarray:
-    """Zero-mean NCC of every window of ``left`` (its :func:`_window_stats` given) with the
-    same window of ``warped``."""
-    l_mean, l_std = left_stats
-    r_mean, r_std = _window_stats(warped, window)
-    return (cv2.blur(left * warped, (window, window)) - l_mean * r_mean) / (l_std * r_std)
+def _zncc(left: np.ndarray, warps: np.ndarray, rows: tuple, cols: tuple, window: int) -> np.ndarray:
+    """float32 (K, rows, columns): the zero-mean NCC of every ``window`` x ``window`` window
+    of ``left`` with the same window of each of ``warps`` (K, h, w), centred on the pixels
+    of ``rows`` and ``cols`` ((start, stop) each; the windows mirrored at the arrays' edges),
+    compiled (:func:`~d3cli.road.compiled.zncc_scores`); the offsets split between the
+    report's two threads."""
+    left = np.ascontiguousarray(left, np.float32)
+    warps = np.ascontiguousarray(warps, np.float32)
+    half = (len(warps) + 1) // 2
+    parts = map_on_threads(lambda part: zncc_scores(left, warps[part], *rows, *cols, window),
+                           (slice(0, half), slice(half, len(warps))))
+    return np.concatenate(parts)
 
 
 def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np.ndarray, *,
@@ -166,7 +163,6 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     # Pixels of the box without an estimate are searched around the median, never kept.
     centre = np.where(finite, sub, float(np.median(sub[finite]))).astype(np.float32)
     lsub = lg[v0:v1, u0:u1]
-    left_stats = _window_stats(lsub, window)
     offsets = np.arange(-reach, reach + 1e-9, step, dtype=np.float32)
     warps = None
     if finite.all():  # the warps of the largest box, made once: a remap is per pixel
@@ -185,17 +181,16 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
                 warps = stack[:, v0 - b0:v1 - b0, u0 - c0:u1 - c0]
     if warps is None:
         warps = warped_right(rg, v0, u0, centre, offsets)
-    scores = np.empty((len(offsets), *lsub.shape), np.float32)
-    for k in range(len(offsets)):
-        scores[k] = _zncc(lsub, left_stats, np.ascontiguousarray(warps[k]), window)
+    # The scores of the pixels that may be re-measured (the mask's bounding box), their
+    # windows read from the box around it
+    rows, cols = (first_v - v0, last_v + 1 - v0), (first_u - u0, last_u + 1 - u0)
+    scores = _zncc(lsub, warps, rows, cols, window)
     # the best offset, a parabola through its neighbours, reliable or not: compiled
-    new, reliable = best_offsets(scores, centre, offsets, float(step), float(min_score))
-    inside = np.zeros(reliable.shape, bool)
-    inside[first_v - v0:last_v + 1 - v0, first_u - u0:last_u + 1 - u0] = \
-        todo[first_v - m0:last_v + 1 - m0, first_u - n0:last_u + 1 - n0]
-    inside &= reliable
-    sub[inside] = new[inside]
-    done[v0:v1, u0:u1] = inside
+    new, reliable = best_offsets(scores, centre[rows[0]:rows[1], cols[0]:cols[1]], offsets, float(step),
+                                 float(min_score))
+    inside = todo[first_v - m0:last_v + 1 - m0, first_u - n0:last_u + 1 - n0] & reliable
+    sub[rows[0]:rows[1], cols[0]:cols[1]][inside] = new[inside]
+    done[first_v:last_v + 1, first_u:last_u + 1] = inside
     return out, done
 
 
@@ -247,8 +242,9 @@ def match_margin(left_grey: np.ndarray, right_grey: np.ndarray, disparity: np.nd
         return float("nan")
     d = np.where(finite, d, np.float32(np.median(d[finite]))).astype(np.float32)
     lsub = np.ascontiguousarray(left_grey[v0:v1, u0:u1], np.float32)
-    left_stats = _window_stats(lsub, window)
-    at, right_of, left_of = (_zncc(lsub, left_stats, w, window)
-                             for w in warped_right(right_grey, v0, u0, d, np.array([0.0, 1.0, -1.0], np.float32)))
+    inner = grown_box(region[v0:v1, u0:u1], 0, 0)  # the region's own box: its pixels' windows
+    rows, cols = (inner[0].start, inner[0].stop), (inner[1].start, inner[1].stop)
+    at, right_of, left_of = _zncc(lsub, warped_right(right_grey, v0, u0, d, np.array([0.0, 1.0, -1.0], np.float32)),
+                                  rows, cols, window)
     margin = at - np.maximum(right_of, left_of)
-    return float(np.median(margin[region[v0:v1, u0:u1]]))
+    return float(np.median(margin[region[v0:v1, u0:u1][inner]]))

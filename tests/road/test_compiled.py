@@ -286,6 +286,30 @@ def test_shifted_rows_are_opencvs_bicubic_remap_along_rows():
     assert np.abs(compiled.shifted_rows(image, v0, u0, anywhere, offsets) - remap(anywhere)).max() <= slope / 32
 
 
+@pytest.mark.parametrize("rows, cols", [((0, 20), (0, 30)), ((4, 15), (7, 22))])
+def test_zncc_scores_are_the_windows_zero_mean_ncc(rows, cols):
+    """Every window of the pixels asked for, mirrored beyond the arrays without repeating the
+    edge (cv2.blur's border), its standard deviations at least 1e-3."""
+    rng = np.random.default_rng(18)
+    left = rng.uniform(0, 255, (20, 30)).astype(np.float32)
+    warps = np.stack([left + rng.normal(0, s, left.shape) for s in (5.0, 40.0, 0.0)]).astype(np.float32)
+    warps[2, :6, :6] = 7.0  # a flat patch: its deviation floored
+    window, r = 5, 2
+    got = compiled.zncc_scores(left, warps, *rows, *cols, window)
+    lp = np.pad(left.astype(np.float64), r, mode="reflect")
+    expected = np.empty((3, rows[1] - rows[0], cols[1] - cols[0]))
+    for k in range(3):
+        wp = np.pad(warps[k].astype(np.float64), r, mode="reflect")
+        for i, v in enumerate(range(*rows)):
+            for j, u in enumerate(range(*cols)):
+                a, b = lp[v:v + window, u:u + window].ravel(), wp[v:v + window, u:u + window].ravel()
+                cov = (a * b).mean() - a.mean() * b.mean()
+                expected[k, i, j] = cov / (np.sqrt(max(a.var(), 1e-6)) * np.sqrt(max(b.var(), 1e-6)))
+    np.testing.assert_allclose(got, expected, atol=1e-5)
+    if rows[0] == 0 and cols[0] == 0:
+        assert got[2, 0, 0] == pytest.approx(0.0, abs=1e-5)  # a window on the flat patch: no covariance
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_band_medians_are_the_medians_of_each_band(dtype):
     rng = np.random.default_rng(21)
