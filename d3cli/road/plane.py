@@ -22,7 +22,7 @@ import numpy as np
 from ..method.perspective import match_in_right_image
 from .compiled import footprint_grid, height_grid, inlier_count, ransac_scores, weighted_scatter
 from .pointcloud import Camera
-from .threads import map_on_threads
+from .threads import halves, map_on_threads
 
 log = logging.getLogger(__name__)
 
@@ -69,17 +69,11 @@ def _plane_of_scatter(centre: np.ndarray, scatter: np.ndarray) -> tuple[np.ndarr
     return n, c
 
 
-def _halves(points: np.ndarray) -> tuple:
-    """The first and the second half of ``points`` (views)."""
-    half = len(points) // 2
-    return points[:half], points[half:]
-
-
 def _scatter_on_threads(points, normal, offset, min_tolerance, depth_factor) -> tuple:
     """:func:`~d3cli.road.compiled.weighted_scatter` of ``points`` (limit 2), each half on
     one of the report's threads, the halves' moments joined about their common centre."""
-    parts = map_on_threads(lambda part: weighted_scatter(part, normal, offset, min_tolerance, depth_factor, 2.0),
-                           _halves(points))
+    parts = map_on_threads(lambda part: weighted_scatter(points[part], normal, offset, min_tolerance, depth_factor,
+                                                         2.0), halves(len(points)))
     total = sum(p[0] for p in parts)
     if total <= 0.0:
         return total, np.zeros(3), np.zeros((3, 3))
@@ -140,9 +134,7 @@ def fit_road_plane(
     # -1, as a collinear one does), then scored in compiled passes, each half of them on
     # one of the report's threads; the first of the best scores wins.
     triples = rng.integers(0, len(sub), (iterations, 3), dtype=np.int64)
-    half = (iterations + 1) // 2
-    parts = map_on_threads(lambda part: ransac_scores(sub, triples[part], tol_sub),
-                           (slice(0, half), slice(half, iterations)))
+    parts = map_on_threads(lambda part: ransac_scores(sub, triples[part], tol_sub), halves(iterations))
     scores, normals, offsets = (np.concatenate([p[i] for p in parts]) for i in range(3))
     if not len(scores) or scores.max() < 0:
         return None
@@ -166,7 +158,7 @@ def fit_road_plane(
         if total < 3:
             break
         n, c = _plane_of_scatter(centre, scatter)
-    share = sum(map_on_threads(lambda part: inlier_count(part, n, c, min_tolerance_m, factor), _halves(fine)))
+    share = sum(map_on_threads(lambda part: inlier_count(fine[part], n, c, min_tolerance_m, factor), halves(len(fine))))
     share /= len(fine)
     return RoadPlane(normal=tuple(float(v) for v in n), offset=float(c), inlier_share=share)
 

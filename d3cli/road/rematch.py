@@ -16,7 +16,7 @@ import numpy as np
 
 from .compiled import best_offsets, shifted_rows, zncc_scores
 from .morphology import grown_box
-from .threads import map_on_threads
+from .threads import halves, map_on_threads
 
 #: Window side (pixels), search reach either side of the stored disparity (pixels) and
 #: the step of the search (pixels; parabola interpolation between steps).
@@ -80,9 +80,7 @@ def warped_right(right_grey: np.ndarray, v0: int, u0: int, disparity: np.ndarray
     image = np.ascontiguousarray(right_grey, np.float32)
     disparity = np.ascontiguousarray(disparity, np.float32)
     offsets = np.ascontiguousarray(offsets, np.float32)
-    half = (len(offsets) + 1) // 2
-    parts = map_on_threads(lambda part: shifted_rows(image, v0, u0, disparity, offsets[part]),
-                           (slice(0, half), slice(half, len(offsets))))
+    parts = map_on_threads(lambda part: shifted_rows(image, v0, u0, disparity, offsets[part]), halves(len(offsets)))
     return np.concatenate(parts)
 
 
@@ -94,9 +92,7 @@ def _zncc(left: np.ndarray, warps: np.ndarray, rows: tuple, cols: tuple, window:
     report's two threads."""
     left = np.ascontiguousarray(left, np.float32)
     warps = np.ascontiguousarray(warps, np.float32)
-    half = (len(warps) + 1) // 2
-    parts = map_on_threads(lambda part: zncc_scores(left, warps[part], *rows, *cols, window),
-                           (slice(0, half), slice(half, len(warps))))
+    parts = map_on_threads(lambda part: zncc_scores(left, warps[part], *rows, *cols, window), halves(len(warps)))
     return np.concatenate(parts)
 
 
@@ -124,8 +120,9 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
         dict to each): the grey images and the right image warped by every offset,
         computed once on the box of the first call's window, or of ``"pad_window"`` where
         the dict gives one; a call whose box that holds reads its own box out of it, one
-        with a larger window warps its own, so the results are those of separate calls.  Used only where the box's disparities are all finite
-        (else a pixel without one is searched around the box's own median).
+        with a larger window warps its own, so the results are those of separate calls.
+        Used only where the box's disparities are all finite (else a pixel without one is
+        searched around the box's own median).
 
     Returns
     -------

@@ -58,6 +58,13 @@ class Job:
             future.result()
 
 
+def halves(n: int) -> tuple:
+    """The two slices of ``n`` items (the first ``n // 2``, then the rest) that
+    :func:`map_on_threads` hands to this thread and the helper: one large compiled loop
+    split over both."""
+    return slice(0, n // 2), slice(n // 2, n)
+
+
 def map_on_threads(func, items) -> list:
     """``[func(x) for x in items]``, the items taken in turn by this thread and the helper
     thread; the results in the items' order.  The helper may be busy (a :class:`Job`, or
