@@ -16,30 +16,33 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, nogil=True)
-def weighted_scatter(points, normal, offset, min_tolerance, depth_factor, limit):  # pragma: no cover - compiled
+@njit(cache=True, nogil=True, fastmath=True)
+def weighted_scatter(xs, ys, zs, inverse_tolerance, normal, offset, limit):  # pragma: no cover - compiled
     """Tukey-biweight IRLS round of the plane fit: weights ``(1 - (r / limit)^2)^2`` of the
-    residuals ``r = (n . P + c) / t`` (0 beyond ``limit``), with the tolerance
-    ``t = max(min_tolerance, depth_factor Z^2)`` of each point, their weighted centre and
-    the weighted scatter matrix ``sum w (P - centre)(P - centre)^T``.
+    residuals ``r = (n . P + c) / t`` (0 beyond ``limit``), with each point's tolerance
+    ``t`` given as ``inverse_tolerance`` (1 / t), their weighted centre and the weighted
+    scatter matrix ``sum w (P - centre)(P - centre)^T``.
 
-    One pass: the moments are summed about the point on the plane nearest the origin
-    (``-c n``, a point of the road), which keeps them as exact as a second pass about the
-    centre would.  ``points`` (N, 3) float32 or float64.
+    The points are columns (``xs``, ``ys``, ``zs``, (N,) float64 each, contiguous) and the
+    weight of a point beyond the limit is the clipped polynomial's 0 rather than a branch:
+    the loop runs on the vector units, its sums in any order (``fastmath``: the moments
+    agree with the ordered sums to about 1e-12).  One pass: the moments are summed about the
+    point on the plane nearest the origin (``-c n``, a point of the road), which keeps them
+    as exact as a second pass about the centre would.
     Returns (sum of weights, centre (3,), scatter (3, 3)); the centre and scatter are zeros
     when no weight is positive.
     """
-    n = points.shape[0]
-    ox, oy, oz = -offset * normal[0], -offset * normal[1], -offset * normal[2]
+    n = xs.shape[0]
+    nx, ny, nz = normal[0], normal[1], normal[2]
+    ox, oy, oz = -offset * nx, -offset * ny, -offset * nz
+    inv_limit = 1.0 / limit
     total = 0.0
     sx = sy = sz = 0.0
     sxx = sxy = sxz = syy = syz = szz = 0.0
     for i in range(n):
-        x, y, z = float(points[i, 0]), float(points[i, 1]), float(points[i, 2])
-        r = (x * normal[0] + y * normal[1] + z * normal[2] + offset) / max(min_tolerance, z ** 2 * depth_factor)
-        if abs(r) >= limit:
-            continue
-        q = 1.0 - (r / limit) ** 2
+        x, y, z = xs[i], ys[i], zs[i]
+        r = (x * nx + y * ny + z * nz + offset) * inverse_tolerance[i] * inv_limit
+        q = max(1.0 - r * r, 0.0)
         wi = q * q
         dx, dy, dz = x - ox, y - oy, z - oz
         total += wi
@@ -68,14 +71,13 @@ def weighted_scatter(points, normal, offset, min_tolerance, depth_factor, limit)
 
 
 @njit(cache=True, nogil=True)
-def inlier_count(points, normal, offset, min_tolerance, depth_factor):  # pragma: no cover - compiled
-    """Number of (N, 3) ``points`` with ``|n . P + c| < max(min_tolerance, depth_factor Z^2)``."""
+def inlier_count(xs, ys, zs, tolerance, normal, offset):  # pragma: no cover - compiled
+    """Number of points (columns ``xs``, ``ys``, ``zs``, (N,) float64 each) with
+    ``|n . P + c| < tolerance``."""
     count = 0
-    for i in range(points.shape[0]):
-        z = float(points[i, 2])
-        r = float(points[i, 0]) * normal[0] + float(points[i, 1]) * normal[1] + z * normal[2]
-        if abs(r + offset) < max(min_tolerance, z ** 2 * depth_factor):
-            count += 1
+    nx, ny, nz = normal[0], normal[1], normal[2]
+    for i in range(xs.shape[0]):
+        count += abs(xs[i] * nx + ys[i] * ny + zs[i] * nz + offset) < tolerance[i]
     return count
 
 
@@ -83,11 +85,17 @@ def inlier_count(points, normal, offset, min_tolerance, depth_factor):  # pragma
 def ransac_scores(points, triples, tolerance):  # pragma: no cover - compiled
     """Inliers of the plane through each row of ``triples`` (K, 3) (indices into ``points``):
     ``|n . P + c| < tolerance`` counted over ``points`` (N, 3) float64; -1 for a degenerate
-    triple (normal shorter than 1e-12).  Returns (scores (K,), normals (K, 3), offsets (K,))."""
+    triple (normal shorter than 1e-12).  Returns (scores (K,), normals (K, 3), offsets (K,)).
+
+    The points are counted from contiguous columns (copied once a call): the count of every
+    hypothesis then runs on the vector units."""
     k = triples.shape[0]
     scores = np.full(k, -1.0)
     normals = np.zeros((k, 3))
     offsets = np.zeros(k)
+    xs = np.ascontiguousarray(points[:, 0])
+    ys = np.ascontiguousarray(points[:, 1])
+    zs = np.ascontiguousarray(points[:, 2])
     for j in range(k):
         a = points[triples[j, 0]]
         b = points[triples[j, 1]]
@@ -103,9 +111,8 @@ def ransac_scores(points, triples, tolerance):  # pragma: no cover - compiled
         nx, ny, nz = nx / norm, ny / norm, nz / norm
         off = -(nx * a[0] + ny * a[1] + nz * a[2])
         count = 0
-        for i in range(points.shape[0]):
-            if abs(points[i, 0] * nx + points[i, 1] * ny + points[i, 2] * nz + off) < tolerance[i]:
-                count += 1
+        for i in range(xs.shape[0]):
+            count += abs(xs[i] * nx + ys[i] * ny + zs[i] * nz + off) < tolerance[i]
         scores[j] = count
         normals[j, 0], normals[j, 1], normals[j, 2] = nx, ny, nz
         offsets[j] = off
@@ -259,18 +266,22 @@ def terrace_level(part, depth, footprint, t, step, core, lost, stack, box):  # p
 
 
 @njit(cache=True, nogil=True)
-def label_boxes(labels, n):  # pragma: no cover - compiled
+def label_boxes(labels, n, weights):  # pragma: no cover - compiled
     """Bounding box ``(x, y, width, height)`` of each label ``0 .. n - 1`` of ``labels``, as
     the first four columns of OpenCV's ``connectedComponentsWithStats`` (whose other
-    statistics, the areas and the centroids, cost more than the labelling)."""
+    statistics, the areas and the centroids, cost more than the labelling), and the sum of
+    ``weights`` (same shape as ``labels``) over each label's pixels (float64, raster order).
+    Returns (boxes (n, 4) int64, sums (n,) float64)."""
     h, w = labels.shape
     lo_x = np.full(n, w, np.int64)
     lo_y = np.full(n, h, np.int64)
     hi_x = np.full(n, -1, np.int64)
     hi_y = np.full(n, -1, np.int64)
+    sums = np.zeros(n)
     for v in range(h):
         for u in range(w):
             k = labels[v, u]
+            sums[k] += weights[v, u]
             if u < lo_x[k]:
                 lo_x[k] = u
             if u > hi_x[k]:
@@ -283,7 +294,7 @@ def label_boxes(labels, n):  # pragma: no cover - compiled
         if hi_x[k] >= 0:
             boxes[k, 0], boxes[k, 1] = lo_x[k], lo_y[k]
             boxes[k, 2], boxes[k, 3] = hi_x[k] - lo_x[k] + 1, hi_y[k] - lo_y[k] + 1
-    return boxes
+    return boxes, sums
 
 
 def h_maxima(image: np.ndarray, h: float) -> np.ndarray:
@@ -736,32 +747,62 @@ def shifted_rows(image, v0, u0, disparity, offsets):  # pragma: no cover - compi
 
     What ``cv2.remap(image, u - (d + o), v, INTER_CUBIC, borderMode=BORDER_REFLECT)``
     computes, for a shift along rows only: four taps instead of sixteen, and the exact
-    position instead of OpenCV's 1/32-pixel table (the same values on the table's
-    positions, float32 rounding aside)."""
+    position (float64) instead of OpenCV's 1/32-pixel table (the same values on the table's
+    positions, float32 rounding aside).  Offsets a whole number of pixels apart share the
+    fraction of their positions, hence the kernel's weights: those are computed once a
+    pixel for each distinct fraction (two for the re-match's half-pixel steps), row by row,
+    and every offset reads its four taps with them."""
     h, w = disparity.shape
     cols = image.shape[1]
     k_n = offsets.shape[0]
     out = np.empty((k_n, h, w), np.float32)
-    a = np.float32(-0.75)
-    one, two, three = np.float32(1.0), np.float32(2.0), np.float32(3.0)
+    # the offsets' classes: offsets a whole number of pixels from the class's first one
+    n_classes = 0
+    first = np.empty(k_n, np.int64)  # the first offset of each class
+    class_of = np.empty(k_n, np.int64)
+    whole = np.zeros(k_n, np.int64)  # offsets[k] - offsets[first of its class]
     for k in range(k_n):
-        for y in range(h):
-            row = image[v0 + y]
+        class_of[k] = -1
+        for c in range(n_classes):
+            diff = float(offsets[k]) - float(offsets[first[c]])
+            if diff == np.floor(diff):
+                class_of[k], whole[k] = c, int(diff)
+                break
+        if class_of[k] < 0:
+            first[n_classes], class_of[k] = k, n_classes
+            n_classes += 1
+    a = -0.75
+    index = np.empty((n_classes, w), np.int64)
+    weights = np.empty((n_classes, 4, w), np.float32)
+    for y in range(h):
+        row = image[v0 + y]
+        for c in range(n_classes):
+            o = float(offsets[first[c]])
             for x in range(w):
-                pos = np.float32(u0 + x) - (disparity[y, x] + offsets[k])
+                pos = float(u0 + x) - (float(disparity[y, x]) + o)
                 i = int(np.floor(pos))
-                t = pos - np.float32(i)
-                t1 = t + one
-                c0 = ((a * t1 - np.float32(5.0) * a) * t1 + np.float32(8.0) * a) * t1 - np.float32(4.0) * a
-                c1 = ((a + two) * t - (a + three)) * t * t + one
-                s = one - t
-                c2 = ((a + two) * s - (a + three)) * s * s + one
-                c3 = one - c0 - c1 - c2
+                t = pos - i
+                t1 = t + 1.0
+                c0 = ((a * t1 - 5.0 * a) * t1 + 8.0 * a) * t1 - 4.0 * a
+                c1 = ((a + 2.0) * t - (a + 3.0)) * t * t + 1.0
+                s = 1.0 - t
+                c2 = ((a + 2.0) * s - (a + 3.0)) * s * s + 1.0
+                index[c, x] = i
+                weights[c, 0, x] = c0
+                weights[c, 1, x] = c1
+                weights[c, 2, x] = c2
+                weights[c, 3, x] = 1.0 - c0 - c1 - c2
+        for k in range(k_n):
+            c, m = class_of[k], whole[k]
+            for x in range(w):
+                i = index[c, x] - m
                 if i >= 1 and i + 2 < cols:
-                    out[k, y, x] = c0 * row[i - 1] + c1 * row[i] + c2 * row[i + 1] + c3 * row[i + 2]
+                    out[k, y, x] = (weights[c, 0, x] * row[i - 1] + weights[c, 1, x] * row[i]
+                                    + weights[c, 2, x] * row[i + 1] + weights[c, 3, x] * row[i + 2])
                 else:
-                    out[k, y, x] = (c0 * row[_reflect(i - 1, cols)] + c1 * row[_reflect(i, cols)]
-                                    + c2 * row[_reflect(i + 1, cols)] + c3 * row[_reflect(i + 2, cols)])
+                    out[k, y, x] = (weights[c, 0, x] * row[_reflect(i - 1, cols)] + weights[c, 1, x] * row[_reflect(i, cols)]
+                                    + weights[c, 2, x] * row[_reflect(i + 1, cols)]
+                                    + weights[c, 3, x] * row[_reflect(i + 2, cols)])
     return out
 
 
@@ -776,12 +817,13 @@ def _reflect_101(i, n):  # pragma: no cover - compiled
     return i
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def zncc_scores(left, warps, r0, r1, c0, c1, window):  # pragma: no cover - compiled
     """Zero-mean NCC of ``left`` (h, w) with each of ``warps`` (K, h, w) over ``window x
     window`` windows centred on the pixels of rows ``r0:r1`` and columns ``c0:c1``:
-    float32 (K, r1 - r0, c1 - c0).  The window sums run along the rows and then down the
-    columns, in float64; a window reaching past the arrays' edge reads them mirrored
+    float32 (K, r1 - r0, c1 - c0).  The window sums run down the columns (a running sum
+    over ``window`` rows, every column at once), then along the row as differences of its
+    prefix sums, in float64; a window reaching past the arrays' edge reads them mirrored
     (BORDER_REFLECT_101, as ``cv2.blur``).  A window's standard deviations are at least
     1e-3 (variance 1e-6).
 
@@ -790,7 +832,7 @@ def zncc_scores(left, warps, r0, r1, c0, c1, window):  # pragma: no cover - comp
     h, w = left.shape
     k_n = warps.shape[0]
     half = window // 2
-    area = float(window * window)
+    inv_area = 1.0 / float(window * window)
     rows, cols = r1 - r0, c1 - c0
     n_rows, n_cols = rows + 2 * half, cols + 2 * half
     out = np.empty((k_n, rows, cols), np.float32)
@@ -805,91 +847,78 @@ def zncc_scores(left, warps, r0, r1, c0, c1, window):  # pragma: no cover - comp
     for y in range(n_rows):
         for x in range(n_cols):
             lp[y, x] = left[ys[y], xs[x]]
-    # sums along the rows (a running sum over ``window`` columns), then down the columns
-    row_a = np.empty((n_rows, cols))
-    row_b = np.empty((n_rows, cols))
-    row_c = np.empty((n_rows, cols))
+    # column sums of the window's rows (va, vb, vc: values, squares, products with the left
+    # image), moved down one row at a time; prefix sums of them along the row (pa, pb, pc)
+    va = np.zeros(n_cols)
+    vb = np.zeros(n_cols)
+    vc = np.zeros(n_cols)
+    pa = np.zeros(n_cols + 1)
+    pb = np.zeros(n_cols + 1)
+    pc = np.zeros(n_cols + 1)
+    # the left image's window means and inverse standard deviations, once
     l_mean = np.empty((rows, cols))
-    l_std = np.empty((rows, cols))
-    for y in range(n_rows):
-        s = 0.0
-        ss = 0.0
-        for x in range(window - 1):
+    l_inv = np.empty((rows, cols))
+    for y in range(window - 1):
+        for x in range(n_cols):
             v = lp[y, x]
-            s += v
-            ss += v * v
+            va[x] += v
+            vb[x] += v * v
+    for y in range(rows):
+        for x in range(n_cols):
+            v = lp[y + window - 1, x]
+            va[x] += v
+            vb[x] += v * v
+        s = ss = 0.0
+        for x in range(n_cols):
+            s += va[x]
+            ss += vb[x]
+            pa[x + 1] = s
+            pb[x + 1] = ss
         for x in range(cols):
-            v = lp[y, x + window - 1]
-            s += v
-            ss += v * v
-            row_a[y, x] = s
-            row_b[y, x] = ss
-            v = lp[y, x]
-            s -= v
-            ss -= v * v
-    for x in range(cols):
-        s = 0.0
-        ss = 0.0
-        for y in range(window - 1):
-            s += row_a[y, x]
-            ss += row_b[y, x]
-        for y in range(rows):
-            s += row_a[y + window - 1, x]
-            ss += row_b[y + window - 1, x]
-            m = s / area
+            m = (pa[x + window] - pa[x]) * inv_area
             l_mean[y, x] = m
-            l_std[y, x] = np.sqrt(max(ss / area - m * m, 1e-6))
-            s -= row_a[y, x]
-            ss -= row_b[y, x]
-    wp = np.empty(n_cols)
-    inv_area = 1.0 / area
-    inv_l_std = 1.0 / l_std
-    col_a = np.empty(cols)
-    col_b = np.empty(cols)
-    col_c = np.empty(cols)
+            l_inv[y, x] = 1.0 / np.sqrt(max((pb[x + window] - pb[x]) * inv_area - m * m, 1e-6))
+        for x in range(n_cols):
+            v = lp[y, x]
+            va[x] -= v
+            vb[x] -= v * v
+    wp = np.empty((n_rows, n_cols))
     for k in range(k_n):
         for y in range(n_rows):
             yy = ys[y]
             for x in range(n_cols):
-                wp[x] = warps[k, yy, xs[x]]
-            s = 0.0
-            ss = 0.0
-            sl = 0.0
-            for x in range(window - 1):
-                v = wp[x]
-                s += v
-                ss += v * v
-                sl += v * lp[y, x]
-            for x in range(cols):
-                v = wp[x + window - 1]
-                s += v
-                ss += v * v
-                sl += v * lp[y, x + window - 1]
-                row_a[y, x] = s
-                row_b[y, x] = ss
-                row_c[y, x] = sl
-                v = wp[x]
-                s -= v
-                ss -= v * v
-                sl -= v * lp[y, x]
-        # down the columns: every column's running sums side by side (one row at a time)
-        col_a[:] = 0.0
-        col_b[:] = 0.0
-        col_c[:] = 0.0
+                wp[y, x] = warps[k, yy, xs[x]]
+        va[:] = 0.0
+        vb[:] = 0.0
+        vc[:] = 0.0
         for y in range(window - 1):
-            for x in range(cols):
-                col_a[x] += row_a[y, x]
-                col_b[x] += row_b[y, x]
-                col_c[x] += row_c[y, x]
+            for x in range(n_cols):
+                v = wp[y, x]
+                va[x] += v
+                vb[x] += v * v
+                vc[x] += v * lp[y, x]
         for y in range(rows):
+            for x in range(n_cols):
+                v = wp[y + window - 1, x]
+                va[x] += v
+                vb[x] += v * v
+                vc[x] += v * lp[y + window - 1, x]
+            s = ss = sl = 0.0
+            for x in range(n_cols):
+                s += va[x]
+                ss += vb[x]
+                sl += vc[x]
+                pa[x + 1] = s
+                pb[x + 1] = ss
+                pc[x + 1] = sl
             for x in range(cols):
-                a = col_a[x] + row_a[y + window - 1, x]
-                b = col_b[x] + row_b[y + window - 1, x]
-                c = col_c[x] + row_c[y + window - 1, x]
-                m = a * inv_area
-                out[k, y, x] = (c * inv_area - l_mean[y, x] * m) * inv_l_std[y, x] / np.sqrt(
-                    max(b * inv_area - m * m, 1e-6))
-                col_a[x] = a - row_a[y, x]
-                col_b[x] = b - row_b[y, x]
-                col_c[x] = c - row_c[y, x]
+                m = (pa[x + window] - pa[x]) * inv_area
+                var = (pb[x + window] - pb[x]) * inv_area - m * m
+                out[k, y, x] = ((pc[x + window] - pc[x]) * inv_area - l_mean[y, x] * m) * l_inv[y, x] / np.sqrt(
+                    max(var, 1e-6))
+            for x in range(n_cols):
+                v = wp[y, x]
+                va[x] -= v
+                vb[x] -= v * v
+                vc[x] -= v * lp[y, x]
     return out

@@ -437,7 +437,7 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, other: np.ndarr
         cand = s.finite & (sign * s.smooth > thr_mm * 1e-3)
     # the labels, then each component's bounding box in one compiled pass
     n, labels = cv2.connectedComponents(cand.astype(np.uint8), connectivity=8)
-    stats = label_boxes(labels, n)
+    stats, areas = label_boxes(labels, n, s.footprint)
     level = max(thr_mm * 1e-3, s.split_noise)
 
     def smoothed(box):  # the split cue's smoothed depth, on a component's box only
@@ -469,11 +469,15 @@ def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, other: np.ndarr
                 found.append((kind, region, measured[1]))
         return found
 
-    # Components are cut and measured independently: on both threads, in their order.
-    wanted = np.ones(n, bool)
+    # Components are cut and measured independently: on both threads, in their order.  A
+    # component smaller than the smallest defect holds none (its parts are parts of it): a
+    # noisy map has dozens of such specks, not cut at all (the margin covers the rounding
+    # of the sums, so that no component whose part could pass is left out).
+    wanted = areas >= road.min_area_m2 * (1 - 1e-6)
     if s.only is not None:  # only the components that reach into s.only (:func:`remeasure`)
-        wanted[:] = False
-        wanted[np.unique(labels[s.only])] = True
+        reach = np.zeros(n, bool)
+        reach[np.unique(labels[s.only])] = True
+        wanted &= reach
     components = [(lab, (slice(y, y + h), slice(x, x + w))) for lab, (x, y, w, h) in enumerate(stats[1:], start=1)
                   if wanted[lab]]
     return [f for found in map_on_threads(component, components) for f in found]

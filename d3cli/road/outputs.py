@@ -13,6 +13,7 @@ import csv
 import io as _io
 import json
 import logging
+import re
 from pathlib import Path
 
 import cv2
@@ -49,6 +50,25 @@ CSV_FIELDS = ("pair", "id", "kind", "u", "v", "x_m", "y_m", "z_m", "area_m2", "m
 def _write_json(path: Path, data: dict) -> None:
     text = json.dumps(data, indent=2) + "\n"
     atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+
+
+def _defects_json_text(data: dict) -> str:
+    """defects.json's text: indented, but each defect's ``outline_px`` on one line.
+
+    Indented, an outline puts each coordinate on a line of its own (most of the file) and
+    runs through the json module's Python encoder; written compactly it is one line a defect
+    and takes the C encoder.  The outlines are swapped for placeholder strings, the rest
+    indented, then the placeholders replaced by the outlines' compact text."""
+    outlines = []
+
+    def placeholder(outline) -> str:
+        outlines.append(json.dumps(outline, separators=(",", ":")))
+        return f"@outline:{len(outlines) - 1}@"
+
+    swapped = {**data, "defects": [{**d, "outline_px": placeholder(d["outline_px"])} if "outline_px" in d else d
+                                   for d in data.get("defects", [])]}
+    text = json.dumps(swapped, indent=2)
+    return re.sub(r'"@outline:(\d+)@"', lambda m: outlines[int(m.group(1))], text) + "\n"
 
 
 def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
@@ -209,9 +229,14 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
         if start_writing is not None:
             start_writing(measured if regions else disparity)
         if regions:
-            remeasured = grid.patched(cell_disparities, measured, finite, zones)  # the zones' cells again
-            remeasured = height_map(remeasured, np.isfinite(remeasured), g_camera, plane)
-            defects, regions = in_pixels(*remeasure(stored, remeasured, grid.any_of(zones), return_regions=True))
+            # the zones' cells again, and their heights (the other cells' are the stored map's)
+            zone_cells = grid.any_of(zones)
+            remeasured, box = cells.copy(), grown_box(zone_cells, 0, 0)
+            if box is not None:
+                patched = grid.patched(cell_disparities, measured, finite, zones)[box]
+                remeasured[box] = height_map(patched, np.isfinite(patched), g_camera, plane,
+                                             origin=(box[0].start, box[1].start))
+            defects, regions = in_pixels(*remeasure(stored, remeasured, zone_cells, return_regions=True))
             # How decisively the images support each defect's disparity (the confidence's
             # weak_match), on the disparity it was measured on; the defects on both threads.
             margins = map_on_threads(lambda region: match_margin(*grey, measured, region), regions)
@@ -224,7 +249,7 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
     # Potholes graded as road agencies do (ASTM D6433, d3cli.road.severity).
     items = [{**d.to_dict(), "reasons": describe(d.flags) if d.flags else "",
               **(pothole_severity(d.max_depth_mm, d.area_m2) if d.kind == "pothole" else {})} for d in defects]
-    _write_json(pair_dir / DEFECTS_JSON, {
+    text = _defects_json_text({
         "plane": plane.to_info(), "decided_share": decided_share, "road_like": not fallback,
         "definitions": "depth: below the median height of the surrounding road ring, mm; area_m2: "
                        "area of the road plane covered by the region; volume_l: fill volume up to the "
@@ -232,6 +257,7 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
                        "equivalent-circle diameter_mm of the area; confidence: ok, or low with the reason "
                        "codes in flags (in words in reasons) and the numbers they were decided from in "
                        "evidence", "defects": items, "warnings": warnings + notes})
+    atomic_write(pair_dir / DEFECTS_JSON, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
     if "pictures" in groups:
         write_image(pair_dir / DEFECTS_PNG, defects_overlay(left, defects, regions))
     for name, group in ((HEIGHT_FILE, "height"), (HEIGHT_COLOR_FILE, "pictures"), (DEFECTS_PNG, "pictures")):

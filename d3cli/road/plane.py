@@ -69,17 +69,38 @@ def _plane_of_scatter(centre: np.ndarray, scatter: np.ndarray) -> tuple[np.ndarr
     return n, c
 
 
-def _scatter_on_threads(points, normal, offset, min_tolerance, depth_factor) -> tuple:
-    """:func:`~d3cli.road.compiled.weighted_scatter` of ``points`` (limit 2), each half on
-    one of the report's threads, the halves' moments joined about their common centre."""
-    parts = map_on_threads(lambda part: weighted_scatter(points[part], normal, offset, min_tolerance, depth_factor,
-                                                         2.0), halves(len(points)))
-    total = sum(p[0] for p in parts)
-    if total <= 0.0:
-        return total, np.zeros(3), np.zeros((3, 3))
-    centre = sum(p[0] * p[1] for p in parts) / total
-    scatter = sum(p[2] + p[0] * np.outer(p[1] - centre, p[1] - centre) for p in parts)
-    return total, centre, scatter
+class _Columns:
+    """Points as the compiled rounds read them: contiguous float64 columns, and each
+    point's tolerance ``max(min_tolerance, depth_factor Z^2)`` and its inverse (the same
+    in every round: computed once)."""
+
+    def __init__(self, points: np.ndarray, min_tolerance: float, depth_factor: float):
+        self.x, self.y, self.z = (np.ascontiguousarray(points[:, i], np.float64) for i in range(3))
+        self.tolerance = np.maximum(min_tolerance, self.z ** 2 * depth_factor)
+        self.inverse = 1.0 / self.tolerance
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+    def scatter(self, normal, offset) -> tuple:
+        """:func:`~d3cli.road.compiled.weighted_scatter` of the points (limit 2), each half
+        on one of the report's threads, the halves' moments joined about their common centre."""
+        parts = map_on_threads(lambda part: weighted_scatter(self.x[part], self.y[part], self.z[part],
+                                                             self.inverse[part], normal, offset, 2.0),
+                               halves(len(self)))
+        total = sum(p[0] for p in parts)
+        if total <= 0.0:
+            return total, np.zeros(3), np.zeros((3, 3))
+        centre = sum(p[0] * p[1] for p in parts) / total
+        scatter = sum(p[2] + p[0] * np.outer(p[1] - centre, p[1] - centre) for p in parts)
+        return total, centre, scatter
+
+    def inliers(self, normal, offset) -> int:
+        """Points within their tolerance of the plane (:func:`~d3cli.road.compiled.inlier_count`),
+        each half counted on one of the report's threads."""
+        return sum(map_on_threads(lambda part: inlier_count(self.x[part], self.y[part], self.z[part],
+                                                            self.tolerance[part], normal, offset),
+                                  halves(len(self))))
 
 
 def fit_road_plane(
@@ -150,16 +171,15 @@ def fit_road_plane(
     def every(step):
         return pts32[::step] if step > 1 and len(pts32) >= 3 * step else pts32
 
-    coarse, fine = every(decimate), every(fine_decimate)
+    coarse, fine = (_Columns(every(step), min_tolerance_m, factor) for step in (decimate, fine_decimate))
     for round_ in range(irls_rounds):
         # Tukey biweight: points beyond 2 tolerances (potholes, kerbs) get weight 0.
         use = coarse if round_ < irls_rounds - fine_rounds else fine
-        total, centre, scatter = _scatter_on_threads(use, n, c, min_tolerance_m, factor)
+        total, centre, scatter = use.scatter(n, c)
         if total < 3:
             break
         n, c = _plane_of_scatter(centre, scatter)
-    share = sum(map_on_threads(lambda part: inlier_count(fine[part], n, c, min_tolerance_m, factor), halves(len(fine))))
-    share /= len(fine)
+    share = fine.inliers(n, c) / len(fine)
     return RoadPlane(normal=tuple(float(v) for v in n), offset=float(c), inlier_share=share)
 
 

@@ -17,14 +17,18 @@ def _points(n=5000, seed=1):
     return np.stack([x, y, z], axis=1).astype(np.float32)
 
 
+def _columns(points):
+    return tuple(np.ascontiguousarray(points[:, i]) for i in range(3))
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_weighted_scatter_is_the_tukey_round(dtype):
     pts = _points().astype(dtype)
     normal, offset = np.array([0.0, -0.9998, -0.02]), 1.5
     normal /= np.linalg.norm(normal)
     tol = np.maximum(0.01, pts[:, 2].astype(np.float64) ** 2 / 500.0)
-    total, centre, scatter = compiled.weighted_scatter(pts, normal, offset, 0.01, 1 / 500.0, 2.0)
     p = pts.astype(np.float64)
+    total, centre, scatter = compiled.weighted_scatter(*_columns(p), 1.0 / tol, normal, offset, 2.0)
     r = (p @ normal + offset) / tol
     w = np.where(np.abs(r) < 2.0, (1 - (r / 2.0) ** 2) ** 2, 0.0)
     ref_centre = (p * w[:, None]).sum(0) / w.sum()
@@ -37,8 +41,9 @@ def test_weighted_scatter_is_the_tukey_round(dtype):
 
 
 def test_weighted_scatter_without_weight_is_zero():
-    pts = _points(100)
-    total, centre, scatter = compiled.weighted_scatter(pts, np.array([0.0, 1.0, 0.0]), 100.0, 0.01, 0.0, 2.0)
+    pts = _points(100).astype(np.float64)
+    total, centre, scatter = compiled.weighted_scatter(*_columns(pts), np.full(100, 100.0), np.array([0.0, 1.0, 0.0]),
+                                                       100.0, 2.0)
     assert total == 0.0 and not centre.any() and not scatter.any()
 
 
@@ -58,9 +63,9 @@ def test_inlier_count_and_ransac_scores_match_numpy():
         np.testing.assert_allclose(n, ref, rtol=1e-12, atol=1e-15)
         assert c == pytest.approx(-float(ref @ a), rel=1e-12, abs=1e-15)
         assert score == (np.abs(pts @ ref - float(ref @ a)) < tol).sum()
-        p32 = pts.astype(np.float32)
-        tol32 = np.maximum(0.01, p32[:, 2].astype(np.float64) ** 2 / 500.0)
-        assert compiled.inlier_count(p32, n, c, 0.01, 1 / 500.0) == (np.abs(p32.astype(np.float64) @ n + c) < tol32).sum()
+        p32 = pts.astype(np.float32).astype(np.float64)
+        tol32 = np.maximum(0.01, p32[:, 2] ** 2 / 500.0)
+        assert compiled.inlier_count(*_columns(p32), tol32, n, c) == (np.abs(p32 @ n + c) < tol32).sum()
     assert scores[-1] == -1
 
 
@@ -144,6 +149,10 @@ def test_back_project_is_disparity_to_points():
     got = compiled.back_project(disp, valid, cam.f, cam.baseline, cam.cx, cam.cy, cam.doffs)
     assert got.dtype == np.float32
     np.testing.assert_array_equal(got, points)
+
+
+def _columns(points):
+    return tuple(np.ascontiguousarray(points[:, i]) for i in range(3))
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -310,6 +319,10 @@ def test_zncc_scores_are_the_windows_zero_mean_ncc(rows, cols):
         assert got[2, 0, 0] == pytest.approx(0.0, abs=1e-5)  # a window on the flat patch: no covariance
 
 
+def _columns(points):
+    return tuple(np.ascontiguousarray(points[:, i]) for i in range(3))
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_band_medians_are_the_medians_of_each_band(dtype):
     rng = np.random.default_rng(21)
@@ -379,7 +392,7 @@ def _rough_floor(rng, shape):
     return np.clip(np.cumsum(np.cumsum(rng.normal(0, 0.3, shape), 0), 1) / 3 + 0.6, 0, 1.2)
 
 
-def test_label_boxes_are_opencvs_statistics():
+def test_label_boxes_are_opencvs_statistics_and_the_weights_sums():
     import cv2
 
     rng = np.random.default_rng(3)
@@ -387,4 +400,8 @@ def test_label_boxes_are_opencvs_statistics():
         shape = tuple(int(x) for x in rng.integers(1, 60, 2))
         mask = (rng.random(shape) < rng.uniform(0.1, 0.7)).astype(np.uint8)
         n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-        np.testing.assert_array_equal(compiled.label_boxes(labels, n), stats[:, :4])
+        weights = rng.uniform(0, 1e-3, shape).astype(np.float32)
+        boxes, sums = compiled.label_boxes(labels, n, weights)
+        np.testing.assert_array_equal(boxes, stats[:, :4])
+        np.testing.assert_allclose(sums, np.bincount(labels.ravel(), weights.ravel().astype(np.float64), n),
+                                   rtol=1e-12)
