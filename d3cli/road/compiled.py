@@ -267,10 +267,11 @@ def terrace_level(part, depth, footprint, t, step, core, lost, stack, box):  # p
 
 @njit(cache=True, nogil=True)
 def label_boxes(labels, n, weights):  # pragma: no cover - compiled
-    """Bounding box ``(x, y, width, height)`` of each label ``0 .. n - 1`` of ``labels``, as
+    """Bounding box ``(x, y, width, height)`` of each label ``1 .. n - 1`` of ``labels``, as
     the first four columns of OpenCV's ``connectedComponentsWithStats`` (whose other
     statistics, the areas and the centroids, cost more than the labelling), and the sum of
     ``weights`` (same shape as ``labels``) over each label's pixels (float64, raster order).
+    The background (label 0, most of a map) is skipped: its row is zeros.
     Returns (boxes (n, 4) int64, sums (n,) float64)."""
     h, w = labels.shape
     lo_x = np.full(n, w, np.int64)
@@ -281,6 +282,8 @@ def label_boxes(labels, n, weights):  # pragma: no cover - compiled
     for v in range(h):
         for u in range(w):
             k = labels[v, u]
+            if k == 0:
+                continue
             sums[k] += weights[v, u]
             if u < lo_x[k]:
                 lo_x[k] = u
@@ -290,7 +293,7 @@ def label_boxes(labels, n, weights):  # pragma: no cover - compiled
                 lo_y[k] = v
             hi_y[k] = v
     boxes = np.zeros((n, 4), np.int64)
-    for k in range(n):
+    for k in range(1, n):
         if hi_x[k] >= 0:
             boxes[k, 0], boxes[k, 1] = lo_x[k], lo_y[k]
             boxes[k, 2], boxes[k, 3] = hi_x[k] - lo_x[k] + 1, hi_y[k] - lo_y[k] + 1
@@ -697,34 +700,40 @@ def best_offsets(scores, centre, offsets, step, min_score):  # pragma: no cover 
 
 
 @njit(cache=True, nogil=True)
-def cell_means(values, decided, step):  # pragma: no cover - compiled
-    """(mean, decided) of the cells of ``step x step`` pixels of a float32 map ``values`` (inf:
-    no value) for :meth:`d3cli.road.grid.Grid.disparities` (the cells of the last row and
-    column hold what is left of the map): a cell has a value where at least half of its
-    pixels have a finite one (their mean, accumulated in float64; inf elsewhere) and is
-    decided where at least half of those are ``decided``."""
-    h, w = values.shape
+def cell_means(disparity, finite, decided, step):  # pragma: no cover - compiled
+    """(mean, decided) of the cells of ``step x step`` pixels of a float32 map ``disparity``
+    whose pixels count where ``finite`` and the value is finite, for
+    :meth:`d3cli.road.grid.Grid.disparities` (the cells of the last row and column hold
+    what is left of the map): a cell has a value where at least half of its pixels count
+    (their mean, accumulated in float64; inf elsewhere) and is decided where at least half
+    of those are ``decided``.  One row of cells at a time, its pixel rows in memory order."""
+    h, w = disparity.shape
     rows, cols = (h + step - 1) // step, (w + step - 1) // step
     out = np.empty((rows, cols), np.float32)
     out_decided = np.zeros((rows, cols), np.bool_)
+    total = np.empty(cols)
+    count = np.empty(cols, np.int64)
+    count_decided = np.empty(cols, np.int64)
     for i in range(rows):
-        for j in range(cols):
-            total = 0.0
-            n = 0
-            n_decided = 0
-            pixels = 0
-            for v in range(i * step, min((i + 1) * step, h)):
+        total[:] = 0.0
+        count[:] = 0
+        count_decided[:] = 0
+        v_end = min((i + 1) * step, h)
+        for v in range(i * step, v_end):
+            for j in range(cols):
                 for u in range(j * step, min((j + 1) * step, w)):
-                    pixels += 1
-                    x = values[v, u]
-                    if np.isfinite(x):
-                        total += x
-                        n += 1
+                    x = disparity[v, u]
+                    if finite[v, u] and np.isfinite(x):
+                        total[j] += x
+                        count[j] += 1
                         if decided[v, u]:
-                            n_decided += 1
+                            count_decided[j] += 1
+        for j in range(cols):
+            pixels = (v_end - i * step) * (min((j + 1) * step, w) - j * step)
+            n = count[j]
             if 2 * n >= pixels and n > 0:
-                out[i, j] = total / n
-                out_decided[i, j] = 2 * n_decided >= n
+                out[i, j] = total[j] / n
+                out_decided[i, j] = 2 * count_decided[j] >= n
             else:
                 out[i, j] = np.inf
     return out, out_decided

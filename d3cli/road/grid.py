@@ -107,12 +107,12 @@ class Grid:
         (:meth:`camera`): a cell has a disparity where at least half of its pixels are
         ``finite`` (the mean of theirs, over ``step``; inf elsewhere) and is decided where at
         least half of those were decided by the method (not filled)."""
-        values = np.where(finite, disparity, np.inf).astype(np.float32)
         if self.step == 1:
-            return values, decided
-        decided = np.ascontiguousarray(decided, bool)
+            return np.where(finite, disparity, np.inf).astype(np.float32), decided
+        disparity = np.ascontiguousarray(disparity, np.float32)
+        finite, decided = np.ascontiguousarray(finite, bool), np.ascontiguousarray(decided, bool)
         split = self.cells[0] // 2 * self.step  # the top and bottom halves' cells on both threads
-        parts = map_on_threads(lambda rows: cell_means(values[rows], decided[rows], self.step),
+        parts = map_on_threads(lambda rows: cell_means(disparity[rows], finite[rows], decided[rows], self.step),
                                (slice(0, split), slice(split, None)))
         cells, cells_decided = (np.concatenate([p[i] for p in parts]) for i in range(2))
         return cells / np.float32(self.step), cells_decided

@@ -393,6 +393,7 @@ def _rough_floor(rng, shape):
 
 
 def test_label_boxes_are_opencvs_statistics_and_the_weights_sums():
+    """Of the labels 1 .. n - 1 (the background's row is zeros)."""
     import cv2
 
     rng = np.random.default_rng(3)
@@ -402,6 +403,7 @@ def test_label_boxes_are_opencvs_statistics_and_the_weights_sums():
         n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
         weights = rng.uniform(0, 1e-3, shape).astype(np.float32)
         boxes, sums = compiled.label_boxes(labels, n, weights)
-        np.testing.assert_array_equal(boxes, stats[:, :4])
-        np.testing.assert_allclose(sums, np.bincount(labels.ravel(), weights.ravel().astype(np.float64), n),
+        np.testing.assert_array_equal(boxes[1:], stats[1:, :4])
+        assert not boxes[0].any() and sums[0] == 0
+        np.testing.assert_allclose(sums[1:], np.bincount(labels.ravel(), weights.ravel().astype(np.float64), n)[1:],
                                    rtol=1e-12)
