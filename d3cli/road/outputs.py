@@ -30,7 +30,7 @@ from .overlay import defects_overlay
 from .plane import fit_road_plane, height_map, seen_by_both
 from .compiled import back_project, height_colours
 from .pointcloud import Camera
-from .rematch import MIN_RELIABLE, WINDOWS, grey_image, hopeless, match_margin, noise_limit, rematch
+from .rematch import MIN_RELIABLE, REACH, WINDOWS, grey_image, hopeless, match_margin, noise_limit, rematch
 from .severity import pothole_severity, survey_summary
 from .threads import Job, map_on_threads
 
@@ -294,20 +294,28 @@ def _rematched(grey, disparity, finite, regions, camera: Camera, plane, road_cfg
     zone matched again."""
     ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * road_cfg.ring_px + 1, 2 * road_cfg.ring_px + 1))
     left, right = grey
+    # Everything a zone's re-match reads lies within this many pixels of its defect: the
+    # two rings, then the larger of the smoothing's support around the outer ring (four
+    # windows, :func:`_highpass_noise`) and the match's own box (a window and the reach).
+    margin = 2 * road_cfg.ring_px + max(4 * max(WINDOWS) + 2, max(WINDOWS) + int(np.ceil(REACH)) + 1)
 
     def zone_disparity(item):
-        """(zone, its re-matched disparity and window, or None and 0 where no window matches
-        it cleanly)."""
+        """(the zone's window of the map, the zone in it, its re-matched disparity and
+        window, or None and 0 where no window matches it cleanly).  Worked on that window
+        of the map: the same pixels as on the whole map, at the cost of the window."""
         region, depth = item
         limit = noise_limit(depth)
-        inner = dilate_near(region, ring)
-        zone = dilate_near(inner, ring) & finite
+        crop = grown_box(region, margin, margin)
+        origin = (crop[0].start, crop[1].start)
+        near, known = disparity[crop], finite[crop]
+        inner = dilate_near(region[crop], ring)
+        zone = dilate_near(inner, ring) & known
         band = zone & ~inner  # flat road: its high-pass residual is matching noise only
         # The warps of the first window's box, made once for the zone: most zones stop there
         # (a larger window warps its own, larger box).
         shared = {"grey": grey}
         for i, window in enumerate(WINDOWS):
-            new, got = rematch(left, right, disparity, zone, window=window, shared=shared)
+            new, got = rematch(left, right, near, zone, window=window, shared=shared, origin=origin)
             share = float(got[zone].mean())
             if share < MIN_RELIABLE:
                 if hopeless(share, len(WINDOWS) - 1 - i):
@@ -315,24 +323,25 @@ def _rematched(grey, disparity, finite, regions, camera: Camera, plane, road_cfg
                 continue
             # Heights only in a window around the band that holds the smoothing's support.
             reach = int(np.ceil(4 * window)) + 2
-            crop = grown_box(band, reach, reach) or (slice(0, 0), slice(0, 0))
-            if _highpass_noise(height_map(new[crop], finite[crop], camera, plane, origin=(crop[0].start, crop[1].start)),
-                               (band & got)[crop], window) <= limit:
-                return zone, new[zone], window
+            box = grown_box(band, reach, reach) or (slice(0, 0), slice(0, 0))
+            if _highpass_noise(height_map(new[box], known[box], camera, plane,
+                                          origin=(origin[0] + box[0].start, origin[1] + box[1].start)),
+                               (band & got)[box], window) <= limit:
+                return crop, zone, new[zone], window
         # no window matches the defect cleanly (a dark, noisy pair): the stored, smoothed
         # map is the better measurement there.
-        return zone, None, 0
+        return crop, zone, None, 0
 
     out = disparity.copy()
     windows = np.zeros(disparity.shape, np.uint8)
     zones = np.zeros(disparity.shape, bool)
     # The regions are matched on both threads (each reads the stored map only) and their
     # zones written in the regions' order, as one after the other would.
-    for zone, values, window in map_on_threads(zone_disparity, list(zip(regions, depths))):
-        windows[zone] = window
-        zones |= zone
+    for crop, zone, values, window in map_on_threads(zone_disparity, list(zip(regions, depths))):
+        windows[crop][zone] = window
+        zones[crop] |= zone
         if values is not None:
-            out[zone] = values
+            out[crop][zone] = values
     return out, windows, zones
 
 

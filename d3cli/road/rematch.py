@@ -106,7 +106,8 @@ def _zncc(left: np.ndarray, warps: np.ndarray, rows: tuple, cols: tuple, window:
 
 def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np.ndarray, *,
             window: int = WINDOW, reach: float = REACH, step: float = STEP,
-            min_score: float = MIN_SCORE, shared: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+            min_score: float = MIN_SCORE, shared: dict | None = None,
+            origin: tuple[int, int] = (0, 0)) -> tuple[np.ndarray, np.ndarray]:
     """Disparity re-measured at the pixels of ``mask`` by zero-mean NCC.
 
     Parameters
@@ -131,6 +132,11 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
         with a larger window warps its own, so the results are those of separate calls.
         Used only where the box's disparities are all finite (else a pixel without one is
         searched around the box's own median).
+    origin : (int, int), keyword-only
+        (row, column) in the images of the first pixel of ``disparity`` and ``mask``, when
+        they are a window of the images (the results are those of the whole images where
+        the window holds the mask grown by ``window + ceil(reach) + 1`` pixels, or reaches
+        the images' edge).
 
     Returns
     -------
@@ -156,10 +162,11 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
         shared["grey"] = (grey_image(left), grey_image(right))
     lg, rg = shared["grey"]
     first_v, last_v, first_u, last_u = m0 + int(rows[0]), m0 + int(rows[-1]), n0 + int(cols[0]), n0 + int(cols[-1])
+    oy, ox = int(origin[0]), int(origin[1])
 
-    def box_of(pad):
-        return (max(first_v - pad, 0), min(last_v + pad + 1, lg.shape[0]),
-                max(first_u - pad, 0), min(last_u + pad + 1, lg.shape[1]))
+    def box_of(pad):  # in the window's pixels, cut at the images' edge (and the window's)
+        return (max(first_v - pad, -oy, 0), min(last_v + pad + 1, lg.shape[0] - oy, out.shape[0]),
+                max(first_u - pad, -ox, 0), min(last_u + pad + 1, lg.shape[1] - ox, out.shape[1]))
 
     pad = window + int(np.ceil(reach)) + 1
     v0, v1, u0, u1 = box_of(pad)
@@ -167,7 +174,7 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     finite = np.isfinite(sub)
     # Pixels of the box without an estimate are searched around the median, never kept.
     centre = np.where(finite, sub, float(np.median(sub[finite]))).astype(np.float32)
-    lsub = lg[v0:v1, u0:u1]
+    lsub = lg[oy + v0:oy + v1, ox + u0:ox + u1]
     offsets = np.arange(-reach, reach + 1e-9, step, dtype=np.float32)
     warps = None
     if finite.all():  # the warps of the largest box, made once: a remap is per pixel
@@ -178,14 +185,14 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
             disp_big = np.asarray(disparity[b0:b1, c0:c1], np.float32)
             stored = None
             if np.isfinite(disp_big).all():
-                stored = ((b0, c0), warped_right(rg, b0, c0, disp_big, offsets))
+                stored = ((b0, c0), warped_right(rg, oy + b0, ox + c0, disp_big, offsets))
             shared["warps_key"], shared["warps"] = key, stored
         if shared["warps"] is not None:
             (b0, c0), stack = shared["warps"]
             if v0 >= b0 and u0 >= c0 and v1 - b0 <= stack.shape[1] and u1 - c0 <= stack.shape[2]:
                 warps = stack[:, v0 - b0:v1 - b0, u0 - c0:u1 - c0]
     if warps is None:
-        warps = warped_right(rg, v0, u0, centre, offsets)
+        warps = warped_right(rg, oy + v0, ox + u0, centre, offsets)
     # The scores of the pixels that may be re-measured (the mask's bounding box), their
     # windows read from the box around it
     rows, cols = (first_v - v0, last_v + 1 - v0), (first_u - u0, last_u + 1 - u0)
