@@ -466,8 +466,10 @@ def back_project(disparity, valid, f, baseline, cx, cy, doffs):  # pragma: no co
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def _value_range(values):  # pragma: no cover - compiled
+    # values without NaN (ranks' contract): the least and greatest are exact in any order,
+    # so the loop may run on the vector units
     lo = hi = float(values[0])
     for i in range(values.size):
         x = float(values[i])
