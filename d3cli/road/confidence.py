@@ -50,7 +50,15 @@ Reasons (defects.json ``flags``, in this order):
     :attr:`ConfidenceRules.max_rematch_change` (more than twice as deep), measured
     something else than the floor the stored map saw (a shelf of a deeper pothole, a
     reflection).  The window it used is evidence too (``rematch_window``, 0:
-    none was clean and the depth is the stored, smoothed map's); it flags nothing.
+    none was clean and the depth is the stored, smoothed map's).
+``narrow``
+    No re-match window measured the defect cleanly (``rematch_window`` 0), so its depth is
+    the stored map's, and the defect is too narrow for that map to reach its floor: the
+    largest disc inside it (evidence ``inscribed_px``, its radius in the image's pixels)
+    is smaller than :attr:`ConfidenceRules.min_stored_radius_px`, the reach of the road
+    configuration's averaging (half its 25 px matching window plus its 15 px smoothing
+    radius).  Every floor pixel of such a map averages the shallower walls in: the depth
+    reads low (dusk cones and narrow potholes 23-35 % shallow on the check seeds).
 
 The thresholds were chosen on synthetic pairs with exact ground truth (docs/road.md, "The
 confidence check"): on the 252 pairs of the twelve seeds they were last chosen on, 5 of
@@ -80,11 +88,12 @@ REASONS = {
     "at_border": "at the image border",
     "merged": "possibly merged with a neighbour",
     "rematch": "re-match unreliable",
+    "narrow": "narrower than the matching window, not re-matched",
 }
 
 #: Short labels for pictures (defects.png).
 SHORT = {"weak_match": "weak", "specular": "wet", "noisy": "dark", "few_decided": "filled", "at_border": "edge",
-         "merged": "merged", "rematch": "rematch"}
+         "merged": "merged", "rematch": "rematch", "narrow": "narrow"}
 
 
 @dataclass(frozen=True)
@@ -108,6 +117,10 @@ class ConfidenceRules:
     min_rematch_change, max_rematch_change : float
         ``rematch`` below the first or above the second relative change of the depth by
         the re-match (the re-matched depth over the stored one, minus 1).
+    min_stored_radius_px : float
+        ``narrow`` below this radius (image pixels) of the largest disc inside a defect
+        measured on the stored map: the reach of the road configuration's averaging
+        (``cost.window`` 25 // 2 + ``refine.smooth_radius`` 15).
     """
 
     min_match_margin: float = 0.020
@@ -117,6 +130,7 @@ class ConfidenceRules:
     min_snr_alone: float = 10.0
     min_rematch_change: float = -0.15
     max_rematch_change: float = 1.0
+    min_stored_radius_px: float = 27.0
 
 
 def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules | None = None) -> tuple:
@@ -129,8 +143,9 @@ def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules
     evidence : dict
         ``match_margin`` (absent without the right image; None where it could not be
         measured: ``weak_match``), ``spikiness``, ``snr``, ``decided_share``,
-        ``deep_at_border``, ``depressions``, ``rematch_change`` (absent without a re-match)
-        and ``map_decided_share`` (present when the whole map's decided share is below
+        ``deep_at_border``, ``depressions``, ``rematch_change``, ``rematch_window`` and
+        ``inscribed_px`` (absent without a re-match) and ``map_decided_share`` (present
+        when the whole map's decided share is below
         ``min_decided_share``: every defect is ``few_decided``).
     min_decided_share : float, keyword-only
         ``road.min_decided_share``.
@@ -153,6 +168,8 @@ def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules
         "at_border": bool(evidence.get("deep_at_border", False)),
         "merged": evidence.get("depressions", 1) >= 2,
         "rematch": not rules.min_rematch_change <= evidence.get("rematch_change", 0.0) <= rules.max_rematch_change,
+        "narrow": evidence.get("rematch_window") == 0
+        and evidence.get("inscribed_px", np.inf) < rules.min_stored_radius_px,
     }
     return tuple(code for code in REASONS if raised[code])
 

@@ -241,7 +241,8 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
             # weak_match), on the disparity it was measured on; the defects on both threads.
             margins = map_on_threads(lambda region: match_margin(*grey, measured, region), regions)
             defects = [with_flags(d, road_cfg, rematch_window=_window_of(d, r, windows),
-                                  match_margin=round(m, 4) if np.isfinite(m) else None)
+                                  match_margin=round(m, 4) if np.isfinite(m) else None,
+                                  inscribed_px=_inscribed_radius(d, r))
                        for d, r, m in zip(defects, regions, margins)]
     if not fallback and decided_share < road_cfg.min_decided_share:
         warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
@@ -276,6 +277,14 @@ def _window_of(defect, region: np.ndarray, windows: np.ndarray) -> int:
     u0, v0, u1, v1 = defect.bbox_px
     box = (slice(v0, v1 + 1), slice(u0, u1 + 1))
     return int(np.bincount(windows[box][region[box]]).argmax())
+
+
+def _inscribed_radius(defect, region: np.ndarray) -> float:
+    """Radius (pixels, one decimal) of the largest disc inside ``region`` (the confidence's
+    ``narrow``): its largest Euclidean distance to a pixel outside, read in its bounding box."""
+    u0, v0, u1, v1 = defect.bbox_px
+    inside = np.pad(region[v0:v1 + 1, u0:u1 + 1], 1).astype(np.uint8)
+    return round(float(cv2.distanceTransform(inside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE).max()), 1)
 
 
 def _rematched(grey, disparity, finite, regions, camera: Camera, plane, road_cfg,

@@ -144,6 +144,12 @@ def test_a_pothole_on_a_floor_without_texture_is_flagged_a_weak_match(tmp_path, 
     sharp = pothole(pair.left, pair.right)  # margin 0.10, re-matched with the 9 px window
     assert sharp["flags"] == [] and sharp["evidence"]["match_margin"] > 0.08
     assert sharp["evidence"]["rematch_window"] in (9, 13, 17, 25)
+    # the radius of the largest disc inside it, in pixels: that of its outline's
+    outline = np.array(sharp["outline_px"][0], np.int32)
+    inside = np.zeros((outline[:, 1].max() + 3, outline[:, 0].max() + 3), np.uint8)
+    cv2.fillPoly(inside, [outline], 1)
+    radius = cv2.distanceTransform(inside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE).max()
+    assert sharp["evidence"]["inscribed_px"] == pytest.approx(radius, abs=1.5)
 
     def blur(image):
         return cv2.GaussianBlur(image, (0, 0), 6)
@@ -151,3 +157,5 @@ def test_a_pothole_on_a_floor_without_texture_is_flagged_a_weak_match(tmp_path, 
     smooth = pothole(blur(pair.left), blur(pair.right))  # margin 0.004, no clean re-match
     assert smooth["evidence"]["match_margin"] < 0.02 and smooth["evidence"]["rematch_window"] == 0
     assert smooth["flags"] == ["weak_match"] and smooth["confidence"] == "low"
+    # on the stored map but wider than its averaging reaches: not narrow
+    assert smooth["evidence"]["inscribed_px"] >= 27
