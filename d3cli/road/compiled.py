@@ -71,6 +71,28 @@ def weighted_scatter(xs, ys, zs, inverse_tolerance, normal, offset, limit):  # p
 
 
 @njit(cache=True, nogil=True)
+def plane_columns(points, step, min_tolerance, depth_factor):  # pragma: no cover - compiled
+    """Every ``step``-th of the (N, 3) ``points`` as the plane fit's rounds read them, in one
+    pass: their coordinates as contiguous float64 columns, each point's tolerance
+    ``max(min_tolerance, depth_factor Z^2)`` and its inverse.
+    Returns (xs, ys, zs, tolerance, inverse), (ceil(N / step),) float64 each."""
+    n = (points.shape[0] + step - 1) // step
+    xs = np.empty(n)
+    ys = np.empty(n)
+    zs = np.empty(n)
+    tolerance = np.empty(n)
+    inverse = np.empty(n)
+    for k in range(n):
+        i = k * step
+        z = float(points[i, 2])
+        xs[k], ys[k], zs[k] = float(points[i, 0]), float(points[i, 1]), z
+        t = max(min_tolerance, z * z * depth_factor)
+        tolerance[k] = t
+        inverse[k] = 1.0 / t
+    return xs, ys, zs, tolerance, inverse
+
+
+@njit(cache=True, nogil=True)
 def inlier_count(xs, ys, zs, tolerance, normal, offset):  # pragma: no cover - compiled
     """Number of points (columns ``xs``, ``ys``, ``zs``, (N,) float64 each) with
     ``|n . P + c| < tolerance``."""

@@ -252,7 +252,8 @@ def match_margin(left_grey: np.ndarray, right_grey: np.ndarray, disparity: np.nd
     finite = np.isfinite(d)
     if not finite.any():
         return float("nan")
-    d = np.where(finite, d, np.float32(np.median(d[finite]))).astype(np.float32)
+    if not finite.all():
+        d = np.where(finite, d, np.float32(np.median(d[finite]))).astype(np.float32)
     lsub = np.ascontiguousarray(left_grey[v0:v1, u0:u1], np.float32)
     inner = grown_box(region[v0:v1, u0:u1], 0, 0)  # the region's own box: its pixels' windows
     rows, cols = (inner[0].start, inner[0].stop), (inner[1].start, inner[1].stop)
