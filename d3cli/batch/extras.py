@@ -11,7 +11,7 @@ import dataclasses
 import logging
 from pathlib import Path
 
-from ..config import output_groups
+from ..config import method_spec, output_groups
 from ..data import formats as io, layouts as datasets
 from ..road.pointcloud import camera_from, save_pair_cloud
 from ..road.outputs import road_report
@@ -75,7 +75,9 @@ def write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -
                                       "camera": dataclasses.asdict(camera)}}
     if cfg.road.report:  # all the logic in d3cli.road.outputs
         with step("road report"):
+            spec = method_spec(stored.get("method", ""))
+            averaging = spec.averaging_px(cfg) if spec is not None and spec.averaging_px is not None else None
             warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road,
-                                    right=right, groups=output_groups(cfg.run.outputs))[1]
+                                    right=right, groups=output_groups(cfg.run.outputs), averaging_px=averaging)[1]
     # Rewritten after the road outputs too: result.json records the files' sizes and hashes.
     return _with_warnings(pair, pair_dir, stored, warnings, changed=want_cloud or cfg.road.report)

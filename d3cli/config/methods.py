@@ -78,6 +78,12 @@ class MethodSpec:
         starts (:meth:`require`).
     install : str or None
         The command that installs :attr:`requires`, for the message.
+    averaging_px : callable or None
+        ``function(cfg)`` of the full :class:`~d3cli.config.Config`: how far around a pixel
+        the method's map averages, in pixels (half its matching window plus the radius of
+        its final smoothing).  The road report flags a defect measured on the stored map
+        that is narrower than that (``narrow``, :mod:`d3cli.road.confidence`); None: not
+        known, no such flag.
     """
 
     name: str
@@ -91,6 +97,7 @@ class MethodSpec:
     extra: str | None = None
     requires: tuple[str, ...] = ()
     install: str | None = None
+    averaging_px: object = None
 
     def fingerprinted(self, sections) -> tuple[str, ...]:
         """The config sections, of ``sections`` (every section's name), that a stored
@@ -132,16 +139,26 @@ INSTALL_ELAS = ("CFLAGS=-I$(python -c 'import numpy;print(numpy.get_include())')
 INSTALL_PANDORA = 'pip install "pandora[sgm]"'
 
 
+def _d3stereo_averaging(cfg) -> int:
+    """d3stereo: half the NCC window plus the radius of the final smoothing."""
+    return cfg.cost.window // 2 + cfg.refine.smooth_radius
+
+
+def _sgbm_averaging(cfg) -> int:
+    """SGBM (and PT-SGM): half its block."""
+    return cfg.sgbm.block_size // 2
+
+
 #: Every method, in the order ``--method`` lists them.
 METHOD_SPECS = (
     MethodSpec("d3stereo", "d3cli.method.pipeline:d3stereo_disparity", pair_dir=True, kernels=True,
-               falls_back=True, peak_bytes="d3cli.method.memory:d3stereo_peak_bytes",
+               falls_back=True, peak_bytes="d3cli.method.memory:d3stereo_peak_bytes", averaging_px=_d3stereo_averaging,
                doc="decisive disparity diffusion, the paper's method (d3cli.method)"),
     MethodSpec("sgbm", "d3cli.baselines.sgbm:sgbm_disparity", section="sgbm",
-               peak_bytes="d3cli.baselines.sgbm:sgbm_peak_bytes",
+               peak_bytes="d3cli.baselines.sgbm:sgbm_peak_bytes", averaging_px=_sgbm_averaging,
                doc="OpenCV's semi-global block matching"),
     MethodSpec("pt-sgm", "d3cli.baselines.pt_sgm:pt_sgm_disparity", kernels=True,
-               peak_bytes="d3cli.baselines.pt_sgm:pt_sgm_peak_bytes",
+               peak_bytes="d3cli.baselines.pt_sgm:pt_sgm_peak_bytes", averaging_px=_sgbm_averaging,
                doc="SGBM after PT-D3Stereo's perspective transformation"),
     MethodSpec("elas", "d3cli.baselines.peers:elas_disparity", section="peers", extra="peers",
                peak_bytes="d3cli.baselines.peers:elas_peak_bytes", requires=("elas",), install=INSTALL_ELAS,

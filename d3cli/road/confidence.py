@@ -55,10 +55,13 @@ Reasons (defects.json ``flags``, in this order):
     No re-match window measured the defect cleanly (``rematch_window`` 0), so its depth is
     the stored map's, and the defect is too narrow for that map to reach its floor: the
     largest disc inside it (evidence ``inscribed_px``, its radius in the image's pixels)
-    is smaller than :attr:`ConfidenceRules.min_stored_radius_px`, the reach of the road
-    configuration's averaging (half its 25 px matching window plus its 15 px smoothing
-    radius).  Every floor pixel of such a map averages the shallower walls in: the depth
-    reads low (dusk cones and narrow potholes 23-35 % shallow on the check seeds).
+    is smaller than how far the method that made the map averages around a pixel
+    (evidence ``averaging_px``: for d3stereo half its matching window plus its smoothing
+    radius, 12 + 15 = 27 px with configs/road.yaml; for SGBM half its block;
+    :attr:`d3cli.config.MethodSpec.averaging_px`).  Every floor pixel of such a map
+    averages the shallower walls in: the depth reads low (dusk cones and narrow potholes
+    23-35 % shallow on the check seeds).  Without ``averaging_px`` (a method that does not
+    say) no defect is flagged ``narrow``.
 
 The thresholds were chosen on synthetic pairs with exact ground truth (docs/road.md, "The
 confidence check"): on the 252 pairs of the twelve seeds they were last chosen on, 5 of
@@ -117,10 +120,6 @@ class ConfidenceRules:
     min_rematch_change, max_rematch_change : float
         ``rematch`` below the first or above the second relative change of the depth by
         the re-match (the re-matched depth over the stored one, minus 1).
-    min_stored_radius_px : float
-        ``narrow`` below this radius (image pixels) of the largest disc inside a defect
-        measured on the stored map: the reach of the road configuration's averaging
-        (``cost.window`` 25 // 2 + ``refine.smooth_radius`` 15).
     """
 
     min_match_margin: float = 0.020
@@ -130,7 +129,6 @@ class ConfidenceRules:
     min_snr_alone: float = 10.0
     min_rematch_change: float = -0.15
     max_rematch_change: float = 1.0
-    min_stored_radius_px: float = 27.0
 
 
 def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules | None = None) -> tuple:
@@ -143,9 +141,10 @@ def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules
     evidence : dict
         ``match_margin`` (absent without the right image; None where it could not be
         measured: ``weak_match``), ``spikiness``, ``snr``, ``decided_share``,
-        ``deep_at_border``, ``depressions``, ``rematch_change``, ``rematch_window`` and
-        ``inscribed_px`` (absent without a re-match) and ``map_decided_share`` (present
-        when the whole map's decided share is below
+        ``deep_at_border``, ``depressions``, ``rematch_change``, ``rematch_window``,
+        ``inscribed_px`` and ``averaging_px`` (absent without a re-match; the last where
+        the method does not say) and ``map_decided_share`` (present when the whole map's
+        decided share is below
         ``min_decided_share``: every defect is ``few_decided``).
     min_decided_share : float, keyword-only
         ``road.min_decided_share``.
@@ -169,7 +168,7 @@ def flags_of(evidence: dict, *, min_decided_share: float, rules: ConfidenceRules
         "merged": evidence.get("depressions", 1) >= 2,
         "rematch": not rules.min_rematch_change <= evidence.get("rematch_change", 0.0) <= rules.max_rematch_change,
         "narrow": evidence.get("rematch_window") == 0
-        and evidence.get("inscribed_px", np.inf) < rules.min_stored_radius_px,
+        and evidence.get("inscribed_px", np.inf) < evidence.get("averaging_px", 0.0),
     }
     return tuple(code for code in REASONS if raised[code])
 

@@ -101,7 +101,7 @@ def height_colour(height: np.ndarray, *, range_mm: float = 50.0) -> np.ndarray:
 
 def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided: np.ndarray,
                 camera: Camera | None, info: dict, road_cfg, *, right: np.ndarray | None = None,
-                groups: frozenset | None = None) -> tuple[list[dict], list[str]]:
+                groups: frozenset | None = None, averaging_px: float | None = None) -> tuple[list[dict], list[str]]:
     """Write the road outputs of one pair into ``pair_dir``.
 
     Parameters
@@ -132,6 +132,12 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         height.pfm with ``height``, height_color.png and defects.png with ``pictures``;
         None: all.  defects.json is always written; a road file not asked for is removed
         (it would describe an earlier report).
+    averaging_px : float, optional, keyword-only
+        How far around a pixel the method that made ``disparity`` averages, pixels
+        (:attr:`d3cli.config.MethodSpec.averaging_px`): with the right image, a defect that
+        keeps the stored map's depth and is narrower than that is flagged ``narrow``
+        (:mod:`d3cli.road.confidence`; evidence ``averaging_px`` and ``inscribed_px``).
+        None: not known, no such flag.
 
     Returns
     -------
@@ -182,14 +188,15 @@ def road_report(pair_dir: Path, left: np.ndarray, disparity: np.ndarray, decided
         start_writing(disparity)
     try:
         return _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane,
-                       (grid, cells, cells_decided), pt, fallback, None if writing else start_writing, warnings)
+                       (grid, cells, cells_decided), pt, fallback, None if writing else start_writing, warnings,
+                       averaging_px)
     finally:
         for job in writing:
             job.result()
 
 
 def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups, finite, plane, grid_maps, pt,
-            fallback, start_writing, warnings):
+            fallback, start_writing, warnings, averaging_px):
     """The rest of :func:`road_report` once the plane is known; ``start_writing(disparity)``,
     unless None (started already), starts writing the height files once the final
     disparities are known.  The defects are found and measured on the measuring grid
@@ -240,9 +247,10 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
             # How decisively the images support each defect's disparity (the confidence's
             # weak_match), on the disparity it was measured on; the defects on both threads.
             margins = map_on_threads(lambda region: match_margin(*grey, measured, region), regions)
+            narrow = {} if averaging_px is None else {"averaging_px": float(averaging_px)}
             defects = [with_flags(d, road_cfg, rematch_window=_window_of(d, r, windows),
                                   match_margin=round(m, 4) if np.isfinite(m) else None,
-                                  inscribed_px=_inscribed_radius(d, r))
+                                  inscribed_px=_inscribed_radius(d, r), **narrow)
                        for d, r, m in zip(defects, regions, margins)]
     if not fallback and decided_share < road_cfg.min_decided_share:
         warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")

@@ -137,8 +137,8 @@ def test_a_pothole_on_a_floor_without_texture_is_flagged_a_weak_match(tmp_path, 
     finite = np.isfinite(pair.disparity)
     cfg = RoadConfig(report=True)
 
-    def pothole(left, right):
-        items = road_report(tmp_path, left, smoothed, finite, cam, {}, cfg, right=right)[0]
+    def pothole(left, right, averaging_px=27.0):  # d3stereo's averaging with road.yaml
+        items = road_report(tmp_path, left, smoothed, finite, cam, {}, cfg, right=right, averaging_px=averaging_px)[0]
         return next(d for d in items if d["kind"] == "pothole")
 
     sharp = pothole(pair.left, pair.right)  # margin 0.10, re-matched with the 9 px window
@@ -157,5 +157,8 @@ def test_a_pothole_on_a_floor_without_texture_is_flagged_a_weak_match(tmp_path, 
     smooth = pothole(blur(pair.left), blur(pair.right))  # margin 0.004, no clean re-match
     assert smooth["evidence"]["match_margin"] < 0.02 and smooth["evidence"]["rematch_window"] == 0
     assert smooth["flags"] == ["weak_match"] and smooth["confidence"] == "low"
-    # on the stored map but wider than its averaging reaches: not narrow
-    assert smooth["evidence"]["inscribed_px"] >= 27
+    # on the stored map but wider than its averaging reaches: not narrow; a map that
+    # averaged wider than the pothole would be
+    assert smooth["evidence"]["inscribed_px"] >= 27 and smooth["evidence"]["averaging_px"] == 27
+    wide = pothole(blur(pair.left), blur(pair.right), averaging_px=smooth["evidence"]["inscribed_px"] + 1)
+    assert wide["flags"] == ["weak_match", "narrow"]

@@ -30,5 +30,7 @@ def test_road_report_on_the_bundled_samples_measures_the_pothole(tmp_path):
     assert pothole["evidence"]["match_margin"] > 0.1
     # No re-match window is clean on SGBM's noisy map: the depth is the stored map's.
     assert (pothole["evidence"]["rematch_window"], pothole["evidence"]["rematch_change"]) == (0, 0.0)
+    # SGBM's 5 px block averages 2 px around a pixel: the pothole is far wider, not narrow
+    assert pothole["evidence"]["averaging_px"] == 2 and pothole["evidence"]["inscribed_px"] > 10
     assert (pothole["flags"], pothole["confidence"], pothole["low_confidence"]) == ([], "ok", False)
     assert pothole["reasons"] == ""
