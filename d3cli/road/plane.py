@@ -51,11 +51,10 @@ class RoadPlane:
                 "inlier_share": float(self.inlier_share)}
 
 
-def _plane_from(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """Weighted total-least-squares plane of (N, 3) points -> (unit normal, c)."""
-    w = np.ones(len(points)) if weights is None else weights
-    centre = (points * w[:, None]).sum(0) / w.sum()
-    d = (points - centre) * np.sqrt(w)[:, None]
+def _plane_from(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Total-least-squares plane of (N, 3) points -> (unit normal, c)."""
+    centre = points.sum(0) / len(points)
+    d = points - centre
     return _plane_of_scatter(centre, d.T @ d)
 
 
