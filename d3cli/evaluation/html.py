@@ -509,7 +509,8 @@ def road_section(out_dir: str | Path, rows: Iterable[Mapping], *, min_depth_mm: 
              "surrounding surface; decided: share of the defect's pixels the method decided itself "
              "(not filled); confidence: ok, or low with the reasons its depth is not trusted (weak match "
              "on little texture: a dark, smooth or wet floor; dark or noisy; few decided pixels; at the "
-             "image border; possibly merged with a neighbour; re-match unreliable; defects.json lists "
+             "image border; possibly merged with a neighbour; re-match unreliable; narrower than the "
+             "matching window, not re-matched; defects.json lists "
              "the numbers behind each).</p>",
              '<table><thead><tr><th>pairs with a road report</th><th>with defects</th><th>potholes</th>'
              "<th>bumps</th><th>flagged (low confidence)</th><th>pothole area [m²]</th><th>pothole volume [l]</th>"

@@ -221,11 +221,10 @@ def defects_overlay(left: np.ndarray, defects, regions) -> np.ndarray:
     order = sorted(range(len(defects)), key=lambda i: (defects[i].kind != "pothole", -defects[i].max_depth_mm))
     rects = place_labels([defects[i].bbox_px for i in order], [sizes[i] for i in order], (height, width),
                          gap=gap, avoid=avoid)
-    unplaced = []
-    for i, rect in zip(order, rects):
-        if rect is None:
-            unplaced.append(texts[i])
-            continue
+    unplaced = [texts[i] for i, rect in zip(order, rects) if rect is None]
+    placed = [(i, rect) for i, rect in zip(order, rects) if rect is not None]
+    # Every leader line first, then every label: a line never crosses another label's text.
+    for i, rect in placed:
         x0, y0, x1, y1 = rect
         points = np.concatenate([c.reshape(-1, 2) for c in contours[i]]) if contours[i] else None
         if points is not None:
@@ -235,6 +234,7 @@ def defects_overlay(left: np.ndarray, defects, regions) -> np.ndarray:
             if np.hypot(start[0] - end[0], start[1] - end[1]) > 2 * gap:
                 _haloed_line(out, start, (int(end[0]), int(end[1])), colours[i], max(1, thick))
                 cv2.circle(out, (int(end[0]), int(end[1])), thick + 2, colours[i], -1, cv2.LINE_AA)
+    for i, (x0, y0, x1, y1) in placed:
         patch = out[y0:y1, x0:x1].astype(np.float32)
         out[y0:y1, x0:x1] = (patch * (1 - _BOX_ALPHA)).astype(np.uint8)
         cv2.rectangle(out, (x0, y0), (x1 - 1, y1 - 1), colours[i], max(1, thick // 2 + 1))

@@ -118,3 +118,43 @@ def test_the_legend_explains_the_reasons_the_picture_shows_and_only_those():
     assert low_confidence_text(["merged", "weak_match", "weak_match"]) == (
         "? depth not trusted, why: weak = weak match on little texture, merged = possibly merged with a neighbour")
     assert low_confidence_text([]) == "? after a label: depth not trusted (none here)"
+
+
+def test_leader_lines_never_cross_another_label():
+    # Seven flagged discs scattered over a 640x360 picture: several labels sit away from
+    # their defects, and their leader lines pass other labels.  Every line is drawn before
+    # every label, so no label box holds a pixel of the outline colour at full strength
+    # (a line drawn after a label crossed its text; under a label a line shows darkened).
+    import cv2
+
+    from d3cli.data.legend import text_size
+
+    rng = np.random.default_rng(7)
+    h, w = 360, 640
+    yy, xx = np.mgrid[:h, :w]
+    defects, regions = [], []
+    for k in range(7):
+        cx, cy, r = rng.integers(40, w - 40), rng.integers(30, h - 30), rng.integers(12, 40)
+        mask = (xx - cx) ** 2 + (yy - cy) ** 2 < r * r
+        vs, us = np.nonzero(mask)
+        defects.append(Defect(id=k + 1, kind="pothole", centroid_px=(float(cx), float(cy)),
+                              bbox_px=(int(us.min()), int(vs.min()), int(us.max()), int(vs.max())),
+                              centroid_m=(0.0, 0.0, 5.0), area_m2=0.1, max_depth_mm=60.0 - 5 * k, mean_depth_mm=20.0,
+                              volume_l=1.0, decided_share=1.0, low_confidence=True,
+                              flags=("weak_match", "merged", "narrow")))
+        regions.append(mask)
+    out = defects_overlay(np.full((h, w), 128, np.uint8), defects, regions)
+    # the labels' places, as defects_overlay sizes and orders them (text_px of the width,
+    # a quarter of it as padding and gap, the defects dilated by 2 thick + 3 to avoid)
+    px = text_px(w)
+    pad, gap = max(2, px // 4), max(4, px // 4)
+    avoid = cv2.dilate(np.any(regions, axis=0).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    order = sorted(range(7), key=lambda i: -defects[i].max_depth_mm)
+    sizes = [(text_size(label_text(defects[i]), px)[0] + 2 * pad, px + 2 * pad) for i in order]
+    rects = [r for r in place_labels([defects[i].bbox_px for i in order], sizes, (h, w), gap=gap, avoid=avoid)
+             if r is not None]
+    assert len(rects) >= 5
+    red = np.array(POTHOLE_COLOUR)
+    for x0, y0, x1, y1 in rects:
+        inner = out[y0 + 3:y1 - 3, x0 + 3:x1 - 3].astype(int)
+        assert not (np.abs(inner - red).max(axis=-1) < 60).any(), (x0, y0, x1, y1)
