@@ -247,10 +247,10 @@ def _report(pair_dir, left, disparity, decided, camera, road_cfg, right, groups,
             # How decisively the images support each defect's disparity (the confidence's
             # weak_match), on the disparity it was measured on; the defects on both threads.
             margins = map_on_threads(lambda region: match_margin(*grey, measured, region), regions)
-            narrow = {} if averaging_px is None else {"averaging_px": float(averaging_px)}
+            averaging = {} if averaging_px is None else {"averaging_px": float(averaging_px)}
             defects = [with_flags(d, road_cfg, rematch_window=_window_of(d, r, windows),
                                   match_margin=round(m, 4) if np.isfinite(m) else None,
-                                  inscribed_px=_inscribed_radius(d, r), **narrow)
+                                  inscribed_px=_inscribed_radius(d, r), **averaging)
                        for d, r, m in zip(defects, regions, margins)]
     if not fallback and decided_share < road_cfg.min_decided_share:
         warnings.append(f"few decided pixels ({100 * decided_share:.0f} %): every defect is low confidence")
