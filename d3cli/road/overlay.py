@@ -176,6 +176,32 @@ def legend_strip(width: int, *, flags: Sequence[str] = (), unplaced: Sequence[st
     return np.vstack(parts)
 
 
+def _sizes(height: int, width: int) -> tuple[int, int, int, int]:
+    """(line thickness, text height, label padding, gap) of defects.png for a picture of
+    ``height`` x ``width`` pixels."""
+    px = text_px(width)
+    return max(1, height // 360), px, max(2, px // 4), max(4, px // 4)
+
+
+def label_places(defects, regions, shape: tuple[int, int]) -> list:
+    """Where :func:`defects_overlay` puts each defect's label in a picture of ``shape``
+    (H, W): ``(index into defects, rectangle (x0, y0, x1, y1), exclusive ends, or None)``,
+    deepest pothole first (the most important labels get the nearest positions), placed
+    by :func:`place_labels` clear of the defects (the regions and their drawn outlines)
+    where there is room."""
+    height, width = shape
+    thick, px, pad, gap = _sizes(height, width)
+    avoid = np.zeros((height, width), np.uint8)
+    for m in regions:
+        avoid |= np.asarray(m, np.uint8)
+    avoid = cv2.dilate(avoid, np.ones((2 * thick + 3, 2 * thick + 3), np.uint8)).astype(bool)
+    sizes = [(text_size(label_text(d), px)[0] + 2 * pad, px + 2 * pad) for d in defects]
+    order = sorted(range(len(defects)), key=lambda i: (defects[i].kind != "pothole", -defects[i].max_depth_mm))
+    rects = place_labels([defects[i].bbox_px for i in order], [sizes[i] for i in order], (height, width),
+                         gap=gap, avoid=avoid)
+    return list(zip(order, rects))
+
+
 def defects_overlay(left: np.ndarray, defects, regions) -> np.ndarray:
     """RGB uint8: the left image with each defect outlined and labelled, the legend below it.
 
@@ -200,29 +226,17 @@ def defects_overlay(left: np.ndarray, defects, regions) -> np.ndarray:
         img = np.repeat(img[:, :, None], 3, axis=2)
     out = np.ascontiguousarray(img[:, :, :3]).copy()
     height, width = out.shape[:2]
-    thick = max(1, height // 360)
-    px = text_px(width)
-    pad = max(2, px // 4)
-    gap = max(4, px // 4)
+    thick, px, pad, gap = _sizes(height, width)
     colours = [POTHOLE_COLOUR if d.kind == "pothole" else BUMP_COLOUR for d in defects]
     contours = [cv2.findContours(np.asarray(m, np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)[0]
                 for m in regions]
     for cs, colour in zip(contours, colours):
         cv2.drawContours(out, cs, -1, BLACK, thick + 2)
         cv2.drawContours(out, cs, -1, colour, thick)
-    # Labels cover no defect where there is room: the regions and their drawn outlines.
-    avoid = np.zeros((height, width), np.uint8)
-    for m in regions:
-        avoid |= np.asarray(m, np.uint8)
-    avoid = cv2.dilate(avoid, np.ones((2 * thick + 3, 2 * thick + 3), np.uint8)).astype(bool)
     texts = [label_text(d) for d in defects]
-    sizes = [(text_size(t, px)[0] + 2 * pad, px + 2 * pad) for t in texts]
-    # Deepest first: the most important labels get the nearest positions.
-    order = sorted(range(len(defects)), key=lambda i: (defects[i].kind != "pothole", -defects[i].max_depth_mm))
-    rects = place_labels([defects[i].bbox_px for i in order], [sizes[i] for i in order], (height, width),
-                         gap=gap, avoid=avoid)
-    unplaced = [texts[i] for i, rect in zip(order, rects) if rect is None]
-    placed = [(i, rect) for i, rect in zip(order, rects) if rect is not None]
+    places = label_places(defects, regions, (height, width))
+    unplaced = [texts[i] for i, rect in places if rect is None]
+    placed = [(i, rect) for i, rect in places if rect is not None]
     # Every leader line first, then every label: a line never crosses another label's text.
     for i, rect in placed:
         x0, y0, x1, y1 = rect

@@ -7,7 +7,7 @@ import pytest
 
 from d3cli.data.legend import text_px
 from d3cli.road.defects import Defect
-from d3cli.road.overlay import BUMP_COLOUR, POTHOLE_COLOUR, defects_overlay, label_text, place_labels
+from d3cli.road.overlay import BUMP_COLOUR, POTHOLE_COLOUR, defects_overlay, label_places, label_text, place_labels
 
 
 def intersects(a, b, gap=0):
@@ -125,10 +125,6 @@ def test_leader_lines_never_cross_another_label():
     # their defects, and their leader lines pass other labels.  Every line is drawn before
     # every label, so no label box holds a pixel of the outline colour at full strength
     # (a line drawn after a label crossed its text; under a label a line shows darkened).
-    import cv2
-
-    from d3cli.data.legend import text_size
-
     rng = np.random.default_rng(7)
     h, w = 360, 640
     yy, xx = np.mgrid[:h, :w]
@@ -144,15 +140,7 @@ def test_leader_lines_never_cross_another_label():
                               flags=("weak_match", "merged", "narrow")))
         regions.append(mask)
     out = defects_overlay(np.full((h, w), 128, np.uint8), defects, regions)
-    # the labels' places, as defects_overlay sizes and orders them (text_px of the width,
-    # a quarter of it as padding and gap, the defects dilated by 2 thick + 3 to avoid)
-    px = text_px(w)
-    pad, gap = max(2, px // 4), max(4, px // 4)
-    avoid = cv2.dilate(np.any(regions, axis=0).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    order = sorted(range(7), key=lambda i: -defects[i].max_depth_mm)
-    sizes = [(text_size(label_text(defects[i]), px)[0] + 2 * pad, px + 2 * pad) for i in order]
-    rects = [r for r in place_labels([defects[i].bbox_px for i in order], sizes, (h, w), gap=gap, avoid=avoid)
-             if r is not None]
+    rects = [r for _, r in label_places(defects, regions, (h, w)) if r is not None]
     assert len(rects) >= 5
     red = np.array(POTHOLE_COLOUR)
     for x0, y0, x1, y1 in rects:
