@@ -80,6 +80,15 @@ def grey_image(image: np.ndarray) -> np.ndarray:
     return img.mean(axis=2) if img.ndim == 3 else img
 
 
+def _holes_at_median(disparity: np.ndarray, finite: np.ndarray) -> np.ndarray:
+    """float32 copy of a box of ``disparity`` whose pixels without an estimate (not
+    ``finite``; at least one is) hold the median of the others: a box's warps need a
+    disparity at every pixel.  The median only where a pixel lacks one."""
+    if finite.all():
+        return np.array(disparity, np.float32)
+    return np.where(finite, disparity, np.float32(np.median(disparity[finite]))).astype(np.float32)
+
+
 def warped_right(right_grey: np.ndarray, v0: int, u0: int, disparity: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """float32 (K, h, w): the grey right image warped onto the left's box at row ``v0``,
     column ``u0`` by ``disparity`` (h, w) plus each of the K ``offsets``, interpolated as
@@ -173,7 +182,7 @@ def rematch(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, mask: np
     sub = out[v0:v1, u0:u1]
     finite = np.isfinite(sub)
     # Pixels of the box without an estimate are searched around the median, never kept.
-    centre = np.where(finite, sub, float(np.median(sub[finite]))).astype(np.float32)
+    centre = _holes_at_median(sub, finite)
     lsub = lg[oy + v0:oy + v1, ox + u0:ox + u1]
     offsets = np.arange(-reach, reach + 1e-9, step, dtype=np.float32)
     warps = None
@@ -252,8 +261,7 @@ def match_margin(left_grey: np.ndarray, right_grey: np.ndarray, disparity: np.nd
     finite = np.isfinite(d)
     if not finite.any():
         return float("nan")
-    if not finite.all():
-        d = np.where(finite, d, np.float32(np.median(d[finite]))).astype(np.float32)
+    d = _holes_at_median(d, finite)
     lsub = np.ascontiguousarray(left_grey[v0:v1, u0:u1], np.float32)
     inner = grown_box(region[v0:v1, u0:u1], 0, 0)  # the region's own box: its pixels' windows
     rows, cols = (inner[0].start, inner[0].stop), (inner[1].start, inner[1].stop)
