@@ -76,7 +76,7 @@ def write_extras(pair, pair_dir: Path, stored: dict, cfg, *, pointcloud: bool) -
     if cfg.road.report:  # all the logic in d3cli.road.outputs
         with step("road report"):
             spec = method_spec(stored.get("method", ""))
-            averaging = spec.averaging_px(cfg) if spec is not None and spec.averaging_px is not None else None
+            averaging = spec.averaging(cfg) if spec is not None else None
             warnings += road_report(pair_dir, left, disparity, valid, camera, stored.get("info", {}), cfg.road,
                                     right=right, groups=output_groups(cfg.run.outputs), averaging_px=averaging)[1]
     # Rewritten after the road outputs too: result.json records the files' sizes and hashes.

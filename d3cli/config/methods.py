@@ -122,6 +122,11 @@ class MethodSpec:
         method's memory model (:attr:`peak_bytes`)."""
         return int(_imported(self.peak_bytes)(shape, max_disparity, cfg))
 
+    def averaging(self, cfg) -> float | None:
+        """How far around a pixel this method's map averages with the configuration ``cfg``
+        (:attr:`averaging_px`), pixels; None where the method does not say."""
+        return None if self.averaging_px is None else self.averaging_px(cfg)
+
     def entry_point(self):
         """The function :attr:`compute` names, imported."""
         return _imported(self.compute)
