@@ -403,8 +403,8 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     finite = np.isfinite(height)
     # the holes' stand-in in the median filter: the median height, over every fourth
     # finite pixel (as the noise below)
-    known = height[finite]
-    fill = float(median(known[::4] if known.size >= 40 else known)) if known.size else 0.0
+    known = _every_fourth(height[finite])
+    fill = float(median(known)) if known.size else 0.0
     smooth, fill = median_filled(height, tuning.median_px, fill)
     # row and column of every pixel, as read-only views (no two full index arrays per map)
     v_all = np.broadcast_to(np.arange(shape[0])[:, None], shape)
@@ -425,7 +425,7 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
     # noise at the median distance (noisy floors would otherwise split into pieces).  Both
     # medians over every fourth pixel (in image order: an even spread over the map; over
     # 50 000 of a 720p map's cells, where a median moves by a fraction of a percent).
-    resid, z = (resid[::4], z[::4]) if resid.size >= 40 else (resid, z)
+    resid, z = _every_fourth(resid), _every_fourth(z)
     sigma_d, z_med = map_on_threads(lambda task: task(), (
         lambda: _mad_sigma(resid) if resid.size >= 10 else 0.0,
         lambda: float(median(z)) if z.size else 0.0))
@@ -434,6 +434,13 @@ def prepare_scene(height, decided, camera: Camera, plane: RoadPlane, road: RoadC
                   finite=finite, smooth=smooth, footprint=footprint, v_all=v_all, u_all=u_all,
                   kernel_ring=kernel_ring, kernel_gap=kernel_gap, kernel_local=kernel_local,
                   map_decided=map_decided, sigma_d=sigma_d, split_noise=split_noise, full_shape=shape, fill=fill)
+
+
+def _every_fourth(values: np.ndarray) -> np.ndarray:
+    """Every fourth of a map's values (in image order: an even spread), all of them where
+    that would leave fewer than ten: what the map-wide medians of :func:`prepare_scene`
+    are taken over."""
+    return values[::4] if values.size >= 40 else values
 
 
 def _find_kind(s: _Scene, kind: str, sign: float, thr_mm: float, other: np.ndarray) -> list:
